@@ -1,0 +1,1 @@
+//! The tension ↔ tip-pose dataset (`DESIGN.md` §3).

@@ -1,0 +1,1 @@
+//! iceoryx2 planner / controller / plant processes (`DESIGN.md` §6).

@@ -1,0 +1,1 @@
+//! Cascade-Correlation (Fahlman & Lebiere 1990) with Quickprop (Fahlman 1988).

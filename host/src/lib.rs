@@ -1,0 +1,16 @@
+//! tendril host library: everything that needs `std`.
+//!
+//! Data flows one way: robot file → statics → dataset → learner → `.tnet` →
+//! firmware core → control loop ↔ plant. The `tendril` binary (`main.rs`) is a
+//! thin shell over this library.
+
+pub mod cli;
+pub mod dataset;
+pub mod evaluate;
+pub mod fsutil;
+pub mod ipc;
+pub mod learn;
+pub mod pipeline;
+pub mod plot;
+pub mod robot;
+pub mod statics;

@@ -1,0 +1,589 @@
+//! Robot descriptions: the TOML schema of `DESIGN.md` §2, its validation, and
+//! the quantities the statics derive from it (section properties, stiffness
+//! matrices, tendon routing).
+//!
+//! Every error names the file, the field and the problem, because a user who
+//! mistypes one number in a robot file should not have to guess which.
+
+use std::f64::consts::PI;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Matrix3, Vector3};
+use serde::Deserialize;
+
+/// Path of the default robot, relative to the workspace root.
+pub const DEFAULT_ROBOT: &str = "robots/seed-4t.toml";
+
+/// Largest tendon count a robot file may declare (the firmware's fixed capacity).
+pub const MAX_TENDONS: usize = 8;
+
+/// A robot file that could not be loaded: which file, which field, what is wrong.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{}: {field}: {problem}", file.display())]
+pub struct RobotError {
+    /// The file (or `<inline>` for a string).
+    pub file: PathBuf,
+    /// Dotted path of the offending field (`backbone.radius`, `tendon[2].offset`), or `file`.
+    pub field: String,
+    /// What is wrong, in words.
+    pub problem: String,
+}
+
+/// How a tendon runs along the backbone.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Routing {
+    /// Constant body-frame offset: r(s) = d (cos φ, sin φ, 0).
+    Straight,
+    /// Helix about the backbone: the position angle grows linearly with s,
+    /// `turns` full turns over the reference length.
+    Helical {
+        /// Turns over the whole length (sign gives the handedness).
+        turns: f64,
+    },
+}
+
+/// One tendon, validated.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Tendon {
+    /// Distance from the backbone axis, m.
+    pub offset: f64,
+    /// Position angle about +z at s = 0, rad (0 = +x, counter-clockwise).
+    pub angle: f64,
+    /// Largest tension the motor may apply, N.
+    pub max_tension: f64,
+    /// Routing along the backbone.
+    pub routing: Routing,
+}
+
+/// A validated robot description.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Robot {
+    /// Robot name from the file.
+    pub name: String,
+    /// Reference arc length L, m.
+    pub length: f64,
+    /// Backbone radius r, m (solid circular section).
+    pub radius: f64,
+    /// Young's modulus E, Pa.
+    pub youngs_modulus: f64,
+    /// Shear modulus G, Pa.
+    pub shear_modulus: f64,
+    /// Effective density ρ, kg/m³.
+    pub density: f64,
+    /// Gravity g in the base frame, m/s².
+    pub gravity: Vector3<f64>,
+    /// Tendons, tendon 0 first.
+    pub tendons: Vec<Tendon>,
+}
+
+// --- the file schema (serde), kept apart from the validated type -------------
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RobotFile {
+    name: String,
+    backbone: BackboneFile,
+    environment: EnvironmentFile,
+    #[serde(default)]
+    tendon: Vec<TendonFile>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct BackboneFile {
+    length: f64,
+    radius: f64,
+    youngs_modulus: f64,
+    shear_modulus: f64,
+    density: f64,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EnvironmentFile {
+    gravity: [f64; 3],
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TendonFile {
+    offset: f64,
+    angle_deg: f64,
+    max_tension: f64,
+    routing: RoutingName,
+    helix_turns: Option<f64>,
+}
+
+#[derive(Deserialize, Clone, Copy, PartialEq, Debug)]
+#[serde(rename_all = "lowercase")]
+enum RoutingName {
+    Straight,
+    Helical,
+}
+
+impl Robot {
+    /// Load and validate a robot file.
+    pub fn load(path: &Path) -> Result<Robot, RobotError> {
+        let text = std::fs::read_to_string(path).map_err(|e| RobotError {
+            file: path.to_path_buf(),
+            field: "file".into(),
+            problem: format!("cannot read: {e}"),
+        })?;
+        Self::from_toml(&text, path)
+    }
+
+    /// Parse and validate robot TOML; `origin` names the source in errors.
+    pub fn from_toml(text: &str, origin: &Path) -> Result<Robot, RobotError> {
+        let raw: RobotFile = toml::from_str(text).map_err(|e| {
+            let field = toml_error_field(text, &e);
+            RobotError {
+                file: origin.to_path_buf(),
+                field,
+                problem: e.message().trim().to_string(),
+            }
+        })?;
+        let v = Validator { file: origin };
+        let b = &raw.backbone;
+        let robot = Robot {
+            name: raw.name.clone(),
+            length: v.positive("backbone.length", b.length)?,
+            radius: v.positive("backbone.radius", b.radius)?,
+            youngs_modulus: v.positive("backbone.youngs_modulus", b.youngs_modulus)?,
+            shear_modulus: v.positive("backbone.shear_modulus", b.shear_modulus)?,
+            density: v.non_negative("backbone.density", b.density)?,
+            gravity: {
+                for (k, g) in raw.environment.gravity.iter().enumerate() {
+                    v.finite(&format!("environment.gravity[{k}]"), *g)?;
+                }
+                Vector3::from(raw.environment.gravity)
+            },
+            tendons: Vec::new(),
+        };
+        if raw.name.trim().is_empty() {
+            return Err(v.err("name", "must not be empty".into()));
+        }
+        if raw.tendon.is_empty() || raw.tendon.len() > MAX_TENDONS {
+            return Err(v.err(
+                "tendon",
+                format!(
+                    "a robot needs 1 to {MAX_TENDONS} [[tendon]] tables, found {}",
+                    raw.tendon.len()
+                ),
+            ));
+        }
+        let mut tendons = Vec::with_capacity(raw.tendon.len());
+        for (i, t) in raw.tendon.iter().enumerate() {
+            let f = |name: &str| format!("tendon[{i}].{name}");
+            let offset = v.positive(&f("offset"), t.offset)?;
+            if offset >= robot.length {
+                return Err(v.err(
+                    &f("offset"),
+                    format!(
+                        "{offset} m must be smaller than the backbone length {} m",
+                        robot.length
+                    ),
+                ));
+            }
+            let angle_deg = v.finite(&f("angle_deg"), t.angle_deg)?;
+            let max_tension = v.positive(&f("max_tension"), t.max_tension)?;
+            let routing = match (t.routing, t.helix_turns) {
+                (RoutingName::Straight, None) => Routing::Straight,
+                (RoutingName::Straight, Some(_)) => {
+                    return Err(v.err(
+                        &f("helix_turns"),
+                        "only allowed with routing = \"helical\"".into(),
+                    ))
+                }
+                (RoutingName::Helical, Some(turns)) => Routing::Helical {
+                    turns: v.finite(&f("helix_turns"), turns)?,
+                },
+                (RoutingName::Helical, None) => {
+                    return Err(v.err(
+                        &f("helix_turns"),
+                        "required with routing = \"helical\"".into(),
+                    ))
+                }
+            };
+            tendons.push(Tendon {
+                offset,
+                angle: angle_deg.to_radians(),
+                max_tension,
+                routing,
+            });
+        }
+        Ok(Robot { tendons, ..robot })
+    }
+
+    /// Number of tendons.
+    pub fn n_tendons(&self) -> usize {
+        self.tendons.len()
+    }
+
+    /// Cross-section area A = π r², m².
+    pub fn area(&self) -> f64 {
+        PI * self.radius * self.radius
+    }
+
+    /// Second moment of area I = π r⁴ / 4, m⁴.
+    pub fn second_moment(&self) -> f64 {
+        PI * self.radius.powi(4) / 4.0
+    }
+
+    /// Shear/extension stiffness Kse = diag(GA, GA, EA), N.
+    pub fn kse(&self) -> Vector3<f64> {
+        let a = self.area();
+        Vector3::new(
+            self.shear_modulus * a,
+            self.shear_modulus * a,
+            self.youngs_modulus * a,
+        )
+    }
+
+    /// Bending/torsion stiffness Kbt = diag(EI, EI, GJ) with J = 2I, N·m².
+    pub fn kbt(&self) -> Vector3<f64> {
+        let i = self.second_moment();
+        Vector3::new(
+            self.youngs_modulus * i,
+            self.youngs_modulus * i,
+            self.shear_modulus * 2.0 * i,
+        )
+    }
+
+    /// Distributed weight f_e = ρ A g in the base frame, N/m.
+    pub fn weight_per_length(&self) -> Vector3<f64> {
+        self.gravity * (self.density * self.area())
+    }
+
+    /// Upper tension limits, N, tendon 0 first.
+    pub fn max_tensions(&self) -> Vec<f64> {
+        self.tendons.iter().map(|t| t.max_tension).collect()
+    }
+
+    /// The same robot with gravity switched off (for closed-form checks).
+    pub fn without_gravity(&self) -> Robot {
+        Robot {
+            gravity: Vector3::zeros(),
+            ..self.clone()
+        }
+    }
+
+    /// Check a tension vector against this robot: right count, finite, within [0, max].
+    pub fn check_tensions(&self, tau: &[f64]) -> Result<(), TensionError> {
+        if tau.len() != self.n_tendons() {
+            return Err(TensionError::Count {
+                expected: self.n_tendons(),
+                got: tau.len(),
+            });
+        }
+        for (i, (&t, tendon)) in tau.iter().zip(&self.tendons).enumerate() {
+            if !t.is_finite() {
+                return Err(TensionError::NotFinite { tendon: i });
+            }
+            if t < 0.0 {
+                return Err(TensionError::Negative {
+                    tendon: i,
+                    value: t,
+                });
+            }
+            if t > tendon.max_tension {
+                return Err(TensionError::AboveMax {
+                    tendon: i,
+                    value: t,
+                    max: tendon.max_tension,
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Tendon {
+    /// Rate of change of the position angle along s, rad/m (0 for straight routing).
+    fn angle_rate(&self, length: f64) -> f64 {
+        match self.routing {
+            Routing::Straight => 0.0,
+            Routing::Helical { turns } => 2.0 * PI * turns / length,
+        }
+    }
+
+    /// Body-frame offset r(s) and its derivatives r'(s), r''(s) (m, 1, 1/m).
+    pub fn offset_at(&self, s: f64, length: f64) -> TendonOffset {
+        let w = self.angle_rate(length);
+        let phi = self.angle + w * s;
+        let (sn, cs) = phi.sin_cos();
+        let d = self.offset;
+        TendonOffset {
+            r: Vector3::new(d * cs, d * sn, 0.0),
+            dr: Vector3::new(-d * w * sn, d * w * cs, 0.0),
+            ddr: Vector3::new(-d * w * w * cs, -d * w * w * sn, 0.0),
+        }
+    }
+
+    /// Whether r(s) is constant (lets the statics skip the routing terms).
+    pub fn is_straight(&self) -> bool {
+        matches!(self.routing, Routing::Straight)
+    }
+}
+
+/// A tendon's body-frame offset at one arc length, with its first two derivatives.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TendonOffset {
+    /// r(s), m.
+    pub r: Vector3<f64>,
+    /// r'(s).
+    pub dr: Vector3<f64>,
+    /// r''(s), 1/m.
+    pub ddr: Vector3<f64>,
+}
+
+/// Skew-symmetric matrix x̂ with x̂ y = x × y.
+pub fn hat(x: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, -x.z, x.y, x.z, 0.0, -x.x, -x.y, x.x, 0.0)
+}
+
+/// A tension vector that does not fit the robot.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TensionError {
+    /// Wrong number of tensions.
+    #[error("expected {expected} tensions (one per tendon), got {got}")]
+    Count {
+        /// Tendons of the robot.
+        expected: usize,
+        /// Tensions given.
+        got: usize,
+    },
+    /// NaN or infinite.
+    #[error("tension of tendon {tendon} is not a finite number")]
+    NotFinite {
+        /// Tendon index.
+        tendon: usize,
+    },
+    /// Tendons can only pull.
+    #[error("tension of tendon {tendon} is negative ({value} N): tendons can only pull")]
+    Negative {
+        /// Tendon index.
+        tendon: usize,
+        /// The value given, N.
+        value: f64,
+    },
+    /// Above the motor limit.
+    #[error("tension of tendon {tendon} is {value} N, above its max_tension {max} N")]
+    AboveMax {
+        /// Tendon index.
+        tendon: usize,
+        /// The value given, N.
+        value: f64,
+        /// The robot's limit, N.
+        max: f64,
+    },
+}
+
+struct Validator<'a> {
+    file: &'a Path,
+}
+
+impl Validator<'_> {
+    fn err(&self, field: &str, problem: String) -> RobotError {
+        RobotError {
+            file: self.file.to_path_buf(),
+            field: field.to_string(),
+            problem,
+        }
+    }
+
+    fn finite(&self, field: &str, x: f64) -> Result<f64, RobotError> {
+        if x.is_finite() {
+            Ok(x)
+        } else {
+            Err(self.err(field, format!("must be a finite number, got {x}")))
+        }
+    }
+
+    fn positive(&self, field: &str, x: f64) -> Result<f64, RobotError> {
+        let x = self.finite(field, x)?;
+        if x > 0.0 {
+            Ok(x)
+        } else {
+            Err(self.err(field, format!("must be positive, got {x}")))
+        }
+    }
+
+    fn non_negative(&self, field: &str, x: f64) -> Result<f64, RobotError> {
+        let x = self.finite(field, x)?;
+        if x >= 0.0 {
+            Ok(x)
+        } else {
+            Err(self.err(field, format!("must not be negative, got {x}")))
+        }
+    }
+}
+
+/// Best-effort dotted name of the field a TOML error points at: the table
+/// header above the error's line plus the key on that line.
+fn toml_error_field(text: &str, e: &toml::de::Error) -> String {
+    let Some(span) = e.span() else {
+        return "file".into();
+    };
+    let before = &text[..span.start.min(text.len())];
+    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+    let line = text[line_start..].lines().next().unwrap_or("");
+    let key = line.split('=').next().unwrap_or("").trim();
+    let mut table = String::new();
+    let mut tendon_index: i64 = -1;
+    for l in text[..line_start].lines() {
+        let l = l.trim();
+        if l.starts_with("[[tendon]]") {
+            tendon_index += 1;
+            table = format!("tendon[{tendon_index}]");
+        } else if l.starts_with('[') {
+            table = l.trim_matches(|c| c == '[' || c == ']').trim().to_string();
+        }
+    }
+    let key = if key.starts_with('[') { "" } else { key };
+    match (table.is_empty(), key.is_empty()) {
+        (true, true) => "file".into(),
+        (true, false) => key.into(),
+        (false, true) => table,
+        (false, false) => format!("{table}.{key}"),
+    }
+}
+
+impl fmt::Display for Robot {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{}: L = {} m, r = {} m, E = {:.3e} Pa, {} tendon(s)",
+            self.name,
+            self.length,
+            self.radius,
+            self.youngs_modulus,
+            self.n_tendons()
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn workspace_robot(name: &str) -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../robots")
+            .join(name)
+    }
+
+    const GOOD: &str = r#"
+name = "t"
+[backbone]
+length = 0.4
+radius = 0.0009
+youngs_modulus = 207e9
+shear_modulus = 79.6e9
+density = 39317.0
+[environment]
+gravity = [9.81, 0.0, 0.0]
+[[tendon]]
+offset = 0.019
+angle_deg = 0.0
+max_tension = 10.0
+routing = "straight"
+"#;
+
+    fn parse(text: &str) -> Result<Robot, RobotError> {
+        Robot::from_toml(text, Path::new("bad.toml"))
+    }
+
+    #[test]
+    fn shipped_robots_load() {
+        let r4 = Robot::load(&workspace_robot("seed-4t.toml")).unwrap();
+        assert_eq!(r4.n_tendons(), 4);
+        assert!((r4.tendons[1].angle - PI / 2.0).abs() < 1e-15);
+        // Effective linear density 0.1 kg/m (DESIGN §2).
+        assert!((r4.density * r4.area() - 0.1).abs() < 1e-4);
+        let r1 = Robot::load(&workspace_robot("seed-1t.toml")).unwrap();
+        assert_eq!(r1.n_tendons(), 1);
+    }
+
+    #[test]
+    fn unknown_key_is_named() {
+        let e = parse(&GOOD.replace("density = 39317.0", "densty = 39317.0")).unwrap_err();
+        assert_eq!(e.field, "backbone.densty");
+        assert!(e.problem.contains("unknown field"), "{e}");
+        assert!(e.to_string().starts_with("bad.toml: backbone.densty:"));
+    }
+
+    #[test]
+    fn wrong_type_is_named() {
+        let e = parse(&GOOD.replace("radius = 0.0009", "radius = \"thin\"")).unwrap_err();
+        assert_eq!(e.field, "backbone.radius");
+    }
+
+    #[test]
+    fn negative_radius_is_rejected() {
+        let e = parse(&GOOD.replace("radius = 0.0009", "radius = -0.0009")).unwrap_err();
+        assert_eq!(e.field, "backbone.radius");
+        assert!(e.problem.contains("positive"));
+    }
+
+    #[test]
+    fn nan_is_rejected() {
+        let e = parse(&GOOD.replace("gravity = [9.81", "gravity = [nan")).unwrap_err();
+        assert_eq!(e.field, "environment.gravity[0]");
+        let e = parse(&GOOD.replace("max_tension = 10.0", "max_tension = inf")).unwrap_err();
+        assert_eq!(e.field, "tendon[0].max_tension");
+    }
+
+    #[test]
+    fn zero_tendons_is_rejected() {
+        let text = GOOD.split("[[tendon]]").next().unwrap();
+        let e = parse(text).unwrap_err();
+        assert_eq!(e.field, "tendon");
+    }
+
+    #[test]
+    fn offset_longer_than_rod_is_rejected() {
+        let e = parse(&GOOD.replace("offset = 0.019", "offset = 0.5")).unwrap_err();
+        assert_eq!(e.field, "tendon[0].offset");
+    }
+
+    #[test]
+    fn helical_routing_needs_turns() {
+        let e = parse(&GOOD.replace("\"straight\"", "\"helical\"")).unwrap_err();
+        assert_eq!(e.field, "tendon[0].helix_turns");
+        let r = parse(&GOOD.replace("\"straight\"", "\"helical\"\nhelix_turns = 0.5")).unwrap();
+        assert_eq!(r.tendons[0].routing, Routing::Helical { turns: 0.5 });
+        // Helix: r(L) has turned by half a turn.
+        let o = r.tendons[0].offset_at(r.length, r.length);
+        assert!((o.r.x + 0.019).abs() < 1e-12 && o.r.y.abs() < 1e-12);
+    }
+
+    #[test]
+    fn tension_vectors_are_checked() {
+        let r = parse(GOOD).unwrap();
+        assert!(r.check_tensions(&[2.0]).is_ok());
+        assert!(matches!(
+            r.check_tensions(&[1.0, 2.0]),
+            Err(TensionError::Count { .. })
+        ));
+        assert!(matches!(
+            r.check_tensions(&[-1.0]),
+            Err(TensionError::Negative { .. })
+        ));
+        assert!(matches!(
+            r.check_tensions(&[f64::NAN]),
+            Err(TensionError::NotFinite { .. })
+        ));
+        assert!(matches!(
+            r.check_tensions(&[11.0]),
+            Err(TensionError::AboveMax { .. })
+        ));
+    }
+
+    #[test]
+    fn hat_is_cross_product() {
+        let a = Vector3::new(1.0, -2.0, 0.5);
+        let b = Vector3::new(0.3, 0.7, -1.1);
+        assert!((hat(&a) * b - a.cross(&b)).norm() < 1e-15);
+    }
+}
