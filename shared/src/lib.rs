@@ -3,3 +3,30 @@
 //! versioned `.tnet` weight format.
 #![no_std]
 #![deny(missing_docs)]
+
+#[cfg(any(feature = "std", test))]
+extern crate std;
+
+pub mod crc32;
+pub mod limits;
+pub mod net;
+pub mod tnet;
+
+#[cfg(test)]
+mod format_tests;
+
+pub use limits::{LimitsError, TendonLimits, MAX_TENDONS};
+pub use net::{CascadeNet, Unit};
+#[cfg(feature = "std")]
+pub use tnet::encode_to_vec;
+pub use tnet::{encode, encoded_len, Activation, Shape, TnetError, TnetView};
+
+
+/// `encode` into a fresh vector, for this crate's tests (no `std` feature needed).
+#[cfg(test)]
+fn encode_to_vec_for_tests(net: &TnetView<'_>) -> std::vec::Vec<u8> {
+    let mut buf = std::vec![0u8; encoded_len(net).expect("valid test net")];
+    let n = encode(net, &mut buf).expect("buffer sized by encoded_len");
+    buf.truncate(n);
+    buf
+}
