@@ -1,0 +1,509 @@
+//! The control step (DESIGN §5): a pure, deterministic function of
+//! (state, setpoint, feedback, time) → (state, tension command), with every
+//! safety decision recorded in a [`Status`] word.
+//!
+//! Order of a step:
+//! 1. time: `dt` since the previous step, capped at [`ControlConfig::max_dt_ns`]
+//!    (a late step never earns a bigger jump); a clock that runs backwards
+//!    gives `dt = 0` (command frozen) and [`Status::CLOCK_FAULT`];
+//! 2. setpoint: a setpoint whose sequence number is not newer than the last
+//!    one is stale and ignored; a NaN/∞ pose or a non-unit quaternion is
+//!    rejected; a pose outside the net's normalisation box (plus
+//!    [`ControlConfig::box_margin`]) is *held*: the previous target stays;
+//! 3. watchdog: no acceptable setpoint for [`ControlConfig::watchdog_ns`] →
+//!    safe hold until the next acceptable one;
+//! 4. optional integral outer loop on the measured tip position;
+//! 5. inference → target tensions; a non-finite output is rejected (hold);
+//! 6. clamp the target into `[0, max_tension]`, then move the command toward it
+//!    by at most `slew_rate · dt` per tendon.
+//!
+//! **Why hold rather than project an unreachable setpoint.** The net's box is
+//! the axis-aligned hull of the training poses; clamping each coordinate into
+//! it produces a pose with a non-unit quaternion that the robot cannot reach
+//! and the net never saw, so the tensions it returns are arbitrary. Holding
+//! the last good target keeps the robot at the last pose known to be
+//! reachable, is trivially within limits, and the planner sees
+//! [`Status::OUT_OF_WORKSPACE`] and can re-plan. `box_margin` admits poses
+//! marginally outside the box (the net extrapolates smoothly a little way).
+
+use core::fmt;
+
+use tendril_shared::{CascadeNet, TendonLimits, MAX_TENDONS};
+
+use crate::infer::infer;
+
+/// Pose dimension: `px, py, pz` (m), `qw, qx, qy, qz`.
+pub const POSE_DIM: usize = 7;
+
+/// One tension per tendon slot (N); slots past the tendon count are 0.
+pub type Tensions = [f32; MAX_TENDONS];
+
+/// What the control step did this period, as bits. The low bits equal
+/// `tendril_shared::messages::command_status` so `bits()` can be sent as
+/// `TensionCommand::status`; bits 16 and up say why in more detail.
+#[derive(Clone, Copy, Default, PartialEq, Eq, Hash)]
+pub struct Status(u32);
+
+impl Status {
+    /// Watchdog fired (or the net is unusable): tensions are a safe hold.
+    pub const SAFE_HOLD: Status = Status(1 << 0);
+    /// The setpoint of this step was rejected (NaN/∞, quaternion, workspace).
+    pub const SETPOINT_REJECTED: Status = Status(1 << 1);
+    /// A tension hit its range or slew limit.
+    pub const SATURATED: Status = Status(1 << 2);
+    /// Integral loop enabled but no fresh feedback: correction frozen.
+    pub const PLANT_STALE: Status = Status(1 << 3);
+    /// The integral correction changed the pose sent to the net.
+    pub const CORRECTION: Status = Status(1 << 4);
+    /// A new weight blob replaced the net before this step.
+    pub const WEIGHTS_SWAPPED: Status = Status(1 << 5);
+    /// A weight blob was rejected before this step; the old net ran.
+    pub const WEIGHTS_REJECTED: Status = Status(1 << 6);
+    /// No acceptable setpoint yet: holding the initial command.
+    pub const NO_SETPOINT: Status = Status(1 << 8);
+    /// A new setpoint was accepted this step.
+    pub const NEW_SETPOINT: Status = Status(1 << 16);
+    /// The setpoint's sequence number was not newer than the last: ignored.
+    pub const STALE_SETPOINT: Status = Status(1 << 17);
+    /// Setpoint rejected: a NaN or infinite component.
+    pub const NONFINITE_SETPOINT: Status = Status(1 << 18);
+    /// Setpoint rejected: quaternion norm off by more than the tolerance.
+    pub const BAD_QUATERNION: Status = Status(1 << 19);
+    /// Setpoint outside the net's normalisation box: previous target held.
+    pub const OUT_OF_WORKSPACE: Status = Status(1 << 20);
+    /// The net produced a NaN/∞ tension: previous target held.
+    pub const NONFINITE_OUTPUT: Status = Status(1 << 21);
+    /// A target tension was clamped into `[0, max_tension]`.
+    pub const RANGE_CLAMPED: Status = Status(1 << 22);
+    /// A tension change was cut to the slew limit.
+    pub const SLEW_LIMITED: Status = Status(1 << 23);
+    /// Time went backwards: `dt` taken as 0.
+    pub const CLOCK_FAULT: Status = Status(1 << 24);
+    /// The net's shape does not fit the robot (inputs ≠ 7 or outputs ≠ tendons).
+    pub const NET_MISMATCH: Status = Status(1 << 25);
+    /// Feedback was NaN/∞ and was ignored.
+    pub const BAD_FEEDBACK: Status = Status(1 << 26);
+    /// The corrected pose left the box: integral frozen, uncorrected pose used.
+    pub const CORRECTION_LIMITED: Status = Status(1 << 27);
+
+    /// No bits set.
+    pub const fn empty() -> Status {
+        Status(0)
+    }
+
+    /// The raw bits.
+    pub const fn bits(self) -> u32 {
+        self.0
+    }
+
+    /// From raw bits (unknown bits kept).
+    pub const fn from_bits(bits: u32) -> Status {
+        Status(bits)
+    }
+
+    /// Whether every bit of `other` is set.
+    pub const fn contains(self, other: Status) -> bool {
+        self.0 & other.0 == other.0
+    }
+
+    /// Whether any bit of `other` is set.
+    pub const fn intersects(self, other: Status) -> bool {
+        self.0 & other.0 != 0
+    }
+
+    /// Set the bits of `other`.
+    pub fn insert(&mut self, other: Status) {
+        self.0 |= other.0;
+    }
+}
+
+impl core::ops::BitOr for Status {
+    type Output = Status;
+    fn bitor(self, rhs: Status) -> Status {
+        Status(self.0 | rhs.0)
+    }
+}
+
+impl core::ops::BitOrAssign for Status {
+    fn bitor_assign(&mut self, rhs: Status) {
+        self.0 |= rhs.0;
+    }
+}
+
+impl fmt::Debug for Status {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "Status({:#010x})", self.0)
+    }
+}
+
+/// Integral outer loop: `c += ki · (p_setpoint − p_measured) · dt`, added to
+/// the setpoint's position before inference (DESIGN §5: removes the net's
+/// steady-state error). `ki = 0` disables it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IntegralConfig {
+    /// Integral gain, 1/s (0 = off).
+    pub ki: f32,
+    /// Bound on each correction component, m (anti-windup).
+    pub limit: f32,
+    /// Feedback older than this freezes the correction ([`Status::PLANT_STALE`]), ns.
+    pub feedback_timeout_ns: u64,
+}
+
+impl IntegralConfig {
+    /// The loop switched off.
+    pub const OFF: IntegralConfig = IntegralConfig {
+        ki: 0.0,
+        limit: 0.0,
+        feedback_timeout_ns: 0,
+    };
+}
+
+/// What the command does while the watchdog holds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SafeHold {
+    /// Keep the last command (the robot stays where it is).
+    Freeze,
+    /// Move (at the slew rate) to these tensions, clamped to the limits,
+    /// e.g. all zero to relax the robot.
+    Ramp(Tensions),
+}
+
+/// Everything the control step needs besides the net. Build with
+/// [`ControlConfig::new`] and adjust fields.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ControlConfig {
+    /// Tension range and slew rate per tendon.
+    pub limits: TendonLimits,
+    /// Silence after the last acceptable setpoint that trips the watchdog, ns.
+    pub watchdog_ns: u64,
+    /// Largest `dt` the slew limit credits for one step, ns.
+    pub max_dt_ns: u64,
+    /// Allowed `| |q|² − 1 |` of a setpoint quaternion.
+    pub quaternion_tolerance: f32,
+    /// How far outside the normalisation box (fraction of each range) a
+    /// setpoint may lie and still be used.
+    pub box_margin: f32,
+    /// Behaviour while the watchdog holds.
+    pub safe_hold: SafeHold,
+    /// Optional integral outer loop.
+    pub integral: IntegralConfig,
+}
+
+impl ControlConfig {
+    /// Defaults for a 1 kHz loop: watchdog 50 ms, `dt` capped at 5 ms,
+    /// quaternion tolerance 1e-2, no box margin, freeze on hold, no integral.
+    pub fn new(limits: TendonLimits) -> ControlConfig {
+        ControlConfig {
+            limits,
+            watchdog_ns: 50_000_000,
+            max_dt_ns: 5_000_000,
+            quaternion_tolerance: 1e-2,
+            box_margin: 0.0,
+            safe_hold: SafeHold::Freeze,
+            integral: IntegralConfig::OFF,
+        }
+    }
+}
+
+/// A desired tip pose.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Setpoint {
+    /// Sender's sequence number; must increase for the setpoint to count.
+    pub seq: u64,
+    /// `px, py, pz` (m), `qw, qx, qy, qz`.
+    pub pose: [f32; POSE_DIM],
+}
+
+/// Measured tip position from the plant.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Feedback {
+    /// Sender's sequence number; must increase to count as fresh.
+    pub seq: u64,
+    /// Measured tip position, m.
+    pub tip_position: [f32; 3],
+}
+
+/// Inputs of one step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepInput {
+    /// Monotonic time of this step, ns.
+    pub now_ns: u64,
+    /// A setpoint received since the last step, if any.
+    pub setpoint: Option<Setpoint>,
+    /// Plant feedback received since the last step, if any.
+    pub feedback: Option<Feedback>,
+}
+
+/// The controller's memory between steps (small, `Copy`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ControlState {
+    /// Command sent last step, N.
+    pub command: Tensions,
+    /// Target the command is slewing toward, N (held when a setpoint is refused).
+    pub target: Tensions,
+    /// Time of the last step, ns.
+    pub last_step_ns: u64,
+    /// Time of the last acceptable setpoint (start time before the first), ns.
+    pub last_setpoint_ns: u64,
+    /// Sequence number of the last setpoint seen (0 = none).
+    pub last_setpoint_seq: u64,
+    /// Pose of the last accepted setpoint (valid when `has_setpoint`).
+    pub pose: [f32; POSE_DIM],
+    /// Whether a setpoint has been accepted yet.
+    pub has_setpoint: bool,
+    /// Whether the watchdog holds (latched until an acceptable setpoint).
+    pub watchdog: bool,
+    /// Integral correction of the position, m.
+    pub correction: [f32; 3],
+    /// Sequence number of the last feedback used.
+    pub last_feedback_seq: u64,
+    /// Time of the last fresh feedback, ns.
+    pub last_feedback_ns: u64,
+}
+
+impl ControlState {
+    /// Start at time `now_ns` holding `initial` (clamped to the limits;
+    /// NaN entries become 0).
+    pub fn new(limits: &TendonLimits, initial: &Tensions, now_ns: u64) -> ControlState {
+        let mut command = [0.0f32; MAX_TENDONS];
+        for ((c, &t), &max) in command
+            .iter_mut()
+            .zip(initial)
+            .zip(limits.max_tension_padded())
+        {
+            *c = if t.is_finite() {
+                t.clamp(0.0, max)
+            } else {
+                0.0
+            };
+        }
+        ControlState {
+            command,
+            target: command,
+            last_step_ns: now_ns,
+            last_setpoint_ns: now_ns,
+            last_setpoint_seq: 0,
+            pose: [0.0; POSE_DIM],
+            has_setpoint: false,
+            watchdog: false,
+            correction: [0.0; 3],
+            last_feedback_seq: 0,
+            last_feedback_ns: now_ns,
+        }
+    }
+}
+
+/// The result of one step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepOutput {
+    /// Tensions to apply, N (`count` valid entries, the rest 0).
+    pub command: Tensions,
+    /// Number of tendons.
+    pub count: usize,
+    /// What happened.
+    pub status: Status,
+}
+
+/// Whether every normalised coordinate of `pose` lies in `[−m, 1 + m]`.
+fn in_box<const H: usize, const OUT: usize>(
+    net: &CascadeNet<POSE_DIM, H, OUT>,
+    pose: &[f32; POSE_DIM],
+    margin: f32,
+) -> bool {
+    let ranges = net.input_lo().iter().zip(net.input_hi());
+    pose.iter().zip(ranges).all(|(&x, (&lo, &hi))| {
+        let u = (x - lo) / (hi - lo);
+        u >= -margin && u <= 1.0 + margin
+    })
+}
+
+fn quaternion_ok(pose: &[f32; POSE_DIM], tol: f32) -> bool {
+    let [_, _, _, w, x, y, z] = *pose;
+    let n2 = w * w + x * x + y * y + z * z;
+    (n2 - 1.0).abs() <= tol
+}
+
+/// One control step. Pure: the same arguments always give the same result,
+/// and nothing outside the return value changes.
+///
+/// Guarantees, for any input (NaN, ∞, huge, stale, out of workspace), with a
+/// fixed `cfg`: every command entry is finite and in `[0, max_tension]`, and
+/// differs from the previous command by at most `slew_rate · min(dt,
+/// max_dt)`; after `watchdog_ns` without an acceptable setpoint the status
+/// has [`Status::SAFE_HOLD`].
+pub fn control_step<const H: usize, const OUT: usize>(
+    cfg: &ControlConfig,
+    net: &CascadeNet<POSE_DIM, H, OUT>,
+    state: &ControlState,
+    input: &StepInput,
+) -> (ControlState, StepOutput) {
+    let mut st = *state;
+    let mut status = Status::empty();
+    let n = cfg.limits.n_tendons();
+    let now = input.now_ns;
+
+    // 1. Time.
+    let dt_ns = if now < st.last_step_ns {
+        status |= Status::CLOCK_FAULT;
+        0
+    } else {
+        (now - st.last_step_ns).min(cfg.max_dt_ns)
+    };
+    if now > st.last_step_ns {
+        st.last_step_ns = now;
+    }
+    let dt = dt_ns as f32 * 1e-9;
+
+    let shape = net.shape();
+    let net_ok = shape.inputs == POSE_DIM && shape.outputs == n;
+    if !net_ok {
+        status |= Status::NET_MISMATCH;
+    }
+
+    // 2. Setpoint.
+    if let Some(sp) = input.setpoint {
+        if st.has_setpoint && sp.seq <= st.last_setpoint_seq {
+            status |= Status::STALE_SETPOINT;
+        } else if sp.pose.iter().any(|v| !v.is_finite()) {
+            st.last_setpoint_seq = sp.seq;
+            status |= Status::SETPOINT_REJECTED | Status::NONFINITE_SETPOINT;
+        } else if !quaternion_ok(&sp.pose, cfg.quaternion_tolerance) {
+            st.last_setpoint_seq = sp.seq;
+            status |= Status::SETPOINT_REJECTED | Status::BAD_QUATERNION;
+        } else if !net_ok || !in_box(net, &sp.pose, cfg.box_margin) {
+            // A live planner asking for an unreachable pose: feed the
+            // watchdog, hold the target.
+            st.last_setpoint_seq = sp.seq;
+            st.last_setpoint_ns = now;
+            status |= Status::SETPOINT_REJECTED | Status::OUT_OF_WORKSPACE;
+        } else {
+            st.last_setpoint_seq = sp.seq;
+            st.last_setpoint_ns = now;
+            st.pose = sp.pose;
+            st.has_setpoint = true;
+            st.watchdog = false;
+            status |= Status::NEW_SETPOINT;
+        }
+    }
+
+    // 3. Watchdog (time since the last acceptable setpoint).
+    if now.saturating_sub(st.last_setpoint_ns) > cfg.watchdog_ns {
+        st.watchdog = true;
+    }
+    if !st.has_setpoint {
+        status |= Status::NO_SETPOINT;
+    }
+
+    let tracking = st.has_setpoint && !st.watchdog && net_ok;
+
+    // 4. Integral outer loop.
+    let mut pose = st.pose;
+    let ic = cfg.integral;
+    if ic.ki > 0.0 && tracking {
+        let mut fresh = false;
+        if let Some(fb) = input.feedback {
+            if fb.tip_position.iter().any(|v| !v.is_finite()) {
+                status |= Status::BAD_FEEDBACK;
+            } else if fb.seq > st.last_feedback_seq {
+                st.last_feedback_seq = fb.seq;
+                st.last_feedback_ns = now;
+                fresh = true;
+                let before = st.correction;
+                for ((c, &p), &m) in st.correction.iter_mut().zip(&st.pose).zip(&fb.tip_position) {
+                    *c = (*c + ic.ki * (p - m) * dt).clamp(-ic.limit, ic.limit);
+                }
+                if !corrected_in_box(net, &st.pose, &st.correction, cfg.box_margin) {
+                    st.correction = before;
+                }
+            }
+        }
+        if !fresh && now.saturating_sub(st.last_feedback_ns) > ic.feedback_timeout_ns {
+            status |= Status::PLANT_STALE;
+        }
+        if corrected_in_box(net, &st.pose, &st.correction, cfg.box_margin) {
+            for (p, c) in pose.iter_mut().zip(&st.correction) {
+                *p += c;
+            }
+            if st.correction.iter().any(|&c| c != 0.0) {
+                status |= Status::CORRECTION;
+            }
+        } else {
+            status |= Status::CORRECTION_LIMITED;
+        }
+    }
+
+    // 5. Target.
+    if st.watchdog || (!net_ok && st.has_setpoint) {
+        status |= Status::SAFE_HOLD;
+        st.target = match cfg.safe_hold {
+            SafeHold::Freeze => st.command,
+            SafeHold::Ramp(t) => t,
+        };
+    } else if tracking {
+        let y = infer(net, &pose);
+        if y.iter().take(n).all(|v| v.is_finite()) {
+            st.target = [0.0; MAX_TENDONS];
+            for (t, v) in st.target.iter_mut().zip(y.iter()).take(n) {
+                *t = *v;
+            }
+        } else {
+            status |= Status::NONFINITE_OUTPUT;
+        }
+    }
+
+    // 6. Limits: clamp the target, slew the command, clamp again (the
+    //    previous command is in range unless the limits changed).
+    let max_t = cfg.limits.max_tension_padded();
+    let rate = cfg.limits.slew_rate_padded();
+    let mut command = [0.0f32; MAX_TENDONS];
+    for i in 0..n.min(MAX_TENDONS) {
+        let (Some(&tgt), Some(&max), Some(&r), Some(&prev)) = (
+            st.target.get(i),
+            max_t.get(i),
+            rate.get(i),
+            st.command.get(i),
+        ) else {
+            continue;
+        };
+        let tgt = if tgt.is_finite() { tgt } else { prev };
+        let clamped = tgt.clamp(0.0, max);
+        if clamped != tgt {
+            status |= Status::RANGE_CLAMPED;
+        }
+        let max_step = r * dt;
+        let delta = clamped - prev;
+        let step = delta.clamp(-max_step, max_step);
+        if step != delta {
+            status |= Status::SLEW_LIMITED;
+        }
+        let c = (prev + step).clamp(0.0, max);
+        if let Some(slot) = command.get_mut(i) {
+            *slot = if c.is_finite() { c } else { 0.0 };
+        }
+    }
+    if status.intersects(Status::RANGE_CLAMPED | Status::SLEW_LIMITED) {
+        status |= Status::SATURATED;
+    }
+    st.command = command;
+    (
+        st,
+        StepOutput {
+            command,
+            count: n,
+            status,
+        },
+    )
+}
+
+fn corrected_in_box<const H: usize, const OUT: usize>(
+    net: &CascadeNet<POSE_DIM, H, OUT>,
+    pose: &[f32; POSE_DIM],
+    correction: &[f32; 3],
+    margin: f32,
+) -> bool {
+    let mut p = *pose;
+    for (x, c) in p.iter_mut().zip(correction) {
+        *x += c;
+    }
+    in_box(net, &p, margin)
+}

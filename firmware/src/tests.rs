@@ -1,0 +1,524 @@
+//! Unit and property tests of inference, the control step, hot swap and the
+//! vector format.
+
+#![allow(clippy::needless_range_loop)] // index loops read like the formulas here
+
+use std::vec::Vec;
+
+use proptest::prelude::*;
+use tendril_shared::{CascadeNet, TendonLimits, MAX_TENDONS};
+
+use crate::control::*;
+use crate::infer::{dot, infer};
+use crate::swap::{NetSlots, SwapError};
+use crate::synth::{synthetic_blob, SplitMix64, INPUT_HI, INPUT_LO};
+use crate::vectors::{self, Record, VecHeader};
+
+type Net = CascadeNet<7, 16, 8>;
+
+fn blob(seed: u64, hidden: usize, outputs: usize) -> Vec<u8> {
+    let mut buf = std::vec![0u8; 8192];
+    let n = synthetic_blob(seed, hidden, outputs, 10.0, &mut buf).unwrap();
+    buf.truncate(n);
+    buf
+}
+
+/// f64 reference straight from the documented flat layout, regenerating the
+/// synthetic weights from the seed (independent of the decoder's storage).
+fn reference(seed: u64, hidden: usize, outputs: usize, x: &[f32; 7]) -> Vec<f64> {
+    let ni = 7;
+    let nh_w: usize = (0..hidden).map(|k| 1 + ni + k).sum();
+    let no_w = outputs * (1 + ni + hidden);
+    let mut rng = SplitMix64(seed);
+    let w: Vec<f64> = (0..nh_w + no_w)
+        .map(|_| rng.uniform(-1.0, 1.0) as f64)
+        .collect();
+    let mut feat: Vec<f64> = std::vec![1.0];
+    for i in 0..ni {
+        let (lo, hi) = (INPUT_LO[i] as f64, INPUT_HI[i] as f64);
+        feat.push((x[i] as f64 - lo) / (hi - lo));
+    }
+    let mut off = 0;
+    for k in 0..hidden {
+        let len = 1 + ni + k;
+        let s: f64 = w[off..off + len]
+            .iter()
+            .zip(&feat)
+            .map(|(a, b)| a * b)
+            .sum();
+        feat.push(1.0 / (1.0 + (-s).exp()) - 0.5);
+        off += len;
+    }
+    (0..outputs)
+        .map(|o| {
+            let len = 1 + ni + hidden;
+            let row = &w[nh_w + o * len..nh_w + (o + 1) * len];
+            let s: f64 = row.iter().zip(&feat).map(|(a, b)| a * b).sum();
+            10.0 * s
+        })
+        .collect()
+}
+
+/// The centre of the synthetic net's input box (every normalised input 0.5;
+/// its quaternion is not unit, so the control step would refuse it).
+fn box_centre() -> [f32; 7] {
+    let mut p = [0.0f32; 7];
+    for i in 0..7 {
+        p[i] = 0.5 * (INPUT_LO[i] + INPUT_HI[i]);
+    }
+    p
+}
+
+/// A valid setpoint inside the box: centre position, unit quaternion.
+fn mid_pose() -> [f32; 7] {
+    let qx = (1.0f32 - 0.98 * 0.98).sqrt();
+    [0.0, 0.0, 0.35, 0.98, qx, 0.0, 0.0]
+}
+
+#[test]
+fn dot_matches_a_plain_sum_for_every_length() {
+    for n in 0..20 {
+        let w: Vec<f32> = (0..n).map(|i| 0.5 - 0.1 * i as f32).collect();
+        let a: Vec<f32> = (0..n).map(|i| 1.0 + 0.25 * i as f32).collect();
+        let exact: f64 = w.iter().zip(&a).map(|(x, y)| *x as f64 * *y as f64).sum();
+        assert!((dot(&w, &a) as f64 - exact).abs() < 1e-5, "n={n}");
+        // The longer slice's extra entries are ignored.
+        let mut longer = a.clone();
+        longer.push(1e30);
+        assert_eq!(dot(&w, &longer), dot(&w, &a));
+    }
+}
+
+#[test]
+fn inference_matches_an_f64_reference_of_the_documented_layout() {
+    let mut rng = SplitMix64(99);
+    for &(seed, hidden, outputs) in &[(1u64, 0usize, 4usize), (2, 1, 1), (3, 12, 4), (4, 16, 8)] {
+        let net = Net::decode(&blob(seed, hidden, outputs)).unwrap();
+        for _ in 0..50 {
+            let mut x = [0.0f32; 7];
+            for i in 0..7 {
+                x[i] = rng.uniform(INPUT_LO[i], INPUT_HI[i]);
+            }
+            let y = infer(&net, &x);
+            let r = reference(seed, hidden, outputs, &x);
+            for o in 0..outputs {
+                let tol = 1e-4 * (1.0 + r[o].abs());
+                assert!(
+                    (y[o] as f64 - r[o]).abs() < tol,
+                    "{seed} {o}: {} vs {}",
+                    y[o],
+                    r[o]
+                );
+            }
+            assert!(y[outputs..].iter().all(|&v| v == 0.0));
+        }
+    }
+}
+
+#[test]
+fn one_hidden_unit_by_hand() {
+    // 7-1-1 net with weights from the seed; check the closed form at the box
+    // centre, where every normalised input is exactly 0.5.
+    let seed = 5;
+    let net = Net::decode(&blob(seed, 1, 1)).unwrap();
+    let mut rng = SplitMix64(seed);
+    let w: Vec<f32> = (0..8 + 9).map(|_| rng.uniform(-1.0, 1.0)).collect();
+    let s_h: f64 = w[0] as f64 + 0.5 * w[1..8].iter().map(|&v| v as f64).sum::<f64>();
+    let h = 1.0 / (1.0 + (-s_h).exp()) - 0.5;
+    let s_o =
+        w[8] as f64 + 0.5 * w[9..16].iter().map(|&v| v as f64).sum::<f64>() + w[16] as f64 * h;
+    let y = infer(&net, &box_centre());
+    assert!(
+        (y[0] as f64 - 10.0 * s_o).abs() < 1e-5,
+        "{} vs {}",
+        y[0],
+        10.0 * s_o
+    );
+}
+
+#[test]
+fn empty_net_infers_zeros() {
+    assert_eq!(infer(&Net::empty(), &mid_pose()), [0.0; 8]);
+}
+
+fn cfg4() -> ControlConfig {
+    let mut c = ControlConfig::new(TendonLimits::uniform(4, 10.0, 100.0).unwrap());
+    c.watchdog_ns = 20_000_000;
+    c.max_dt_ns = 2_000_000;
+    c
+}
+
+fn sp(seq: u64, pose: [f32; 7]) -> Option<Setpoint> {
+    Some(Setpoint { seq, pose })
+}
+
+fn input(now_ns: u64, setpoint: Option<Setpoint>) -> StepInput {
+    StepInput {
+        now_ns,
+        setpoint,
+        feedback: None,
+    }
+}
+
+#[test]
+fn tracking_converges_to_the_clamped_net_output_at_the_slew_rate() {
+    let cfg = cfg4();
+    let net = Net::decode(&blob(3, 12, 4)).unwrap();
+    let pose = mid_pose();
+    let y = infer(&net, &pose);
+    let mut st = ControlState::new(&cfg.limits, &[0.0; MAX_TENDONS], 0);
+    let (s1, o1) = control_step(&cfg, &net, &st, &input(1_000_000, sp(1, pose)));
+    assert!(o1.status.contains(Status::NEW_SETPOINT));
+    // 1 ms at 100 N/s: at most 0.1 N per tendon.
+    for i in 0..4 {
+        assert!((o1.command[i] - y[i].clamp(0.0, 10.0).min(0.1)).abs() < 1e-6);
+    }
+    st = s1;
+    for k in 2..400u64 {
+        st = control_step(&cfg, &net, &st, &input(k * 1_000_000, sp(k, pose))).0;
+    }
+    for i in 0..4 {
+        assert!((st.command[i] - y[i].clamp(0.0, 10.0)).abs() < 1e-6, "{i}");
+    }
+    assert_eq!(&st.command[4..], &[0.0; 4]);
+}
+
+#[test]
+fn nan_stale_and_out_of_box_setpoints_hold_the_target() {
+    let cfg = cfg4();
+    let net = Net::decode(&blob(3, 12, 4)).unwrap();
+    let st0 = ControlState::new(&cfg.limits, &[0.0; MAX_TENDONS], 0);
+    let (st, _) = control_step(&cfg, &net, &st0, &input(1_000_000, sp(5, mid_pose())));
+    let target = st.target;
+
+    let mut nan = mid_pose();
+    nan[2] = f32::NAN;
+    let (s, o) = control_step(&cfg, &net, &st, &input(2_000_000, sp(6, nan)));
+    assert!(o
+        .status
+        .contains(Status::SETPOINT_REJECTED | Status::NONFINITE_SETPOINT));
+    assert_eq!(s.target, target);
+
+    let mut far = mid_pose();
+    far[0] = 0.5; // outside px ∈ [−0.15, 0.15]
+    let (s, o) = control_step(&cfg, &net, &st, &input(2_000_000, sp(6, far)));
+    assert!(o.status.contains(Status::OUT_OF_WORKSPACE));
+    assert_eq!(s.target, target);
+
+    let mut skew = mid_pose();
+    skew[3] = 0.5;
+    let (_, o) = control_step(&cfg, &net, &st, &input(2_000_000, sp(6, skew)));
+    assert!(o.status.contains(Status::BAD_QUATERNION));
+
+    let (s, o) = control_step(&cfg, &net, &st, &input(2_000_000, sp(5, far)));
+    assert!(o.status.contains(Status::STALE_SETPOINT));
+    assert!(!o.status.contains(Status::SETPOINT_REJECTED));
+    assert_eq!(s.target, target);
+}
+
+#[test]
+fn watchdog_trips_after_the_configured_silence_and_recovers() {
+    let cfg = cfg4();
+    let net = Net::decode(&blob(3, 12, 4)).unwrap();
+    let mut st = ControlState::new(&cfg.limits, &[0.0; MAX_TENDONS], 0);
+    st = control_step(&cfg, &net, &st, &input(1_000_000, sp(1, mid_pose()))).0;
+    // Silent until exactly the timeout: still tracking.
+    let (_, o) = control_step(&cfg, &net, &st, &input(21_000_000, None));
+    assert!(!o.status.contains(Status::SAFE_HOLD));
+    let (s, o) = control_step(&cfg, &net, &st, &input(21_000_001, None));
+    assert!(o.status.contains(Status::SAFE_HOLD));
+    // Freeze: the command does not move while holding.
+    assert_eq!(o.command, st.command);
+    let (_, o) = control_step(&cfg, &net, &s, &input(22_000_000, sp(2, mid_pose())));
+    assert!(!o.status.contains(Status::SAFE_HOLD));
+    assert!(o.status.contains(Status::NEW_SETPOINT));
+}
+
+#[test]
+fn ramp_safe_hold_relaxes_at_the_slew_rate() {
+    let mut cfg = cfg4();
+    cfg.safe_hold = SafeHold::Ramp([0.0; MAX_TENDONS]);
+    let net = Net::decode(&blob(3, 12, 4)).unwrap();
+    let mut st = ControlState::new(&cfg.limits, &[5.0; MAX_TENDONS], 0);
+    st.watchdog = true;
+    let (st, o) = control_step(&cfg, &net, &st, &input(1_000_000, None));
+    assert!(o.status.contains(Status::SAFE_HOLD | Status::SLEW_LIMITED));
+    assert!((o.command[0] - 4.9).abs() < 1e-5);
+    assert!(st.command[..4].iter().all(|&c| (c - 4.9).abs() < 1e-5));
+}
+
+#[test]
+fn clock_running_backwards_freezes_the_command() {
+    let cfg = cfg4();
+    let net = Net::decode(&blob(3, 12, 4)).unwrap();
+    let st = ControlState::new(&cfg.limits, &[1.0; MAX_TENDONS], 10_000_000);
+    let (_, o) = control_step(&cfg, &net, &st, &input(5_000_000, sp(1, mid_pose())));
+    assert!(o.status.contains(Status::CLOCK_FAULT));
+    assert_eq!(&o.command[..4], &[1.0; 4]);
+}
+
+#[test]
+fn net_with_wrong_output_count_is_refused() {
+    let cfg = cfg4();
+    let net = Net::decode(&blob(3, 2, 3)).unwrap();
+    let st = ControlState::new(&cfg.limits, &[0.0; MAX_TENDONS], 0);
+    let (_, o) = control_step(&cfg, &net, &st, &input(1_000_000, sp(1, mid_pose())));
+    assert!(o.status.contains(Status::NET_MISMATCH));
+    assert_eq!(o.command, [0.0; MAX_TENDONS]);
+}
+
+#[test]
+fn integral_loop_removes_a_constant_plant_offset() {
+    // Plant: the measured tip is the pose the net was asked for, shifted by a
+    // constant bias. The integrator must converge to exactly that bias.
+    let mut cfg = cfg4();
+    cfg.integral = IntegralConfig {
+        ki: 50.0,
+        limit: 0.01,
+        feedback_timeout_ns: 5_000_000,
+    };
+    let net = Net::decode(&blob(3, 12, 4)).unwrap();
+    let pose = mid_pose();
+    let bias = [0.002f32, -0.001, 0.0005];
+    let mut st = ControlState::new(&cfg.limits, &[0.0; MAX_TENDONS], 0);
+    let mut status = Status::empty();
+    for k in 1..2000u64 {
+        let tip = [
+            pose[0] + st.correction[0] - bias[0],
+            pose[1] + st.correction[1] - bias[1],
+            pose[2] + st.correction[2] - bias[2],
+        ];
+        let inp = StepInput {
+            now_ns: k * 1_000_000,
+            setpoint: sp(k, pose),
+            feedback: Some(Feedback {
+                seq: k,
+                tip_position: tip,
+            }),
+        };
+        let (s, o) = control_step(&cfg, &net, &st, &inp);
+        st = s;
+        status = o.status;
+    }
+    assert!(status.contains(Status::CORRECTION));
+    for i in 0..3 {
+        assert!(
+            (st.correction[i] - bias[i]).abs() < 1e-6,
+            "{i}: {:?}",
+            st.correction
+        );
+    }
+    // Feedback stops: the correction freezes and the status says so.
+    let (s, o) = control_step(&cfg, &net, &st, &input(2_010_000_000, sp(3000, pose)));
+    assert!(o.status.contains(Status::PLANT_STALE));
+    assert_eq!(s.correction, st.correction);
+}
+
+#[test]
+fn a_rejected_blob_leaves_the_running_net_in_place() {
+    let good = blob(3, 12, 4);
+    let other = blob(8, 12, 4);
+    let mut slots = NetSlots::<7, 16, 8>::new();
+    slots.load(&good, (7, 4)).unwrap();
+    let pose = mid_pose();
+    let before = infer(slots.active(), &pose);
+    let mut bad = other.clone();
+    bad[30] ^= 1;
+    assert!(matches!(
+        slots.load(&bad, (7, 4)),
+        Err(SwapError::Decode(_))
+    ));
+    assert_eq!(infer(slots.active(), &pose), before);
+    assert!(matches!(
+        slots.load(&blob(3, 12, 3), (7, 4)),
+        Err(SwapError::ShapeMismatch { outputs: 3, .. })
+    ));
+    assert_eq!(infer(slots.active(), &pose), before);
+    assert!(matches!(
+        slots.load(&blob(3, 17, 4), (7, 4)),
+        Err(SwapError::Decode(_))
+    ));
+    assert_eq!(infer(slots.active(), &pose), before);
+    slots.load(&other, (7, 4)).unwrap();
+    let after = infer(slots.active(), &pose);
+    assert_eq!(after, infer(&Net::decode(&other).unwrap(), &pose));
+    assert_ne!(after, before);
+    // Swapping back and forth keeps working (both buffers reused).
+    slots.load(&good, (7, 4)).unwrap();
+    assert_eq!(infer(slots.active(), &pose), before);
+}
+
+#[test]
+fn vector_header_and_records_round_trip() {
+    let h = VecHeader {
+        count: 2,
+        n_tendons: 4,
+        max_tension: 10.0,
+        slew_rate: 200.0,
+        watchdog_ns: 7,
+        max_dt_ns: 8,
+        ki: 0.5,
+        integral_limit: 0.01,
+        feedback_timeout_ns: 9,
+        quaternion_tolerance: 0.02,
+        box_margin: 0.03,
+    };
+    let r = Record {
+        now_ns: 123,
+        flags: vectors::HAS_SETPOINT,
+        seq: 4,
+        pose: mid_pose(),
+        tip: [1.0, 2.0, 3.0],
+    };
+    let mut bytes = std::vec![0u8; vectors::HEADER_LEN + 2 * vectors::RECORD_LEN];
+    h.write((&mut bytes[..vectors::HEADER_LEN]).try_into().unwrap());
+    for k in 0..2 {
+        let at = vectors::HEADER_LEN + k * vectors::RECORD_LEN;
+        r.write(
+            (&mut bytes[at..at + vectors::RECORD_LEN])
+                .try_into()
+                .unwrap(),
+        );
+    }
+    let (h2, recs) = vectors::parse(&bytes).unwrap();
+    assert_eq!(h2, h);
+    let recs: Vec<Record> = recs.collect();
+    assert_eq!(recs, std::vec![r, r]);
+    assert!(vectors::parse(&bytes[..bytes.len() - 1]).is_err());
+}
+
+// ---- property tests of the control step -------------------------------------
+
+/// A float from the nasty corners: NaN, ±∞, huge, tiny, in-box, just out.
+fn nasty_f32() -> impl Strategy<Value = f32> {
+    prop_oneof![
+        Just(f32::NAN),
+        Just(f32::INFINITY),
+        Just(f32::NEG_INFINITY),
+        Just(f32::MAX),
+        Just(-f32::MAX),
+        Just(0.0f32),
+        -1e6f32..1e6f32,
+        -1.0f32..1.0f32,
+    ]
+}
+
+#[derive(Clone, Debug)]
+struct Event {
+    dt_ns: i64,
+    setpoint: Option<(u64, [f32; 7], bool)>,
+    feedback: Option<[f32; 3]>,
+}
+
+fn pose_strategy() -> impl Strategy<Value = [f32; 7]> {
+    let in_box = (0.0f32..1.0, 0.0f32..1.0, 0.0f32..1.0).prop_map(|(a, b, c)| {
+        let mut p = box_centre();
+        p[0] = INPUT_LO[0] + a * (INPUT_HI[0] - INPUT_LO[0]);
+        p[1] = INPUT_LO[1] + b * (INPUT_HI[1] - INPUT_LO[1]);
+        p[2] = INPUT_LO[2] + c * (INPUT_HI[2] - INPUT_LO[2]);
+        let n = (p[3] * p[3] + p[4] * p[4] + p[5] * p[5] + p[6] * p[6]).sqrt();
+        for q in &mut p[3..] {
+            *q /= n;
+        }
+        p
+    });
+    let wild = proptest::array::uniform7(nasty_f32());
+    prop_oneof![3 => in_box, 1 => wild]
+}
+
+fn event_strategy() -> impl Strategy<Value = Event> {
+    (
+        prop_oneof![8 => 0i64..3_000_000, 1 => -5_000_000i64..0, 1 => 0i64..100_000_000],
+        proptest::option::weighted(0.7, (0u64..50, pose_strategy(), any::<bool>())),
+        proptest::option::weighted(0.5, proptest::array::uniform3(nasty_f32())),
+    )
+        .prop_map(|(dt_ns, setpoint, feedback)| Event {
+            dt_ns,
+            setpoint,
+            feedback,
+        })
+}
+
+fn config_strategy() -> impl Strategy<Value = ControlConfig> {
+    (
+        1usize..=8,
+        0.1f32..50.0,
+        0.5f32..500.0,
+        any::<bool>(),
+        0.0f32..200.0,
+        0.0f32..0.2,
+    )
+        .prop_map(|(n, max_t, rate, ramp, ki, margin)| {
+            let mut c = ControlConfig::new(TendonLimits::uniform(n, max_t, rate).unwrap());
+            c.watchdog_ns = 10_000_000;
+            c.max_dt_ns = 3_000_000;
+            c.box_margin = margin;
+            if ramp {
+                c.safe_hold = SafeHold::Ramp([max_t * 0.5; MAX_TENDONS]);
+            }
+            c.integral = IntegralConfig {
+                ki,
+                limit: 0.02,
+                feedback_timeout_ns: 4_000_000,
+            };
+            c
+        })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    #[test]
+    fn command_stays_in_range_within_slew_and_watchdog_trips(
+        cfg in config_strategy(),
+        outputs in 1usize..=8,
+        initial in proptest::array::uniform8(nasty_f32()),
+        events in proptest::collection::vec(event_strategy(), 1..80),
+    ) {
+        // The net's outputs usually match the tendons (sometimes not: mismatch path).
+        let n = cfg.limits.n_tendons();
+        let net_out = if outputs % 3 == 0 { outputs } else { n };
+        let net = Net::decode(&blob(11, 6, net_out)).unwrap();
+        let max_t = *cfg.limits.max_tension_padded();
+        let rate = *cfg.limits.slew_rate_padded();
+        let mut now: u64 = 1_000_000_000;
+        let mut st = ControlState::new(&cfg.limits, &initial, now);
+        let mut last_accepted = now;
+        for ev in events {
+            let prev = st.command;
+            let prev_now = st.last_step_ns;
+            now = if ev.dt_ns < 0 { now.saturating_sub(ev.dt_ns.unsigned_abs()) } else { now + ev.dt_ns as u64 };
+            let inp = StepInput {
+                now_ns: now,
+                setpoint: ev.setpoint.map(|(seq, pose, _)| Setpoint { seq, pose }),
+                feedback: ev.feedback.map(|tip| Feedback { seq: now, tip_position: tip }),
+            };
+            let (s, o) = control_step(&cfg, &net, &st, &inp);
+            let dt = now.saturating_sub(prev_now).min(cfg.max_dt_ns) as f32 * 1e-9;
+            for i in 0..MAX_TENDONS {
+                let c = o.command[i];
+                prop_assert!(c.is_finite());
+                prop_assert!(c >= 0.0 && c <= max_t[i], "tendon {i}: {c} outside [0, {}]", max_t[i]);
+                let allowed = rate[i] * dt;
+                // Up to the rounding of `prev + step` (an ulp of values ≤ max).
+                prop_assert!((c - prev[i]).abs() <= allowed * (1.0 + 1e-5) + max_t[i] * 3e-7,
+                    "tendon {i}: moved {} > {allowed}", (c - prev[i]).abs());
+            }
+            if o.status.contains(Status::NEW_SETPOINT) || o.status.contains(Status::OUT_OF_WORKSPACE) {
+                last_accepted = now;
+            }
+            if now.saturating_sub(last_accepted) > cfg.watchdog_ns && !o.status.contains(Status::NEW_SETPOINT) {
+                prop_assert!(s.watchdog, "silent for {} ns but no watchdog", now - last_accepted);
+                prop_assert!(o.status.contains(Status::SAFE_HOLD));
+            }
+            prop_assert_eq!(o.command, s.command);
+            st = s;
+        }
+    }
+
+    #[test]
+    fn inference_never_panics_on_any_pose(pose in proptest::array::uniform7(nasty_f32())) {
+        let net = Net::decode(&blob(3, 12, 4)).unwrap();
+        let _ = infer(&net, &pose);
+    }
+}
