@@ -77,7 +77,9 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize> CascadeNet<IN, 
                 hidden: 0,
                 outputs: 0,
             },
-            hidden_activation: Activation::SymmetricSigmoid,
+            // All-zero bit pattern (Linear is code 0), so a `static` of empty
+            // nets lands in .bss and costs no flash.
+            hidden_activation: Activation::Linear,
             output_activation: Activation::Linear,
             input_lo: [0.0; IN],
             input_hi: [0.0; IN],
