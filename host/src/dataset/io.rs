@@ -1,0 +1,329 @@
+//! Dataset files: CSV rows `t0..t{n-1},px,py,pz,qw,qx,qy,qz` and a JSON
+//! sidecar that says how the rows were made. Reading checks the header and
+//! every value; writing is atomic.
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+
+use super::POSE_COLUMNS;
+use crate::fsutil::write_atomic_with;
+use crate::statics::SolverSettings;
+
+/// Tensions and the tip poses they produce, one row per sample.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Dataset {
+    /// Tendons per sample.
+    pub n_tendons: usize,
+    /// `n × n_tendons`, N.
+    pub tensions: DMatrix<f64>,
+    /// `n × 7`: px, py, pz (m), qw, qx, qy, qz.
+    pub poses: DMatrix<f64>,
+}
+
+/// A dataset file that could not be read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum DatasetError {
+    /// I/O failure.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The header is not `t0..t{n-1},px,py,pz,qw,qx,qy,qz`.
+    #[error("{}: bad header: {why}", path.display())]
+    Header {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        why: String,
+    },
+    /// A row is malformed.
+    #[error("{}: line {line}: {why}", path.display())]
+    Row {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number (header = line 1).
+        line: usize,
+        /// What is wrong.
+        why: String,
+    },
+    /// The file holds no sample.
+    #[error("{}: no data rows", path.display())]
+    Empty {
+        /// The file.
+        path: PathBuf,
+    },
+}
+
+impl Dataset {
+    /// An empty dataset for `n_tendons` tendons.
+    pub fn empty(n_tendons: usize) -> Dataset {
+        Dataset {
+            n_tendons,
+            tensions: DMatrix::zeros(0, n_tendons),
+            poses: DMatrix::zeros(0, 7),
+        }
+    }
+
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.tensions.nrows()
+    }
+
+    /// Whether there is no sample.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The samples at `idx`, in that order.
+    pub fn rows(&self, idx: &[usize]) -> Dataset {
+        Dataset {
+            n_tendons: self.n_tendons,
+            tensions: self.tensions.select_rows(idx),
+            poses: self.poses.select_rows(idx),
+        }
+    }
+
+    /// Column names of the CSV form.
+    pub fn header(n_tendons: usize) -> Vec<String> {
+        (0..n_tendons)
+            .map(|i| format!("t{i}"))
+            .chain(POSE_COLUMNS.iter().map(|s| s.to_string()))
+            .collect()
+    }
+
+    /// Read a dataset CSV, checking the header and that every value is a finite number.
+    pub fn read_csv(path: &Path) -> Result<Dataset, DatasetError> {
+        let io = |source| DatasetError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        let file = std::fs::File::open(path).map_err(io)?;
+        let mut reader = csv::ReaderBuilder::new().has_headers(true).from_reader(file);
+        let header: Vec<String> = reader
+            .headers()
+            .map_err(|e| DatasetError::Header {
+                path: path.to_path_buf(),
+                why: e.to_string(),
+            })?
+            .iter()
+            .map(|s| s.trim().to_string())
+            .collect();
+        let n_tendons = header.iter().take_while(|h| h.starts_with('t')).count();
+        let expected = Self::header(n_tendons);
+        if n_tendons == 0 || header.len() < expected.len() || header[..expected.len()] != expected[..]
+        {
+            return Err(DatasetError::Header {
+                path: path.to_path_buf(),
+                why: format!(
+                    "expected columns {} (found {})",
+                    if n_tendons == 0 {
+                        "t0.., px, py, pz, qw, qx, qy, qz".to_string()
+                    } else {
+                        expected.join(",")
+                    },
+                    header.join(",")
+                ),
+            });
+        }
+        let width = expected.len();
+        let mut values = Vec::new();
+        for (k, record) in reader.records().enumerate() {
+            let line = k + 2;
+            let record = record.map_err(|e| DatasetError::Row {
+                path: path.to_path_buf(),
+                line,
+                why: e.to_string(),
+            })?;
+            if record.len() < width {
+                return Err(DatasetError::Row {
+                    path: path.to_path_buf(),
+                    line,
+                    why: format!("{} fields, expected {width}", record.len()),
+                });
+            }
+            for (c, field) in record.iter().take(width).enumerate() {
+                let x: f64 = field.trim().parse().map_err(|_| DatasetError::Row {
+                    path: path.to_path_buf(),
+                    line,
+                    why: format!("column {}: {field:?} is not a number", expected[c]),
+                })?;
+                if !x.is_finite() {
+                    return Err(DatasetError::Row {
+                        path: path.to_path_buf(),
+                        line,
+                        why: format!("column {}: {field} is not finite", expected[c]),
+                    });
+                }
+                values.push(x);
+            }
+        }
+        let n = values.len() / width;
+        if n == 0 {
+            return Err(DatasetError::Empty {
+                path: path.to_path_buf(),
+            });
+        }
+        let all = DMatrix::from_row_slice(n, width, &values);
+        Ok(Dataset {
+            n_tendons,
+            tensions: all.columns(0, n_tendons).into_owned(),
+            poses: all.columns(n_tendons, 7).into_owned(),
+        })
+    }
+
+    /// Write as CSV, atomically. Values are written with Rust's shortest
+    /// round-trip formatting, so reading back gives bit-identical numbers.
+    pub fn write_csv(&self, path: &Path) -> Result<(), DatasetError> {
+        write_atomic_with(path, |w| {
+            writeln!(w, "{}", Self::header(self.n_tendons).join(","))?;
+            let mut line = String::with_capacity(256);
+            for i in 0..self.len() {
+                line.clear();
+                for j in 0..self.n_tendons {
+                    push_value(&mut line, self.tensions[(i, j)]);
+                }
+                for j in 0..7 {
+                    push_value(&mut line, self.poses[(i, j)]);
+                }
+                line.pop();
+                line.push('\n');
+                w.write_all(line.as_bytes())?;
+            }
+            Ok(())
+        })
+        .map_err(|source| DatasetError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
+    }
+}
+
+fn push_value(line: &mut String, x: f64) {
+    use std::fmt::Write as _;
+    let _ = write!(line, "{x},");
+}
+
+/// How a dataset was made: written beside the CSV as `<name>.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Sidecar {
+    /// Robot file path as given.
+    pub robot_file: String,
+    /// SHA-256 of the robot file's bytes.
+    pub robot_sha256: String,
+    /// Robot name.
+    pub robot_name: String,
+    /// Sampler name (`adjacent` or `uniform`).
+    pub sampler: String,
+    /// Random seed.
+    pub seed: u64,
+    /// Samples asked for.
+    pub requested: usize,
+    /// Rows written.
+    pub count: usize,
+    /// Statics settings used.
+    pub solver: SolverSettings,
+    /// Per-column (min, max) over the written rows, keyed by column name.
+    pub ranges: Vec<(String, f64, f64)>,
+    /// Warm-started solves that did not meet the tolerance and were re-solved cold.
+    pub resolved_cold: usize,
+    /// Samples dropped because even the cold solve failed.
+    pub dropped: usize,
+    /// What was done with the failures, in words.
+    pub failure_policy: String,
+    /// Held-out test fraction the learners use.
+    pub test_fraction: f64,
+    /// Min–max ranges of the training split (poses in, tensions out).
+    pub train_ranges: Option<super::split::Ranges>,
+    /// Wall time of the generation, s.
+    pub seconds: f64,
+    /// tendril version that wrote it.
+    pub tendril_version: String,
+}
+
+impl Sidecar {
+    /// The sidecar path for a dataset path: `data.csv` → `data.json`.
+    pub fn path_for(csv: &Path) -> PathBuf {
+        csv.with_extension("json")
+    }
+
+    /// Write atomically as pretty JSON.
+    pub fn write(&self, path: &Path) -> Result<(), DatasetError> {
+        let text = serde_json::to_string_pretty(self).map_err(|e| DatasetError::Io {
+            path: path.to_path_buf(),
+            source: std::io::Error::other(e),
+        })?;
+        crate::fsutil::write_atomic(path, text.as_bytes()).map_err(|source| DatasetError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
+    }
+
+    /// Read a sidecar.
+    pub fn read(path: &Path) -> Result<Sidecar, DatasetError> {
+        let text = std::fs::read_to_string(path).map_err(|source| DatasetError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        serde_json::from_str(&text).map_err(|e| DatasetError::Header {
+            path: path.to_path_buf(),
+            why: e.to_string(),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample() -> Dataset {
+        Dataset {
+            n_tendons: 2,
+            tensions: DMatrix::from_row_slice(2, 2, &[0.1, 2.0, 3.0, 0.0]),
+            poses: DMatrix::from_row_slice(
+                2,
+                7,
+                &[
+                    0.01, 0.0, 0.39, 1.0, 0.0, 0.0, 0.0, -0.02, 1e-9, 0.398, 0.99, 0.1, 0.0, 0.0,
+                ],
+            ),
+        }
+    }
+
+    #[test]
+    fn csv_round_trip_is_bit_identical() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("d.csv");
+        let mut d = sample();
+        d.poses[(0, 0)] = 0.1 + 0.2; // not exactly representable in short decimal
+        d.write_csv(&path).unwrap();
+        assert_eq!(Dataset::read_csv(&path).unwrap(), d);
+    }
+
+    #[test]
+    fn malformed_files_name_the_problem() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bad.csv");
+        std::fs::write(&path, "t0,px,py\n1,2,3\n").unwrap();
+        let e = Dataset::read_csv(&path).unwrap_err().to_string();
+        assert!(e.contains("bad header"), "{e}");
+
+        std::fs::write(&path, "t0,px,py,pz,qw,qx,qy,qz\n1,2,3,4,5,6,7,oops\n").unwrap();
+        let e = Dataset::read_csv(&path).unwrap_err().to_string();
+        assert!(e.contains("line 2") && e.contains("qz"), "{e}");
+
+        std::fs::write(&path, "t0,px,py,pz,qw,qx,qy,qz\n1,2,3,4,5,6,7,NaN\n").unwrap();
+        let e = Dataset::read_csv(&path).unwrap_err().to_string();
+        assert!(e.contains("not finite"), "{e}");
+
+        std::fs::write(&path, "t0,px,py,pz,qw,qx,qy,qz\n").unwrap();
+        assert!(matches!(
+            Dataset::read_csv(&path),
+            Err(DatasetError::Empty { .. })
+        ));
+    }
+}

@@ -1,0 +1,125 @@
+//! Tension samplers (`DESIGN.md` §3).
+
+use rand::Rng;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+/// How tension vectors are drawn.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Sampler {
+    /// Exactly two adjacent tendons (i, i+1 mod n) pull, each uniform in
+    /// [0, τ_max]; the rest are slack. Keeps IK a function for antagonistic
+    /// tendon sets; the default for robots with more than two tendons.
+    Adjacent,
+    /// Every tendon uniform in [0, τ_max] (the paper's sampler). With
+    /// antagonistic tendons the inverse map is not unique.
+    Uniform,
+}
+
+impl Sampler {
+    /// The default for a robot with `n_tendons` tendons.
+    pub fn default_for(n_tendons: usize) -> Sampler {
+        if n_tendons > 2 {
+            Sampler::Adjacent
+        } else {
+            Sampler::Uniform
+        }
+    }
+
+    /// Name as used on the command line and in sidecars.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Sampler::Adjacent => "adjacent",
+            Sampler::Uniform => "uniform",
+        }
+    }
+
+    /// Draw `count` tension vectors for tendons with limits `max` (N),
+    /// deterministically from `seed`.
+    pub fn draw(&self, count: usize, max: &[f64], seed: u64) -> Vec<Vec<f64>> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let n = max.len();
+        (0..count)
+            .map(|_| match self {
+                Sampler::Uniform => max.iter().map(|&m| rng.random::<f64>() * m).collect(),
+                Sampler::Adjacent => {
+                    let mut t = vec![0.0; n];
+                    if n == 1 {
+                        t[0] = rng.random::<f64>() * max[0];
+                    } else {
+                        let i = rng.random_range(0..n);
+                        let j = (i + 1) % n;
+                        t[i] = rng.random::<f64>() * max[i];
+                        t[j] = rng.random::<f64>() * max[j];
+                    }
+                    t
+                }
+            })
+            .collect()
+    }
+}
+
+/// An order of `samples` in which consecutive tension vectors are close, so
+/// each solve can warm-start from the previous one: a boustrophedon (snake)
+/// walk over a grid of `cells` per axis, rows reversed alternately so
+/// neighbouring cells in the walk share a face.
+pub fn snake_order(samples: &[Vec<f64>], max: &[f64], cells: usize) -> Vec<usize> {
+    let cells = cells.max(1);
+    let key = |t: &Vec<f64>| -> Vec<usize> {
+        let mut k = Vec::with_capacity(t.len() + 1);
+        let mut parity = 0usize;
+        for (&x, &m) in t.iter().zip(max) {
+            let c = ((x / m * cells as f64) as usize).min(cells - 1);
+            let c = if parity % 2 == 1 { cells - 1 - c } else { c };
+            parity += c;
+            k.push(c);
+        }
+        k
+    };
+    let mut order: Vec<usize> = (0..samples.len()).collect();
+    let keys: Vec<Vec<usize>> = samples.iter().map(key).collect();
+    order.sort_by(|&a, &b| keys[a].cmp(&keys[b]).then(a.cmp(&b)));
+    order
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn adjacent_sampler_pulls_exactly_two_neighbours_within_limits() {
+        let max = [10.0, 8.0, 10.0, 6.0];
+        for t in Sampler::Adjacent.draw(2000, &max, 3) {
+            let nz: Vec<usize> = (0..4).filter(|&i| t[i] != 0.0).collect();
+            assert_eq!(nz.len(), 2, "{t:?}");
+            assert!(nz[1] == nz[0] + 1 || (nz[0] == 0 && nz[1] == 3), "{t:?}");
+            assert!(t.iter().zip(&max).all(|(x, m)| (0.0..=*m).contains(x)));
+        }
+    }
+
+    #[test]
+    fn samplers_are_seeded() {
+        let max = [10.0; 4];
+        assert_eq!(Sampler::Uniform.draw(50, &max, 1), Sampler::Uniform.draw(50, &max, 1));
+        assert_ne!(Sampler::Uniform.draw(50, &max, 1), Sampler::Uniform.draw(50, &max, 2));
+    }
+
+    #[test]
+    fn snake_order_keeps_neighbours_close() {
+        let max = [10.0; 2];
+        let s = Sampler::Uniform.draw(4000, &max, 5);
+        let order = snake_order(&s, &max, 16);
+        let mut sorted = order.clone();
+        sorted.sort_unstable();
+        assert_eq!(sorted, (0..4000).collect::<Vec<_>>());
+        let step = |o: &[usize]| -> f64 {
+            o.windows(2)
+                .map(|w| ((s[w[0]][0] - s[w[1]][0]).powi(2) + (s[w[0]][1] - s[w[1]][1]).powi(2)).sqrt())
+                .sum::<f64>()
+                / o.len() as f64
+        };
+        let natural: Vec<usize> = (0..4000).collect();
+        assert!(step(&order) < step(&natural) / 5.0);
+    }
+}

@@ -1,0 +1,193 @@
+//! Train / validation / test splits and min–max normalisation. Ranges always
+//! come from the training rows only, so the test split never leaks into what
+//! a learner sees.
+
+use nalgebra::DMatrix;
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use super::Dataset;
+
+/// Default held-out test fraction (the paper's 97 % / 3 %).
+pub const TEST_FRACTION: f64 = 0.03;
+/// Default validation fraction, carved from the training rows.
+pub const VALID_FRACTION: f64 = 0.1;
+/// Default split seed.
+pub const SPLIT_SEED: u64 = 1;
+
+/// Seeded shuffle of `0..n` into (train, test), `round(n · test_fraction)`
+/// test rows (at least one when n ≥ 2 and the fraction is positive).
+/// Both lists come back sorted, so row order within a split is the file's.
+pub fn split_indices(n: usize, test_fraction: f64, seed: u64) -> (Vec<usize>, Vec<usize>) {
+    let mut idx: Vec<usize> = (0..n).collect();
+    idx.shuffle(&mut ChaCha8Rng::seed_from_u64(seed));
+    let mut n_test = (n as f64 * test_fraction.clamp(0.0, 1.0)).round() as usize;
+    if test_fraction > 0.0 && n >= 2 {
+        n_test = n_test.clamp(1, n - 1);
+    }
+    let mut test = idx[..n_test].to_vec();
+    let mut train = idx[n_test..].to_vec();
+    train.sort_unstable();
+    test.sort_unstable();
+    (train, test)
+}
+
+/// Per-column min–max normalisation to [0, 1].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MinMax {
+    /// Column minima.
+    pub lo: Vec<f64>,
+    /// Column maxima (a constant column gets `lo + 1`, so it maps to 0).
+    pub hi: Vec<f64>,
+}
+
+impl MinMax {
+    /// Ranges of the columns of `m`.
+    pub fn fit(m: &DMatrix<f64>) -> MinMax {
+        let mut lo = Vec::with_capacity(m.ncols());
+        let mut hi = Vec::with_capacity(m.ncols());
+        for c in m.column_iter() {
+            let a = c.min();
+            let mut b = c.max();
+            if b - a <= f64::EPSILON * a.abs().max(1.0) {
+                b = a + 1.0;
+            }
+            lo.push(a);
+            hi.push(b);
+        }
+        MinMax { lo, hi }
+    }
+
+    /// (x − lo) / (hi − lo), column by column.
+    pub fn normalise(&self, m: &DMatrix<f64>) -> DMatrix<f64> {
+        DMatrix::from_fn(m.nrows(), m.ncols(), |i, j| {
+            (m[(i, j)] - self.lo[j]) / (self.hi[j] - self.lo[j])
+        })
+    }
+
+    /// lo + x (hi − lo), column by column.
+    pub fn denormalise(&self, m: &DMatrix<f64>) -> DMatrix<f64> {
+        DMatrix::from_fn(m.nrows(), m.ncols(), |i, j| {
+            self.lo[j] + m[(i, j)] * (self.hi[j] - self.lo[j])
+        })
+    }
+}
+
+/// Normalisation ranges of a training split: poses in, tensions out.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Ranges {
+    /// Pose ranges (px, py, pz, qw, qx, qy, qz).
+    pub poses: MinMax,
+    /// Tension ranges.
+    pub tensions: MinMax,
+}
+
+/// Everything a learner needs, normalised with the training split's ranges.
+#[derive(Clone, Debug)]
+pub struct Prepared {
+    /// Training rows (validation rows included), physical units.
+    pub train: Dataset,
+    /// Held-out test rows, physical units.
+    pub test: Dataset,
+    /// Input (pose) ranges from the training rows.
+    pub x_range: MinMax,
+    /// Output (tension) ranges from the training rows.
+    pub y_range: MinMax,
+    /// Normalised training inputs, validation rows excluded.
+    pub train_x: DMatrix<f64>,
+    /// Normalised training targets, validation rows excluded.
+    pub train_y: DMatrix<f64>,
+    /// Normalised validation inputs (carved from the training rows).
+    pub valid_x: DMatrix<f64>,
+    /// Normalised validation targets.
+    pub valid_y: DMatrix<f64>,
+    /// Normalised test inputs.
+    pub test_x: DMatrix<f64>,
+    /// Normalised test targets.
+    pub test_y: DMatrix<f64>,
+}
+
+impl Prepared {
+    /// The ranges as stored in sidecars and weight files.
+    pub fn ranges(&self) -> Ranges {
+        Ranges {
+            poses: self.x_range.clone(),
+            tensions: self.y_range.clone(),
+        }
+    }
+}
+
+/// Split `data` into train / test (`test_fraction`), carve a validation split
+/// (`valid_fraction` of the training rows) and normalise everything with the
+/// ranges of the training rows.
+pub fn prepare(data: &Dataset, test_fraction: f64, valid_fraction: f64, seed: u64) -> Prepared {
+    let (train_idx, test_idx) = split_indices(data.len(), test_fraction, seed);
+    let train = data.rows(&train_idx);
+    let test = data.rows(&test_idx);
+    let x_range = MinMax::fit(&train.poses);
+    let y_range = MinMax::fit(&train.tensions);
+    let (fit_idx, valid_idx) =
+        split_indices(train.len(), valid_fraction, seed.wrapping_add(0x5eed));
+    let fit = train.rows(&fit_idx);
+    let valid = train.rows(&valid_idx);
+    Prepared {
+        train_x: x_range.normalise(&fit.poses),
+        train_y: y_range.normalise(&fit.tensions),
+        valid_x: x_range.normalise(&valid.poses),
+        valid_y: y_range.normalise(&valid.tensions),
+        test_x: x_range.normalise(&test.poses),
+        test_y: y_range.normalise(&test.tensions),
+        train,
+        test,
+        x_range,
+        y_range,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn split_is_a_seeded_partition() {
+        let (train, test) = split_indices(1000, 0.03, 7);
+        assert_eq!(test.len(), 30);
+        assert_eq!(train.len(), 970);
+        let mut all: Vec<_> = train.iter().chain(&test).copied().collect();
+        all.sort_unstable();
+        assert_eq!(all, (0..1000).collect::<Vec<_>>());
+        assert_eq!(split_indices(1000, 0.03, 7), (train.clone(), test.clone()));
+        assert_ne!(split_indices(1000, 0.03, 8).1, test);
+    }
+
+    #[test]
+    fn normalisation_round_trips_and_maps_training_range_to_unit_interval() {
+        let m = DMatrix::from_row_slice(3, 2, &[1.0, 5.0, 3.0, 5.0, 2.0, 5.0]);
+        let r = MinMax::fit(&m);
+        let n = r.normalise(&m);
+        assert_eq!(n.column(0).min(), 0.0);
+        assert_eq!(n.column(0).max(), 1.0);
+        assert!(n.column(1).iter().all(|&x| x == 0.0), "constant column maps to 0");
+        assert!((r.denormalise(&n) - m).abs().max() < 1e-15);
+    }
+
+    #[test]
+    fn prepare_takes_ranges_from_training_rows_only() {
+        let n = 200;
+        let t = DMatrix::from_fn(n, 2, |i, j| (i * (j + 1)) as f64);
+        let p = DMatrix::from_fn(n, 7, |i, j| (i as f64) * 0.01 + j as f64);
+        let data = Dataset {
+            n_tendons: 2,
+            tensions: t,
+            poses: p,
+        };
+        let prep = prepare(&data, 0.1, 0.1, 3);
+        assert_eq!(prep.test.len(), 20);
+        assert_eq!(prep.train_x.nrows() + prep.valid_x.nrows(), 180);
+        assert_eq!(MinMax::fit(&prep.train.poses), prep.x_range);
+        // Training-row inputs sit in [0, 1].
+        assert!(prep.train_x.iter().all(|&x| (0.0..=1.0).contains(&x)));
+    }
+}

@@ -1,0 +1,254 @@
+//! Checks of the statics against independent facts: closed-form arcs, beam
+//! theory, RK4's order, global equilibrium of the converged shape, symmetry.
+
+use std::path::Path;
+
+use nalgebra::{Vector3, Vector6};
+
+use super::*;
+use crate::robot::Robot;
+
+fn seed() -> Robot {
+    Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml")).unwrap()
+}
+
+fn fine() -> SolverSettings {
+    SolverSettings {
+        steps: 128,
+        ..SolverSettings::default()
+    }
+}
+
+/// The exact constant-curvature solution of DESIGN §2 for one straight
+/// tendon without gravity: (px or py, pz, θ).
+fn arc(robot: &Robot, tau: f64) -> (f64, f64, f64) {
+    let kappa = tau * robot.tendons[0].offset / robot.kbt().x;
+    let vz = 1.0 - tau / robot.kse().z;
+    let theta = kappa * robot.length;
+    (vz * (1.0 - theta.cos()) / kappa, vz * theta.sin() / kappa, theta)
+}
+
+#[test]
+fn tip_matches_constant_curvature_arc_at_2n() {
+    let robot = seed().without_gravity();
+    let sol = Statics::new(&robot, fine()).solve(&[2.0, 0.0, 0.0, 0.0], None).unwrap();
+    // DESIGN §2 fact.
+    assert!((sol.position.x - 0.02845159664930).abs() < 1e-9, "{}", sol.position);
+    assert!((sol.position.z - 0.3986461197924).abs() < 1e-9, "{}", sol.position);
+    assert!(sol.position.y.abs() < 1e-12);
+}
+
+#[test]
+fn tip_matches_constant_curvature_arc_for_tendons_0_and_1() {
+    let robot = seed().without_gravity();
+    let statics = Statics::new(&robot, fine());
+    for &tau in &[0.25, 1.0, 2.0, 4.0, 7.5, 10.0] {
+        let (lateral, pz, theta) = arc(&robot, tau);
+        let (c, s) = ((theta / 2.0).cos(), (theta / 2.0).sin());
+
+        // Tendon 0 (+x) bends toward +x: rotation about +y.
+        let sol = statics.solve(&[tau, 0.0, 0.0, 0.0], None).unwrap();
+        let p = sol.position;
+        assert!((p.x - lateral).abs() < 1e-9 && p.y.abs() < 1e-9 && (p.z - pz).abs() < 1e-9,
+            "tendon 0, {tau} N: {p} vs ({lateral}, 0, {pz})");
+        let q = sol.quaternion;
+        assert!((q[0] - c).abs() < 1e-9 && q[1].abs() < 1e-9 && (q[2] - s).abs() < 1e-9 && q[3].abs() < 1e-9,
+            "tendon 0, {tau} N: q = {q:?}");
+
+        // Tendon 1 (+y) bends toward +y: rotation about −x.
+        let sol = statics.solve(&[0.0, tau, 0.0, 0.0], None).unwrap();
+        let p = sol.position;
+        assert!(p.x.abs() < 1e-9 && (p.y - lateral).abs() < 1e-9 && (p.z - pz).abs() < 1e-9,
+            "tendon 1, {tau} N: {p}");
+        let q = sol.quaternion;
+        assert!((q[0] - c).abs() < 1e-9 && (q[1] + s).abs() < 1e-9 && q[2].abs() < 1e-9 && q[3].abs() < 1e-9,
+            "tendon 1, {tau} N: q = {q:?}");
+    }
+}
+
+#[test]
+fn default_discretisation_is_within_1e7_m_of_the_arc() {
+    let robot = seed().without_gravity();
+    let statics = Statics::new(&robot, SolverSettings::default());
+    for &tau in &[2.0, 10.0] {
+        let (lateral, pz, _) = arc(&robot, tau);
+        let p = statics.solve(&[tau, 0.0, 0.0, 0.0], None).unwrap().position;
+        let err = ((p.x - lateral).powi(2) + (p.z - pz).powi(2)).sqrt();
+        assert!(err < 1e-7, "{tau} N: tip error {err:e} m");
+    }
+}
+
+#[test]
+fn gravity_sag_matches_the_design_fact_and_beam_theory() {
+    let robot = seed();
+    let sol = Statics::new(&robot, fine()).solve(&[0.0; 4], None).unwrap();
+    // DESIGN §2 fact: 29.32 mm (large-deflection); linear theory says 29.44 mm.
+    assert!((sol.position.x * 1e3 - 29.32).abs() < 0.01, "sag {} mm", sol.position.x * 1e3);
+
+    // At a small load the rod is linear: δ = w L⁴ / (8 E I).
+    let mut light = robot.clone();
+    light.gravity = robot.gravity * 0.01;
+    let sol = Statics::new(&light, fine()).solve(&[0.0; 4], None).unwrap();
+    let w = light.weight_per_length().x;
+    let beam = w * light.length.powi(4) / (8.0 * light.kbt().x);
+    let rel = (sol.position.x - beam).abs() / beam;
+    assert!(rel < 2e-3, "sag {} vs beam {} (rel {rel:e})", sol.position.x, beam);
+}
+
+#[test]
+fn small_tip_force_matches_cantilever_theory() {
+    // δ = F L³ / (3 E I) for a tip force on a weightless cantilever.
+    let robot = seed().without_gravity();
+    let f = 1e-3;
+    let sol = Statics::new(&robot, fine())
+        .solve_loaded(&[0.0; 4], Vector3::new(0.0, f, 0.0), Vector3::zeros(), None)
+        .unwrap();
+    let beam = f * robot.length.powi(3) / (3.0 * robot.kbt().x);
+    let rel = (sol.position.y - beam).abs() / beam;
+    assert!(rel < 1e-3, "deflection {} vs {} (rel {rel:e})", sol.position.y, beam);
+}
+
+#[test]
+fn rk4_converges_at_fourth_order() {
+    let robot = seed();
+    let tau = [6.0, 3.0, 0.0, 0.0];
+    let reference = Statics::new(&robot, SolverSettings { steps: 1024, ..fine() })
+        .solve(&tau, None)
+        .unwrap()
+        .position;
+    let err = |steps| {
+        let s = SolverSettings { steps, ..SolverSettings::default() };
+        (Statics::new(&robot, s).solve(&tau, None).unwrap().position - reference).norm()
+    };
+    let (e8, e16, e32) = (err(8), err(16), err(32));
+    for (coarse, finer) in [(e8, e16), (e16, e32)] {
+        let ratio = coarse / finer;
+        assert!((12.0..20.0).contains(&ratio), "halving the step cut the error by {ratio} ({coarse:e} → {finer:e})");
+    }
+}
+
+/// Simpson's rule over evenly spaced samples (odd count).
+fn simpson(h: f64, f: &[Vector3<f64>]) -> Vector3<f64> {
+    let n = f.len() - 1;
+    assert!(n % 2 == 0);
+    let mut sum = f[0] + f[n];
+    for (k, x) in f.iter().enumerate().take(n).skip(1) {
+        sum += x * if k % 2 == 1 { 4.0 } else { 2.0 };
+    }
+    sum * (h / 3.0)
+}
+
+/// Global equilibrium of the whole rod, computed from the converged shape and
+/// not from the tip condition the solver drives to zero: the base internal
+/// wrench must balance the weight, the tendons' pull at the base and the tip load.
+fn assert_global_equilibrium(robot: &Robot, tau: &[f64], f_ext: Vector3<f64>, m_ext: Vector3<f64>) {
+    let statics = Statics::new(robot, fine());
+    let sol = statics.solve_loaded(tau, f_ext, m_ext, None).unwrap();
+    assert!(sol.residual < 1e-9, "tip residual {}", sol.residual);
+    let x = sol.warm.x;
+    let n0 = Vector3::new(x[0], x[1], x[2]);
+    let m0 = robot.kbt().component_mul(&Vector3::new(x[3], x[4], x[5]));
+    let v0 = Vector3::z() + n0.component_div(&robot.kse());
+    let u0 = Vector3::new(x[3], x[4], x[5]);
+
+    let f_e = robot.weight_per_length();
+    let mut force = f_e * robot.length + f_ext;
+    let shape = statics.shape(&sol, 129);
+    let h = robot.length / 128.0;
+    let arms: Vec<_> = shape.iter().map(|p| p.cross(&f_e)).collect();
+    let mut moment = simpson(h, &arms) + shape[128].cross(&f_ext) + m_ext;
+    for (t, &tau_i) in robot.tendons.iter().zip(tau) {
+        let o = t.offset_at(0.0, robot.length);
+        let q = u0.cross(&o.r) + o.dr + v0;
+        let pull = -q.normalize() * tau_i; // the tendon's force on the rod where it leaves the base
+        force += pull;
+        moment += o.r.cross(&pull);
+    }
+    assert!((n0 - force).norm() < 1e-7, "force balance: n(0) = {n0}, loads = {force}");
+    assert!((m0 - moment).norm() < 1e-7, "moment balance: m(0) = {m0}, loads = {moment}");
+}
+
+#[test]
+fn converged_rod_is_in_global_equilibrium() {
+    let robot = seed();
+    assert_global_equilibrium(&robot, &[5.0, 2.0, 0.0, 0.0], Vector3::zeros(), Vector3::zeros());
+    assert_global_equilibrium(&robot, &[0.0, 0.0, 8.0, 9.0], Vector3::new(0.1, -0.2, 0.05), Vector3::new(0.0, 0.01, 0.0));
+}
+
+#[test]
+fn helical_routing_is_in_global_equilibrium() {
+    let mut robot = seed();
+    robot.tendons[0].routing = crate::robot::Routing::Helical { turns: 0.5 };
+    assert_global_equilibrium(&robot, &[4.0, 0.0, 0.0, 0.0], Vector3::zeros(), Vector3::zeros());
+    // A helical tendon also twists the tip: the pose is not a planar bend.
+    let p = Statics::new(&robot, fine()).solve(&[4.0, 0.0, 0.0, 0.0], None).unwrap().position;
+    assert!(p.y.abs() > 1e-4, "half-turn helix should deflect out of the xz plane: {p}");
+}
+
+#[test]
+fn rotating_tensions_by_one_tendon_rotates_the_pose_by_90_degrees() {
+    let robot = seed().without_gravity();
+    let statics = Statics::new(&robot, SolverSettings::default());
+    let a = statics.solve(&[3.0, 7.0, 0.0, 0.5], None).unwrap();
+    let b = statics.solve(&[0.5, 3.0, 7.0, 0.0], None).unwrap();
+    let rotated = Vector3::new(-a.position.y, a.position.x, a.position.z);
+    assert!((b.position - rotated).norm() < 1e-10, "{} vs {}", b.position, rotated);
+}
+
+#[test]
+fn warm_start_matches_cold_and_costs_less() {
+    let robot = seed();
+    let statics = Statics::new(&robot, SolverSettings::default());
+    let first = statics.solve(&[4.0, 3.0, 0.0, 0.0], None).unwrap();
+    let cold = statics.solve(&[4.1, 3.0, 0.0, 0.0], None).unwrap();
+    let warm = statics.solve(&[4.1, 3.0, 0.0, 0.0], Some(&first.warm)).unwrap();
+    assert!((cold.position - warm.position).norm() < 1e-10);
+    assert!(warm.integrations < cold.integrations, "warm {} vs cold {}", warm.integrations, cold.integrations);
+}
+
+#[test]
+fn far_warm_start_still_converges() {
+    let robot = seed();
+    let statics = Statics::new(&robot, SolverSettings::default());
+    let far = statics.solve(&[0.0, 0.0, 10.0, 10.0], None).unwrap();
+    let sol = statics.solve(&[10.0, 10.0, 0.0, 0.0], Some(&far.warm)).unwrap();
+    let cold = statics.solve(&[10.0, 10.0, 0.0, 0.0], None).unwrap();
+    assert!((sol.position - cold.position).norm() < 1e-10);
+}
+
+#[test]
+fn bad_tension_vectors_are_rejected() {
+    let statics = Statics::new(&seed(), SolverSettings::default());
+    for bad in [vec![1.0, 2.0], vec![-1.0, 0.0, 0.0, 0.0], vec![f64::NAN, 0.0, 0.0, 0.0], vec![0.0, 11.0, 0.0, 0.0]] {
+        match statics.solve(&bad, None) {
+            Err(SolveError::BadTensions(_)) => {}
+            other => panic!("{bad:?} gave {other:?}"),
+        }
+    }
+    let err = statics
+        .solve_loaded(&[0.0; 4], Vector3::new(f64::NAN, 0.0, 0.0), Vector3::zeros(), None)
+        .unwrap_err();
+    assert_eq!(err, SolveError::BadLoad);
+}
+
+#[test]
+fn corrupt_warm_start_falls_back_to_cold() {
+    let statics = Statics::new(&seed(), SolverSettings::default());
+    let mut w = statics.solve(&[1.0, 0.0, 0.0, 0.0], None).unwrap().warm;
+    w.x = Vector6::from_element(f64::NAN);
+    let sol = statics.solve(&[1.0, 0.0, 0.0, 0.0], Some(&w)).unwrap();
+    assert!(sol.residual < 1e-9);
+}
+
+#[test]
+fn shape_starts_at_the_base_and_ends_at_the_tip() {
+    let statics = Statics::new(&seed(), SolverSettings::default());
+    let sol = statics.solve(&[5.0, 0.0, 0.0, 2.0], None).unwrap();
+    let shape = statics.shape(&sol, 11);
+    assert_eq!(shape.len(), 11);
+    assert!(shape[0].norm() == 0.0);
+    assert!((shape[10] - sol.position).norm() < 1e-7);
+    // Arc length between points ≈ L/10 (inextensible to 1e-4).
+    let len: f64 = shape.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+    assert!((len - 0.4).abs() < 1e-3, "chord length {len}");
+}
