@@ -9,6 +9,7 @@ extern crate std;
 
 pub mod crc32;
 pub mod limits;
+pub mod messages;
 pub mod net;
 pub mod tnet;
 

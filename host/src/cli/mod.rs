@@ -3,6 +3,11 @@
 
 use clap::{Parser, Subcommand};
 
+mod controller;
+mod plant;
+mod planner;
+mod sim;
+
 /// Learn and run inverse kinematics of tendon-driven continuum robots.
 ///
 /// With no subcommand, runs the whole pipeline on the default robot and
@@ -15,12 +20,25 @@ pub struct Cli {
 }
 
 #[derive(Subcommand, Debug)]
-enum Command {}
+enum Command {
+    /// Stream setpoints along a trajectory (iceoryx2 process).
+    Planner(planner::PlannerArgs),
+    /// Run the firmware control step at 1 kHz (iceoryx2 process).
+    Controller(controller::ControllerArgs),
+    /// Simulate tendon motors and the robot (iceoryx2 process).
+    Plant(plant::PlantArgs),
+    /// Launch planner, controller and plant; inject faults; write a report.
+    Sim(sim::SimArgs),
+}
 
 /// Parse `std::env::args` and run the chosen subcommand.
 pub fn run() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
         None => crate::pipeline::run_default(),
+        Some(Command::Planner(a)) => planner::run(a),
+        Some(Command::Controller(a)) => controller::run(a),
+        Some(Command::Plant(a)) => plant::run(a),
+        Some(Command::Sim(a)) => sim::run(a),
     }
 }

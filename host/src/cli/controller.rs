@@ -1,0 +1,129 @@
+//! `tendril controller`: the firmware control step in a 1 kHz
+//! absolute-deadline loop (DESIGN §5, §6).
+
+use std::path::PathBuf;
+
+use clap::{Args, ValueEnum};
+
+use crate::ipc::controller::ControllerConfig;
+
+/// On/off switch.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum OnOff {
+    /// Enabled.
+    On,
+    /// Disabled.
+    Off,
+}
+
+/// Loop and tuning options (shared with `tendril sim`).
+#[derive(Args, Clone, Debug)]
+pub struct LoopOpts {
+    /// Control rate, Hz.
+    #[arg(long, default_value_t = 1000.0)]
+    pub rate: f64,
+    /// Spin this long before each deadline instead of sleeping, µs (0 = pure sleep).
+    #[arg(long, default_value_t = 50.0)]
+    pub spin_us: f64,
+    /// Run the loop under SCHED_FIFO (needs privileges).
+    #[arg(long)]
+    pub realtime: bool,
+    /// Setpoint silence, in periods, that trips the safe hold.
+    #[arg(long, default_value_t = 2.5)]
+    pub watchdog_periods: f64,
+    /// Integral correction of the measured tip error.
+    #[arg(long, value_enum, default_value_t = OnOff::On)]
+    pub correction: OnOff,
+    /// Integral gain of the correction, 1/s.
+    #[arg(long, default_value_t = 10.0)]
+    pub ki: f64,
+    /// Bound on the correction per axis, mm.
+    #[arg(long, default_value_t = 10.0)]
+    pub correction_limit_mm: f64,
+    /// Motor-lag lead: setpoints are advanced by velocity × lead, ms
+    /// (≈ motor time constant + half a period; 0 = off).
+    #[arg(long, default_value_t = 20.5)]
+    pub lead_ms: f64,
+    /// Tension slew-rate limit, N/s.
+    #[arg(long, default_value_t = 200.0)]
+    pub slew: f64,
+}
+
+impl LoopOpts {
+    /// Same options as arguments (for spawning a controller).
+    pub fn to_args(&self) -> Vec<String> {
+        let mut a = vec![
+            format!("--rate={}", self.rate),
+            format!("--spin-us={}", self.spin_us),
+            format!("--watchdog-periods={}", self.watchdog_periods),
+            format!(
+                "--correction={}",
+                if self.correction == OnOff::On { "on" } else { "off" }
+            ),
+            format!("--ki={}", self.ki),
+            format!("--correction-limit-mm={}", self.correction_limit_mm),
+            format!("--lead-ms={}", self.lead_ms),
+            format!("--slew={}", self.slew),
+        ];
+        if self.realtime {
+            a.push("--realtime".into());
+        }
+        a
+    }
+
+    /// Fill the loop fields of a controller config.
+    pub fn apply(&self, cfg: &mut ControllerConfig) {
+        cfg.rate = self.rate;
+        cfg.spin_us = self.spin_us;
+        cfg.realtime = self.realtime;
+        cfg.watchdog_periods = self.watchdog_periods;
+        cfg.ki = if self.correction == OnOff::On { self.ki } else { 0.0 };
+        cfg.correction_limit = self.correction_limit_mm * 1e-3;
+        cfg.lead = self.lead_ms * 1e-3;
+        cfg.slew_rate = self.slew;
+    }
+}
+
+/// Run the firmware control step at a fixed rate between planner and plant.
+#[derive(Args, Debug)]
+pub struct ControllerArgs {
+    /// Robot description file (tension limits).
+    #[arg(long, default_value = "robots/seed-4t.toml")]
+    pub robot: PathBuf,
+    /// Trained IK net (`tendril train` output).
+    #[arg(long, default_value = "out/model.tnet")]
+    pub model: PathBuf,
+    /// iceoryx2 service-name prefix.
+    #[arg(long, default_value = crate::ipc::DEFAULT_PREFIX)]
+    pub prefix: String,
+    #[command(flatten)]
+    pub tuning: LoopOpts,
+    /// Stop after this many seconds (default: until SIGTERM or a stop message).
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Per-period CSV log.
+    #[arg(long)]
+    pub log: Option<PathBuf>,
+    /// Statistics JSON written at exit.
+    #[arg(long)]
+    pub stats: Option<PathBuf>,
+}
+
+/// Run `tendril controller`.
+pub fn run(args: ControllerArgs) -> anyhow::Result<()> {
+    let mut cfg = ControllerConfig::new(args.robot, args.model);
+    cfg.prefix = args.prefix;
+    args.tuning.apply(&mut cfg);
+    cfg.duration = args.duration;
+    cfg.log = args.log;
+    cfg.stats = args.stats;
+    let stats = crate::ipc::controller::run(&cfg)?;
+    log::info!(
+        "controller: {} cycles, {} overruns, lateness p50 {:.1} µs p99 {:.1} µs",
+        stats.cycles,
+        stats.overruns,
+        stats.lateness_us.p50,
+        stats.lateness_us.p99
+    );
+    Ok(())
+}

@@ -1,0 +1,221 @@
+//! Monotonic time shared by all processes on the machine, absolute-deadline
+//! sleeping, and the periodic-loop bookkeeping (lateness, overruns).
+//!
+//! Why absolute deadlines: a loop that sleeps "one period" after its work
+//! drifts by the work time plus the wake-up latency every cycle (and so do
+//! iceoryx2 WaitSet intervals); deadlines `t0 + k·T` do not drift at all.
+
+/// `CLOCK_MONOTONIC` in nanoseconds. One clock for every process on the
+/// machine, so a message's stamp can be compared with the receiver's clock.
+pub fn now_ns() -> u64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: valid pointer to a timespec; CLOCK_MONOTONIC always exists on Linux.
+    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+}
+
+/// Ask the kernel for 1 ns timer slack instead of the default 50 µs, so
+/// `clock_nanosleep` wakes close to the deadline. Harmless if refused.
+pub fn tighten_timer_slack() {
+    // SAFETY: prctl with PR_SET_TIMERSLACK takes one integer argument.
+    unsafe {
+        libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong, 0, 0, 0);
+    }
+}
+
+/// Try to run this thread under `SCHED_FIFO` at `priority` (needs root or
+/// CAP_SYS_NICE); returns whether it worked. Off by default: on a shared
+/// 2-core machine a real-time spinner can starve everyone else.
+pub fn try_realtime(priority: i32) -> bool {
+    let param = libc::sched_param {
+        sched_priority: priority,
+    };
+    // SAFETY: plain syscall on the calling thread (pid 0) with a valid param.
+    unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) == 0 }
+}
+
+/// Sleep until the monotonic clock reads `deadline_ns`: `clock_nanosleep`
+/// (absolute, so a signal or early wake-up cannot stretch it) until
+/// `spin_ns` before the deadline, then spin for the rest. `spin_ns = 0` is a
+/// pure sleep.
+pub fn sleep_until(deadline_ns: u64, spin_ns: u64) {
+    let wake = deadline_ns.saturating_sub(spin_ns);
+    loop {
+        let now = now_ns();
+        if now >= wake {
+            break;
+        }
+        let ts = libc::timespec {
+            tv_sec: (wake / 1_000_000_000) as libc::time_t,
+            tv_nsec: (wake % 1_000_000_000) as libc::c_long,
+        };
+        // SAFETY: valid timespec; TIMER_ABSTIME with a null remainder pointer.
+        let rc = unsafe {
+            libc::clock_nanosleep(libc::CLOCK_MONOTONIC, libc::TIMER_ABSTIME, &ts, std::ptr::null_mut())
+        };
+        if rc != 0 && rc != libc::EINTR {
+            break;
+        }
+    }
+    while now_ns() < deadline_ns {
+        std::hint::spin_loop();
+    }
+}
+
+/// Deadlines `start + k·period` of a periodic task, with deterministic
+/// overrun handling: a period whose deadline has already passed by a full
+/// period when the task gets to it is *skipped* (not run late), and counted.
+#[derive(Clone, Debug)]
+pub struct Ticker {
+    start_ns: u64,
+    period_ns: u64,
+    /// Index of the next period to run.
+    next: u64,
+    /// Periods run.
+    pub cycles: u64,
+    /// Periods whose work finished after the next period's deadline.
+    pub overruns: u64,
+    /// Periods skipped because the task was a full period or more behind.
+    pub skipped: u64,
+}
+
+/// What [`Ticker::wait`] reports about the period it just started.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Tick {
+    /// Period index `k` (deadline `start + k·T`).
+    pub index: u64,
+    /// This period's deadline (ns, monotonic).
+    pub deadline_ns: u64,
+    /// Wake-up time minus deadline (ns, ≥ 0).
+    pub lateness_ns: u64,
+    /// Periods skipped just before this one.
+    pub skipped: u64,
+}
+
+impl Ticker {
+    /// A ticker whose period 0 is due at `start_ns`.
+    pub fn new(start_ns: u64, period_ns: u64) -> Ticker {
+        Ticker {
+            start_ns,
+            period_ns: period_ns.max(1),
+            next: 0,
+            cycles: 0,
+            overruns: 0,
+            skipped: 0,
+        }
+    }
+
+    /// Period length (ns).
+    pub fn period_ns(&self) -> u64 {
+        self.period_ns
+    }
+
+    /// Deadline of period `k`.
+    pub fn deadline(&self, k: u64) -> u64 {
+        self.start_ns + k * self.period_ns
+    }
+
+    /// Decide which period runs next given the current time: the next
+    /// unstarted one, unless the clock is already a full period past its
+    /// deadline, in which case the periods missed are skipped and the most
+    /// recent due one runs. Pure (no clock, no sleep) so it can be tested.
+    pub fn plan(&mut self, now_ns: u64) -> (u64, u64) {
+        let mut k = self.next;
+        let mut skipped = 0;
+        let due = self.deadline(k);
+        if now_ns >= due + self.period_ns {
+            let latest = (now_ns - self.start_ns) / self.period_ns;
+            skipped = latest - k;
+            k = latest;
+        }
+        self.skipped += skipped;
+        self.next = k + 1;
+        self.cycles += 1;
+        (k, skipped)
+    }
+
+    /// Record that the work of the period started with [`Ticker::wait`]
+    /// finished at `now_ns`; counts an overrun if it crossed the next deadline.
+    pub fn finish(&mut self, now_ns: u64) -> bool {
+        let overrun = now_ns > self.deadline(self.next);
+        if overrun {
+            self.overruns += 1;
+        }
+        overrun
+    }
+
+    /// Sleep until the next period's deadline and report on it.
+    pub fn wait(&mut self, spin_ns: u64) -> Tick {
+        let (k, skipped) = self.plan(now_ns());
+        let deadline = self.deadline(k);
+        sleep_until(deadline, spin_ns);
+        let woke = now_ns();
+        Tick {
+            index: k,
+            deadline_ns: deadline,
+            lateness_ns: woke.saturating_sub(deadline),
+            skipped,
+        }
+    }
+}
+
+/// Percentile (0–100) of unsorted samples by nearest rank; `None` if empty.
+pub fn percentile(samples: &mut [u64], p: f64) -> Option<u64> {
+    if samples.is_empty() {
+        return None;
+    }
+    samples.sort_unstable();
+    let rank = ((p / 100.0) * samples.len() as f64).ceil() as usize;
+    Some(samples[rank.clamp(1, samples.len()) - 1])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ticker_runs_consecutive_periods_when_on_time() {
+        let mut t = Ticker::new(1_000, 100);
+        assert_eq!(t.plan(900), (0, 0));
+        assert!(!t.finish(1_050));
+        assert_eq!(t.plan(1_060), (1, 0));
+        assert_eq!(t.deadline(1), 1_100);
+        assert_eq!((t.cycles, t.skipped, t.overruns), (2, 0, 0));
+    }
+
+    #[test]
+    fn ticker_skips_whole_missed_periods_and_counts_them() {
+        let mut t = Ticker::new(0, 100);
+        assert_eq!(t.plan(0), (0, 0));
+        // Work of period 0 ran until t = 350: periods 1 and 2 are lost,
+        // period 3 (deadline 300) runs now.
+        assert!(t.finish(350));
+        assert_eq!(t.plan(350), (3, 2));
+        assert_eq!((t.skipped, t.overruns), (2, 1));
+        // Late but within one period: run period 4 late, skip nothing.
+        assert!(!t.finish(390));
+        assert_eq!(t.plan(450), (4, 0));
+    }
+
+    #[test]
+    fn sleep_until_never_wakes_early() {
+        tighten_timer_slack();
+        for spin in [0, 20_000] {
+            let deadline = now_ns() + 2_000_000;
+            sleep_until(deadline, spin);
+            assert!(now_ns() >= deadline);
+        }
+    }
+
+    #[test]
+    fn percentile_by_nearest_rank() {
+        let mut v: Vec<u64> = (1..=100).rev().collect();
+        assert_eq!(percentile(&mut v, 50.0), Some(50));
+        assert_eq!(percentile(&mut v, 99.0), Some(99));
+        assert_eq!(percentile(&mut v, 100.0), Some(100));
+        assert_eq!(percentile(&mut [], 50.0), None);
+    }
+}

@@ -1,0 +1,133 @@
+//! The planner process: streams setpoints (pose + velocity) along a
+//! trajectory at a fixed rate with absolute deadlines, after an initial
+//! hold at the trajectory's first pose so the robot can settle there.
+//! It can also inject bad setpoints (NaN, out of workspace) for the HIL tests.
+
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+use tendril_shared::messages::{setpoint_flags, Header, Setpoint};
+
+use super::clock::{now_ns, tighten_timer_slack, Ticker};
+use super::stats::CsvLog;
+use super::trajectory::{Shape, Trajectory};
+use super::transport::{self, Services};
+use super::{IpcError, StopWatch};
+use crate::robot::Robot;
+use crate::statics::{SolverSettings, Statics};
+
+/// Bad setpoints to send instead of the trajectory's, each for one message.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Injections {
+    /// Times (s from start) at which to send a pose with a NaN.
+    pub nan_at: Vec<f64>,
+    /// Times (s) at which to send a pose far outside the workspace, for
+    /// `outside_for` seconds each.
+    pub outside_at: Vec<f64>,
+    /// Duration of each out-of-workspace burst (s).
+    pub outside_for: f64,
+}
+
+/// Everything the planner process needs.
+#[derive(Clone, Debug)]
+pub struct PlannerConfig {
+    /// Robot file (to lift lateral targets to reachable poses).
+    pub robot: PathBuf,
+    /// Service-name prefix.
+    pub prefix: String,
+    /// What to follow.
+    pub shape: Shape,
+    /// Setpoint rate (Hz).
+    pub rate: f64,
+    /// Initial hold at the first pose (s).
+    pub settle: f64,
+    /// Stop after this many seconds (None: until told).
+    pub duration: Option<f64>,
+    /// Bad setpoints to inject.
+    pub inject: Injections,
+    /// Per-setpoint CSV log.
+    pub log: Option<PathBuf>,
+}
+
+/// Flag bit in the planner log (not on the wire): this message was an
+/// injected bad setpoint; the logged pose is the trajectory's.
+pub const LOG_INJECTED: u32 = 1 << 31;
+
+/// Column names of the planner log.
+pub const LOG_HEADER: &str = "t_ns,seq,flags,px,py,pz,qw,qx,qy,qz";
+
+/// Run the planner process until stopped or done.
+pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
+    if !(cfg.rate > 0.0 && cfg.rate <= 20_000.0) || cfg.settle < 0.0 {
+        return Err(IpcError::Config(format!(
+            "planner rate {} Hz / settle {} s: rate must be in (0, 20000], settle ≥ 0",
+            cfg.rate, cfg.settle
+        )));
+    }
+    let robot = Robot::load(&cfg.robot).map_err(|e| IpcError::Other(e.to_string()))?;
+    let statics = Statics::new(&robot, SolverSettings::default());
+    let traj = Trajectory::new(&cfg.shape, &statics)?;
+
+    let node = transport::node("tendril-planner")?;
+    let services = Services::open_or_create(&node, &cfg.prefix)?;
+    let publisher = transport::publisher(&services.setpoint)?;
+    let stop = StopWatch::new(&services)?;
+    let mut log = CsvLog::create(cfg.log.as_deref(), LOG_HEADER)?;
+    tighten_timer_slack();
+
+    let period_ns = (1e9 / cfg.rate).round() as u64;
+    let start = now_ns();
+    let mut ticker = Ticker::new(start, period_ns);
+    let mut seq = 0u64;
+    let mut last_flush = start;
+    loop {
+        let tick = ticker.wait(0);
+        let t = (tick.deadline_ns - start) as f64 * 1e-9;
+        let (point, mut flags) = if t < cfg.settle {
+            (traj.sample(0.0), setpoint_flags::HOLD)
+        } else {
+            (traj.sample(t - cfg.settle), setpoint_flags::HAS_VELOCITY)
+        };
+        let mut pose = point.pose.map(|v| v as f32);
+        let mut velocity = point.velocity.map(|v| v as f32);
+        let clean = pose;
+        let mut injected = false;
+        if cfg.inject.nan_at.iter().any(|&a| t >= a && t < a + 1.0 / cfg.rate) {
+            pose[0] = f32::NAN;
+            injected = true;
+            log::warn!("planner: injecting a NaN setpoint at {t:.3} s");
+        }
+        if cfg.inject.outside_at.iter().any(|&a| t >= a && t < a + cfg.inject.outside_for) {
+            // 1 m sideways: far outside any 0.4 m robot's reach.
+            pose[0] += 1.0;
+            injected = true;
+            velocity = [0.0; 7];
+            flags &= !setpoint_flags::HAS_VELOCITY;
+        }
+        seq += 1;
+        let stamp = now_ns();
+        let msg = Setpoint {
+            header: Header { seq, stamp_ns: stamp },
+            pose,
+            velocity,
+            flags,
+            reserved: 0,
+        };
+        transport::send(&publisher, msg)?;
+        // The log keeps the trajectory's pose (what the robot should do)
+        // and marks injected messages.
+        let log_flags = flags | if injected { LOG_INJECTED } else { 0 };
+        let mut row = vec![stamp as f64, seq as f64, log_flags as f64];
+        row.extend(clean.iter().map(|&v| v as f64));
+        log.row(&row)?;
+        if stamp - last_flush > 100_000_000 {
+            log.flush()?;
+            last_flush = stamp;
+        }
+        if stop.requested() || cfg.duration.is_some_and(|d| t >= d) {
+            break;
+        }
+    }
+    log.flush()?;
+    Ok(seq)
+}

@@ -1,0 +1,548 @@
+//! The simulated plant: one motor per tendon tracking its commanded tension
+//! with first-order dynamics and saturation, optional series tendon
+//! compliance, and the robot's tip from the Cosserat statics, warm-started
+//! from the previous step (quasi-static: the rod is stiff and light next to
+//! the motors, so it settles far faster than they move). A tip "sensor" adds
+//! Gaussian noise. Faults: a stuck motor, dropped and delayed commands.
+//!
+//! The process is event-driven: it sleeps on the `tension_cmd` event and
+//! steps when a command arrives (or after a timeout), so the command's
+//! one-way latency is the event wake-up, not a polling period.
+
+use std::collections::VecDeque;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use tendril_shared::messages::{plant_status, Header, PlantState, TensionCommand, MAX_TENDONS};
+
+use super::clock::now_ns;
+use super::stats::{CsvLog, Summary};
+use super::transport::{self, Services};
+use super::{IpcError, StopWatch};
+use crate::robot::Robot;
+use crate::statics::{SolverSettings, Statics, WarmStart};
+
+/// Injected faults, each active from `*_at` seconds after start.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PlantFaults {
+    /// Tendon whose motor freezes, and when (s).
+    pub stuck: Option<(usize, f64)>,
+    /// Fraction of commands dropped, and the window (s from start, s to end).
+    pub drop: Option<(f64, f64, f64)>,
+    /// Extra delay (s) applied to commands in a window (from, to).
+    pub delay: Option<(f64, f64, f64)>,
+}
+
+/// Plant model parameters.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PlantParams {
+    /// Motor time constant (s): tension error decays as exp(−t/τ).
+    pub motor_tau: f64,
+    /// Series tendon compliance as a second lag (s); 0 = rigid tendons.
+    pub compliance_tau: f64,
+    /// Tip position sensor noise, standard deviation (m).
+    pub noise: f64,
+    /// Tip orientation sensor noise, standard deviation per quaternion component.
+    pub noise_quat: f64,
+    /// Seed of the noise and drop generator.
+    pub seed: u64,
+    /// RK4 steps of the statics (speed vs accuracy; 16 ≈ 1e-7 m).
+    pub statics_steps: usize,
+    /// Faults to inject.
+    pub faults: PlantFaults,
+}
+
+impl Default for PlantParams {
+    fn default() -> Self {
+        PlantParams {
+            motor_tau: 0.02,
+            compliance_tau: 0.0,
+            noise: 20e-6,
+            noise_quat: 1e-5,
+            seed: 1,
+            statics_steps: 16,
+            faults: PlantFaults::default(),
+        }
+    }
+}
+
+/// The plant's physics, free of any IPC (testable, benchmarkable).
+pub struct PlantModel {
+    statics: Statics,
+    params: PlantParams,
+    max_tension: Vec<f64>,
+    /// Motor output tension (N).
+    motor: Vec<f64>,
+    /// Tension in the tendon at the tip (N); equals `motor` for rigid tendons.
+    tendon: Vec<f64>,
+    target: Vec<f64>,
+    warm: Option<WarmStart>,
+    solved_for: Vec<f64>,
+    pose: [f64; 7],
+    rng: ChaCha8Rng,
+    stuck: bool,
+    /// Statics failures (the last good pose was kept).
+    pub solve_failures: u64,
+}
+
+impl PlantModel {
+    /// A plant at rest with all tensions zero.
+    pub fn new(robot: &Robot, params: PlantParams) -> Result<PlantModel, IpcError> {
+        if !(params.motor_tau > 0.0) || params.compliance_tau < 0.0 || params.noise < 0.0 {
+            return Err(IpcError::Config(
+                "plant: motor time constant must be > 0, compliance and noise ≥ 0".into(),
+            ));
+        }
+        if let Some((k, _)) = params.faults.stuck {
+            if k >= robot.n_tendons() {
+                return Err(IpcError::Config(format!(
+                    "plant: stuck motor {k} but the robot has {} tendons",
+                    robot.n_tendons()
+                )));
+            }
+        }
+        let settings = SolverSettings {
+            steps: params.statics_steps.max(4),
+            ..SolverSettings::default()
+        };
+        let statics = Statics::new(robot, settings);
+        let n = robot.n_tendons();
+        let zero = vec![0.0; n];
+        let sol = statics
+            .solve(&zero, None)
+            .map_err(|e| IpcError::Other(format!("plant: statics at rest: {e}")))?;
+        Ok(PlantModel {
+            max_tension: robot.max_tensions(),
+            motor: zero.clone(),
+            tendon: zero.clone(),
+            target: zero.clone(),
+            warm: Some(sol.warm.clone()),
+            solved_for: zero,
+            pose: sol.pose(),
+            rng: ChaCha8Rng::seed_from_u64(params.seed),
+            stuck: false,
+            solve_failures: 0,
+            statics,
+            params,
+        })
+    }
+
+    /// Number of tendons.
+    pub fn n(&self) -> usize {
+        self.motor.len()
+    }
+
+    /// Set the commanded tensions, saturated to each motor's range; returns
+    /// whether the command was out of range (or not finite) before saturation.
+    pub fn command(&mut self, tensions: &[f64]) -> bool {
+        let mut bad = tensions.len() != self.n();
+        for (i, target) in self.target.iter_mut().enumerate() {
+            let t = tensions.get(i).copied().unwrap_or(f64::NAN);
+            if !t.is_finite() {
+                bad = true;
+                continue; // keep the previous target for this motor
+            }
+            if t < 0.0 || t > self.max_tension[i] {
+                bad = true;
+            }
+            *target = t.clamp(0.0, self.max_tension[i]);
+        }
+        bad
+    }
+
+    /// Freeze motor `k` where it is (fault injection).
+    pub fn set_stuck(&mut self) {
+        self.stuck = true;
+    }
+
+    /// Advance by `dt` seconds: motors, tendons, statics. Returns whether the
+    /// statics converged (otherwise the previous pose is kept).
+    pub fn step(&mut self, dt: f64) -> bool {
+        let dt = dt.clamp(0.0, 0.1);
+        let a_m = 1.0 - (-dt / self.params.motor_tau).exp();
+        let stuck = if self.stuck {
+            self.params.faults.stuck.map(|s| s.0)
+        } else {
+            None
+        };
+        for i in 0..self.n() {
+            if stuck != Some(i) {
+                self.motor[i] += (self.target[i] - self.motor[i]) * a_m;
+            }
+            self.tendon[i] = if self.params.compliance_tau > 0.0 {
+                let a_c = 1.0 - (-dt / self.params.compliance_tau).exp();
+                self.tendon[i] + (self.motor[i] - self.tendon[i]) * a_c
+            } else {
+                self.motor[i]
+            };
+        }
+        let moved = self
+            .tendon
+            .iter()
+            .zip(&self.solved_for)
+            .any(|(a, b)| (a - b).abs() > 1e-9);
+        if !moved {
+            return true;
+        }
+        let sol = self
+            .statics
+            .solve(&self.tendon, self.warm.as_ref())
+            .or_else(|_| self.statics.solve(&self.tendon, None));
+        match sol {
+            Ok(sol) => {
+                self.pose = sol.pose();
+                self.warm = Some(sol.warm);
+                self.solved_for.clone_from(&self.tendon);
+                true
+            }
+            Err(_) => {
+                self.solve_failures += 1;
+                false
+            }
+        }
+    }
+
+    /// True tip pose (no noise).
+    pub fn pose(&self) -> [f64; 7] {
+        self.pose
+    }
+
+    /// Tendon tensions (N).
+    pub fn tensions(&self) -> &[f64] {
+        &self.tendon
+    }
+
+    /// Commanded (saturated) tensions (N).
+    pub fn targets(&self) -> &[f64] {
+        &self.target
+    }
+
+    /// The tip as the sensor reports it: position and quaternion with
+    /// Gaussian noise (quaternion renormalised).
+    pub fn measure(&mut self) -> [f64; 7] {
+        let mut m = self.pose;
+        for (k, v) in m.iter_mut().enumerate() {
+            let sd = if k < 3 {
+                self.params.noise
+            } else {
+                self.params.noise_quat
+            };
+            if sd > 0.0 {
+                *v += sd * gaussian(&mut self.rng);
+            }
+        }
+        let qn = m[3..].iter().map(|v| v * v).sum::<f64>().sqrt();
+        for v in &mut m[3..] {
+            *v /= qn;
+        }
+        if m[3] < 0.0 {
+            for v in &mut m[3..] {
+                *v = -*v;
+            }
+        }
+        m
+    }
+
+    /// A uniform draw in [0, 1) from the plant's generator (drop decisions).
+    pub fn uniform(&mut self) -> f64 {
+        self.rng.random::<f64>()
+    }
+}
+
+/// Standard normal draw (Box–Muller).
+fn gaussian(rng: &mut ChaCha8Rng) -> f64 {
+    let u1: f64 = rng.random::<f64>().max(1e-300);
+    let u2: f64 = rng.random::<f64>();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+/// Everything the plant process needs.
+#[derive(Clone, Debug)]
+pub struct PlantConfig {
+    /// Robot file.
+    pub robot: PathBuf,
+    /// Service-name prefix.
+    pub prefix: String,
+    /// Model parameters.
+    pub params: PlantParams,
+    /// Busy-poll for commands instead of sleeping on the event.
+    pub spin: bool,
+    /// Step and publish at least this often without commands (s).
+    pub idle_period: f64,
+    /// Commands older than this mark the state `COMMAND_STALE` (s).
+    pub command_timeout: f64,
+    /// Stop after this many seconds (None: until told).
+    pub duration: Option<f64>,
+    /// Per-step CSV log.
+    pub log: Option<PathBuf>,
+    /// Statistics JSON written at exit.
+    pub stats: Option<PathBuf>,
+}
+
+/// What the plant reports at exit.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct PlantStats {
+    /// Steps taken.
+    pub steps: u64,
+    /// Commands received.
+    pub commands: u64,
+    /// Commands with a tension out of range or not finite (saturated before use).
+    pub out_of_range_commands: u64,
+    /// Commands dropped by fault injection.
+    pub dropped: u64,
+    /// Commands delayed by fault injection.
+    pub delayed: u64,
+    /// Gaps in the command sequence numbers (lost messages).
+    pub sequence_gaps: u64,
+    /// Statics failures.
+    pub solve_failures: u64,
+    /// One-way command latency: controller's stamp → plant receive (µs).
+    pub latency_us: Summary,
+    /// Time of one step: motor update + statics (µs).
+    pub step_us: Summary,
+}
+
+/// Column names of the plant log (for `n` tendons).
+pub fn log_header(n: usize) -> String {
+    let mut cols = vec!["t_ns".to_string(), "cmd_seq".into(), "cmd_status".into()];
+    cols.extend((0..n).map(|i| format!("cmd{i}")));
+    cols.extend((0..n).map(|i| format!("tau{i}")));
+    cols.extend(["px", "py", "pz", "mx", "my", "mz", "status", "step_ns"].map(String::from));
+    cols.join(",")
+}
+
+/// Run the plant process until stopped.
+pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
+    let robot = Robot::load(&cfg.robot).map_err(|e| IpcError::Other(e.to_string()))?;
+    let mut model = PlantModel::new(&robot, cfg.params.clone())?;
+    let n = model.n();
+    let node = transport::node("tendril-plant")?;
+    let services = Services::open_or_create(&node, &cfg.prefix)?;
+    let commands = transport::subscriber(&services.tension_cmd)?;
+    let listener = transport::listener(&services.tension_cmd_event)?;
+    let state_pub = transport::publisher(&services.plant_state)?;
+    let stop = StopWatch::new(&services)?;
+    let mut log = CsvLog::create(cfg.log.as_deref(), &log_header(n))?;
+
+    let start = now_ns();
+    let secs = |t: u64| t.saturating_sub(start) as f64 * 1e-9;
+    let mut stats = PlantStats::default();
+    let mut latencies = Vec::with_capacity(1 << 16);
+    let mut step_times = Vec::with_capacity(1 << 16);
+    let mut delayed: VecDeque<(u64, TensionCommand)> = VecDeque::new();
+    let mut last_cmd: Option<TensionCommand> = None;
+    let mut last_cmd_time = start;
+    let mut last_step = start;
+    let mut seq = 0u64;
+    let mut status_sticky = 0u32;
+    let mut pending = Vec::with_capacity(16);
+    let idle = Duration::from_secs_f64(cfg.idle_period.max(1e-4));
+    let faults = cfg.params.faults.clone();
+    let mut last_flush = start;
+
+    loop {
+        // Wait for a command (event) or the idle period.
+        if cfg.spin {
+            let until = now_ns() + idle.as_nanos() as u64;
+            while now_ns() < until && !commands.has_samples().unwrap_or(false) {
+                std::hint::spin_loop();
+            }
+        } else {
+            listener
+                .timed_wait(|_| {}, idle)
+                .map_err(|e| IpcError::Receive(format!("tension_cmd event: {e:?}")))?;
+        }
+        pending.clear();
+        transport::drain(&commands, &mut pending)?;
+        let now = now_ns();
+        let t = secs(now);
+        for cmd in pending.drain(..) {
+            stats.commands += 1;
+            latencies.push(now.saturating_sub(cmd.header.stamp_ns));
+            if let Some(prev) = last_cmd {
+                if cmd.header.seq > prev.header.seq + 1 {
+                    stats.sequence_gaps += cmd.header.seq - prev.header.seq - 1;
+                }
+            }
+            if let Some((p, from, to)) = faults.drop {
+                if t >= from && t < to && model.uniform() < p {
+                    stats.dropped += 1;
+                    status_sticky |= plant_status::DROPPING;
+                    continue;
+                }
+            }
+            match faults.delay {
+                Some((d, from, to)) if t >= from && t < to => {
+                    stats.delayed += 1;
+                    status_sticky |= plant_status::DELAYING;
+                    delayed.push_back((now + (d * 1e9) as u64, cmd));
+                }
+                _ => delayed.push_back((now, cmd)),
+            }
+        }
+        while delayed.front().is_some_and(|(due, _)| *due <= now) {
+            let Some((_, cmd)) = delayed.pop_front() else {
+                break;
+            };
+            let count = (cmd.count as usize).min(MAX_TENDONS);
+            let tau: Vec<f64> = cmd.tensions[..count].iter().map(|&v| v as f64).collect();
+            if model.command(&tau) {
+                stats.out_of_range_commands += 1;
+                status_sticky |= plant_status::COMMAND_OUT_OF_RANGE;
+            }
+            last_cmd = Some(cmd);
+            last_cmd_time = now;
+        }
+        if let Some((_, at)) = faults.stuck {
+            if t >= at {
+                model.set_stuck();
+                status_sticky |= plant_status::MOTOR_STUCK;
+            }
+        }
+
+        let t0 = now_ns();
+        let ok = model.step((t0 - last_step) as f64 * 1e-9);
+        let t1 = now_ns();
+        last_step = t0;
+        step_times.push(t1 - t0);
+        stats.steps += 1;
+
+        let mut status = status_sticky;
+        if !ok {
+            status |= plant_status::SOLVE_FAILED;
+        }
+        if secs(t1) - secs(last_cmd_time) > cfg.command_timeout {
+            status |= plant_status::COMMAND_STALE;
+        }
+        let measured = model.measure();
+        seq += 1;
+        let mut msg = PlantState {
+            header: Header {
+                seq,
+                stamp_ns: now_ns(),
+            },
+            command_seq: last_cmd.map_or(0, |c| c.header.seq),
+            count: n as u32,
+            status,
+            ..PlantState::default()
+        };
+        for (dst, src) in msg.tensions.iter_mut().zip(model.tensions()) {
+            *dst = *src as f32;
+        }
+        for (dst, src) in msg.tip_pose.iter_mut().zip(measured) {
+            *dst = src as f32;
+        }
+        transport::send(&state_pub, msg)?;
+
+        let mut row = Vec::with_capacity(3 + 2 * n + 8);
+        row.push(t0 as f64);
+        row.push(last_cmd.map_or(0.0, |c| c.header.seq as f64));
+        row.push(last_cmd.map_or(0.0, |c| c.status as f64));
+        row.extend(model.targets().iter().copied());
+        row.extend(model.tensions().iter().copied());
+        let p = model.pose();
+        row.extend([p[0], p[1], p[2], measured[0], measured[1], measured[2]]);
+        row.push(status as f64);
+        row.push((t1 - t0) as f64);
+        log.row(&row)?;
+        if t1 - last_flush > 100_000_000 {
+            log.flush()?;
+            last_flush = t1;
+        }
+
+        if stop.requested() || cfg.duration.is_some_and(|d| secs(t1) >= d) {
+            break;
+        }
+    }
+    log.flush()?;
+    stats.solve_failures = model.solve_failures;
+    stats.latency_us = Summary::of_ns(&mut latencies);
+    stats.step_us = Summary::of_ns(&mut step_times);
+    if let Some(path) = &cfg.stats {
+        let json = serde_json::to_vec_pretty(&stats).map_err(|e| IpcError::Other(e.to_string()))?;
+        super::write_file(path, &json)?;
+    }
+    Ok(stats)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    fn robot() -> Robot {
+        Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml")).unwrap()
+    }
+
+    #[test]
+    fn motor_follows_first_order_step_response() {
+        let params = PlantParams {
+            noise: 0.0,
+            noise_quat: 0.0,
+            ..PlantParams::default()
+        };
+        let mut m = PlantModel::new(&robot(), params).unwrap();
+        assert!(!m.command(&[2.0, 0.0, 0.0, 0.0]));
+        // One time constant in 20 steps of 1 ms: 1 − e^−1 of the step.
+        for _ in 0..20 {
+            assert!(m.step(0.001));
+        }
+        let expect = 2.0 * (1.0 - (-1.0f64).exp());
+        assert!((m.tensions()[0] - expect).abs() < 1e-9);
+        // And the pose is the statics of exactly those tensions.
+        let s = Statics::new(&robot(), SolverSettings::default());
+        let sol = s.solve(m.tensions(), None).unwrap();
+        assert!((sol.position - nalgebra::Vector3::from_row_slice(&m.pose()[..3])).norm() < 1e-6);
+    }
+
+    #[test]
+    fn out_of_range_commands_are_flagged_and_saturated() {
+        let mut m = PlantModel::new(&robot(), PlantParams::default()).unwrap();
+        assert!(m.command(&[12.0, -1.0, f64::NAN, 1.0]));
+        assert_eq!(m.targets(), &[10.0, 0.0, 0.0, 1.0]);
+        assert!(m.command(&[1.0, 1.0]));
+    }
+
+    #[test]
+    fn stuck_motor_keeps_its_tension() {
+        let params = PlantParams {
+            faults: PlantFaults {
+                stuck: Some((1, 0.0)),
+                ..PlantFaults::default()
+            },
+            ..PlantParams::default()
+        };
+        let mut m = PlantModel::new(&robot(), params).unwrap();
+        m.command(&[1.0, 1.0, 0.0, 0.0]);
+        m.step(0.01);
+        let held = m.tensions()[1];
+        m.set_stuck();
+        m.command(&[1.0, 3.0, 0.0, 0.0]);
+        for _ in 0..50 {
+            m.step(0.01);
+        }
+        assert_eq!(m.tensions()[1], held);
+        assert!((m.tensions()[0] - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn sensor_noise_has_the_configured_spread() {
+        let params = PlantParams {
+            noise: 1e-4,
+            ..PlantParams::default()
+        };
+        let mut m = PlantModel::new(&robot(), params).unwrap();
+        let truth = m.pose();
+        let k = 4000;
+        let mut sum2 = 0.0;
+        for _ in 0..k {
+            let d = m.measure()[0] - truth[0];
+            sum2 += d * d;
+        }
+        let sd = (sum2 / k as f64).sqrt();
+        assert!((sd - 1e-4).abs() < 0.1e-4, "sd = {sd}");
+    }
+}

@@ -1,0 +1,219 @@
+//! iceoryx2 glue: the `ZeroCopySend` wrapper for the `shared` messages, the
+//! service names under a prefix, and one place that fixes every service's
+//! quality-of-service settings (creator and openers must agree on them).
+
+use std::fmt::Debug;
+
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use iceoryx2::service::port_factory::{event, publish_subscribe};
+use tendril_shared::messages::{Control, PlantState, Setpoint, TensionCommand, WeightUpdate};
+
+use super::IpcError;
+
+/// The iceoryx2 service flavour: inter-process, shared memory.
+pub type Svc = ipc::Service;
+
+/// A `shared` message as an iceoryx2 payload. `shared` is `no_std` and knows
+/// nothing of iceoryx2, and the orphan rule forbids implementing iceoryx2's
+/// trait for its types here, hence the transparent wrapper.
+#[repr(transparent)]
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Wire<T>(pub T);
+
+/// A message type that may cross process boundaries as plain bytes.
+///
+/// # Safety
+/// Implement only for `#[repr(C)]` types made of numbers and arrays of
+/// numbers (every bit pattern valid, no pointers); `NAME` must be unique.
+pub unsafe trait Message: Copy + Debug + Default + 'static {
+    /// Type name iceoryx2 compares when a port connects to a service.
+    const NAME: &'static str;
+}
+
+// SAFETY: all five are #[repr(C)] structs of integers, floats and arrays
+// thereof with explicit padding (layout tests in `shared::messages`).
+unsafe impl Message for Setpoint {
+    const NAME: &'static str = "tendril::Setpoint/v1";
+}
+unsafe impl Message for TensionCommand {
+    const NAME: &'static str = "tendril::TensionCommand/v1";
+}
+unsafe impl Message for PlantState {
+    const NAME: &'static str = "tendril::PlantState/v1";
+}
+unsafe impl Message for WeightUpdate {
+    const NAME: &'static str = "tendril::WeightUpdate/v1";
+}
+unsafe impl Message for Control {
+    const NAME: &'static str = "tendril::Control/v1";
+}
+
+// SAFETY: `Wire<T>` is `repr(transparent)` over a `Message`, whose contract is
+// exactly ZeroCopySend's (self-contained, every bit pattern valid).
+unsafe impl<T: Message> ZeroCopySend for Wire<T> {
+    unsafe fn type_name() -> &'static str {
+        T::NAME
+    }
+}
+
+/// Publisher of one message type.
+pub type Pub<T> = Publisher<Svc, Wire<T>, ()>;
+/// Subscriber of one message type.
+pub type Sub<T> = Subscriber<Svc, Wire<T>, ()>;
+type Factory<T> = publish_subscribe::PortFactory<Svc, Wire<T>, ()>;
+
+/// Default service-name prefix; tests and `tendril sim` use a unique one.
+pub const DEFAULT_PREFIX: &str = "tendril";
+
+/// The iceoryx2 services of one control loop, all under one prefix.
+pub struct Services {
+    /// planner → controller.
+    pub setpoint: Factory<Setpoint>,
+    /// controller → plant.
+    pub tension_cmd: Factory<TensionCommand>,
+    /// Event raised after each tension command so the plant can sleep until one arrives.
+    pub tension_cmd_event: event::PortFactory<Svc>,
+    /// plant → controller, planner.
+    pub plant_state: Factory<PlantState>,
+    /// anyone → controller: a new `.tnet`.
+    pub weights: Factory<WeightUpdate>,
+    /// launcher → everyone: stop.
+    pub control: Factory<Control>,
+}
+
+fn service_name(prefix: &str, topic: &str) -> Result<ServiceName, IpcError> {
+    let full = format!("{prefix}/{topic}");
+    ServiceName::new(&full).map_err(|e| IpcError::BadName(format!("service name {full:?}: {e:?}")))
+}
+
+fn pubsub<T: Message>(
+    node: &Node<Svc>,
+    prefix: &str,
+    topic: &str,
+    buffer: usize,
+    history: usize,
+) -> Result<Factory<T>, IpcError> {
+    let name = service_name(prefix, topic)?;
+    node.service_builder(&name)
+        .publish_subscribe::<Wire<T>>()
+        // A restarted process gets a new publisher while the dead one's port
+        // waits for cleanup: room for a few of each.
+        .max_publishers(4)
+        .max_subscribers(8)
+        .max_nodes(16)
+        .subscriber_max_buffer_size(buffer)
+        .history_size(history)
+        // Receivers want the newest message; on overflow drop the oldest.
+        .enable_safe_overflow(true)
+        .open_or_create()
+        .map_err(|e| IpcError::Service(format!("{}: {e:?}", name.as_str())))
+}
+
+impl Services {
+    /// Open the services under `prefix`, creating any that do not exist.
+    /// Create them in a launcher *before* spawning peers: concurrent
+    /// `open_or_create` calls racing a dead-node cleanup can fail.
+    pub fn open_or_create(node: &Node<Svc>, prefix: &str) -> Result<Services, IpcError> {
+        let event_name = service_name(prefix, "tension_cmd")?;
+        let tension_cmd_event = node
+            .service_builder(&event_name)
+            .event()
+            .max_notifiers(8)
+            .max_listeners(8)
+            .max_nodes(16)
+            .open_or_create()
+            .map_err(|e| IpcError::Service(format!("{} (event): {e:?}", event_name.as_str())))?;
+        Ok(Services {
+            setpoint: pubsub(node, prefix, "setpoint", 8, 1)?,
+            tension_cmd: pubsub(node, prefix, "tension_cmd", 8, 1)?,
+            tension_cmd_event,
+            plant_state: pubsub(node, prefix, "plant_state", 8, 1)?,
+            weights: pubsub(node, prefix, "weights", 2, 0)?,
+            control: pubsub(node, prefix, "control", 4, 1)?,
+        })
+    }
+}
+
+/// Create this process's iceoryx2 node. Creating a node also removes the
+/// resources of dead nodes (a crashed predecessor), which is how a restarted
+/// process takes over a killed one's place.
+pub fn node(name: &str) -> Result<Node<Svc>, IpcError> {
+    let node_name = NodeName::new(name).map_err(|e| IpcError::BadName(format!("node name {name:?}: {e:?}")))?;
+    NodeBuilder::new()
+        .name(&node_name)
+        .create::<Svc>()
+        .map_err(|e| IpcError::Service(format!("node {name}: {e:?}")))
+}
+
+/// Make a publisher for a service.
+pub fn publisher<T: Message>(factory: &Factory<T>) -> Result<Pub<T>, IpcError> {
+    factory
+        .publisher_builder()
+        .create()
+        .map_err(|e| IpcError::Port(format!("publisher {}: {e:?}", T::NAME)))
+}
+
+/// Make a subscriber for a service.
+pub fn subscriber<T: Message>(factory: &Factory<T>) -> Result<Sub<T>, IpcError> {
+    factory
+        .subscriber_builder()
+        .create()
+        .map_err(|e| IpcError::Port(format!("subscriber {}: {e:?}", T::NAME)))
+}
+
+/// Make a notifier for an event service.
+pub fn notifier(factory: &event::PortFactory<Svc>) -> Result<Notifier<Svc>, IpcError> {
+    factory
+        .notifier_builder()
+        .create()
+        .map_err(|e| IpcError::Port(format!("notifier: {e:?}")))
+}
+
+/// Make a listener for an event service.
+pub fn listener(factory: &event::PortFactory<Svc>) -> Result<Listener<Svc>, IpcError> {
+    factory
+        .listener_builder()
+        .create()
+        .map_err(|e| IpcError::Port(format!("listener: {e:?}")))
+}
+
+/// Publish one message (copied into a loaned shared-memory sample).
+pub fn send<T: Message>(publisher: &Pub<T>, msg: T) -> Result<(), IpcError> {
+    let sample = publisher
+        .loan_uninit()
+        .map_err(|e| IpcError::Send(format!("{}: {e:?}", T::NAME)))?;
+    sample
+        .write_payload(Wire(msg))
+        .send()
+        .map_err(|e| IpcError::Send(format!("{}: {e:?}", T::NAME)))?;
+    Ok(())
+}
+
+/// Drain a subscriber and return the newest message and how many arrived.
+pub fn latest<T: Message>(subscriber: &Sub<T>) -> Result<(Option<T>, usize), IpcError> {
+    let mut newest = None;
+    let mut count = 0;
+    while let Some(sample) = subscriber
+        .receive()
+        .map_err(|e| IpcError::Receive(format!("{}: {e:?}", T::NAME)))?
+    {
+        newest = Some(sample.payload().0);
+        count += 1;
+    }
+    Ok((newest, count))
+}
+
+/// Receive every pending message, oldest first, into `out`.
+pub fn drain<T: Message>(subscriber: &Sub<T>, out: &mut Vec<T>) -> Result<(), IpcError> {
+    while let Some(sample) = subscriber
+        .receive()
+        .map_err(|e| IpcError::Receive(format!("{}: {e:?}", T::NAME)))?
+    {
+        out.push(sample.payload().0);
+    }
+    Ok(())
+}
