@@ -3,7 +3,14 @@
 //! in [0, 1] (ranges from the training split) and implements [`Learner`], so
 //! the comparison treats them all alike.
 
+pub mod cascade_forward;
 pub mod cascor;
+pub mod elm;
+pub mod knn;
 pub mod learner;
+pub mod linalg;
+pub mod mlp;
+pub mod rbf;
+pub mod tree;
 
 pub use learner::{Learner, LearnError, Split};

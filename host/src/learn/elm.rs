@@ -1,0 +1,204 @@
+//! Extreme learning machine (Huang, Zhu & Siew 2006): one hidden layer of
+//! logistic sigmoid units with random, untrained input weights and biases;
+//! only the linear output layer is fitted, by ridge least squares.
+//!
+//! Tuning: for each input-weight scale one random layer of the largest
+//! candidate width is drawn and its Gram matrix computed once. A narrower
+//! layer is a prefix of its units, whose Gram matrix is a leading block of
+//! the big one, so every (width, ridge) pair costs only a Cholesky solve.
+
+use nalgebra::DMatrix;
+use rand::Rng;
+use rayon::prelude::*;
+
+use super::linalg::{argmin, check_splits, cross, gram, ridge_solve, rmse, rng, sigmoid, sub_seed};
+use super::{LearnError, Learner, Split};
+
+/// A random sigmoid layer: `h = σ(x W + b)`.
+#[derive(Clone, Debug)]
+struct Layer {
+    /// `inputs × hidden`.
+    w: DMatrix<f64>,
+    b: Vec<f64>,
+}
+
+impl Layer {
+    fn draw(inputs: usize, hidden: usize, scale: f64, seed: u64) -> Layer {
+        let mut r = rng(seed);
+        // Column by column so that the first k units are the same draw for any width.
+        let mut w = DMatrix::zeros(inputs, hidden);
+        let mut b = vec![0.0; hidden];
+        for j in 0..hidden {
+            for i in 0..inputs {
+                w[(i, j)] = scale * r.random_range(-1.0..1.0);
+            }
+            b[j] = scale * r.random_range(-1.0..1.0);
+        }
+        Layer { w, b }
+    }
+
+    fn narrowed(&self, hidden: usize) -> Layer {
+        Layer {
+            w: self.w.columns(0, hidden).into_owned(),
+            b: self.b[..hidden].to_vec(),
+        }
+    }
+
+    /// Hidden activations with a trailing bias column of ones.
+    fn features(&self, x: &DMatrix<f64>) -> DMatrix<f64> {
+        let h = self.b.len();
+        let mut z = x * &self.w;
+        for j in 0..h {
+            let bj = self.b[j];
+            z.column_mut(j).apply(|v| *v = sigmoid(*v + bj));
+        }
+        z.insert_column(h, 1.0)
+    }
+}
+
+/// Extreme learning machine regressor.
+pub struct Elm {
+    /// Candidate hidden-layer widths.
+    pub hiddens: Vec<usize>,
+    /// Candidate ridge factors (relative to the mean diagonal of the Gram matrix).
+    pub ridges: Vec<f64>,
+    /// Candidate input-weight scales: weights and biases uniform in [−s, s].
+    pub scales: Vec<f64>,
+    layer: Option<Layer>,
+    out: DMatrix<f64>,
+    hidden: usize,
+    ridge: f64,
+    scale: f64,
+}
+
+impl Default for Elm {
+    /// The grid used by `tendril compare`: widths {250, 500, 1000, 1500} ×
+    /// ridges {1e-10 … 1e-4} × scales {1, 4} (two Gram matrices, 32 solves).
+    fn default() -> Self {
+        Elm::with_grid(
+            vec![250, 500, 1000, 1500],
+            vec![1e-10, 1e-8, 1e-6, 1e-4],
+            vec![1.0, 4.0],
+        )
+    }
+}
+
+impl Elm {
+    /// An ELM choosing width, ridge and weight scale from the given candidates.
+    pub fn with_grid(hiddens: Vec<usize>, ridges: Vec<f64>, scales: Vec<f64>) -> Elm {
+        Elm {
+            hiddens,
+            ridges,
+            scales,
+            layer: None,
+            out: DMatrix::zeros(0, 0),
+            hidden: 0,
+            ridge: 0.0,
+            scale: 0.0,
+        }
+    }
+
+    /// An ELM with fixed hyper-parameters.
+    pub fn fixed(hidden: usize, ridge: f64, scale: f64) -> Elm {
+        Elm::with_grid(vec![hidden], vec![ridge], vec![scale])
+    }
+
+    /// Chosen (hidden width, ridge, weight scale).
+    pub fn chosen(&self) -> (usize, f64, f64) {
+        (self.hidden, self.ridge, self.scale)
+    }
+}
+
+impl Learner for Elm {
+    fn name(&self) -> &str {
+        "ELM"
+    }
+
+    fn fit(&mut self, train: Split<'_>, valid: Split<'_>, seed: u64) -> Result<(), LearnError> {
+        check_splits(train, valid)?;
+        if self.hiddens.is_empty()
+            || self.hiddens.contains(&0)
+            || self.ridges.is_empty()
+            || self.scales.is_empty()
+        {
+            return Err(LearnError::BadParameter {
+                name: "ELM grid",
+                why: "need at least one width ≥ 1, one ridge and one scale".into(),
+            });
+        }
+        if self
+            .ridges
+            .iter()
+            .chain(&self.scales)
+            .any(|v| !v.is_finite() || *v < 0.0)
+        {
+            return Err(LearnError::BadParameter {
+                name: "ELM grid",
+                why: "ridges and scales must be finite and ≥ 0".into(),
+            });
+        }
+        let h_max = self.hiddens.iter().copied().max().unwrap_or(1);
+        let inputs = train.x.ncols();
+        let mut best: Option<(f64, usize, f64, f64, Layer, DMatrix<f64>)> = None;
+        for (si, &scale) in self.scales.iter().enumerate() {
+            let layer = Layer::draw(inputs, h_max, scale, sub_seed(seed, si as u64));
+            let f = layer.features(train.x);
+            let fv = layer.features(valid.x);
+            let g = gram(&f);
+            let c = cross(&f, train.y);
+            let cands: Vec<(usize, f64)> = self
+                .hiddens
+                .iter()
+                .flat_map(|&h| self.ridges.iter().map(move |&r| (h, r)))
+                .collect();
+            let fits: Vec<Option<(f64, DMatrix<f64>)>> = cands
+                .par_iter()
+                .map(|&(h, r)| {
+                    // Leading block: the first h units plus the bias (last column).
+                    let idx: Vec<usize> = (0..h).chain(std::iter::once(h_max)).collect();
+                    let gs = g.select_rows(&idx).select_columns(&idx);
+                    let cs = c.select_rows(&idx);
+                    let w = ridge_solve(&gs, &cs, r).ok()?;
+                    let pred = fv.select_columns(&idx) * &w;
+                    Some((rmse(&pred, valid.y), w))
+                })
+                .collect();
+            let scores: Vec<f64> = fits
+                .iter()
+                .map(|f| f.as_ref().map_or(f64::NAN, |f| f.0))
+                .collect();
+            if let Some(i) = argmin(&scores) {
+                if best.as_ref().is_none_or(|b| scores[i] < b.0) {
+                    let (h, r) = cands[i];
+                    let w = fits[i].as_ref().map(|f| f.1.clone()).unwrap_or_default();
+                    best = Some((scores[i], h, r, scale, layer.narrowed(h), w));
+                }
+            }
+        }
+        let (score, h, r, s, layer, w) = best
+            .ok_or_else(|| LearnError::Numerical("every ELM candidate failed to solve".into()))?;
+        (self.hidden, self.ridge, self.scale) = (h, r, s);
+        self.layer = Some(layer);
+        self.out = w;
+        log::info!("ELM: hidden={h} ridge={r:e} scale={s} (valid RMSE {score:.5})");
+        Ok(())
+    }
+
+    fn predict(&self, x: &DMatrix<f64>) -> DMatrix<f64> {
+        match &self.layer {
+            Some(l) => l.features(x) * &self.out,
+            None => DMatrix::from_element(x.nrows(), 0, f64::NAN),
+        }
+    }
+
+    fn parameter_count(&self) -> usize {
+        self.layer.as_ref().map_or(0, |l| l.w.len() + l.b.len()) + self.out.len()
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "hidden={}, ridge={:e}, weight scale={}",
+            self.hidden, self.ridge, self.scale
+        )
+    }
+}
