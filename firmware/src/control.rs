@@ -272,7 +272,7 @@ impl ControlState {
             .zip(limits.max_tension_padded())
         {
             *c = if t.is_finite() {
-                t.clamp(0.0, max)
+                clamp(t, 0.0, max)
             } else {
                 0.0
             };
@@ -315,6 +315,14 @@ fn in_box<const H: usize, const OUT: usize>(
         let u = (x - lo) / (hi - lo);
         u >= -margin && u <= 1.0 + margin
     })
+}
+
+/// `x` limited to `[lo, hi]` (NaN → `lo`). Unlike `f32::clamp` it has no
+/// panic path (`clamp` asserts `lo <= hi`, which would drag a panic and float
+/// formatting into the MCU image).
+#[inline]
+pub fn clamp(x: f32, lo: f32, hi: f32) -> f32 {
+    x.max(lo).min(hi)
 }
 
 fn quaternion_ok(pose: &[f32; POSE_DIM], tol: f32) -> bool {
@@ -410,7 +418,7 @@ pub fn control_step<const H: usize, const OUT: usize>(
                 fresh = true;
                 let before = st.correction;
                 for ((c, &p), &m) in st.correction.iter_mut().zip(&st.pose).zip(&fb.tip_position) {
-                    *c = (*c + ic.ki * (p - m) * dt).clamp(-ic.limit, ic.limit);
+                    *c = clamp(*c + ic.ki * (p - m) * dt, -ic.limit, ic.limit);
                 }
                 if !corrected_in_box(net, &st.pose, &st.correction, cfg.box_margin) {
                     st.correction = before;
@@ -466,17 +474,17 @@ pub fn control_step<const H: usize, const OUT: usize>(
             continue;
         };
         let tgt = if tgt.is_finite() { tgt } else { prev };
-        let clamped = tgt.clamp(0.0, max);
+        let clamped = clamp(tgt, 0.0, max);
         if clamped != tgt {
             status |= Status::RANGE_CLAMPED;
         }
         let max_step = r * dt;
         let delta = clamped - prev;
-        let step = delta.clamp(-max_step, max_step);
+        let step = clamp(delta, -max_step, max_step);
         if step != delta {
             status |= Status::SLEW_LIMITED;
         }
-        let c = (prev + step).clamp(0.0, max);
+        let c = clamp(prev + step, 0.0, max);
         if let Some(slot) = command.get_mut(i) {
             *slot = if c.is_finite() { c } else { 0.0 };
         }

@@ -23,6 +23,24 @@ impl<const IN: usize, const MAX_HIDDEN: usize> Unit<IN, MAX_HIDDEN> {
         inputs: [0.0; IN],
         hidden: [0.0; MAX_HIDDEN],
     };
+
+    /// The whole row as one slice, `[bias, inputs…, hidden…]`
+    /// (`1 + IN + MAX_HIDDEN` long): the inference loop runs one dot product
+    /// per unit over it.
+    pub fn as_slice(&self) -> &[f32] {
+        const {
+            assert!(core::mem::size_of::<Self>() == 4 * (1 + IN + MAX_HIDDEN));
+            assert!(core::mem::align_of::<Self>() == core::mem::align_of::<f32>());
+        }
+        // SAFETY: `Unit` is `#[repr(C)]` and made only of `f32`s (a scalar and
+        // two arrays), so it is `1 + IN + MAX_HIDDEN` contiguous, aligned,
+        // initialised `f32`s without padding (checked at compile time
+        // above); the pointer comes from the whole struct, so its provenance
+        // covers every element, and the borrow of `self` keeps it alive.
+        unsafe {
+            core::slice::from_raw_parts((self as *const Self).cast::<f32>(), 1 + IN + MAX_HIDDEN)
+        }
+    }
 }
 
 /// A cascade-correlation net decoded from a `.tnet` file into fixed-capacity
