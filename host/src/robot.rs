@@ -15,6 +15,10 @@ use serde::Deserialize;
 /// Path of the default robot, relative to the workspace root.
 pub const DEFAULT_ROBOT: &str = "robots/seed-4t.toml";
 
+/// The default robot's file, built into the binary so the main job runs
+/// from any directory.
+pub const BUILTIN_DEFAULT_TOML: &str = include_str!("../../robots/seed-4t.toml");
+
 /// Largest tendon count a robot file may declare (the firmware's fixed capacity).
 pub const MAX_TENDONS: usize = 8;
 
@@ -125,12 +129,26 @@ enum RoutingName {
 impl Robot {
     /// Load and validate a robot file.
     pub fn load(path: &Path) -> Result<Robot, RobotError> {
+        Self::load_with_source(path).map(|(robot, _)| robot)
+    }
+
+    /// Load `path`; if it is the default robot path and no such file exists
+    /// (run outside the workspace), use the built-in copy. Returns the robot
+    /// and the exact bytes it came from (for content hashes).
+    pub fn load_with_source(path: &Path) -> Result<(Robot, String), RobotError> {
+        if path == Path::new(DEFAULT_ROBOT) && !path.exists() {
+            let origin = Path::new("<built-in robots/seed-4t.toml>");
+            return Ok((
+                Self::from_toml(BUILTIN_DEFAULT_TOML, origin)?,
+                BUILTIN_DEFAULT_TOML.to_string(),
+            ));
+        }
         let text = std::fs::read_to_string(path).map_err(|e| RobotError {
             file: path.to_path_buf(),
             field: "file".into(),
             problem: format!("cannot read: {e}"),
         })?;
-        Self::from_toml(&text, path)
+        Ok((Self::from_toml(&text, path)?, text))
     }
 
     /// Parse and validate robot TOML; `origin` names the source in errors.
@@ -422,9 +440,28 @@ impl Validator<'_> {
 /// Best-effort dotted name of the field a TOML error points at: the table
 /// header above the error's line plus the key on that line.
 fn toml_error_field(text: &str, e: &toml::de::Error) -> String {
+    let missing = e
+        .message()
+        .split("missing field `")
+        .nth(1)
+        .and_then(|rest| rest.split('`').next());
     let Some(span) = e.span() else {
-        return "file".into();
+        return missing.unwrap_or("file").into();
     };
+    if let Some(name) = missing {
+        // serde points a missing field at its table's header (or the file start).
+        let header = text[span.start.min(text.len())..]
+            .lines()
+            .next()
+            .unwrap_or("")
+            .trim();
+        let table = header.trim_matches(|c| c == '[' || c == ']').trim();
+        return if span.start == 0 || !header.starts_with('[') {
+            name.into()
+        } else {
+            format!("{table}.{name}")
+        };
+    }
     let before = &text[..span.start.min(text.len())];
     let line_start = before.rfind('\n').map_or(0, |i| i + 1);
     let line = text[line_start..].lines().next().unwrap_or("");
@@ -511,6 +548,14 @@ routing = "straight"
         assert_eq!(e.field, "backbone.densty");
         assert!(e.problem.contains("unknown field"), "{e}");
         assert!(e.to_string().starts_with("bad.toml: backbone.densty:"));
+    }
+
+    #[test]
+    fn missing_fields_are_named() {
+        let e = parse("name = \"x\"\n").unwrap_err();
+        assert_eq!(e.field, "backbone", "{e}");
+        let e = parse(&GOOD.replace("youngs_modulus = 207e9\n", "")).unwrap_err();
+        assert_eq!(e.field, "backbone.youngs_modulus", "{e}");
     }
 
     #[test]

@@ -3,10 +3,14 @@
 
 use clap::{Parser, Subcommand};
 
+pub mod common;
 mod controller;
-mod plant;
+mod fk;
+pub mod generate;
 mod planner;
+mod plant;
 mod sim;
+mod workspace;
 
 /// Learn and run inverse kinematics of tendon-driven continuum robots.
 ///
@@ -21,6 +25,12 @@ pub struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Forward statics: tip pose for tendon tensions (one, or a CSV batch).
+    Fk(fk::FkArgs),
+    /// Generate the tension <-> pose dataset (CSV + JSON sidecar).
+    Generate(generate::GenerateArgs),
+    /// Plot a dataset's reachable workspace and a few backbone shapes.
+    Workspace(workspace::WorkspaceArgs),
     /// Stream setpoints along a trajectory (iceoryx2 process).
     Planner(planner::PlannerArgs),
     /// Run the firmware control step at 1 kHz (iceoryx2 process).
@@ -36,6 +46,9 @@ pub fn run() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
         None => crate::pipeline::run_default(),
+        Some(Command::Fk(a)) => fk::run(a),
+        Some(Command::Generate(a)) => generate::run(a),
+        Some(Command::Workspace(a)) => workspace::run(a),
         Some(Command::Planner(a)) => planner::run(a),
         Some(Command::Controller(a)) => controller::run(a),
         Some(Command::Plant(a)) => plant::run(a),

@@ -14,9 +14,10 @@ use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 
+use super::io::ColumnRange;
 use super::sample::{snake_order, Sampler};
-use super::{Dataset, POSE_COLUMNS};
-use crate::statics::{SolveError, Statics, WarmStart};
+use super::Dataset;
+use crate::statics::{Solution, SolveError, Statics, WarmStart};
 
 /// Samples per warm-started chain. Small enough to balance two cores, large
 /// enough that the one cold start per chunk is negligible.
@@ -63,11 +64,99 @@ pub enum GenerateError {
     NoSamples,
 }
 
-/// Outcome of one sample.
-enum Row {
-    Ok([f64; 7]),
-    ResolvedCold([f64; 7]),
+/// Outcome of one sample of a batch solve.
+#[derive(Debug)]
+pub enum Outcome {
+    /// Solved warm (or cold, for the first of its chain).
+    Solved(Solution),
+    /// The warm-started solve failed; a cold re-solve succeeded.
+    ResolvedCold(Solution),
+    /// Even the cold solve failed.
     Failed(SolveError),
+}
+
+impl Outcome {
+    /// The solution, if any.
+    pub fn solution(&self) -> Option<&Solution> {
+        match self {
+            Outcome::Solved(s) | Outcome::ResolvedCold(s) => Some(s),
+            Outcome::Failed(_) => None,
+        }
+    }
+}
+
+/// Solve every tension vector of `tensions`, visiting them in `order` in
+/// chains of [`CHUNK`] warm-started solves; chains run in parallel. A
+/// warm-started solve that fails is re-solved cold before it counts as
+/// failed. `order` must be a permutation of `0..tensions.len()`. Returns
+/// outcomes in the index order of `tensions`, or `None` if `stop` was set
+/// before the end.
+pub fn solve_batch(
+    statics: &Statics,
+    tensions: &[Vec<f64>],
+    order: &[usize],
+    bar: &ProgressBar,
+    stop: &AtomicBool,
+) -> Option<Vec<Outcome>> {
+    assert_eq!(order.len(), tensions.len(), "order must be a permutation");
+    let chunks: Vec<&[usize]> = order.chunks(CHUNK).collect();
+    let solved: Vec<Option<Vec<(usize, Outcome)>>> = chunks
+        .par_iter()
+        .map(|chunk| {
+            if stop.load(Ordering::Relaxed) {
+                return None;
+            }
+            let mut warm: Option<WarmStart> = None;
+            let mut out = Vec::with_capacity(chunk.len());
+            for &i in chunk.iter() {
+                let t = &tensions[i];
+                let outcome = match statics.solve(t, warm.as_ref()) {
+                    Ok(sol) => Outcome::Solved(sol),
+                    Err(_) if warm.is_some() => match statics.solve(t, None) {
+                        Ok(sol) => Outcome::ResolvedCold(sol),
+                        Err(e) => Outcome::Failed(e),
+                    },
+                    Err(e) => Outcome::Failed(e),
+                };
+                if let Some(sol) = outcome.solution() {
+                    warm = Some(sol.warm.clone());
+                }
+                out.push((i, outcome));
+            }
+            bar.inc(chunk.len() as u64);
+            Some(out)
+        })
+        .collect();
+    if stop.load(Ordering::Relaxed) || solved.iter().any(Option::is_none) {
+        return None;
+    }
+    let mut slots: Vec<Option<Outcome>> = (0..tensions.len()).map(|_| None).collect();
+    for (i, outcome) in solved.into_iter().flatten().flatten() {
+        slots[i] = Some(outcome);
+    }
+    let outcomes: Vec<Outcome> = slots.into_iter().flatten().collect();
+    assert_eq!(
+        outcomes.len(),
+        tensions.len(),
+        "order must be a permutation"
+    );
+    Some(outcomes)
+}
+
+/// A progress bar on stderr for `len` solves, or a hidden one.
+pub fn solve_bar(len: usize, visible: bool) -> ProgressBar {
+    if !visible {
+        return ProgressBar::hidden();
+    }
+    let b = ProgressBar::new(len as u64);
+    b.set_style(
+        ProgressStyle::with_template(
+            "{spinner} solving statics [{bar:30}] {pos}/{len} {per_sec} eta {eta}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    b
 }
 
 /// Generate a dataset. `stop` is polled between chunks (set it from a Ctrl-C
@@ -84,83 +173,32 @@ pub fn generate(
     let max = statics.robot().max_tensions();
     let tensions = opts.sampler.draw(opts.samples, &max, opts.seed);
     let order = snake_order(&tensions, &max, SNAKE_CELLS);
-
-    let bar = if opts.progress {
-        let b = ProgressBar::new(opts.samples as u64);
-        b.set_style(
-            ProgressStyle::with_template(
-                "{spinner} solving statics [{bar:30}] {pos}/{len} {per_sec} eta {eta}",
-            )
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
-        );
-        b
-    } else {
-        ProgressBar::hidden()
-    };
-
-    let chunks: Vec<&[usize]> = order.chunks(CHUNK).collect();
-    let solved: Vec<Option<Vec<(usize, Row)>>> = chunks
-        .par_iter()
-        .map(|chunk| {
-            if stop.load(Ordering::Relaxed) {
-                return None;
-            }
-            let mut warm: Option<WarmStart> = None;
-            let mut out = Vec::with_capacity(chunk.len());
-            for &i in chunk.iter() {
-                let t = &tensions[i];
-                let row = match statics.solve(t, warm.as_ref()) {
-                    Ok(sol) => {
-                        warm = Some(sol.warm.clone());
-                        Row::Ok(sol.pose())
-                    }
-                    Err(_) if warm.is_some() => match statics.solve(t, None) {
-                        Ok(sol) => {
-                            warm = Some(sol.warm.clone());
-                            Row::ResolvedCold(sol.pose())
-                        }
-                        Err(e) => Row::Failed(e),
-                    },
-                    Err(e) => Row::Failed(e),
-                };
-                out.push((i, row));
-            }
-            bar.inc(chunk.len() as u64);
-            Some(out)
-        })
-        .collect();
+    let bar = solve_bar(opts.samples, opts.progress);
+    let outcomes =
+        solve_batch(statics, &tensions, &order, &bar, stop).ok_or(GenerateError::Interrupted)?;
     bar.finish_and_clear();
-    if stop.load(Ordering::Relaxed) || solved.iter().any(Option::is_none) {
-        return Err(GenerateError::Interrupted);
-    }
 
-    let mut rows: Vec<Option<Row>> = (0..opts.samples).map(|_| None).collect();
-    for (i, row) in solved.into_iter().flatten().flatten() {
-        rows[i] = Some(row);
-    }
     let (mut resolved_cold, mut dropped) = (0, 0);
     let mut failures = Vec::new();
     let mut kept_t = Vec::with_capacity(opts.samples * max.len());
     let mut kept_p = Vec::with_capacity(opts.samples * 7);
-    for (i, row) in rows.into_iter().enumerate() {
-        let pose = match row {
-            Some(Row::Ok(p)) => p,
-            Some(Row::ResolvedCold(p)) => {
+    for (t, outcome) in tensions.into_iter().zip(outcomes) {
+        let sol = match outcome {
+            Outcome::Solved(s) => s,
+            Outcome::ResolvedCold(s) => {
                 resolved_cold += 1;
-                p
+                s
             }
-            Some(Row::Failed(e)) => {
+            Outcome::Failed(e) => {
                 dropped += 1;
                 if failures.len() < 10 {
-                    failures.push((tensions[i].clone(), e));
+                    failures.push((t, e));
                 }
                 continue;
             }
-            None => unreachable!("every sample belongs to exactly one chunk"),
         };
-        kept_t.extend_from_slice(&tensions[i]);
-        kept_p.extend_from_slice(&pose);
+        kept_t.extend_from_slice(&t);
+        kept_p.extend_from_slice(&sol.pose());
     }
     let n = kept_p.len() / 7;
     Ok(Generated {
@@ -176,14 +214,17 @@ pub fn generate(
     })
 }
 
-/// Per-column (name, min, max) of a dataset, for the sidecar.
-pub fn column_ranges(data: &Dataset) -> Vec<(String, f64, f64)> {
-    let mut out = Vec::new();
-    for (j, c) in data.tensions.column_iter().enumerate() {
-        out.push((format!("t{j}"), c.min(), c.max()));
-    }
-    for (name, c) in POSE_COLUMNS.iter().zip(data.poses.column_iter()) {
-        out.push((name.to_string(), c.min(), c.max()));
-    }
-    out
+/// Per-column value ranges of a dataset, for the sidecar.
+pub fn column_ranges(data: &Dataset) -> Vec<ColumnRange> {
+    let names = Dataset::header(data.n_tendons);
+    let columns = data.tensions.column_iter().chain(data.poses.column_iter());
+    names
+        .into_iter()
+        .zip(columns)
+        .map(|(column, c)| ColumnRange {
+            column,
+            min: c.min(),
+            max: c.max(),
+        })
+        .collect()
 }

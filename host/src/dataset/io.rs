@@ -103,7 +103,9 @@ impl Dataset {
             source,
         };
         let file = std::fs::File::open(path).map_err(io)?;
-        let mut reader = csv::ReaderBuilder::new().has_headers(true).from_reader(file);
+        let mut reader = csv::ReaderBuilder::new()
+            .has_headers(true)
+            .from_reader(file);
         let header: Vec<String> = reader
             .headers()
             .map_err(|e| DatasetError::Header {
@@ -115,7 +117,9 @@ impl Dataset {
             .collect();
         let n_tendons = header.iter().take_while(|h| h.starts_with('t')).count();
         let expected = Self::header(n_tendons);
-        if n_tendons == 0 || header.len() < expected.len() || header[..expected.len()] != expected[..]
+        if n_tendons == 0
+            || header.len() < expected.len()
+            || header[..expected.len()] != expected[..]
         {
             return Err(DatasetError::Header {
                 path: path.to_path_buf(),
@@ -204,8 +208,31 @@ impl Dataset {
 }
 
 fn push_value(line: &mut String, x: f64) {
-    use std::fmt::Write as _;
-    let _ = write!(line, "{x},");
+    line.push_str(&format_value(x));
+    line.push(',');
+}
+
+/// Shortest text that reads back as exactly `x`: plain decimal for ordinary
+/// magnitudes, scientific notation for tiny or huge ones (Rust's `Display`
+/// would spell 1e-18 with eighteen zeros).
+pub fn format_value(x: f64) -> String {
+    let a = x.abs();
+    if a != 0.0 && !(1e-5..1e15).contains(&a) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
+}
+
+/// The range of one dataset column.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ColumnRange {
+    /// Column name (`t0`, `px`, …).
+    pub column: String,
+    /// Smallest value.
+    pub min: f64,
+    /// Largest value.
+    pub max: f64,
 }
 
 /// How a dataset was made: written beside the CSV as `<name>.json`.
@@ -227,8 +254,8 @@ pub struct Sidecar {
     pub count: usize,
     /// Statics settings used.
     pub solver: SolverSettings,
-    /// Per-column (min, max) over the written rows, keyed by column name.
-    pub ranges: Vec<(String, f64, f64)>,
+    /// Per-column value range over the written rows.
+    pub ranges: Vec<ColumnRange>,
     /// Warm-started solves that did not meet the tolerance and were re-solved cold.
     pub resolved_cold: usize,
     /// Samples dropped because even the cold solve failed.

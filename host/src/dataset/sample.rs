@@ -5,7 +5,9 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 /// How tension vectors are drawn.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Sampler {
     /// Exactly two adjacent tendons (i, i+1 mod n) pull, each uniform in
@@ -101,8 +103,14 @@ mod tests {
     #[test]
     fn samplers_are_seeded() {
         let max = [10.0; 4];
-        assert_eq!(Sampler::Uniform.draw(50, &max, 1), Sampler::Uniform.draw(50, &max, 1));
-        assert_ne!(Sampler::Uniform.draw(50, &max, 1), Sampler::Uniform.draw(50, &max, 2));
+        assert_eq!(
+            Sampler::Uniform.draw(50, &max, 1),
+            Sampler::Uniform.draw(50, &max, 1)
+        );
+        assert_ne!(
+            Sampler::Uniform.draw(50, &max, 1),
+            Sampler::Uniform.draw(50, &max, 2)
+        );
     }
 
     #[test]
@@ -115,7 +123,9 @@ mod tests {
         assert_eq!(sorted, (0..4000).collect::<Vec<_>>());
         let step = |o: &[usize]| -> f64 {
             o.windows(2)
-                .map(|w| ((s[w[0]][0] - s[w[1]][0]).powi(2) + (s[w[0]][1] - s[w[1]][1]).powi(2)).sqrt())
+                .map(|w| {
+                    ((s[w[0]][0] - s[w[1]][0]).powi(2) + (s[w[0]][1] - s[w[1]][1]).powi(2)).sqrt()
+                })
                 .sum::<f64>()
                 / o.len() as f64
         };

@@ -169,7 +169,10 @@ mod tests {
         let n = r.normalise(&m);
         assert_eq!(n.column(0).min(), 0.0);
         assert_eq!(n.column(0).max(), 1.0);
-        assert!(n.column(1).iter().all(|&x| x == 0.0), "constant column maps to 0");
+        assert!(
+            n.column(1).iter().all(|&x| x == 0.0),
+            "constant column maps to 0"
+        );
         assert!((r.denormalise(&n) - m).abs().max() < 1e-15);
     }
 

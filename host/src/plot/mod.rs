@@ -6,6 +6,8 @@ pub mod sim;
 
 use std::sync::Once;
 
+pub mod workspace;
+
 static FONTS: Once = Once::new();
 
 /// Register the bundled font under the family names plotters asks for.

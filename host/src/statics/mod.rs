@@ -12,7 +12,7 @@ pub mod pose;
 pub mod rod;
 pub mod shoot;
 
-pub use shoot::{SolveError, Solution, SolverSettings, Statics, WarmStart};
+pub use shoot::{Solution, SolveError, SolverSettings, Statics, WarmStart};
 
 #[cfg(test)]
 mod tests;

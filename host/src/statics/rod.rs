@@ -282,8 +282,7 @@ mod tests {
     use std::path::Path;
 
     fn seed() -> Robot {
-        Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml"))
-            .unwrap()
+        Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml")).unwrap()
     }
 
     #[test]

@@ -85,7 +85,7 @@ impl Solution {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SolveError {
     /// The tension vector does not fit the robot.
-    #[error("bad tensions: {0}")]
+    #[error(transparent)]
     BadTensions(#[from] TensionError),
     /// An external load is NaN or infinite.
     #[error("external tip load is not finite")]
@@ -137,7 +137,11 @@ impl Statics {
 
     /// Tip pose for `tensions` (N, one per tendon). `warm`: the warm start of a
     /// nearby solution, or `None` for a cold start.
-    pub fn solve(&self, tensions: &[f64], warm: Option<&WarmStart>) -> Result<Solution, SolveError> {
+    pub fn solve(
+        &self,
+        tensions: &[f64],
+        warm: Option<&WarmStart>,
+    ) -> Result<Solution, SolveError> {
         self.solve_loaded(tensions, Vector3::zeros(), Vector3::zeros(), warm)
     }
 

@@ -25,16 +25,30 @@ fn arc(robot: &Robot, tau: f64) -> (f64, f64, f64) {
     let kappa = tau * robot.tendons[0].offset / robot.kbt().x;
     let vz = 1.0 - tau / robot.kse().z;
     let theta = kappa * robot.length;
-    (vz * (1.0 - theta.cos()) / kappa, vz * theta.sin() / kappa, theta)
+    (
+        vz * (1.0 - theta.cos()) / kappa,
+        vz * theta.sin() / kappa,
+        theta,
+    )
 }
 
 #[test]
 fn tip_matches_constant_curvature_arc_at_2n() {
     let robot = seed().without_gravity();
-    let sol = Statics::new(&robot, fine()).solve(&[2.0, 0.0, 0.0, 0.0], None).unwrap();
+    let sol = Statics::new(&robot, fine())
+        .solve(&[2.0, 0.0, 0.0, 0.0], None)
+        .unwrap();
     // DESIGN §2 fact.
-    assert!((sol.position.x - 0.02845159664930).abs() < 1e-9, "{}", sol.position);
-    assert!((sol.position.z - 0.3986461197924).abs() < 1e-9, "{}", sol.position);
+    assert!(
+        (sol.position.x - 0.02845159664930).abs() < 1e-9,
+        "{}",
+        sol.position
+    );
+    assert!(
+        (sol.position.z - 0.3986461197924).abs() < 1e-9,
+        "{}",
+        sol.position
+    );
     assert!(sol.position.y.abs() < 1e-12);
 }
 
@@ -49,20 +63,34 @@ fn tip_matches_constant_curvature_arc_for_tendons_0_and_1() {
         // Tendon 0 (+x) bends toward +x: rotation about +y.
         let sol = statics.solve(&[tau, 0.0, 0.0, 0.0], None).unwrap();
         let p = sol.position;
-        assert!((p.x - lateral).abs() < 1e-9 && p.y.abs() < 1e-9 && (p.z - pz).abs() < 1e-9,
-            "tendon 0, {tau} N: {p} vs ({lateral}, 0, {pz})");
+        assert!(
+            (p.x - lateral).abs() < 1e-9 && p.y.abs() < 1e-9 && (p.z - pz).abs() < 1e-9,
+            "tendon 0, {tau} N: {p} vs ({lateral}, 0, {pz})"
+        );
         let q = sol.quaternion;
-        assert!((q[0] - c).abs() < 1e-9 && q[1].abs() < 1e-9 && (q[2] - s).abs() < 1e-9 && q[3].abs() < 1e-9,
-            "tendon 0, {tau} N: q = {q:?}");
+        assert!(
+            (q[0] - c).abs() < 1e-9
+                && q[1].abs() < 1e-9
+                && (q[2] - s).abs() < 1e-9
+                && q[3].abs() < 1e-9,
+            "tendon 0, {tau} N: q = {q:?}"
+        );
 
         // Tendon 1 (+y) bends toward +y: rotation about −x.
         let sol = statics.solve(&[0.0, tau, 0.0, 0.0], None).unwrap();
         let p = sol.position;
-        assert!(p.x.abs() < 1e-9 && (p.y - lateral).abs() < 1e-9 && (p.z - pz).abs() < 1e-9,
-            "tendon 1, {tau} N: {p}");
+        assert!(
+            p.x.abs() < 1e-9 && (p.y - lateral).abs() < 1e-9 && (p.z - pz).abs() < 1e-9,
+            "tendon 1, {tau} N: {p}"
+        );
         let q = sol.quaternion;
-        assert!((q[0] - c).abs() < 1e-9 && (q[1] + s).abs() < 1e-9 && q[2].abs() < 1e-9 && q[3].abs() < 1e-9,
-            "tendon 1, {tau} N: q = {q:?}");
+        assert!(
+            (q[0] - c).abs() < 1e-9
+                && (q[1] + s).abs() < 1e-9
+                && q[2].abs() < 1e-9
+                && q[3].abs() < 1e-9,
+            "tendon 1, {tau} N: q = {q:?}"
+        );
     }
 }
 
@@ -83,7 +111,11 @@ fn gravity_sag_matches_the_design_fact_and_beam_theory() {
     let robot = seed();
     let sol = Statics::new(&robot, fine()).solve(&[0.0; 4], None).unwrap();
     // DESIGN §2 fact: 29.32 mm (large-deflection); linear theory says 29.44 mm.
-    assert!((sol.position.x * 1e3 - 29.32).abs() < 0.01, "sag {} mm", sol.position.x * 1e3);
+    assert!(
+        (sol.position.x * 1e3 - 29.32).abs() < 0.01,
+        "sag {} mm",
+        sol.position.x * 1e3
+    );
 
     // At a small load the rod is linear: δ = w L⁴ / (8 E I).
     let mut light = robot.clone();
@@ -92,7 +124,12 @@ fn gravity_sag_matches_the_design_fact_and_beam_theory() {
     let w = light.weight_per_length().x;
     let beam = w * light.length.powi(4) / (8.0 * light.kbt().x);
     let rel = (sol.position.x - beam).abs() / beam;
-    assert!(rel < 2e-3, "sag {} vs beam {} (rel {rel:e})", sol.position.x, beam);
+    assert!(
+        rel < 2e-3,
+        "sag {} vs beam {} (rel {rel:e})",
+        sol.position.x,
+        beam
+    );
 }
 
 #[test]
@@ -105,25 +142,42 @@ fn small_tip_force_matches_cantilever_theory() {
         .unwrap();
     let beam = f * robot.length.powi(3) / (3.0 * robot.kbt().x);
     let rel = (sol.position.y - beam).abs() / beam;
-    assert!(rel < 1e-3, "deflection {} vs {} (rel {rel:e})", sol.position.y, beam);
+    assert!(
+        rel < 1e-3,
+        "deflection {} vs {} (rel {rel:e})",
+        sol.position.y,
+        beam
+    );
 }
 
 #[test]
 fn rk4_converges_at_fourth_order() {
     let robot = seed();
     let tau = [6.0, 3.0, 0.0, 0.0];
-    let reference = Statics::new(&robot, SolverSettings { steps: 1024, ..fine() })
-        .solve(&tau, None)
-        .unwrap()
-        .position;
+    let reference = Statics::new(
+        &robot,
+        SolverSettings {
+            steps: 1024,
+            ..fine()
+        },
+    )
+    .solve(&tau, None)
+    .unwrap()
+    .position;
     let err = |steps| {
-        let s = SolverSettings { steps, ..SolverSettings::default() };
+        let s = SolverSettings {
+            steps,
+            ..SolverSettings::default()
+        };
         (Statics::new(&robot, s).solve(&tau, None).unwrap().position - reference).norm()
     };
     let (e8, e16, e32) = (err(8), err(16), err(32));
     for (coarse, finer) in [(e8, e16), (e16, e32)] {
         let ratio = coarse / finer;
-        assert!((12.0..20.0).contains(&ratio), "halving the step cut the error by {ratio} ({coarse:e} → {finer:e})");
+        assert!(
+            (12.0..20.0).contains(&ratio),
+            "halving the step cut the error by {ratio} ({coarse:e} → {finer:e})"
+        );
     }
 }
 
@@ -164,25 +218,52 @@ fn assert_global_equilibrium(robot: &Robot, tau: &[f64], f_ext: Vector3<f64>, m_
         force += pull;
         moment += o.r.cross(&pull);
     }
-    assert!((n0 - force).norm() < 1e-7, "force balance: n(0) = {n0}, loads = {force}");
-    assert!((m0 - moment).norm() < 1e-7, "moment balance: m(0) = {m0}, loads = {moment}");
+    assert!(
+        (n0 - force).norm() < 1e-7,
+        "force balance: n(0) = {n0}, loads = {force}"
+    );
+    assert!(
+        (m0 - moment).norm() < 1e-7,
+        "moment balance: m(0) = {m0}, loads = {moment}"
+    );
 }
 
 #[test]
 fn converged_rod_is_in_global_equilibrium() {
     let robot = seed();
-    assert_global_equilibrium(&robot, &[5.0, 2.0, 0.0, 0.0], Vector3::zeros(), Vector3::zeros());
-    assert_global_equilibrium(&robot, &[0.0, 0.0, 8.0, 9.0], Vector3::new(0.1, -0.2, 0.05), Vector3::new(0.0, 0.01, 0.0));
+    assert_global_equilibrium(
+        &robot,
+        &[5.0, 2.0, 0.0, 0.0],
+        Vector3::zeros(),
+        Vector3::zeros(),
+    );
+    assert_global_equilibrium(
+        &robot,
+        &[0.0, 0.0, 8.0, 9.0],
+        Vector3::new(0.1, -0.2, 0.05),
+        Vector3::new(0.0, 0.01, 0.0),
+    );
 }
 
 #[test]
 fn helical_routing_is_in_global_equilibrium() {
     let mut robot = seed();
     robot.tendons[0].routing = crate::robot::Routing::Helical { turns: 0.5 };
-    assert_global_equilibrium(&robot, &[4.0, 0.0, 0.0, 0.0], Vector3::zeros(), Vector3::zeros());
+    assert_global_equilibrium(
+        &robot,
+        &[4.0, 0.0, 0.0, 0.0],
+        Vector3::zeros(),
+        Vector3::zeros(),
+    );
     // A helical tendon also twists the tip: the pose is not a planar bend.
-    let p = Statics::new(&robot, fine()).solve(&[4.0, 0.0, 0.0, 0.0], None).unwrap().position;
-    assert!(p.y.abs() > 1e-4, "half-turn helix should deflect out of the xz plane: {p}");
+    let p = Statics::new(&robot, fine())
+        .solve(&[4.0, 0.0, 0.0, 0.0], None)
+        .unwrap()
+        .position;
+    assert!(
+        p.y.abs() > 1e-4,
+        "half-turn helix should deflect out of the xz plane: {p}"
+    );
 }
 
 #[test]
@@ -192,7 +273,12 @@ fn rotating_tensions_by_one_tendon_rotates_the_pose_by_90_degrees() {
     let a = statics.solve(&[3.0, 7.0, 0.0, 0.5], None).unwrap();
     let b = statics.solve(&[0.5, 3.0, 7.0, 0.0], None).unwrap();
     let rotated = Vector3::new(-a.position.y, a.position.x, a.position.z);
-    assert!((b.position - rotated).norm() < 1e-10, "{} vs {}", b.position, rotated);
+    assert!(
+        (b.position - rotated).norm() < 1e-10,
+        "{} vs {}",
+        b.position,
+        rotated
+    );
 }
 
 #[test]
@@ -201,9 +287,16 @@ fn warm_start_matches_cold_and_costs_less() {
     let statics = Statics::new(&robot, SolverSettings::default());
     let first = statics.solve(&[4.0, 3.0, 0.0, 0.0], None).unwrap();
     let cold = statics.solve(&[4.1, 3.0, 0.0, 0.0], None).unwrap();
-    let warm = statics.solve(&[4.1, 3.0, 0.0, 0.0], Some(&first.warm)).unwrap();
+    let warm = statics
+        .solve(&[4.1, 3.0, 0.0, 0.0], Some(&first.warm))
+        .unwrap();
     assert!((cold.position - warm.position).norm() < 1e-10);
-    assert!(warm.integrations < cold.integrations, "warm {} vs cold {}", warm.integrations, cold.integrations);
+    assert!(
+        warm.integrations < cold.integrations,
+        "warm {} vs cold {}",
+        warm.integrations,
+        cold.integrations
+    );
 }
 
 #[test]
@@ -211,7 +304,9 @@ fn far_warm_start_still_converges() {
     let robot = seed();
     let statics = Statics::new(&robot, SolverSettings::default());
     let far = statics.solve(&[0.0, 0.0, 10.0, 10.0], None).unwrap();
-    let sol = statics.solve(&[10.0, 10.0, 0.0, 0.0], Some(&far.warm)).unwrap();
+    let sol = statics
+        .solve(&[10.0, 10.0, 0.0, 0.0], Some(&far.warm))
+        .unwrap();
     let cold = statics.solve(&[10.0, 10.0, 0.0, 0.0], None).unwrap();
     assert!((sol.position - cold.position).norm() < 1e-10);
 }
@@ -219,14 +314,24 @@ fn far_warm_start_still_converges() {
 #[test]
 fn bad_tension_vectors_are_rejected() {
     let statics = Statics::new(&seed(), SolverSettings::default());
-    for bad in [vec![1.0, 2.0], vec![-1.0, 0.0, 0.0, 0.0], vec![f64::NAN, 0.0, 0.0, 0.0], vec![0.0, 11.0, 0.0, 0.0]] {
+    for bad in [
+        vec![1.0, 2.0],
+        vec![-1.0, 0.0, 0.0, 0.0],
+        vec![f64::NAN, 0.0, 0.0, 0.0],
+        vec![0.0, 11.0, 0.0, 0.0],
+    ] {
         match statics.solve(&bad, None) {
             Err(SolveError::BadTensions(_)) => {}
             other => panic!("{bad:?} gave {other:?}"),
         }
     }
     let err = statics
-        .solve_loaded(&[0.0; 4], Vector3::new(f64::NAN, 0.0, 0.0), Vector3::zeros(), None)
+        .solve_loaded(
+            &[0.0; 4],
+            Vector3::new(f64::NAN, 0.0, 0.0),
+            Vector3::zeros(),
+            None,
+        )
         .unwrap_err();
     assert_eq!(err, SolveError::BadLoad);
 }

@@ -1,0 +1,107 @@
+//! The paper's Figure 1: the reachable tip positions as a point cloud in three
+//! orthogonal projections, and a few backbone shapes.
+
+use std::path::Path;
+
+use nalgebra::{DMatrix, Vector3};
+use plotters::prelude::*;
+
+/// A labelled backbone shape (base frame, m).
+pub struct Shape {
+    /// Legend text, e.g. "t0 = 10 N".
+    pub label: String,
+    /// Points from base to tip.
+    pub points: Vec<Vector3<f64>>,
+}
+
+type DrawResult = Result<(), Box<dyn std::error::Error>>;
+
+fn range_mm(v: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
+    let lo = v.clone().fold(f64::INFINITY, f64::min) * 1e3;
+    let hi = v.fold(f64::NEG_INFINITY, f64::max) * 1e3;
+    let pad = ((hi - lo) * 0.05).max(1.0);
+    (lo - pad, hi + pad)
+}
+
+/// Draw the tip cloud of `poses` (n × 7, metres) in three projections and
+/// `shapes` in the x–z plane into a PNG at `out` (written atomically).
+pub fn draw_workspace(
+    poses: &DMatrix<f64>,
+    shapes: &[Shape],
+    title: &str,
+    out: &Path,
+) -> DrawResult {
+    super::init_fonts();
+    let tmp = out.with_extension("tmp.png");
+    {
+        let root = BitMapBackend::new(&tmp, (1400, 1200)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let root = root.titled(title, ("sans-serif", 28))?;
+        let panels = root.split_evenly((2, 2));
+        let axes = [
+            (0, 1, "x [mm]", "y [mm]", "top view"),
+            (0, 2, "x [mm]", "z [mm]", "side view (x-z)"),
+            (1, 2, "y [mm]", "z [mm]", "front view (y-z)"),
+        ];
+        for (panel, &(a, b, xl, yl, caption)) in panels.iter().zip(&axes) {
+            let xs = poses.column(a);
+            let ys = poses.column(b);
+            let (x0, x1) = range_mm(xs.iter().copied());
+            let (y0, y1) = range_mm(ys.iter().copied());
+            let mut chart = ChartBuilder::on(panel)
+                .caption(caption, ("sans-serif", 22))
+                .margin(12)
+                .x_label_area_size(45)
+                .y_label_area_size(60)
+                .build_cartesian_2d(x0..x1, y0..y1)?;
+            chart
+                .configure_mesh()
+                .x_desc(xl)
+                .y_desc(yl)
+                .label_style(("sans-serif", 15))
+                .draw()?;
+            chart.draw_series(
+                xs.iter()
+                    .zip(ys.iter())
+                    .map(|(&x, &y)| Circle::new((x * 1e3, y * 1e3), 1, BLUE.mix(0.35).filled())),
+            )?;
+        }
+        // Backbone shapes in the x–z plane.
+        let all = shapes.iter().flat_map(|s| s.points.iter());
+        let (x0, x1) = range_mm(all.clone().map(|p| p.x));
+        let (z0, z1) = range_mm(all.map(|p| p.z));
+        let mut chart = ChartBuilder::on(&panels[3])
+            .caption("backbone shapes (x-z)", ("sans-serif", 22))
+            .margin(12)
+            .x_label_area_size(45)
+            .y_label_area_size(60)
+            .build_cartesian_2d(x0..x1, z0..z1)?;
+        chart
+            .configure_mesh()
+            .x_desc("x [mm]")
+            .y_desc("z [mm]")
+            .label_style(("sans-serif", 15))
+            .draw()?;
+        for (k, s) in shapes.iter().enumerate() {
+            let color = Palette99::pick(k).to_rgba();
+            chart
+                .draw_series(LineSeries::new(
+                    s.points.iter().map(|p| (p.x * 1e3, p.z * 1e3)),
+                    color.stroke_width(2),
+                ))?
+                .label(s.label.clone())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
+                });
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 14))
+            .draw()?;
+        root.present()?;
+    }
+    std::fs::rename(&tmp, out)?;
+    Ok(())
+}
