@@ -31,6 +31,13 @@ where
         buf.flush()?;
     }
     tmp.as_file().sync_all()?;
+    // tempfile creates 0600; results are meant to be shared like any output.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        tmp.as_file()
+            .set_permissions(std::fs::Permissions::from_mode(0o644))?;
+    }
     tmp.persist(path).map_err(|e| e.error)?;
     Ok(())
 }
