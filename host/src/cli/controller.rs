@@ -38,7 +38,7 @@ pub struct LoopOpts {
     #[arg(long, default_value_t = 10.0)]
     pub ki: f64,
     /// Bound on the correction per axis, mm.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 3.0)]
     pub correction_limit_mm: f64,
     /// Motor-lag lead: setpoints are advanced by velocity × lead, ms
     /// (≈ motor time constant + half a period; 0 = off).
@@ -58,7 +58,11 @@ impl LoopOpts {
             format!("--watchdog-periods={}", self.watchdog_periods),
             format!(
                 "--correction={}",
-                if self.correction == OnOff::On { "on" } else { "off" }
+                if self.correction == OnOff::On {
+                    "on"
+                } else {
+                    "off"
+                }
             ),
             format!("--ki={}", self.ki),
             format!("--correction-limit-mm={}", self.correction_limit_mm),
@@ -77,7 +81,11 @@ impl LoopOpts {
         cfg.spin_us = self.spin_us;
         cfg.realtime = self.realtime;
         cfg.watchdog_periods = self.watchdog_periods;
-        cfg.ki = if self.correction == OnOff::On { self.ki } else { 0.0 };
+        cfg.ki = if self.correction == OnOff::On {
+            self.ki
+        } else {
+            0.0
+        };
         cfg.correction_limit = self.correction_limit_mm * 1e-3;
         cfg.lead = self.lead_ms * 1e-3;
         cfg.slew_rate = self.slew;

@@ -7,8 +7,8 @@ use anyhow::Context;
 use clap::Args;
 
 use super::controller::LoopOpts;
-use super::plant::PlantOpts;
 use super::planner::TrajectoryOpts;
+use super::plant::PlantOpts;
 use crate::ipc::sim::{unique_prefix, SimConfig, SimFaults};
 
 /// Run planner, controller and plant as separate processes and report.
@@ -20,6 +20,10 @@ pub struct SimArgs {
     /// Trained IK net (`tendril train` output).
     #[arg(long, default_value = "out/model.tnet")]
     pub model: PathBuf,
+    /// Fit a quick random-feature IK net (written to OUT/quick.tnet) instead
+    /// of loading --model: for tests and demos without a trained model.
+    #[arg(long)]
+    pub quick_model: bool,
     /// Output directory for report.json, report.md, sim.png and the logs.
     #[arg(long, default_value = "out/sim")]
     pub out: PathBuf,
@@ -68,7 +72,21 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
     if !(args.duration > 0.0) {
         anyhow::bail!("--duration must be positive");
     }
-    if !args.model.exists() {
+    let model = if args.quick_model {
+        let robot = crate::robot::Robot::load(&args.robot)?;
+        let statics =
+            crate::statics::Statics::new(&robot, crate::statics::SolverSettings::default());
+        let blob = crate::ipc::fixture::quick_net(&statics, 2000, 48, 6.0, 7)?;
+        std::fs::create_dir_all(&args.out)
+            .with_context(|| format!("creating {}", args.out.display()))?;
+        let path = args.out.join("quick.tnet");
+        crate::fsutil::write_atomic(&path, &blob)
+            .with_context(|| format!("writing {}", path.display()))?;
+        path
+    } else {
+        args.model.clone()
+    };
+    if !model.exists() {
         anyhow::bail!(
             "model {} not found: train one with `tendril train` or pass --model",
             args.model.display()
@@ -76,12 +94,20 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
     }
     let exe = std::env::current_exe().context("locating the tendril executable")?;
     let mut planner_args = args.traj.to_args();
-    let join = |v: &[f64]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(",");
+    let join = |v: &[f64]| {
+        v.iter()
+            .map(|x| x.to_string())
+            .collect::<Vec<_>>()
+            .join(",")
+    };
     if !args.inject_nan_at.is_empty() {
         planner_args.push(format!("--inject-nan-at={}", join(&args.inject_nan_at)));
     }
     if !args.inject_outside_at.is_empty() {
-        planner_args.push(format!("--inject-outside-at={}", join(&args.inject_outside_at)));
+        planner_args.push(format!(
+            "--inject-outside-at={}",
+            join(&args.inject_outside_at)
+        ));
     }
     let label = format!(
         "trajectory {:?}, correction {:?}, lead {} ms, motor τ {} ms, noise {} mm, {} s",
@@ -95,7 +121,7 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
     let cfg = SimConfig {
         exe,
         robot: args.robot,
-        model: args.model,
+        model,
         out: args.out.clone(),
         prefix: args.prefix.unwrap_or_else(unique_prefix),
         duration: args.duration,

@@ -8,6 +8,7 @@
 
 pub mod clock;
 pub mod controller;
+pub mod fixture;
 pub mod plant;
 pub mod planner;
 pub mod sim;
