@@ -1,0 +1,240 @@
+//! The trained net as a `.tnet` weight file (`DESIGN.md` §5), written and read
+//! through the `tendril-shared` encoder/decoder the firmware uses, and host
+//! inference through the firmware's own f32 `infer`, so `tendril ik` and the
+//! MCU compute bit-identical tensions from the same file.
+
+use std::path::Path;
+
+use nalgebra::DMatrix;
+use tendril_firmware::POSE_DIM;
+use tendril_shared::{Activation, Shape, TnetError, TnetView, MAX_TENDONS};
+
+use super::net::{CascadeNet, OutputKind};
+
+/// Hidden-unit capacity of the host's decoded nets (the trainer's cap).
+pub const HOST_MAX_HIDDEN: usize = 64;
+
+/// The host's fixed-capacity decoded net: 7 pose inputs, up to
+/// [`HOST_MAX_HIDDEN`] hidden units, up to 8 tendons.
+pub type HostNet = tendril_shared::CascadeNet<POSE_DIM, HOST_MAX_HIDDEN, MAX_TENDONS>;
+
+/// Why a net could not be exported or a `.tnet` file not loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    /// The format rejected the net or the bytes.
+    #[error("{path}: {source}")]
+    Format {
+        /// The file concerned (or "<memory>").
+        path: String,
+        /// What the format says.
+        source: TnetError,
+    },
+    /// Reading or writing the file failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file concerned.
+        path: String,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// Normalisation ranges that disagree with the net's shape.
+    #[error("{0}")]
+    Ranges(String),
+}
+
+/// Min–max normalisation ranges the net was trained with (physical units).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Ranges {
+    /// Per-input lower bound (pose: m, unit quaternion).
+    pub input_lo: Vec<f64>,
+    /// Per-input upper bound.
+    pub input_hi: Vec<f64>,
+    /// Per-output lower bound (N).
+    pub output_lo: Vec<f64>,
+    /// Per-output upper bound (N).
+    pub output_hi: Vec<f64>,
+}
+
+fn f32s(v: &[f64]) -> Vec<f32> {
+    v.iter().map(|&x| x as f32).collect()
+}
+
+/// Encode `net` (normalised in → normalised out) with its `ranges` as `.tnet` bytes.
+pub fn to_bytes(net: &CascadeNet, ranges: &Ranges) -> Result<Vec<u8>, ExportError> {
+    if ranges.input_lo.len() != net.n_inputs
+        || ranges.input_hi.len() != net.n_inputs
+        || ranges.output_lo.len() != net.n_outputs
+        || ranges.output_hi.len() != net.n_outputs
+    {
+        return Err(ExportError::Ranges(format!(
+            "net is {}→{} but ranges have {}/{} inputs and {}/{} outputs",
+            net.n_inputs,
+            net.n_outputs,
+            ranges.input_lo.len(),
+            ranges.input_hi.len(),
+            ranges.output_lo.len(),
+            ranges.output_hi.len()
+        )));
+    }
+    let hidden: Vec<f32> = net
+        .hidden
+        .iter()
+        .flat_map(|w| w.iter().map(|&x| x as f32))
+        .collect();
+    let outputs: Vec<f32> = net
+        .outputs
+        .iter()
+        .flat_map(|w| w.iter().map(|&x| x as f32))
+        .collect();
+    let (ilo, ihi, olo, ohi) = (
+        f32s(&ranges.input_lo),
+        f32s(&ranges.input_hi),
+        f32s(&ranges.output_lo),
+        f32s(&ranges.output_hi),
+    );
+    let view = TnetView {
+        shape: Shape {
+            inputs: net.n_inputs,
+            hidden: net.n_hidden(),
+            outputs: net.n_outputs,
+        },
+        hidden_activation: Activation::SymmetricSigmoid,
+        output_activation: match net.output_kind {
+            OutputKind::Linear => Activation::Linear,
+            OutputKind::Sigmoid => Activation::Sigmoid,
+        },
+        input_lo: &ilo,
+        input_hi: &ihi,
+        output_lo: &olo,
+        output_hi: &ohi,
+        hidden_weights: &hidden,
+        output_weights: &outputs,
+    };
+    tendril_shared::encode_to_vec(&view).map_err(|source| ExportError::Format {
+        path: "<memory>".into(),
+        source,
+    })
+}
+
+/// Write `net` with `ranges` to `path` atomically.
+pub fn write_tnet(path: &Path, net: &CascadeNet, ranges: &Ranges) -> Result<(), ExportError> {
+    let bytes = to_bytes(net, ranges).map_err(|e| match e {
+        ExportError::Format { source, .. } => ExportError::Format {
+            path: path.display().to_string(),
+            source,
+        },
+        other => other,
+    })?;
+    crate::fsutil::write_atomic(path, &bytes).map_err(|source| ExportError::Io {
+        path: path.display().to_string(),
+        source,
+    })
+}
+
+/// Decode `.tnet` bytes into the host's fixed-capacity net (boxed: ~21 KiB).
+pub fn decode(bytes: &[u8]) -> Result<Box<HostNet>, TnetError> {
+    let mut net = Box::<HostNet>::default();
+    net.decode_into(bytes)?;
+    Ok(net)
+}
+
+/// Read and decode a `.tnet` file; errors name the file and the problem.
+pub fn read_tnet(path: &Path) -> Result<Box<HostNet>, ExportError> {
+    let bytes = std::fs::read(path).map_err(|source| ExportError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    decode(&bytes).map_err(|source| ExportError::Format {
+        path: path.display().to_string(),
+        source,
+    })
+}
+
+/// Tensions (N) for one pose through the firmware's f32 inference.
+pub fn infer(net: &HostNet, pose: &[f64; POSE_DIM]) -> Vec<f32> {
+    let mut x = [0.0f32; POSE_DIM];
+    for (d, s) in x.iter_mut().zip(pose) {
+        *d = *s as f32;
+    }
+    let y = tendril_firmware::infer(net, &x);
+    y[..net.shape().outputs].to_vec()
+}
+
+/// Batch inference: poses `n × 7` → tensions `n × outputs` (N), through the firmware's f32 code.
+pub fn infer_batch(net: &HostNet, poses: &DMatrix<f64>) -> DMatrix<f64> {
+    let no = net.shape().outputs;
+    let mut out = DMatrix::zeros(poses.nrows(), no);
+    let mut x = [0.0f32; POSE_DIM];
+    for r in 0..poses.nrows() {
+        for (c, d) in x.iter_mut().enumerate() {
+            *d = if c < poses.ncols() {
+                poses[(r, c)] as f32
+            } else {
+                0.0
+            };
+        }
+        let y = tendril_firmware::infer(net, &x);
+        for c in 0..no {
+            out[(r, c)] = f64::from(y[c]);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn small_net() -> (CascadeNet, Ranges) {
+        let net = CascadeNet {
+            n_inputs: 7,
+            n_outputs: 2,
+            hidden: vec![
+                vec![0.1, 0.5, -0.3, 0.2, 0.1, -0.4, 0.3, 0.05],
+                vec![-0.2, 0.4, 0.9, 1.5, -0.1, 0.2, 0.3, -0.6, 2.0],
+            ],
+            outputs: vec![
+                vec![0.3, -0.7, 0.2, 1.1, -0.6, 0.4, 0.1, 0.2, 0.9, -1.2],
+                vec![0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0],
+            ],
+            output_kind: OutputKind::Linear,
+        };
+        let ranges = Ranges {
+            input_lo: vec![-0.1, -0.1, 0.2, 0.8, -0.3, -0.3, -0.01],
+            input_hi: vec![0.1, 0.1, 0.4, 1.0, 0.3, 0.3, 0.01],
+            output_lo: vec![0.0, 0.0],
+            output_hi: vec![10.0, 8.0],
+        };
+        (net, ranges)
+    }
+
+    #[test]
+    fn decoded_net_matches_the_f64_net_to_f32_precision() {
+        let (net, ranges) = small_net();
+        let bytes = to_bytes(&net, &ranges).unwrap();
+        let dec = decode(&bytes).unwrap();
+        assert_eq!(dec.shape().hidden, 2);
+        let pose = [0.03, -0.02, 0.35, 0.95, 0.1, -0.2, 0.001];
+        let y32 = infer(&dec, &pose);
+        let xn = DMatrix::from_fn(1, 7, |_, c| {
+            (pose[c] - ranges.input_lo[c]) / (ranges.input_hi[c] - ranges.input_lo[c])
+        });
+        let y64 = net.predict(&xn);
+        for o in 0..2 {
+            let y = ranges.output_lo[o] + y64[(0, o)] * (ranges.output_hi[o] - ranges.output_lo[o]);
+            assert!(
+                (f64::from(y32[o]) - y).abs() < 1e-4 * (1.0 + y.abs()),
+                "{o}: {} vs {y}",
+                y32[o]
+            );
+        }
+    }
+
+    #[test]
+    fn mismatched_ranges_are_refused() {
+        let (net, mut ranges) = small_net();
+        ranges.output_hi.pop();
+        let e = to_bytes(&net, &ranges).unwrap_err().to_string();
+        assert!(e.contains("ranges"), "{e}");
+    }
+}
