@@ -1,6 +1,6 @@
 //! `tendril fk`: forward statics, one pose or a CSV batch (DESIGN §7).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use serde_json::json;
@@ -91,7 +91,7 @@ fn single(statics: &Statics, tensions: &[f64], args: &FkArgs) -> anyhow::Result<
     Ok(())
 }
 
-fn batch(statics: &Statics, input: &PathBuf, output: &PathBuf) -> anyhow::Result<()> {
+fn batch(statics: &Statics, input: &Path, output: &Path) -> anyhow::Result<()> {
     let n = statics.robot().n_tendons();
     let mut reader = csv::Reader::from_path(input)
         .with_context(|| format!("{}: cannot open", input.display()))?;

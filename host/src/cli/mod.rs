@@ -23,6 +23,8 @@ pub struct Cli {
     command: Option<Command>,
 }
 
+// Parsed once per process: the size of the largest variant does not matter.
+#[allow(clippy::large_enum_variant)]
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Forward statics: tip pose for tendon tensions (one, or a CSV batch).

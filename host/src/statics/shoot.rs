@@ -217,7 +217,7 @@ impl Statics {
         let mut out = Vec::with_capacity(points);
         let mut k = 0usize;
         integrate_observed(&rod, base, intervals * per, |_, y| {
-            if k % per == 0 {
+            if k.is_multiple_of(per) {
                 out.push(y.p);
             }
             k += 1;

@@ -184,7 +184,7 @@ fn rk4_converges_at_fourth_order() {
 /// Simpson's rule over evenly spaced samples (odd count).
 fn simpson(h: f64, f: &[Vector3<f64>]) -> Vector3<f64> {
     let n = f.len() - 1;
-    assert!(n % 2 == 0);
+    assert!(n.is_multiple_of(2));
     let mut sum = f[0] + f[n];
     for (k, x) in f.iter().enumerate().take(n).skip(1) {
         sum += x * if k % 2 == 1 { 4.0 } else { 2.0 };
