@@ -25,9 +25,10 @@ pub struct LoopOpts {
     /// Spin this long before each deadline instead of sleeping, µs (0 = pure sleep).
     #[arg(long, default_value_t = 50.0)]
     pub spin_us: f64,
-    /// Run the loop under SCHED_FIFO (needs privileges).
-    #[arg(long)]
-    pub realtime: bool,
+    /// Run under SCHED_FIFO (needs privileges; falls back with a warning).
+    /// Default: off for `controller`, on for `sim` (all three processes).
+    #[arg(long, value_enum)]
+    pub realtime: Option<OnOff>,
     /// Setpoint silence, in periods, that trips the safe hold.
     #[arg(long, default_value_t = 2.5)]
     pub watchdog_periods: f64,
@@ -38,7 +39,7 @@ pub struct LoopOpts {
     #[arg(long, default_value_t = 10.0)]
     pub ki: f64,
     /// Bound on the correction per axis, mm.
-    #[arg(long, default_value_t = 3.0)]
+    #[arg(long, default_value_t = 10.0)]
     pub correction_limit_mm: f64,
     /// Motor-lag lead: setpoints are advanced by velocity × lead, ms
     /// (≈ motor time constant + half a period; 0 = off).
@@ -69,8 +70,8 @@ impl LoopOpts {
             format!("--lead-ms={}", self.lead_ms),
             format!("--slew={}", self.slew),
         ];
-        if self.realtime {
-            a.push("--realtime".into());
+        if let Some(rt) = self.realtime {
+            a.push(format!("--realtime={}", if rt == OnOff::On { "on" } else { "off" }));
         }
         a
     }
@@ -79,7 +80,7 @@ impl LoopOpts {
     pub fn apply(&self, cfg: &mut ControllerConfig) {
         cfg.rate = self.rate;
         cfg.spin_us = self.spin_us;
-        cfg.realtime = self.realtime;
+        cfg.realtime = self.realtime == Some(OnOff::On);
         cfg.watchdog_periods = self.watchdog_periods;
         cfg.ki = if self.correction == OnOff::On {
             self.ki

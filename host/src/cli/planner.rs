@@ -39,7 +39,11 @@ pub struct TrajectoryOpts {
     #[arg(long, default_value_t = 0.2)]
     pub freq: f64,
     /// Step targets, "x,y;x,y;…" in mm.
-    #[arg(long, default_value = "10,0;0,10;-10,0;0,-10", allow_hyphen_values = true)]
+    #[arg(
+        long,
+        default_value = "10,0;0,10;-10,0;0,-10",
+        allow_hyphen_values = true
+    )]
     pub targets_mm: String,
     /// Seconds per step target.
     #[arg(long, default_value_t = 2.0)]
@@ -83,8 +87,16 @@ impl TrajectoryOpts {
                     .collect::<anyhow::Result<_>>()?,
                 dwell: self.dwell,
             },
-            Kind::Circle => Shape::Circle { center, radius, freq: self.freq },
-            Kind::Figure8 => Shape::FigureEight { center, radius, freq: self.freq },
+            Kind::Circle => Shape::Circle {
+                center,
+                radius,
+                freq: self.freq,
+            },
+            Kind::Figure8 => Shape::FigureEight {
+                center,
+                radius,
+                freq: self.freq,
+            },
             Kind::Csv => {
                 let Some(path) = &self.poses else {
                     bail!("--trajectory csv needs --poses FILE");
@@ -145,6 +157,9 @@ pub struct PlannerArgs {
     /// Per-setpoint CSV log.
     #[arg(long)]
     pub log: Option<PathBuf>,
+    /// Run under SCHED_FIFO once the trajectory is prepared.
+    #[arg(long)]
+    pub realtime: bool,
 }
 
 /// Run `tendril planner`.
@@ -162,6 +177,7 @@ pub fn run(args: PlannerArgs) -> anyhow::Result<()> {
             outside_for: args.outside_for,
         },
         log: args.log,
+        realtime: args.realtime,
     };
     let sent = crate::ipc::planner::run(&cfg)?;
     log::info!("planner: sent {sent} setpoints");

@@ -60,10 +60,17 @@ impl PlantOpts {
             Some(s) => {
                 let err = || format!("--stuck {s:?}: expected TENDON@SECONDS");
                 let (k, t) = s.split_once('@').with_context(err)?;
-                Some((k.trim().parse().with_context(err)?, t.trim().parse().with_context(err)?))
+                Some((
+                    k.trim().parse().with_context(err)?,
+                    t.trim().parse().with_context(err)?,
+                ))
             }
         };
-        let drop = self.drop.as_deref().map(|s| window(s, "--drop")).transpose()?;
+        let drop = self
+            .drop
+            .as_deref()
+            .map(|s| window(s, "--drop"))
+            .transpose()?;
         if drop.is_some_and(|d| !(0.0..=1.0).contains(&d.0)) {
             bail!("--drop: the fraction must be in [0, 1]");
         }
@@ -95,7 +102,11 @@ impl PlantOpts {
         if self.spin {
             a.push("--spin".into());
         }
-        for (flag, v) in [("--stuck", &self.stuck), ("--drop", &self.drop), ("--delay", &self.delay)] {
+        for (flag, v) in [
+            ("--stuck", &self.stuck),
+            ("--drop", &self.drop),
+            ("--delay", &self.delay),
+        ] {
             if let Some(v) = v {
                 a.push(format!("{flag}={v}"));
             }
@@ -124,6 +135,9 @@ pub struct PlantArgs {
     /// Statistics JSON written at exit.
     #[arg(long)]
     pub stats: Option<PathBuf>,
+    /// Run under SCHED_FIFO once the model is set up.
+    #[arg(long)]
+    pub realtime: bool,
 }
 
 /// Run `tendril plant`.
@@ -138,6 +152,7 @@ pub fn run(args: PlantArgs) -> anyhow::Result<()> {
         duration: args.duration,
         log: args.log,
         stats: args.stats,
+        realtime: args.realtime,
     };
     let stats = crate::ipc::plant::run(&cfg)?;
     log::info!(

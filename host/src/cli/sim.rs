@@ -93,7 +93,17 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
         );
     }
     let exe = std::env::current_exe().context("locating the tendril executable")?;
+    // Real-time scheduling is on by default under `sim` (`--realtime off`
+    // to disable): it keeps the 1 kHz loop on time on a busy machine.
+    let mut tuning = args.tuning.clone();
+    let realtime = tuning.realtime.unwrap_or(super::controller::OnOff::On) == super::controller::OnOff::On;
+    tuning.realtime = Some(if realtime { super::controller::OnOff::On } else { super::controller::OnOff::Off });
     let mut planner_args = args.traj.to_args();
+    let mut plant_args = args.plant.to_args();
+    if realtime {
+        planner_args.push("--realtime".into());
+        plant_args.push("--realtime".into());
+    }
     let join = |v: &[f64]| {
         v.iter()
             .map(|x| x.to_string())
@@ -128,8 +138,8 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
         settle: args.traj.settle,
         rate: args.tuning.rate,
         planner_args,
-        controller_args: args.tuning.to_args(),
-        plant_args: args.plant.to_args(),
+        controller_args: tuning.to_args(),
+        plant_args,
         faults: SimFaults {
             kill_planner_at: args.kill_planner_at,
             restart_planner_after: args.restart_planner_after,

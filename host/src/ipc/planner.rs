@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 use tendril_shared::messages::{setpoint_flags, Header, Setpoint};
 
-use super::clock::{now_ns, tighten_timer_slack, Ticker};
+use super::clock::{now_ns, tighten_timer_slack, try_realtime, Ticker};
 use super::stats::CsvLog;
 use super::trajectory::{Shape, Trajectory};
 use super::transport::{self, Services};
@@ -47,6 +47,8 @@ pub struct PlannerConfig {
     pub inject: Injections,
     /// Per-setpoint CSV log.
     pub log: Option<PathBuf>,
+    /// Switch to SCHED_FIFO after the (CPU-heavy) trajectory set-up.
+    pub realtime: bool,
 }
 
 /// Flag bit in the planner log (not on the wire): this message was an
@@ -74,6 +76,9 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
     let stop = StopWatch::new(&services)?;
     let mut log = CsvLog::create(cfg.log.as_deref(), LOG_HEADER)?;
     tighten_timer_slack();
+    if cfg.realtime && !try_realtime(40) {
+        log::warn!("planner: SCHED_FIFO refused, running with normal priority");
+    }
 
     let period_ns = (1e9 / cfg.rate).round() as u64;
     let start = now_ns();

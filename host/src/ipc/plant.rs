@@ -280,6 +280,8 @@ pub struct PlantConfig {
     pub log: Option<PathBuf>,
     /// Statistics JSON written at exit.
     pub stats: Option<PathBuf>,
+    /// Switch to SCHED_FIFO after set-up.
+    pub realtime: bool,
 }
 
 /// What the plant reports at exit.
@@ -326,6 +328,10 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
     let state_pub = transport::publisher(&services.plant_state)?;
     let stop = StopWatch::new(&services)?;
     let mut log = CsvLog::create(cfg.log.as_deref(), &log_header(n))?;
+    super::clock::tighten_timer_slack();
+    if cfg.realtime && !super::clock::try_realtime(45) {
+        log::warn!("plant: SCHED_FIFO refused, running with normal priority");
+    }
 
     let start = now_ns();
     let secs = |t: u64| t.saturating_sub(start) as f64 * 1e-9;

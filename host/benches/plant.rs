@@ -1,0 +1,47 @@
+//! Plant step time: motor update + warm-started Cosserat statics, with the
+//! commanded tensions moving along the tension path of a 30 mm circle at
+//! 0.2 Hz sampled at 1 kHz (the load the plant sees in `tendril sim`).
+//! Target (issue 7): median ≤ 200 µs so the plant keeps up with 1 kHz.
+//!
+//! `cargo bench -p tendril --bench plant`
+
+use std::path::Path;
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use nalgebra::Vector2;
+use tendril::ipc::plant::{PlantModel, PlantParams};
+use tendril::ipc::trajectory::bend_tensions;
+use tendril::robot::Robot;
+use tendril::statics::{SolverSettings, Statics};
+
+fn plant_step(c: &mut Criterion) {
+    let robot = Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml")).unwrap();
+    let statics = Statics::new(&robot, SolverSettings::default());
+    // Tension path: a bend vector turning like the circle's (≈ 3 N around −x).
+    let path: Vec<Vec<f64>> = (0..5000)
+        .map(|k| {
+            let a = std::f64::consts::TAU * 0.2 * k as f64 * 1e-3;
+            bend_tensions(&statics, &Vector2::new(-3.0 + 1.5 * a.cos(), 1.5 * a.sin()))
+        })
+        .collect();
+    let mut group = c.benchmark_group("plant");
+    for steps in [16usize, 24] {
+        let params = PlantParams {
+            statics_steps: steps,
+            ..PlantParams::default()
+        };
+        let mut plant = PlantModel::new(&robot, params).unwrap();
+        let mut k = 0;
+        group.bench_function(format!("step_1ms_rk4_{steps}"), |b| {
+            b.iter(|| {
+                plant.command(&path[k % path.len()]);
+                k += 1;
+                plant.step(1e-3)
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, plant_step);
+criterion_main!(benches);
