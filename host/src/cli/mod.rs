@@ -4,6 +4,7 @@
 use clap::{Parser, Subcommand};
 
 pub mod common;
+mod compare;
 mod controller;
 mod fk;
 pub mod generate;
@@ -31,6 +32,8 @@ enum Command {
     Fk(fk::FkArgs),
     /// Generate the tension <-> pose dataset (CSV + JSON sidecar).
     Generate(generate::GenerateArgs),
+    /// Train every learner on one split and compare them (Table II, Figure 3).
+    Compare(compare::CompareArgs),
     /// Plot a dataset's reachable workspace and a few backbone shapes.
     Workspace(workspace::WorkspaceArgs),
     /// Stream setpoints along a trajectory (iceoryx2 process).
@@ -50,6 +53,7 @@ pub fn run() -> anyhow::Result<()> {
         None => crate::pipeline::run_default(),
         Some(Command::Fk(a)) => fk::run(a),
         Some(Command::Generate(a)) => generate::run(a),
+        Some(Command::Compare(a)) => compare::run(a),
         Some(Command::Workspace(a)) => workspace::run(a),
         Some(Command::Planner(a)) => planner::run(a),
         Some(Command::Controller(a)) => controller::run(a),

@@ -330,10 +330,9 @@ pub(crate) fn fit_best(
     let scores: Vec<f64> = nets.iter().map(|n| n.1).collect();
     let best = argmin(&scores)
         .ok_or_else(|| LearnError::Numerical("training diverged for every candidate".into()))?;
-    Ok(nets
-        .into_iter()
+    nets.into_iter()
         .nth(best)
-        .ok_or_else(|| LearnError::Numerical("lost the best net".into()))?)
+        .ok_or_else(|| LearnError::Numerical("lost the best net".into()))
 }
 
 fn hidden_label(h: &[usize]) -> String {

@@ -200,7 +200,9 @@ impl Learner for Rbf {
             });
         }
         let d = train.x.ncols();
-        let mut best: Option<(f64, usize, f64, f64, Vec<f64>, f64, DMatrix<f64>)> = None;
+        // (valid RMSE, centres, width factor, ridge, centres, σ, output weights)
+        type Best = (f64, usize, f64, f64, Vec<f64>, f64, DMatrix<f64>);
+        let mut best: Option<Best> = None;
         for (ci, &k) in self.centres.iter().enumerate() {
             let c = kmeans(train.x, k, sub_seed(seed, ci as u64));
             let spacing = mean_spacing(&c, d);
