@@ -63,6 +63,23 @@ impl<const IN: usize, const H: usize, const OUT: usize> NetSlots<IN, H, OUT> {
     /// `want` = required (inputs, outputs), checked after decoding; on any
     /// error the active net is unchanged.
     pub fn load(&mut self, blob: &[u8], want: (usize, usize)) -> Result<(), SwapError> {
+        let result = self.try_load(blob, want);
+        match &result {
+            Ok(()) => {
+                let s = self.active().shape();
+                log::info!(
+                    "weights swapped: net {}-{}-{}",
+                    s.inputs,
+                    s.hidden,
+                    s.outputs
+                );
+            }
+            Err(e) => log::warn!("{e}; keeping the running net"),
+        }
+        result
+    }
+
+    fn try_load(&mut self, blob: &[u8], want: (usize, usize)) -> Result<(), SwapError> {
         let [a, b] = &mut self.slots;
         let spare = if self.active == 0 { b } else { a };
         spare.decode_into(blob)?;

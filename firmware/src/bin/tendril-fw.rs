@@ -79,6 +79,26 @@ mod mcu {
         }
     }
 
+    // ---- log facade over semihosting -----------------------------------------
+
+    /// `log` records as `log <level> <message>` lines on the semihosting
+    /// console (the parity test ignores them).
+    struct SemihostingLogger;
+
+    impl log::Log for SemihostingLogger {
+        fn enabled(&self, _: &log::Metadata) -> bool {
+            true
+        }
+        fn log(&self, record: &log::Record) {
+            if let Ok(mut h) = hio::hstdout() {
+                let _ = writeln!(h, "log {} {}", record.level(), record.args());
+            }
+        }
+        fn flush(&self) {}
+    }
+
+    static LOGGER: SemihostingLogger = SemihostingLogger;
+
     // ---- stack painting -----------------------------------------------------
 
     extern "C" {
@@ -270,6 +290,9 @@ mod mcu {
     fn main() -> ! {
         static mut SLOTS: McuSlots = McuSlots::new();
         let floor = paint_stack();
+        if log::set_logger(&LOGGER).is_ok() {
+            log::set_max_level(log::LevelFilter::Info);
+        }
         let mut out = Out {
             host: hio::hstdout().ok(),
             buf: [0; 200],
