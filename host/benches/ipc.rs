@@ -25,7 +25,9 @@ use tendril::ipc::stats::Summary;
 use tendril::ipc::transport::{self, Services, Svc};
 use tendril::robot::Robot;
 use tendril::statics::{SolverSettings, Statics};
-use tendril_firmware::control::{control_step, ControlConfig, ControlState, Setpoint as FwSetpoint, StepInput};
+use tendril_firmware::control::{
+    control_step, ControlConfig, ControlState, Setpoint as FwSetpoint, StepInput,
+};
 use tendril_shared::messages::{setpoint_flags, Header, Setpoint, TensionCommand, MAX_TENDONS};
 use tendril_shared::TendonLimits;
 
@@ -35,13 +37,23 @@ fn robot() -> Robot {
     Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml")).unwrap()
 }
 
-fn sp_event(node: &Node<Svc>, prefix: &str) -> iceoryx2::service::port_factory::event::PortFactory<Svc> {
+fn sp_event(
+    node: &Node<Svc>,
+    prefix: &str,
+) -> iceoryx2::service::port_factory::event::PortFactory<Svc> {
     let name = ServiceName::new(&format!("{prefix}/bench_setpoint")).unwrap();
-    node.service_builder(&name).event().open_or_create().unwrap()
+    node.service_builder(&name)
+        .event()
+        .open_or_create()
+        .unwrap()
 }
 
 /// Wait for the next message: on the event (sleeping) or by polling.
-fn wait_for<T: transport::Message>(spin: bool, listener: &Listener<Svc>, sub: &transport::Sub<T>) -> Option<T> {
+fn wait_for<T: transport::Message>(
+    spin: bool,
+    listener: &Listener<Svc>,
+    sub: &transport::Sub<T>,
+) -> Option<T> {
     let deadline = now_ns() + 2_000_000_000;
     loop {
         if let Ok(Some(s)) = sub.receive() {
@@ -61,7 +73,9 @@ fn child(prefix: &str, spin: bool) {
     let r = robot();
     let statics = Statics::new(&r, SolverSettings::default());
     let mut slots: Box<Slots> = Box::default();
-    slots.load(&quick_net(&statics, 800, 32, 6.0, 1).unwrap(), (7, 4)).unwrap();
+    slots
+        .load(&quick_net(&statics, 800, 32, 6.0, 1).unwrap(), (7, 4))
+        .unwrap();
     let limits = TendonLimits::uniform(4, 10.0, 200.0).unwrap();
     let cfg = ControlConfig::new(limits);
     let mut state = ControlState::new(&limits, &[0.0; MAX_TENDONS], now_ns());
@@ -107,7 +121,11 @@ fn child(prefix: &str, spin: bool) {
 
 /// Run one latency measurement with a child in `spin` or event mode.
 fn latency(samples: usize, spin: bool) -> (Summary, Summary) {
-    let prefix = format!("tendril-bench-{}-{}", std::process::id(), now_ns() % 1_000_000_000);
+    let prefix = format!(
+        "tendril-bench-{}-{}",
+        std::process::id(),
+        now_ns() % 1_000_000_000
+    );
     let node = transport::node("tendril-bench").unwrap();
     let services = Services::open_or_create(&node, &prefix).unwrap();
     let ev = sp_event(&node, &prefix);
@@ -116,7 +134,10 @@ fn latency(samples: usize, spin: bool) -> (Summary, Summary) {
     let cmd_sub = transport::subscriber(&services.tension_cmd).unwrap();
     let listener = transport::listener(&services.tension_cmd_event).unwrap();
     let mut kid = Command::new(std::env::current_exe().unwrap())
-        .env(CHILD_ENV, format!("{prefix},{}", if spin { "spin" } else { "event" }))
+        .env(
+            CHILD_ENV,
+            format!("{prefix},{}", if spin { "spin" } else { "event" }),
+        )
         .spawn()
         .unwrap();
     tighten_timer_slack();
@@ -124,14 +145,19 @@ fn latency(samples: usize, spin: bool) -> (Summary, Summary) {
 
     // A reachable pose in the quick net's box (tip 15 mm off axis).
     let statics = Statics::new(&robot(), SolverSettings::default());
-    let pose = tendril::ipc::trajectory::Lifter::new(&statics).lift([0.015, 0.0]).unwrap();
+    let pose = tendril::ipc::trajectory::Lifter::new(&statics)
+        .lift([0.015, 0.0])
+        .unwrap();
     let pose = pose.map(|v| v as f32);
     let send = |seq: u64, flags: u32| {
         let stamp = now_ns();
         transport::send(
             &sp_pub,
             Setpoint {
-                header: Header { seq, stamp_ns: stamp },
+                header: Header {
+                    seq,
+                    stamp_ns: stamp,
+                },
                 pose,
                 velocity: [0.0; 7],
                 flags,
@@ -159,7 +185,14 @@ fn latency(samples: usize, spin: bool) -> (Summary, Summary) {
     for i in 0..samples {
         sleep_until(start + i as u64 * 1_000_000, 30_000);
         seq += 1;
-        let t0 = send(seq, if i + 1 == samples { setpoint_flags::FINAL } else { 0 });
+        let t0 = send(
+            seq,
+            if i + 1 == samples {
+                setpoint_flags::FINAL
+            } else {
+                0
+            },
+        );
         loop {
             let Some(cmd) = wait_for(spin, &listener, &cmd_sub) else {
                 panic!("no tension command for setpoint {seq}");
@@ -177,18 +210,30 @@ fn latency(samples: usize, spin: bool) -> (Summary, Summary) {
 }
 
 fn sim_lateness(secs: f64, realtime: bool) -> serde_json::Value {
-    let out: PathBuf = std::env::temp_dir().join(format!("tendril-ipc-bench-{}", std::process::id()));
+    let out: PathBuf =
+        std::env::temp_dir().join(format!("tendril-ipc-bench-{}", std::process::id()));
     let status = Command::new(env!("CARGO_BIN_EXE_tendril"))
         .current_dir(Path::new(env!("CARGO_MANIFEST_DIR")).join(".."))
-        .args(["sim", "--quick-model", "--trajectory", "circle", "--settle", "1"])
+        .args([
+            "sim",
+            "--quick-model",
+            "--trajectory",
+            "circle",
+            "--settle",
+            "1",
+        ])
         .arg(format!("--duration={secs}"))
-        .arg(format!("--realtime={}", if realtime { "on" } else { "off" }))
+        .arg(format!(
+            "--realtime={}",
+            if realtime { "on" } else { "off" }
+        ))
         .arg("--out")
         .arg(&out)
         .status()
         .unwrap();
     assert!(status.success());
-    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    let r: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
     let _ = std::fs::remove_dir_all(&out);
     r
 }
@@ -209,7 +254,9 @@ fn main() {
     };
     let samples = opt("--samples", 10_000.0) as usize;
     let secs = opt("--lateness-secs", 60.0);
-    println!("| mode | hop p50 | hop p99 | hop p99.9 | chain p50 | chain p99 | chain p99.9 | samples |");
+    println!(
+        "| mode | hop p50 | hop p99 | hop p99.9 | chain p50 | chain p99 | chain p99.9 | samples |"
+    );
     println!("|---|---|---|---|---|---|---|---|");
     for spin in [false, true] {
         let (hop, chain) = latency(samples, spin);

@@ -15,7 +15,8 @@ use tendril::robot::Robot;
 use tendril::statics::{SolverSettings, Statics};
 
 fn plant_step(c: &mut Criterion) {
-    let robot = Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml")).unwrap();
+    let robot =
+        Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml")).unwrap();
     let statics = Statics::new(&robot, SolverSettings::default());
     // Tension path: a bend vector turning like the circle's (≈ 3 N around −x).
     let path: Vec<Vec<f64>> = (0..5000)

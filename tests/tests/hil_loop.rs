@@ -41,16 +41,28 @@ fn f(v: &Value) -> f64 {
 fn csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let mut lines = text.lines();
-    let header: Vec<String> = lines.next().unwrap().split(',').map(str::to_string).collect();
+    let header: Vec<String> = lines
+        .next()
+        .unwrap()
+        .split(',')
+        .map(str::to_string)
+        .collect();
     let rows = lines
-        .filter_map(|l| l.split(',').map(|x| x.parse::<f64>().ok()).collect::<Option<Vec<_>>>())
+        .filter_map(|l| {
+            l.split(',')
+                .map(|x| x.parse::<f64>().ok())
+                .collect::<Option<Vec<_>>>()
+        })
         .filter(|r| r.len() == header.len())
         .collect();
     (header, rows)
 }
 
 fn col(header: &[String], name: &str) -> usize {
-    header.iter().position(|h| h == name).unwrap_or_else(|| panic!("no column {name}"))
+    header
+        .iter()
+        .position(|h| h == name)
+        .unwrap_or_else(|| panic!("no column {name}"))
 }
 
 /// Every tension command the plant(s) ever logged is finite and within the
@@ -67,7 +79,10 @@ fn assert_plant_saw_only_valid_tensions(dir: &Path) {
         let last = col(&h, "tau0");
         for r in &rows {
             for &t in &r[first..last] {
-                assert!(t.is_finite() && (0.0..=10.0).contains(&t), "plant got tension {t}");
+                assert!(
+                    t.is_finite() && (0.0..=10.0).contains(&t),
+                    "plant got tension {t}"
+                );
             }
         }
         checked += rows.len();
@@ -80,21 +95,39 @@ fn assert_plant_saw_only_valid_tensions(dir: &Path) {
 fn assert_loop_kept_its_period(report: &Value, secs: f64) {
     let c = &report["controller"];
     let cycles = f(&c["cycles"]);
-    assert!(cycles >= 0.9 * secs * 1000.0, "only {cycles} cycles in {secs} s");
+    assert!(
+        cycles >= 0.9 * secs * 1000.0,
+        "only {cycles} cycles in {secs} s"
+    );
     let skipped = f(&c["skipped"]);
-    assert!(skipped < 0.02 * cycles, "{skipped} periods skipped of {cycles}");
+    assert!(
+        skipped < 0.02 * cycles,
+        "{skipped} periods skipped of {cycles}"
+    );
 }
 
 #[test]
 fn nominal_circle_tracks_within_a_millimetre_rms_with_correction() {
-    let (r, dir, _) = sim(&["--trajectory", "circle", "--settle", "1.5", "--duration", "6"]);
+    let (r, dir, _) = sim(&[
+        "--trajectory",
+        "circle",
+        "--settle",
+        "1.5",
+        "--duration",
+        "6",
+    ]);
     let rms = f(&r["rms_tracking_error_mm"]);
     assert!(rms <= 1.0, "circle RMS {rms} mm");
     assert!(f(&r["max_tracking_error_mm"]) < 3.0);
     assert!(f(&r["tracking_samples"]) > 4000.0);
     assert_loop_kept_its_period(&r, 7.5);
     assert_eq!(f(&r["plant"]["out_of_range_commands"]), 0.0);
-    assert_eq!(r["faults"].as_array().map(Vec::len), Some(0), "{}", r["faults"]);
+    assert_eq!(
+        r["faults"].as_array().map(Vec::len),
+        Some(0),
+        "{}",
+        r["faults"]
+    );
     for key in ["p50", "p99"] {
         assert!(f(&r["controller"]["lateness_us"][key]) >= 0.0);
         assert!(f(&r["ipc_latency_us"][key]) > 0.0);
@@ -123,13 +156,22 @@ fn correction_loop_settles_steps_to_fifty_microns_and_beats_ik_alone() {
     let (off, _d_off, _) = sim(&off_args);
     let (on, _d_on, _) = on.join().unwrap();
     let steady = |r: &Value| -> Vec<f64> {
-        r["steady_state"].as_array().unwrap().iter().map(|s| f(&s["error_mm"])).collect()
+        r["steady_state"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|s| f(&s["error_mm"]))
+            .collect()
     };
     let (e_on, e_off) = (steady(&on), steady(&off));
     assert_eq!(e_on.len(), 2, "{e_on:?}");
     assert_eq!(e_off.len(), 2, "{e_off:?}");
     for (a, b) in e_on.iter().zip(&e_off) {
-        assert!(*a <= 0.05, "steady-state error with correction {a} mm: {}", on["steady_state"]);
+        assert!(
+            *a <= 0.05,
+            "steady-state error with correction {a} mm: {}",
+            on["steady_state"]
+        );
         assert!(a <= b, "correction made it worse: {a} vs IK alone {b}");
     }
 }
@@ -152,7 +194,13 @@ fn killed_planner_trips_safe_hold_within_three_periods_and_a_new_one_is_picked_u
     // the last period that saw a new setpoint before the hold, and the hold.
     let (h, rows) = csv(&dir.path().join("controller.csv"));
     let (it, ist, isp) = (col(&h, "t_ns"), col(&h, "status"), col(&h, "sp_seq"));
-    let kill = r["faults"].as_array().unwrap().iter().find(|e| e["kind"].as_str().unwrap().starts_with("planner_killed")).expect("kill event")["t_s"].clone();
+    let kill = r["faults"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|e| e["kind"].as_str().unwrap().starts_with("planner_killed"))
+        .expect("kill event")["t_s"]
+        .clone();
     assert!(f(&kill) > 2.0);
     let first_hold = rows
         .iter()
@@ -161,19 +209,34 @@ fn killed_planner_trips_safe_hold_within_three_periods_and_a_new_one_is_picked_u
         .find(|(_, row)| (row[ist] as u32) & 1 != 0 && rows.len() > 0)
         .map(|(i, _)| i);
     // Skip any brief hold from scheduling noise: take the hold that lasts.
-    let lasting = (1500..rows.len()).find(|&i| (i..(i + 50).min(rows.len())).all(|j| (rows[j][ist] as u32) & 1 != 0));
+    let lasting = (1500..rows.len())
+        .find(|&i| (i..(i + 50).min(rows.len())).all(|j| (rows[j][ist] as u32) & 1 != 0));
     let hold_i = lasting.expect("controller never held after the kill");
     assert!(first_hold.is_some());
-    let last_new = (1..hold_i).rev().find(|&i| rows[i][isp] != rows[i - 1][isp]).unwrap();
+    let last_new = (1..hold_i)
+        .rev()
+        .find(|&i| rows[i][isp] != rows[i - 1][isp])
+        .unwrap();
     let periods = ((rows[hold_i][it] - rows[last_new][it]) / 1e6).round();
-    assert!(periods <= 3.0, "safe hold {periods} periods after the last setpoint");
+    assert!(
+        periods <= 3.0,
+        "safe hold {periods} periods after the last setpoint"
+    );
 
     assert_eq!(f(&r["plant"]["out_of_range_commands"]), 0.0);
     assert_plant_saw_only_valid_tensions(dir.path());
     assert!(f(&r["controller"]["planner_restarts"]) >= 1.0);
-    let restart = r["faults"].as_array().unwrap().iter().find(|e| e["kind"] == "planner_restarted").expect("restart event");
+    let restart = r["faults"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|e| e["kind"] == "planner_restarted")
+        .expect("restart event");
     let resumed = f(&restart["resumed_after_s"]);
-    assert!(resumed < 5.0, "tracking resumed {resumed} s after the restart");
+    assert!(
+        resumed < 5.0,
+        "tracking resumed {resumed} s after the restart"
+    );
     let after = f(&restart["rms_after_recovery_mm"]);
     assert!(after <= 1.5, "RMS after recovery {after} mm");
 }
@@ -193,19 +256,31 @@ fn killed_plant_is_detected_and_a_restarted_one_is_driven_again() {
         "0.5",
     ]);
     let c = &r["controller"];
-    assert!(f(&c["plant_stale_cycles"]) > 0.0, "controller never noticed the missing plant");
+    assert!(
+        f(&c["plant_stale_cycles"]) > 0.0,
+        "controller never noticed the missing plant"
+    );
     assert!(f(&c["plant_recoveries"]) >= 1.0 && f(&c["plant_restarts"]) >= 1.0);
     let faults = r["faults"].as_array().unwrap();
-    let killed = faults.iter().find(|e| e["kind"].as_str().unwrap().starts_with("plant_killed")).unwrap();
+    let killed = faults
+        .iter()
+        .find(|e| e["kind"].as_str().unwrap().starts_with("plant_killed"))
+        .unwrap();
     assert_eq!(killed["controller_flagged_stale"], true);
-    let restarted = faults.iter().find(|e| e["kind"] == "plant_restarted").unwrap();
+    let restarted = faults
+        .iter()
+        .find(|e| e["kind"] == "plant_restarted")
+        .unwrap();
     let after = f(&restarted["rms_after_recovery_mm"]);
     assert!(after <= 1.5, "RMS after the new plant took over {after} mm");
     // The new plant's own log shows it tracking (its tip moved off the rest pose).
     let (h, rows) = csv(&dir.path().join("plant-1.csv"));
     let ix = col(&h, "px");
     let moved = rows.iter().map(|row| row[ix]).fold(f64::INFINITY, f64::min);
-    assert!(moved < 0.01, "restarted plant never left the rest pose (min px {moved})");
+    assert!(
+        moved < 0.01,
+        "restarted plant never left the rest pose (min px {moved})"
+    );
     assert_plant_saw_only_valid_tensions(dir.path());
 }
 
@@ -229,7 +304,11 @@ fn bad_setpoints_and_a_corrupted_weight_update_are_rejected_without_breaking_the
     ]);
     let c = &r["controller"];
     assert!(f(&c["rejected_nonfinite"]) >= 1.0);
-    assert!(f(&c["rejected_workspace"]) >= 10.0, "{}", c["rejected_workspace"]);
+    assert!(
+        f(&c["rejected_workspace"]) >= 10.0,
+        "{}",
+        c["rejected_workspace"]
+    );
     assert_eq!(f(&c["weight_rejections"]), 1.0);
     assert_eq!(f(&c["weight_swaps"]), 1.0);
     assert!(stderr.contains("rejected"), "rejections were not logged");

@@ -71,7 +71,10 @@ impl LoopOpts {
             format!("--slew={}", self.slew),
         ];
         if let Some(rt) = self.realtime {
-            a.push(format!("--realtime={}", if rt == OnOff::On { "on" } else { "off" }));
+            a.push(format!(
+                "--realtime={}",
+                if rt == OnOff::On { "on" } else { "off" }
+            ));
         }
         a
     }

@@ -69,7 +69,7 @@ pub struct SimArgs {
 pub fn run(args: SimArgs) -> anyhow::Result<()> {
     args.traj.shape()?; // fail early on a bad trajectory
     args.plant.params()?;
-    if !(args.duration > 0.0) {
+    if args.duration.is_nan() || args.duration <= 0.0 {
         anyhow::bail!("--duration must be positive");
     }
     let model = if args.quick_model {
@@ -96,8 +96,13 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
     // Real-time scheduling is on by default under `sim` (`--realtime off`
     // to disable): it keeps the 1 kHz loop on time on a busy machine.
     let mut tuning = args.tuning.clone();
-    let realtime = tuning.realtime.unwrap_or(super::controller::OnOff::On) == super::controller::OnOff::On;
-    tuning.realtime = Some(if realtime { super::controller::OnOff::On } else { super::controller::OnOff::Off });
+    let realtime =
+        tuning.realtime.unwrap_or(super::controller::OnOff::On) == super::controller::OnOff::On;
+    tuning.realtime = Some(if realtime {
+        super::controller::OnOff::On
+    } else {
+        super::controller::OnOff::Off
+    });
     let mut planner_args = args.traj.to_args();
     let mut plant_args = args.plant.to_args();
     if realtime {

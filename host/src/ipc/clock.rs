@@ -54,7 +54,12 @@ pub fn sleep_until(deadline_ns: u64, spin_ns: u64) {
         };
         // SAFETY: valid timespec; TIMER_ABSTIME with a null remainder pointer.
         let rc = unsafe {
-            libc::clock_nanosleep(libc::CLOCK_MONOTONIC, libc::TIMER_ABSTIME, &ts, std::ptr::null_mut())
+            libc::clock_nanosleep(
+                libc::CLOCK_MONOTONIC,
+                libc::TIMER_ABSTIME,
+                &ts,
+                std::ptr::null_mut(),
+            )
         };
         if rc != 0 && rc != libc::EINTR {
             break;

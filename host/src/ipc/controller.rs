@@ -15,12 +15,13 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 use tendril_firmware::control::{
-    control_step, ControlConfig, ControlState, Feedback, IntegralConfig, SafeHold, Setpoint as FwSetpoint, Status,
-    StepInput, POSE_DIM,
+    control_step, ControlConfig, ControlState, Feedback, IntegralConfig, SafeHold,
+    Setpoint as FwSetpoint, Status, StepInput, POSE_DIM,
 };
 use tendril_firmware::swap::NetSlots;
 use tendril_shared::messages::{
-    command_status, setpoint_flags, Header, PlantState, Setpoint, TensionCommand, WeightUpdate, MAX_TENDONS,
+    command_status, setpoint_flags, Header, PlantState, Setpoint, TensionCommand, WeightUpdate,
+    MAX_TENDONS,
 };
 use tendril_shared::TendonLimits;
 
@@ -164,7 +165,10 @@ pub fn load_net(slots: &mut Slots, bytes: &[u8], tendons: usize) -> Result<(), I
 /// Run the controller process until stopped.
 pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
     if !(cfg.rate > 0.0 && cfg.rate <= 20_000.0) {
-        return Err(IpcError::Config(format!("controller rate {} Hz: must be in (0, 20000]", cfg.rate)));
+        return Err(IpcError::Config(format!(
+            "controller rate {} Hz: must be in (0, 20000]",
+            cfg.rate
+        )));
     }
     if !(cfg.ki >= 0.0 && cfg.lead >= 0.0 && cfg.slew_rate > 0.0 && cfg.watchdog_periods > 0.0) {
         return Err(IpcError::Config(
@@ -175,13 +179,15 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
     let n = robot.n_tendons();
     let max: Vec<f32> = robot.max_tensions().iter().map(|&v| v as f32).collect();
     let slew = vec![cfg.slew_rate as f32; n];
-    let limits = TendonLimits::new(&max, &slew).map_err(|e| IpcError::Config(format!("tension limits: {e:?}")))?;
+    let limits = TendonLimits::new(&max, &slew)
+        .map_err(|e| IpcError::Config(format!("tension limits: {e:?}")))?;
     let bytes = std::fs::read(&cfg.model).map_err(|source| IpcError::Io {
         path: cfg.model.clone(),
         source,
     })?;
     let mut slots: Box<Slots> = Box::default();
-    load_net(&mut slots, &bytes, n).map_err(|e| IpcError::Other(format!("{}: {e}", cfg.model.display())))?;
+    load_net(&mut slots, &bytes, n)
+        .map_err(|e| IpcError::Other(format!("{}: {e}", cfg.model.display())))?;
 
     let period_ns = (1e9 / cfg.rate).round() as u64;
     let mut fw = ControlConfig::new(limits);
@@ -246,18 +252,26 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
         let (wu, _): (Option<WeightUpdate>, usize) = transport::latest(&weights)?;
 
         if let Some(w) = wu {
-            match w.payload().ok_or_else(|| "length field exceeds capacity".to_string()).and_then(|b| {
-                slots.load(b, (POSE_DIM, n)).map_err(|e| e.to_string())
-            }) {
+            match w
+                .payload()
+                .ok_or_else(|| "length field exceeds capacity".to_string())
+                .and_then(|b| slots.load(b, (POSE_DIM, n)).map_err(|e| e.to_string()))
+            {
                 Ok(()) => {
                     stats.weight_swaps += 1;
                     extra |= command_status::WEIGHTS_SWAPPED;
-                    log::info!("controller: new weights swapped in (update #{})", w.header.seq);
+                    log::info!(
+                        "controller: new weights swapped in (update #{})",
+                        w.header.seq
+                    );
                 }
                 Err(e) => {
                     stats.weight_rejections += 1;
                     extra |= command_status::WEIGHTS_REJECTED;
-                    log::warn!("controller: weight update #{} rejected, old net kept: {e}", w.header.seq);
+                    log::warn!(
+                        "controller: weight update #{} rejected, old net kept: {e}",
+                        w.header.seq
+                    );
                 }
             }
         }
@@ -268,7 +282,10 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
             sp_age.push(t_wake.saturating_sub(s.header.stamp_ns));
             if last_sp.is_some_and(|p| s.header.seq <= p.header.seq) {
                 stats.planner_restarts += 1;
-                log::info!("controller: setpoint sequence restarted at #{}: new planner", s.header.seq);
+                log::info!(
+                    "controller: setpoint sequence restarted at #{}: new planner",
+                    s.header.seq
+                );
             }
             local_sp_seq += 1;
             let mut pose = s.pose;
@@ -346,7 +363,10 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
             stats.hold_cycles += 1;
             if !in_hold {
                 stats.watchdog_trips += 1;
-                log::warn!("controller: no setpoint for {:.1} periods: safe hold", cfg.watchdog_periods);
+                log::warn!(
+                    "controller: no setpoint for {:.1} periods: safe hold",
+                    cfg.watchdog_periods
+                );
             }
         } else if in_hold {
             log::info!("controller: setpoints back, tracking resumed");
@@ -392,7 +412,11 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
             log.flush()?;
             last_flush = t_done;
         }
-        if stop.requested() || cfg.duration.is_some_and(|d| (t_done - start) as f64 * 1e-9 >= d) {
+        if stop.requested()
+            || cfg
+                .duration
+                .is_some_and(|d| (t_done - start) as f64 * 1e-9 >= d)
+        {
             break;
         }
     }

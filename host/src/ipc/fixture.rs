@@ -21,7 +21,13 @@ const JITTER_COPIES: usize = 3;
 
 /// Fit a `.tnet` with `hidden` random units on `samples` poses whose bends
 /// cover a disc of `max_bend` newtons. Deterministic for a given seed.
-pub fn quick_net(statics: &Statics, samples: usize, hidden: usize, max_bend: f64, seed: u64) -> Result<Vec<u8>, IpcError> {
+pub fn quick_net(
+    statics: &Statics,
+    samples: usize,
+    hidden: usize,
+    max_bend: f64,
+    seed: u64,
+) -> Result<Vec<u8>, IpcError> {
     let n = statics.robot().n_tendons();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     // Samples on a spiral-ordered grid of bends so each solve warm-starts from a neighbour.
@@ -58,7 +64,9 @@ pub fn quick_net(statics: &Statics, samples: usize, hidden: usize, max_bend: f64
         }
     }
     let samples = xs.len();
-    let lo: Vec<f64> = (0..7).map(|k| xs.iter().map(|x| x[k]).fold(f64::INFINITY, f64::min)).collect();
+    let lo: Vec<f64> = (0..7)
+        .map(|k| xs.iter().map(|x| x[k]).fold(f64::INFINITY, f64::min))
+        .collect();
     let hi: Vec<f64> = (0..7)
         .map(|k| {
             let h = xs.iter().map(|x| x[k]).fold(f64::NEG_INFINITY, f64::max);
@@ -91,7 +99,9 @@ pub fn quick_net(statics: &Statics, samples: usize, hidden: usize, max_bend: f64
     let cols = 1 + 7 + hidden;
     let mut f = DMatrix::<f64>::zeros(samples, cols);
     for (i, x) in xs.iter().enumerate() {
-        let xn: Vec<f64> = (0..7).map(|k| ((x[k] - lo[k]) / (hi[k] - lo[k]) as f64) as f32 as f64).collect();
+        let xn: Vec<f64> = (0..7)
+            .map(|k| ((x[k] - lo[k]) / (hi[k] - lo[k])) as f32 as f64)
+            .collect();
         f[(i, 0)] = 1.0;
         for k in 0..7 {
             f[(i, 1 + k)] = xn[k];
@@ -142,10 +152,13 @@ mod tests {
 
     #[test]
     fn quick_net_inverts_held_out_statics_to_a_few_millimetres() {
-        let robot = Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml")).unwrap();
+        let robot =
+            Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml"))
+                .unwrap();
         let s = Statics::new(&robot, SolverSettings::default());
         let blob = quick_net(&s, 1500, 48, 6.0, 3).unwrap();
-        let net: tendril_shared::CascadeNet<7, 64, 8> = tendril_shared::CascadeNet::decode(&blob).unwrap();
+        let net: tendril_shared::CascadeNet<7, 64, 8> =
+            tendril_shared::CascadeNet::decode(&blob).unwrap();
         // Held-out bends (not on the training spiral): predicted tensions,
         // run forward through the statics, must land near the pose's tip.
         let mut worst: f64 = 0.0;
@@ -153,7 +166,10 @@ mod tests {
             let tau = bend_tensions(&s, &Vector2::new(bx, by));
             let pose = s.solve(&tau, None).unwrap().pose().map(|v| v as f32);
             let pred = tendril_firmware::infer(&net, &pose);
-            let pred: Vec<f64> = pred[..4].iter().map(|&v| (v as f64).clamp(0.0, 10.0)).collect();
+            let pred: Vec<f64> = pred[..4]
+                .iter()
+                .map(|&v| (v as f64).clamp(0.0, 10.0))
+                .collect();
             let tip = s.solve(&pred, None).unwrap().position;
             let err = ((tip.x - pose[0] as f64).powi(2) + (tip.y - pose[1] as f64).powi(2)).sqrt();
             worst = worst.max(err);
@@ -167,9 +183,16 @@ mod tests {
         let mut shifted = pose;
         shifted[0] -= 0.002;
         let pred = tendril_firmware::infer(&net, &shifted);
-        let pred: Vec<f64> = pred[..4].iter().map(|&v| (v as f64).clamp(0.0, 10.0)).collect();
+        let pred: Vec<f64> = pred[..4]
+            .iter()
+            .map(|&v| (v as f64).clamp(0.0, 10.0))
+            .collect();
         let tip = s.solve(&pred, None).unwrap().position;
         let dx = tip.x - pose[0] as f64;
-        assert!((dx + 0.002).abs() < 1e-3 && (tip.y - pose[1] as f64).abs() < 1e-3, "moved by {dx}, {}", tip.y - pose[1] as f64);
+        assert!(
+            (dx + 0.002).abs() < 1e-3 && (tip.y - pose[1] as f64).abs() < 1e-3,
+            "moved by {dx}, {}",
+            tip.y - pose[1] as f64
+        );
     }
 }

@@ -9,8 +9,8 @@
 pub mod clock;
 pub mod controller;
 pub mod fixture;
-pub mod plant;
 pub mod planner;
+pub mod plant;
 pub mod sim;
 pub mod stats;
 pub mod trajectory;
@@ -87,5 +87,6 @@ impl StopWatch {
 
 /// Write `bytes` to `path` atomically, mapping the error.
 pub(crate) fn write_file(path: &std::path::Path, bytes: &[u8]) -> Result<(), IpcError> {
-    crate::fsutil::write_atomic(path, bytes).map_err(|e| IpcError::Other(format!("{}: {e}", path.display())))
+    crate::fsutil::write_atomic(path, bytes)
+        .map_err(|e| IpcError::Other(format!("{}: {e}", path.display())))
 }

@@ -97,12 +97,22 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
         let mut velocity = point.velocity.map(|v| v as f32);
         let clean = pose;
         let mut injected = false;
-        if cfg.inject.nan_at.iter().any(|&a| t >= a && t < a + 1.0 / cfg.rate) {
+        if cfg
+            .inject
+            .nan_at
+            .iter()
+            .any(|&a| t >= a && t < a + 1.0 / cfg.rate)
+        {
             pose[0] = f32::NAN;
             injected = true;
             log::warn!("planner: injecting a NaN setpoint at {t:.3} s");
         }
-        if cfg.inject.outside_at.iter().any(|&a| t >= a && t < a + cfg.inject.outside_for) {
+        if cfg
+            .inject
+            .outside_at
+            .iter()
+            .any(|&a| t >= a && t < a + cfg.inject.outside_for)
+        {
             // 1 m sideways: far outside any 0.4 m robot's reach.
             pose[0] += 1.0;
             injected = true;
@@ -112,7 +122,10 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
         seq += 1;
         let stamp = now_ns();
         let msg = Setpoint {
-            header: Header { seq, stamp_ns: stamp },
+            header: Header {
+                seq,
+                stamp_ns: stamp,
+            },
             pose,
             velocity,
             flags,

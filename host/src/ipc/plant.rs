@@ -91,7 +91,11 @@ pub struct PlantModel {
 impl PlantModel {
     /// A plant at rest with all tensions zero.
     pub fn new(robot: &Robot, params: PlantParams) -> Result<PlantModel, IpcError> {
-        if !(params.motor_tau > 0.0) || params.compliance_tau < 0.0 || params.noise < 0.0 {
+        if params.motor_tau.is_nan()
+            || params.motor_tau <= 0.0
+            || params.compliance_tau < 0.0
+            || params.noise < 0.0
+        {
             return Err(IpcError::Config(
                 "plant: motor time constant must be > 0, compliance and noise ≥ 0".into(),
             ));

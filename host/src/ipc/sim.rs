@@ -14,12 +14,14 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
-use tendril_shared::messages::{command_status, control_command, setpoint_flags, Control, Header, WeightUpdate};
+use tendril_shared::messages::{
+    command_status, control_command, setpoint_flags, Control, Header, WeightUpdate,
+};
 
 use super::clock::now_ns;
 use super::controller::ControllerStats;
-use super::plant::PlantStats;
 use super::planner::LOG_INJECTED;
+use super::plant::PlantStats;
 use super::stats::{column, read_log};
 use super::transport::{self, Services};
 use super::IpcError;
@@ -75,7 +77,11 @@ pub struct SimConfig {
 
 /// A unique service prefix for one run: parallel sims and tests never share services.
 pub fn unique_prefix() -> String {
-    format!("tendril-sim-{}-{}", std::process::id(), now_ns() % 1_000_000_000_000)
+    format!(
+        "tendril-sim-{}-{}",
+        std::process::id(),
+        now_ns() % 1_000_000_000_000
+    )
 }
 
 struct Kids {
@@ -183,7 +189,9 @@ pub fn run(cfg: &SimConfig) -> Result<Value, IpcError> {
     let weights = transport::publisher(&services.weights)?;
     let watch = transport::subscriber(&services.setpoint)?;
 
-    let mut kids = Kids { children: Vec::new() };
+    let mut kids = Kids {
+        children: Vec::new(),
+    };
     let mut plant_gen = 0;
     let plant_args = |gen: usize| {
         let mut a = common(&cfg.plant_args);
@@ -215,11 +223,15 @@ pub fn run(cfg: &SimConfig) -> Result<Value, IpcError> {
             break now_ns();
         }
         if now_ns() - wait_start > 60_000_000_000 {
-            return Err(IpcError::Other("sim: no setpoint from the planner within 60 s".into()));
+            return Err(IpcError::Other(
+                "sim: no setpoint from the planner within 60 s".into(),
+            ));
         }
         for (role, child) in &mut kids.children {
             if let Ok(Some(status)) = child.try_wait() {
-                return Err(IpcError::Other(format!("sim: {role} exited early ({status})")));
+                return Err(IpcError::Other(format!(
+                    "sim: {role} exited early ({status})"
+                )));
             }
         }
         std::thread::sleep(Duration::from_millis(5));
@@ -303,7 +315,14 @@ pub fn run(cfg: &SimConfig) -> Result<Value, IpcError> {
                     msg.bytes[mid] ^= 0x10;
                 }
                 transport::send(&weights, msg)?;
-                note(if corrupt { "weights_corrupted_sent" } else { "weights_valid_sent" }.into());
+                note(
+                    if corrupt {
+                        "weights_corrupted_sent"
+                    } else {
+                        "weights_valid_sent"
+                    }
+                    .into(),
+                );
             }
         }
     }
@@ -325,7 +344,8 @@ pub fn run(cfg: &SimConfig) -> Result<Value, IpcError> {
     }
 
     let report = report(cfg, t0, &events, &forced, planner_gen, plant_gen)?;
-    let json_text = serde_json::to_vec_pretty(&report).map_err(|e| IpcError::Other(e.to_string()))?;
+    let json_text =
+        serde_json::to_vec_pretty(&report).map_err(|e| IpcError::Other(e.to_string()))?;
     super::write_file(&cfg.out.join("report.json"), &json_text)?;
     super::write_file(&cfg.out.join("report.md"), markdown(&report).as_bytes())?;
     Ok(report)
@@ -359,7 +379,13 @@ fn pct(v: &[f64], p: f64) -> f64 {
     s[rank.clamp(1, s.len()) - 1]
 }
 
-fn read_rows(dir: &Path, stem: &str, gens: usize) -> Result<Vec<(Vec<String>, Vec<Vec<f64>>)>, IpcError> {
+/// A CSV log: header and numeric rows.
+type Log = (Vec<String>, Vec<Vec<f64>>);
+
+/// One plant step: time (ns), true tip (m), commanded and actual tensions (N).
+type PlantRow = (f64, [f64; 3], Vec<f64>, Vec<f64>);
+
+fn read_rows(dir: &Path, stem: &str, gens: usize) -> Result<Vec<Log>, IpcError> {
     let mut all = Vec::new();
     for g in 0..=gens {
         let path = dir.join(format!("{stem}-{g}.csv"));
@@ -383,13 +409,20 @@ fn report(
     let mut sp: Vec<(f64, u32, [f64; 3])> = Vec::new();
     for (h, rows) in read_rows(&cfg.out, "planner", planner_gens)? {
         let p = cfg.out.join("planner");
-        let (it, ifl, ix) = (column(&h, "t_ns", &p)?, column(&h, "flags", &p)?, column(&h, "px", &p)?);
-        sp.extend(rows.iter().map(|r| (r[it], r[ifl] as u32, [r[ix], r[ix + 1], r[ix + 2]])));
+        let (it, ifl, ix) = (
+            column(&h, "t_ns", &p)?,
+            column(&h, "flags", &p)?,
+            column(&h, "px", &p)?,
+        );
+        sp.extend(
+            rows.iter()
+                .map(|r| (r[it], r[ifl] as u32, [r[ix], r[ix + 1], r[ix + 2]])),
+        );
     }
     sp.sort_by(|a, b| a.0.total_cmp(&b.0));
 
     // Plant: true tip and tensions at every step, all generations.
-    let mut plant_rows: Vec<(f64, [f64; 3], Vec<f64>, Vec<f64>)> = Vec::new();
+    let mut plant_rows: Vec<PlantRow> = Vec::new();
     let mut n = 0;
     for (h, rows) in read_rows(&cfg.out, "plant", plant_gens)? {
         let p = cfg.out.join("plant");
@@ -429,8 +462,10 @@ fn report(
         });
     }
     let err_mm = |s: &Sample| {
-        ((s.desired[0] - s.actual[0]).powi(2) + (s.desired[1] - s.actual[1]).powi(2) + (s.desired[2] - s.actual[2]).powi(2))
-            .sqrt()
+        ((s.desired[0] - s.actual[0]).powi(2)
+            + (s.desired[1] - s.actual[1]).powi(2)
+            + (s.desired[2] - s.actual[2]).powi(2))
+        .sqrt()
             * 1e3
     };
     let tracking: Vec<f64> = samples.iter().filter(|s| !s.hold).map(err_mm).collect();
@@ -477,7 +512,10 @@ fn report(
             plant_stats.push(s);
         }
     }
-    let latency = plant_stats.first().map(|s| s.latency_us).unwrap_or_default();
+    let latency = plant_stats
+        .first()
+        .map(|s| s.latency_us)
+        .unwrap_or_default();
     let plant_step = plant_stats.first().map(|s| s.step_us).unwrap_or_default();
     let out_of_range: u64 = plant_stats.iter().map(|s| s.out_of_range_commands).sum();
 
@@ -575,7 +613,8 @@ fn analyse_faults(
             .iter()
             .filter(|s| !s.hold && s.t >= a && s.t < b)
             .map(|s| {
-                ((s.desired[0] - s.actual[0]).powi(2) + (s.desired[1] - s.actual[1]).powi(2)).sqrt() * 1e3
+                ((s.desired[0] - s.actual[0]).powi(2) + (s.desired[1] - s.actual[1]).powi(2)).sqrt()
+                    * 1e3
             })
             .collect();
         if e.is_empty() {
@@ -617,7 +656,7 @@ fn analyse_faults(
         }
         if ev.kind.starts_with("plant_killed") && !rows.is_empty() {
             // The controller sees the state sequence stop advancing.
-            let last_state = rows.iter().filter(|r| r[it] <= te).map(|r| r[ips]).last();
+            let last_state = rows.iter().rev().find(|r| r[it] <= te).map(|r| r[ips]);
             let frozen_until = rows
                 .iter()
                 .filter(|r| r[it] > te)
@@ -656,13 +695,19 @@ fn analyse_faults(
 fn markdown(r: &Value) -> String {
     let f = |v: &Value| v.as_f64().map_or("–".to_string(), |x| format!("{x:.3}"));
     let mut s = String::new();
-    s.push_str(&format!("# tendril sim report\n\n{}\n\n", r["label"].as_str().unwrap_or("")));
+    s.push_str(&format!(
+        "# tendril sim report\n\n{}\n\n",
+        r["label"].as_str().unwrap_or("")
+    ));
     s.push_str("| quantity | value |\n|---|---|\n");
     for (name, v) in [
         ("RMS tracking error (mm)", &r["rms_tracking_error_mm"]),
         ("max tracking error (mm)", &r["max_tracking_error_mm"]),
         ("p95 tracking error (mm)", &r["p95_tracking_error_mm"]),
-        ("max steady-state error (mm)", &r["max_steady_state_error_mm"]),
+        (
+            "max steady-state error (mm)",
+            &r["max_steady_state_error_mm"],
+        ),
         ("controller cycles", &r["controller"]["cycles"]),
         ("controller overruns", &r["controller"]["overruns"]),
         ("lateness p50 (µs)", &r["controller"]["lateness_us"]["p50"]),
@@ -670,7 +715,10 @@ fn markdown(r: &Value) -> String {
         ("IPC latency p50 (µs)", &r["ipc_latency_us"]["p50"]),
         ("IPC latency p99 (µs)", &r["ipc_latency_us"]["p99"]),
         ("plant step median (µs)", &r["plant"]["step_us"]["p50"]),
-        ("out-of-range commands at the plant", &r["plant"]["out_of_range_commands"]),
+        (
+            "out-of-range commands at the plant",
+            &r["plant"]["out_of_range_commands"],
+        ),
     ] {
         s.push_str(&format!("| {name} | {} |\n", f(v)));
     }

@@ -92,10 +92,11 @@ impl CsvLog {
             line.push_str(&format!("{v}"));
         }
         line.push('\n');
-        out.write_all(line.as_bytes()).map_err(|source| IpcError::Io {
-            path: self.path.clone(),
-            source,
-        })
+        out.write_all(line.as_bytes())
+            .map_err(|source| IpcError::Io {
+                path: self.path.clone(),
+                source,
+            })
     }
 
     /// Push buffered rows to the file.

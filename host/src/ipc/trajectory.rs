@@ -168,7 +168,9 @@ impl Trajectory {
             }),
             Shape::Steps { targets, dwell } => {
                 if targets.is_empty() || *dwell <= 0.0 {
-                    return Err(IpcError::Config("steps need at least one target and a positive dwell".into()));
+                    return Err(IpcError::Config(
+                        "steps need at least one target and a positive dwell".into(),
+                    ));
                 }
                 let mut times = Vec::new();
                 let mut poses = Vec::new();
@@ -183,9 +185,20 @@ impl Trajectory {
                     stepwise: true,
                 })
             }
-            Shape::Circle { center, radius, freq } | Shape::FigureEight { center, radius, freq } => {
+            Shape::Circle {
+                center,
+                radius,
+                freq,
+            }
+            | Shape::FigureEight {
+                center,
+                radius,
+                freq,
+            } => {
                 if *freq <= 0.0 || *radius < 0.0 {
-                    return Err(IpcError::Config("a path needs a positive frequency and radius".into()));
+                    return Err(IpcError::Config(
+                        "a path needs a positive frequency and radius".into(),
+                    ));
                 }
                 let eight = matches!(shape, Shape::FigureEight { .. });
                 let period = 1.0 / freq;
@@ -196,7 +209,10 @@ impl Trajectory {
                     let t = period * i as f64 / n as f64;
                     let a = std::f64::consts::TAU * freq * t;
                     let xy = if eight {
-                        [center[0] + radius * a.sin(), center[1] + radius * a.sin() * a.cos()]
+                        [
+                            center[0] + radius * a.sin(),
+                            center[1] + radius * a.sin() * a.cos(),
+                        ]
                     } else {
                         [center[0] + radius * a.cos(), center[1] + radius * a.sin()]
                     };
@@ -212,7 +228,9 @@ impl Trajectory {
             }
             Shape::Table(rows) => {
                 if rows.is_empty() || rows.windows(2).any(|w| w[1].0 <= w[0].0) {
-                    return Err(IpcError::Config("pose table needs rows with increasing times".into()));
+                    return Err(IpcError::Config(
+                        "pose table needs rows with increasing times".into(),
+                    ));
                 }
                 Ok(Trajectory {
                     times: rows.iter().map(|r| r.0).collect(),
@@ -237,10 +255,11 @@ impl Trajectory {
         } else {
             t
         };
-        let i = match self.times.iter().rposition(|&ti| ti <= t) {
-            Some(i) => i,
-            None => 0,
-        };
+        let i = self
+            .times
+            .iter()
+            .rposition(|&ti| ti <= t)
+            .unwrap_or_default();
         if self.stepwise || i + 1 >= n {
             return PosePoint {
                 pose: self.poses[i.min(n - 1)],
@@ -340,7 +359,10 @@ mod tests {
             assert!((r - 0.015).abs() < 2e-6, "r = {r}");
             // Speed of a 15 mm circle at 0.2 Hz is 2π·0.2·15 mm/s.
             let v = (p.velocity[0].powi(2) + p.velocity[1].powi(2)).sqrt();
-            assert!((v - std::f64::consts::TAU * 0.2 * 0.015).abs() < 1e-4, "v = {v}");
+            assert!(
+                (v - std::f64::consts::TAU * 0.2 * 0.015).abs() < 1e-4,
+                "v = {v}"
+            );
             // Tangent: velocity ⟂ radius.
             assert!((p.pose[0] * p.velocity[0] + p.pose[1] * p.velocity[1]).abs() < 1e-5);
         }

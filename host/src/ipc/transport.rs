@@ -144,7 +144,8 @@ impl Services {
 pub fn node(name: &str) -> Result<Node<Svc>, IpcError> {
     // iceoryx2 logs to the console itself; keep it to warnings and errors.
     set_log_level(LogLevel::Warn);
-    let node_name = NodeName::new(name).map_err(|e| IpcError::BadName(format!("node name {name:?}: {e:?}")))?;
+    let node_name =
+        NodeName::new(name).map_err(|e| IpcError::BadName(format!("node name {name:?}: {e:?}")))?;
     NodeBuilder::new()
         .name(&node_name)
         .create::<Svc>()

@@ -21,7 +21,10 @@ pub fn draw(path: &Path, report: &Value) -> Result<(), Box<dyn std::error::Error
     // Top view of the tip path.
     let des: Vec<(f64, f64)> = path_pts.iter().map(|p| (num(&p[1]), num(&p[2]))).collect();
     let act: Vec<(f64, f64)> = path_pts.iter().map(|p| (num(&p[3]), num(&p[4]))).collect();
-    let pts = des.iter().chain(&act).filter(|p| p.0.is_finite() && p.1.is_finite());
+    let pts = des
+        .iter()
+        .chain(&act)
+        .filter(|p| p.0.is_finite() && p.1.is_finite());
     let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
     for p in pts {
         x0 = x0.min(p.0);
@@ -41,7 +44,11 @@ pub fn draw(path: &Path, report: &Value) -> Result<(), Box<dyn std::error::Error
         .x_label_area_size(40)
         .y_label_area_size(55)
         .build_cartesian_2d(cx - half..cx + half, cy - half..cy + half)?;
-    chart.configure_mesh().x_desc("x (mm)").y_desc("y (mm)").draw()?;
+    chart
+        .configure_mesh()
+        .x_desc("x (mm)")
+        .y_desc("y (mm)")
+        .draw()?;
     chart
         .draw_series(LineSeries::new(des.iter().copied(), BLUE.stroke_width(2)))?
         .label("desired")
@@ -58,8 +65,16 @@ pub fn draw(path: &Path, report: &Value) -> Result<(), Box<dyn std::error::Error
 
     // Tensions over time: commanded (thin) and actual (thick) per tendon.
     let n = report["tendons"].as_u64().unwrap_or(0) as usize;
-    let t_max = tensions.last().map(|r| num(&r[0])).filter(|t| t.is_finite()).unwrap_or(1.0);
-    let t_min = tensions.first().map(|r| num(&r[0])).filter(|t| t.is_finite()).unwrap_or(0.0);
+    let t_max = tensions
+        .last()
+        .map(|r| num(&r[0]))
+        .filter(|t| t.is_finite())
+        .unwrap_or(1.0);
+    let t_min = tensions
+        .first()
+        .map(|r| num(&r[0]))
+        .filter(|t| t.is_finite())
+        .unwrap_or(0.0);
     let mut f_max: f64 = 1.0;
     for r in tensions {
         for k in 0..n {
@@ -67,12 +82,19 @@ pub fn draw(path: &Path, report: &Value) -> Result<(), Box<dyn std::error::Error
         }
     }
     let mut chart = ChartBuilder::on(&right)
-        .caption("tendon tensions (thin: commanded, thick: actual)", ("sans-serif", 22))
+        .caption(
+            "tendon tensions (thin: commanded, thick: actual)",
+            ("sans-serif", 22),
+        )
         .margin(15)
         .x_label_area_size(40)
         .y_label_area_size(55)
         .build_cartesian_2d(t_min..t_max.max(t_min + 1e-3), 0.0..f_max * 1.05)?;
-    chart.configure_mesh().x_desc("time (s)").y_desc("tension (N)").draw()?;
+    chart
+        .configure_mesh()
+        .x_desc("time (s)")
+        .y_desc("tension (N)")
+        .draw()?;
     for k in 0..n {
         let color = Palette99::pick(k).to_rgba();
         chart.draw_series(LineSeries::new(
@@ -85,7 +107,9 @@ pub fn draw(path: &Path, report: &Value) -> Result<(), Box<dyn std::error::Error
                 color.stroke_width(3),
             ))?
             .label(format!("tendon {k}"))
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(3)));
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(3))
+            });
     }
     chart
         .configure_series_labels()
