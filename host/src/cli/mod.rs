@@ -11,6 +11,7 @@ pub mod generate;
 mod planner;
 mod plant;
 mod sim;
+pub mod train;
 mod workspace;
 
 /// Learn and run inverse kinematics of tendon-driven continuum robots.
@@ -44,6 +45,8 @@ enum Command {
     Plant(plant::PlantArgs),
     /// Launch planner, controller and plant; inject faults; write a report.
     Sim(sim::SimArgs),
+    /// Train a cascade-correlation IK net and export it as .tnet.
+    Train(train::TrainArgs),
 }
 
 /// Parse `std::env::args` and run the chosen subcommand.
@@ -59,5 +62,6 @@ pub fn run() -> anyhow::Result<()> {
         Some(Command::Controller(a)) => controller::run(a),
         Some(Command::Plant(a)) => plant::run(a),
         Some(Command::Sim(a)) => sim::run(a),
+        Some(Command::Train(a)) => train::run(a),
     }
 }

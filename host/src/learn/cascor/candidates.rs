@@ -91,6 +91,9 @@ pub struct Context<'a> {
     pub params: QuickpropParams,
     /// Added to the sigmoid derivative where it scales an error (Fahlman's offset).
     pub prime_offset: f64,
+    /// Pattern count in the ε scaling ε / (patterns × fan-in): the full training
+    /// set even when candidates see a subset, so the step does not change with it.
+    pub patterns: usize,
 }
 
 /// A trained candidate.
@@ -181,7 +184,12 @@ pub fn train_candidate(ctx: &Context<'_>, objective: Objective, seed: u64) -> Ca
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut w = DVector::from_fn(m, |_, _| rng.random_range(-1.0..=1.0));
     let p = ctx.params;
-    let mut qp = Quickprop::new(m, p.epsilon / (n as f64 * m as f64), p.mu, p.decay);
+    let mut qp = Quickprop::new(
+        m,
+        p.epsilon / (ctx.patterns.max(1) as f64 * m as f64),
+        p.mu,
+        p.decay,
+    );
     let mut patience = Patience::new(p.patience, p.threshold, false);
     let mut values = DVector::zeros(n);
     let mut g_v = DVector::zeros(n);
@@ -278,6 +286,7 @@ mod tests {
                 max_epochs: 10,
             },
             prime_offset: 0.0, // the true gradient; the offset deliberately biases it
+            patterns: 60,
         };
         let w = DVector::from_vec(vec![0.3, -0.8, 0.5, 0.9, -0.2]);
         let (mut v, mut gv, mut g) = (DVector::zeros(60), DVector::zeros(60), DVector::zeros(5));
@@ -346,6 +355,7 @@ mod tests {
                 max_epochs: 1,
             },
             prime_offset: 0.0,
+            patterns: 80,
         };
         let v = DVector::from_fn(80, |r, _| (3.0 * f[(r, 1)] + f[(r, 2)]).tanh());
         let s = error_reduction(&ctx, &v);
@@ -383,6 +393,7 @@ mod tests {
                 max_epochs: 50,
             },
             prime_offset: 0.1,
+            patterns: 200,
         };
         let objs = [Objective::Covariance, Objective::Cascade2];
         let one = rayon::ThreadPoolBuilder::new()

@@ -9,7 +9,12 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
 use serde::{Deserialize, Serialize};
 
-use super::candidates::{train_pool, Candidate, Context, Objective, Projector};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+use super::candidates::{
+    candidate_seed, error_reduction, train_pool, Candidate, Context, Objective, Projector,
+};
 use super::net::{hidden_activation, logistic, CascadeNet, OutputKind};
 use super::quickprop::{Patience, Quickprop, QuickpropParams};
 use crate::learn::LearnError;
@@ -75,6 +80,9 @@ pub struct CascorOptions {
     /// Hidden units grown by every output configuration before validation picks one
     /// (only when more than one configuration is allowed).
     pub pilot_units: usize,
+    /// Train candidates on a fixed random subset of this many training rows
+    /// (re-drawn per unit; 0 = all rows). Installation and outputs use all rows.
+    pub candidate_patterns: usize,
     /// Show a progress bar on stderr.
     pub progress: bool,
 }
@@ -109,6 +117,7 @@ impl Default for CascorOptions {
             valid_patience: 8,
             target_rmse: 0.0,
             pilot_units: 3,
+            candidate_patterns: 0,
             progress: true,
         }
     }
@@ -347,29 +356,82 @@ impl State {
     /// Candidate phase + installation + output phase.
     fn grow(&mut self, d: &Data<'_>) -> Result<UnitLog, LearnError> {
         let err = self.error_prime(d.y, d.opts.output_prime_offset);
-        let mean = err.row_mean();
-        let e_centred = DMatrix::from_fn(err.nrows(), err.ncols(), |r, c| err[(r, c)] - mean[c]);
         let proj = Projector::new(&self.gram).ok_or_else(|| {
             LearnError::Numerical("feature Gram matrix is not positive definite".into())
         })?;
         let e_perp = proj.project_off(&self.f, &err);
-        let ctx = Context {
-            f: &self.f,
-            sse_centred: e_centred.norm_squared().max(f64::MIN_POSITIVE),
-            e_centred: &e_centred,
-            sse_perp: e_perp.norm_squared().max(f64::MIN_POSITIVE),
-            e_perp: &e_perp,
-            proj: &proj,
-            params: d.opts.candidate,
-            prime_offset: d.opts.candidate_prime_offset,
-        };
         let objectives: &[Objective] = match d.opts.objective {
             ObjectiveChoice::Covariance => &[Objective::Covariance],
             ObjectiveChoice::Cascade2 => &[Objective::Cascade2],
             ObjectiveChoice::Mixed => &[Objective::Covariance, Objective::Cascade2],
         };
         let unit = self.hidden.len();
-        let pool = train_pool(&ctx, objectives, d.opts.pool.max(1), d.seed, unit);
+        let n = self.f.nrows();
+        let k = d.opts.candidate_patterns;
+        // Rows the candidates train on: all, or a seeded subset drawn per unit.
+        let rows: Option<Vec<usize>> = (k > 0 && k < n).then(|| {
+            let mut rng = ChaCha8Rng::seed_from_u64(candidate_seed(d.seed, unit, usize::MAX));
+            let mut idx = rand::seq::index::sample(&mut rng, n, k).into_vec();
+            idx.sort_unstable();
+            idx
+        });
+        let (f_c, err_c) = match &rows {
+            Some(r) => (self.f.select_rows(r), err.select_rows(r)),
+            None => (self.f.clone(), err.clone()),
+        };
+        // Project on the rows the candidates see: a residual that is not exactly
+        // orthogonal to their span lets a candidate score by copying a feature.
+        let (proj_c, e_perp_c) = match &rows {
+            Some(_) => {
+                let p = Projector::new(&f_c.tr_mul(&f_c)).ok_or_else(|| {
+                    LearnError::Numerical("candidate Gram matrix is not positive definite".into())
+                })?;
+                let e = p.project_off(&f_c, &err_c);
+                (p, e)
+            }
+            None => (
+                Projector::new(&self.gram).ok_or_else(|| {
+                    LearnError::Numerical("feature Gram matrix is not positive definite".into())
+                })?,
+                e_perp.clone(),
+            ),
+        };
+        let mean = err_c.row_mean();
+        let e_centred =
+            DMatrix::from_fn(err_c.nrows(), err_c.ncols(), |r, c| err_c[(r, c)] - mean[c]);
+        let ctx = Context {
+            f: &f_c,
+            sse_centred: e_centred.norm_squared().max(f64::MIN_POSITIVE),
+            e_centred: &e_centred,
+            sse_perp: e_perp_c.norm_squared().max(f64::MIN_POSITIVE),
+            e_perp: &e_perp_c,
+            proj: &proj_c,
+            params: d.opts.candidate,
+            prime_offset: d.opts.candidate_prime_offset,
+            patterns: n,
+        };
+        let mut pool = train_pool(&ctx, objectives, d.opts.pool.max(1), d.seed, unit);
+        if rows.is_some() {
+            // Re-evaluate every candidate on all training rows.
+            let e_full = DMatrix::zeros(0, 0);
+            let full = Context {
+                f: &self.f,
+                e_centred: &e_full,
+                sse_centred: 1.0,
+                sse_perp: e_perp.norm_squared().max(f64::MIN_POSITIVE),
+                e_perp: &e_perp,
+                proj: &proj,
+                params: d.opts.candidate,
+                prime_offset: d.opts.candidate_prime_offset,
+                patterns: n,
+            };
+            for c in &mut pool {
+                let mut v = &self.f * DVector::from_column_slice(&c.weights);
+                v.apply(|x| *x = hidden_activation(*x));
+                c.reduction = error_reduction(&full, &v);
+                c.values = v;
+            }
+        }
         let best = self.pick(&pool, d);
         let cand = pool
             .into_iter()
