@@ -11,6 +11,8 @@ pub mod generate;
 mod planner;
 mod plant;
 mod sim;
+pub mod evaluate;
+pub mod ik;
 pub mod train;
 mod workspace;
 
@@ -47,6 +49,10 @@ enum Command {
     Sim(sim::SimArgs),
     /// Train a cascade-correlation IK net and export it as .tnet.
     Train(train::TrainArgs),
+    /// Tendon tensions for tip poses through a trained .tnet net (one or a CSV batch).
+    Ik(ik::IkArgs),
+    /// Tension RMSE, task-space tip error and inference time of a .tnet net.
+    Evaluate(evaluate::EvaluateArgs),
 }
 
 /// Parse `std::env::args` and run the chosen subcommand.
@@ -63,5 +69,7 @@ pub fn run() -> anyhow::Result<()> {
         Some(Command::Plant(a)) => plant::run(a),
         Some(Command::Sim(a)) => sim::run(a),
         Some(Command::Train(a)) => train::run(a),
+        Some(Command::Ik(a)) => ik::run(a),
+        Some(Command::Evaluate(a)) => evaluate::run(a),
     }
 }

@@ -107,14 +107,15 @@ pub struct TrainArgs {
     /// Candidate Quickprop: maximum growth factor μ.
     #[arg(long, default_value_t = 2.0)]
     pub cand_mu: f64,
-    /// Candidate Quickprop: ε (divided by patterns × candidate fan-in).
-    #[arg(long, default_value_t = 1.0)]
+    /// Candidate Quickprop: ε (divided by patterns × candidate fan-in). Fahlman's
+    /// 1.0 leaves candidates nearly untrained here (objectives are normalised); 1000 measured best.
+    #[arg(long, default_value_t = 1000.0)]
     pub cand_epsilon: f64,
     /// Candidate Quickprop: patience (epochs).
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = 25)]
     pub cand_patience: usize,
     /// Candidate Quickprop: relative change threshold.
-    #[arg(long, default_value_t = 0.03)]
+    #[arg(long, default_value_t = 0.01)]
     pub cand_threshold: f64,
     /// Candidate Quickprop: epoch cap per candidate.
     #[arg(long, default_value_t = 1000)]
@@ -135,7 +136,7 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = 3)]
     pub pilot_units: usize,
     /// Candidates train on a seeded random subset of this many training rows per unit (0 = all).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 3000)]
     pub cand_patterns: usize,
     /// Worker threads (default: all cores).
     #[arg(long)]
