@@ -425,23 +425,34 @@ impl Comparison {
         self.entries.iter().find(|e| e.name == REFERENCE)
     }
 
-    /// Every (baseline, metric) where a baseline is strictly better than
-    /// cascade correlation, as sentences for the report.
+    /// For each baseline that is strictly better than cascade correlation on
+    /// some column (at the precision the table shows), one sentence listing
+    /// those columns with both values.
     pub fn beats(&self) -> Vec<String> {
         let Some(r) = self.reference() else {
             return Vec::new();
         };
+        let cols = columns();
+        let round = |v: f64, d: usize| (v * 10f64.powi(d as i32)).round();
         let mut v = Vec::new();
-        for c in columns() {
-            let rv = (c.get)(r);
-            for e in self.entries.iter().filter(|e| e.name != REFERENCE) {
-                let ev = (c.get)(e);
-                if ev.is_finite() && (ev < rv || !rv.is_finite()) {
-                    v.push(format!(
-                        "{} beats {REFERENCE} on {}: {:.*} vs {:.*}",
-                        e.name, c.header, c.digits, ev, c.digits, rv
-                    ));
-                }
+        for e in self.entries.iter().filter(|e| e.name != REFERENCE) {
+            let wins: Vec<String> = cols
+                .iter()
+                .filter_map(|c| {
+                    let (ev, rv) = ((c.get)(e), (c.get)(r));
+                    let better = ev.is_finite()
+                        && (!rv.is_finite() || round(ev, c.digits) < round(rv, c.digits));
+                    better.then(|| {
+                        format!("{} ({:.*} vs {:.*})", c.header, c.digits, ev, c.digits, rv)
+                    })
+                })
+                .collect();
+            if !wins.is_empty() {
+                v.push(format!(
+                    "{} beats {REFERENCE} on {}",
+                    e.name,
+                    wins.join(", ")
+                ));
             }
         }
         v
@@ -623,5 +634,89 @@ fn csv_field(s: &str) -> String {
         format!("\"{}\"", s.replace('"', "\"\""))
     } else {
         s.to_string()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn entry(name: &str, test_rmse: f64, tip: f64) -> Entry {
+        let mut test = SplitMetrics {
+            samples: 10,
+            tension_rmse_norm100: test_rmse,
+            tension_rmse_newton: test_rmse / 10.0,
+            ..SplitMetrics::default()
+        };
+        test.position_mm.mean = tip;
+        Entry {
+            name: name.into(),
+            hyper: "h=1".into(),
+            parameters: 10,
+            train_seconds: 1.0,
+            infer_us: 1.0,
+            train: test.clone(),
+            train_task_rows: 10,
+            test,
+        }
+    }
+
+    fn table(entries: Vec<Entry>) -> Comparison {
+        Comparison {
+            robot: "r".into(),
+            sizes: (80, 10, 10),
+            options: CompareOptions::default(),
+            entries,
+        }
+    }
+
+    #[test]
+    fn table_says_where_a_baseline_beats_cascade_correlation() {
+        let c = table(vec![entry(REFERENCE, 0.5, 1.0), entry("ELM", 0.2, 2.0)]);
+        let beats = c.beats();
+        assert_eq!(beats.len(), 1, "{beats:?}");
+        assert!(
+            beats[0].starts_with("ELM beats Cascade correlation on"),
+            "{beats:?}"
+        );
+        assert!(
+            beats[0].contains("RMSE×100 test (0.200 vs 0.500)"),
+            "{beats:?}"
+        );
+        assert!(!beats[0].contains("tip mean mm ("), "{beats:?}");
+        let md = c.to_markdown();
+        assert!(md.contains("## Where a baseline beats Cascade correlation"));
+        assert!(md.contains("| ELM | **0.200** | **0.200** |"), "{md}");
+    }
+
+    #[test]
+    fn table_says_when_no_baseline_beats_cascade_correlation() {
+        let c = table(vec![entry(REFERENCE, 0.1, 0.1), entry("KNN", 0.2, 2.0)]);
+        assert!(c.beats().is_empty());
+        assert!(c.to_markdown().contains("Nowhere"));
+    }
+
+    #[test]
+    fn csv_quotes_fields_with_commas() {
+        let c = table(vec![entry("KNN", 0.2, 2.0)]);
+        let mut e = c.entries[0].clone();
+        e.hyper = "k=5, weights=distance".into();
+        let c = table(vec![e]);
+        assert!(c
+            .to_csv()
+            .lines()
+            .nth(1)
+            .unwrap()
+            .ends_with(",\"k=5, weights=distance\""));
+    }
+
+    #[test]
+    fn subsample_is_sorted_distinct_and_seeded() {
+        let a = subsample(1000, 50, 3);
+        assert_eq!(a.len(), 50);
+        assert!(a.windows(2).all(|w| w[0] < w[1]));
+        assert_eq!(a, subsample(1000, 50, 3));
+        assert_ne!(a, subsample(1000, 50, 4));
+        assert_eq!(subsample(10, 0, 1), (0..10).collect::<Vec<_>>());
     }
 }

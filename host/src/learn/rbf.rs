@@ -8,6 +8,7 @@
 
 use nalgebra::DMatrix;
 use rand::seq::index::sample;
+use rand::Rng;
 use rayon::prelude::*;
 
 use super::linalg::{
@@ -21,8 +22,8 @@ const KMEANS_ROWS: usize = 6000;
 /// Lloyd iterations of k-means.
 const KMEANS_ITERS: usize = 15;
 
-/// k-means (Lloyd) from `k` distinct sampled rows; returns `k × d` centres
-/// row-major. Empty clusters keep their previous centre.
+/// k-means (Lloyd) from k-means++ seeds; returns `k × d` centres row-major.
+/// Empty clusters keep their previous centre.
 pub fn kmeans(x: &DMatrix<f64>, k: usize, seed: u64) -> Vec<f64> {
     let n = x.nrows();
     let d = x.ncols();
@@ -40,10 +41,7 @@ pub fn kmeans(x: &DMatrix<f64>, k: usize, seed: u64) -> Vec<f64> {
         .collect();
     let np = rows.len();
     let k = k.min(np);
-    let mut c: Vec<f64> = sample(&mut r, np, k)
-        .into_iter()
-        .flat_map(|i| pts[i * d..(i + 1) * d].to_vec())
-        .collect();
+    let mut c = kmeans_plus_plus(&pts, d, k, &mut r);
     for _ in 0..KMEANS_ITERS {
         let assign: Vec<usize> = (0..np)
             .into_par_iter()
@@ -64,6 +62,41 @@ pub fn kmeans(x: &DMatrix<f64>, k: usize, seed: u64) -> Vec<f64> {
                 }
             }
         }
+    }
+    c
+}
+
+/// k-means++ seeding (Arthur & Vassilvitskii 2007): each next centre drawn
+/// with probability ∝ squared distance to the nearest centre so far, which
+/// spreads the centres over the data (random seeding leaves clumps and holes).
+fn kmeans_plus_plus(pts: &[f64], d: usize, k: usize, r: &mut impl Rng) -> Vec<f64> {
+    let np = pts.len() / d;
+    let mut c = Vec::with_capacity(k * d);
+    let first = r.random_range(0..np);
+    c.extend_from_slice(&pts[first * d..(first + 1) * d]);
+    let mut d2: Vec<f64> = pts.par_chunks(d).map(|p| dist2(p, &c[..d])).collect();
+    while c.len() < k * d {
+        let total: f64 = d2.iter().sum();
+        let pick = if total > 0.0 {
+            let mut t = r.random::<f64>() * total;
+            let mut pick = np - 1;
+            for (i, v) in d2.iter().enumerate() {
+                if t < *v {
+                    pick = i;
+                    break;
+                }
+                t -= v;
+            }
+            pick
+        } else {
+            // Fewer distinct points than centres: repeat one.
+            r.random_range(0..np)
+        };
+        let new = pts[pick * d..(pick + 1) * d].to_vec();
+        d2.par_iter_mut()
+            .zip(pts.par_chunks(d))
+            .for_each(|(v, p)| *v = v.min(dist2(p, &new)));
+        c.extend_from_slice(&new);
     }
     c
 }

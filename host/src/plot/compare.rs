@@ -37,7 +37,7 @@ fn log_bounds(values: impl Iterator<Item = f64>) -> (f64, f64) {
     }
     (
         10f64.powf(lo.log10().floor()),
-        10f64.powf((hi * 3.0).log10().ceil()),
+        10f64.powf((hi * 1.8).log10().ceil()),
     )
 }
 
