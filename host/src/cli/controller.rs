@@ -16,6 +16,15 @@ pub enum OnOff {
     Off,
 }
 
+/// Where the integral correction runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum CorrectionMode {
+    /// Host side, arc-consistent (default).
+    Arc,
+    /// The firmware's position-only integral.
+    Fw,
+}
+
 /// Loop and tuning options (shared with `tendril sim`).
 #[derive(Args, Clone, Debug)]
 pub struct LoopOpts {
@@ -35,6 +44,11 @@ pub struct LoopOpts {
     /// Integral correction of the measured tip error.
     #[arg(long, value_enum, default_value_t = OnOff::On)]
     pub correction: OnOff,
+    /// Where the correction runs: `arc` = host side, lateral integral applied
+    /// as a constant-curvature bend (the corrected setpoint stays a
+    /// reachable pose); `fw` = the firmware's position-only integral.
+    #[arg(long, value_enum, default_value_t = CorrectionMode::Arc)]
+    pub correction_mode: CorrectionMode,
     /// Integral gain of the correction, 1/s.
     #[arg(long, default_value_t = 10.0)]
     pub ki: f64,
@@ -66,6 +80,14 @@ impl LoopOpts {
                 }
             ),
             format!("--ki={}", self.ki),
+            format!(
+                "--correction-mode={}",
+                if self.correction_mode == CorrectionMode::Arc {
+                    "arc"
+                } else {
+                    "fw"
+                }
+            ),
             format!("--correction-limit-mm={}", self.correction_limit_mm),
             format!("--lead-ms={}", self.lead_ms),
             format!("--slew={}", self.slew),
@@ -91,6 +113,7 @@ impl LoopOpts {
             0.0
         };
         cfg.correction_limit = self.correction_limit_mm * 1e-3;
+        cfg.firmware_integral = self.correction_mode == CorrectionMode::Fw;
         cfg.lead = self.lead_ms * 1e-3;
         cfg.slew_rate = self.slew;
     }

@@ -56,6 +56,10 @@ pub struct ControllerConfig {
     pub watchdog_periods: f64,
     /// Integral gain of the outer loop (1/s); 0 = IK alone.
     pub ki: f64,
+    /// Where the integral correction runs: `true` = the firmware's
+    /// position-only loop, `false` = host-side arc-consistent correction
+    /// ([`super::correction`]) with the firmware loop off.
+    pub firmware_integral: bool,
     /// Bound on the integral correction per axis (m).
     pub correction_limit: f64,
     /// Motor-lag lead (s): advance the setpoint by velocity · lead.
@@ -85,6 +89,7 @@ impl ControllerConfig {
             realtime: false,
             watchdog_periods: 2.5,
             ki: 0.0,
+            firmware_integral: false,
             correction_limit: 0.01,
             lead: 0.021,
             slew_rate: 200.0,
@@ -195,7 +200,7 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
     fw.max_dt_ns = 5 * period_ns;
     fw.box_margin = cfg.box_margin as f32;
     fw.safe_hold = SafeHold::Freeze;
-    if cfg.ki > 0.0 {
+    if cfg.ki > 0.0 && cfg.firmware_integral {
         fw.integral = IntegralConfig {
             ki: cfg.ki as f32,
             limit: cfg.correction_limit as f32,
@@ -235,6 +240,10 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
     let mut in_hold = false;
     let mut cmd_seq = 0u64;
     let mut overran = false;
+    let arc_mode = cfg.ki > 0.0 && !cfg.firmware_integral;
+    let mut integral = super::correction::ArcIntegral::default();
+    let mut last_good_sp: Option<Setpoint> = None;
+    let length = robot.length;
     let mut last_flush = start;
 
     loop {
@@ -331,6 +340,19 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
         }
         if stale {
             stats.plant_stale_cycles += 1;
+            extra |= command_status::PLANT_STALE;
+        }
+
+        // Host-side arc-consistent correction (see `correction`): move the
+        // setpoint handed to the firmware along the arc by the integral.
+        if arc_mode {
+            if let Some(sp) = fw_sp.as_mut() {
+                if sp.pose.iter().all(|v| v.is_finite()) {
+                    let pose = sp.pose.map(|v| v as f64);
+                    sp.pose =
+                        super::correction::arc_shift(&pose, integral.c, length).map(|v| v as f32);
+                }
+            }
         }
 
         let input = StepInput {
@@ -341,6 +363,37 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
         let (next, out) = control_step(&fw, slots.active(), &state, &input);
         state = next;
         let status = out.status;
+        if status.contains(Status::NEW_SETPOINT) {
+            last_good_sp = last_sp;
+        }
+        // Integrate only while tracking an accepted setpoint with fresh
+        // feedback; a rejected or injected setpoint never reaches the integral.
+        let tracking = !status.intersects(
+            Status::SAFE_HOLD
+                | Status::NO_SETPOINT
+                | Status::OUT_OF_WORKSPACE
+                | Status::SETPOINT_REJECTED,
+        ) && !stale;
+        if arc_mode && tracking {
+            if let (Some(s), Some(f)) = (last_good_sp, &fw_fb) {
+                let mut desired = [s.pose[0] as f64, s.pose[1] as f64];
+                if s.flags & setpoint_flags::HAS_VELOCITY != 0 {
+                    desired[0] += s.velocity[0] as f64 * cfg.lead;
+                    desired[1] += s.velocity[1] as f64 * cfg.lead;
+                }
+                let measured = [f.tip_position[0] as f64, f.tip_position[1] as f64];
+                integral.update(
+                    desired,
+                    measured,
+                    cfg.ki,
+                    period_ns as f64 * 1e-9,
+                    cfg.correction_limit,
+                );
+            }
+        }
+        if arc_mode && integral.c != [0.0, 0.0] {
+            extra |= command_status::CORRECTION;
+        }
         if status.contains(Status::NONFINITE_SETPOINT) {
             stats.rejected_nonfinite += 1;
             log::warn!("controller: setpoint with NaN/∞ rejected");

@@ -8,6 +8,7 @@
 
 pub mod clock;
 pub mod controller;
+pub mod correction;
 pub mod fixture;
 pub mod planner;
 pub mod plant;

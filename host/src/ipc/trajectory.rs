@@ -80,10 +80,10 @@ impl<'a> Lifter<'a> {
             let (_, px) = self.tip(&(bend + Vector2::new(h, 0.0)))?;
             let (_, py) = self.tip(&(bend + Vector2::new(0.0, h)))?;
             let j = Matrix2::from_columns(&[(px - p) / h, (py - p) / h]);
-            let step = j
-                .try_inverse()
-                .map(|ji| ji * r)
-                .ok_or_else(|| IpcError::Other(format!("tip position {xy:?} m: singular lift")))?;
+            // A singular Jacobian: the bend saturated every tendon it uses.
+            let Some(step) = j.try_inverse().map(|ji| ji * r) else {
+                break;
+            };
             // Damp big steps: the map is smooth but strongly nonlinear at large bends.
             let scale = (2.0 / step.norm().max(1e-12)).min(1.0);
             bend -= step * scale;

@@ -1,0 +1,174 @@
+//! Integral correction that keeps the corrected setpoint a pose the robot
+//! can actually take.
+//!
+//! Why: a bending continuum robot has two degrees of freedom, so its
+//! reachable poses form a surface in the 7-number pose space, and an IK net
+//! trained on reachable poses only is unconstrained off that surface.
+//! Shifting the position of a setpoint while keeping its orientation (what a
+//! position-only integral does) lands off the surface; a net trained on
+//! exact statics data can then return nonsense (measured: all tensions
+//! negative → clamped to zero, tip sagging 24 mm off a 30 mm circle). Here
+//! the lateral correction `c` is applied as a change of a constant-curvature
+//! arc: the bend angle θ follows the lateral distance d through
+//! d = L (1 − cos θ)/θ, the tip orientation is rotated by the change of
+//! (θ, bending plane) and the height by the change of L sin θ / θ. Exact for
+//! an inextensible constant-curvature arc; a first-order model elsewhere,
+//! which is all a slowly integrated correction needs.
+
+/// Bend angle θ (rad) of a constant-curvature arc of length `l` whose tip
+/// lies at lateral distance `d` from the axis (Newton on d = L(1−cos θ)/θ).
+pub fn arc_angle(d: f64, l: f64) -> f64 {
+    let target = (d / l).clamp(0.0, 0.72); // 0.72 ≈ max of (1−cos θ)/θ
+    let mut th = 2.0 * target; // small-angle start: d ≈ Lθ/2
+    for _ in 0..30 {
+        if th < 1e-9 {
+            return 2.0 * target;
+        }
+        let f = (1.0 - th.cos()) / th - target;
+        let df = (th * th.sin() - (1.0 - th.cos())) / (th * th);
+        if df.abs() < 1e-12 {
+            break;
+        }
+        let next = (th - f / df).clamp(0.0, 2.3);
+        if (next - th).abs() < 1e-14 {
+            th = next;
+            break;
+        }
+        th = next;
+    }
+    th
+}
+
+/// sin θ / θ, finite at 0.
+fn sinc(th: f64) -> f64 {
+    if th.abs() < 1e-8 {
+        1.0 - th * th / 6.0
+    } else {
+        th.sin() / th
+    }
+}
+
+/// Hamilton product a ⊗ b of (w, x, y, z) quaternions.
+fn qmul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+    [
+        a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+        a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+        a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+        a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0],
+    ]
+}
+
+/// Orientation of an arc bent by θ toward direction φ (rotation about the
+/// axis z × (cos φ, sin φ, 0)).
+fn arc_rotation(th: f64, phi: f64) -> [f64; 4] {
+    let (s, c) = (th / 2.0).sin_cos();
+    [c, -phi.sin() * s, phi.cos() * s, 0.0]
+}
+
+/// The pose `pose` (px, py, pz, qw, qx, qy, qz) moved laterally by
+/// `c = (cx, cy)` (m) as a constant-curvature arc of length `l` would move.
+pub fn arc_shift(pose: &[f64; 7], c: [f64; 2], l: f64) -> [f64; 7] {
+    let (x0, y0) = (pose[0], pose[1]);
+    let (x1, y1) = (x0 + c[0], y0 + c[1]);
+    let (d0, d1) = (x0.hypot(y0), x1.hypot(y1));
+    let (th0, th1) = (arc_angle(d0, l), arc_angle(d1, l));
+    let (phi0, phi1) = (y0.atan2(x0), y1.atan2(x1));
+    let r0 = arc_rotation(th0, phi0);
+    let r1 = arc_rotation(th1, phi1);
+    let r0_inv = [r0[0], -r0[1], -r0[2], -r0[3]];
+    let q0 = [pose[3], pose[4], pose[5], pose[6]];
+    let mut q = qmul(qmul(r1, r0_inv), q0);
+    let n = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+    for v in &mut q {
+        *v /= n;
+    }
+    if q[0] < 0.0 {
+        for v in &mut q {
+            *v = -*v;
+        }
+    }
+    let z1 = pose[2] + l * (sinc(th1) - sinc(th0));
+    [x1, y1, z1, q[0], q[1], q[2], q[3]]
+}
+
+/// The integral outer loop on the lateral tip error.
+#[derive(Clone, Debug, Default)]
+pub struct ArcIntegral {
+    /// Correction (m), base frame x and y.
+    pub c: [f64; 2],
+}
+
+impl ArcIntegral {
+    /// Integrate `ki · (desired − measured) · dt` on x and y, each clamped to ±`limit`.
+    pub fn update(&mut self, desired: [f64; 2], measured: [f64; 2], ki: f64, dt: f64, limit: f64) {
+        for k in 0..2 {
+            let e = desired[k] - measured[k];
+            if e.is_finite() {
+                self.c[k] = (self.c[k] + ki * e * dt).clamp(-limit, limit);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Exact inextensible constant-curvature arc pose bent by θ toward φ.
+    fn arc_pose(th: f64, phi: f64, l: f64) -> [f64; 7] {
+        let d = l * (1.0 - th.cos()) / th;
+        let q = arc_rotation(th, phi);
+        [
+            d * phi.cos(),
+            d * phi.sin(),
+            l * th.sin() / th,
+            q[0],
+            q[1],
+            q[2],
+            q[3],
+        ]
+    }
+
+    #[test]
+    fn arc_angle_inverts_the_lateral_distance() {
+        for th in [0.01, 0.3, 0.9, 1.5] {
+            let d = 0.4 * (1.0 - f64::cos(th)) / th;
+            assert!((arc_angle(d, 0.4) - th).abs() < 1e-10);
+        }
+    }
+
+    #[test]
+    fn arc_rotation_bends_toward_plus_x_with_positive_qy() {
+        // DESIGN §2: pulling tendon 0 bends the tip toward +x with qy > 0.
+        let p = arc_pose(0.2, 0.0, 0.4);
+        assert!(p[0] > 0.0 && p[5] > 0.0);
+    }
+
+    #[test]
+    fn shifting_an_exact_arc_gives_the_exact_arc_at_the_new_position() {
+        let l = 0.4;
+        let from = arc_pose(0.25, 0.3, l);
+        let to = arc_pose(0.31, -0.4, l);
+        let shifted = arc_shift(&from, [to[0] - from[0], to[1] - from[1]], l);
+        for k in 0..7 {
+            assert!(
+                (shifted[k] - to[k]).abs() < 1e-9,
+                "component {k}: {} vs {}",
+                shifted[k],
+                to[k]
+            );
+        }
+    }
+
+    #[test]
+    fn zero_shift_is_the_identity_and_integral_clamps() {
+        let p = arc_pose(0.1, 1.0, 0.4);
+        let s = arc_shift(&p, [0.0, 0.0], 0.4);
+        for k in 0..7 {
+            assert!((s[k] - p[k]).abs() < 1e-12);
+        }
+        let mut i = ArcIntegral::default();
+        i.update([1.0, 0.0], [0.0, 0.0], 10.0, 1.0, 0.005);
+        assert_eq!(i.c, [0.005, 0.0]);
+    }
+}
