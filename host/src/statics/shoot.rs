@@ -60,7 +60,8 @@ pub struct Solution {
     pub residual: f64,
     /// Newton iterations used.
     pub iterations: usize,
-    /// Integrations (rod passes) used, Jacobian columns included.
+    /// Rod passes used (a finite-difference Jacobian adds seven passes on a
+    /// half-resolution grid).
     pub integrations: usize,
     /// Warm start for a neighbouring solve.
     pub warm: WarmStart,
@@ -244,6 +245,7 @@ fn base_state(rod: &Rod, x: &Vector6<f64>) -> RodState {
 }
 
 /// One shooting problem: the rod with its tensions and tip load.
+#[derive(Clone, Copy)]
 struct Shooting<'a> {
     rod: &'a Rod,
     steps: usize,
@@ -266,13 +268,22 @@ impl Shooting<'_> {
         self.rod.tip_residual(&tip, &self.f_ext, &self.m_ext)
     }
 
-    fn jacobian(&self, x: &Vector6<f64>, r: &Vector6<f64>) -> Matrix6<f64> {
+    /// Forward-difference Jacobian of the residual at `x`. It is built on
+    /// half the RK4 steps: Newton only needs a good approximation of the
+    /// Jacobian (the residual itself stays on the full grid, so the answer
+    /// does not change), and this halves the cost of every refresh.
+    fn jacobian(&self, x: &Vector6<f64>) -> Matrix6<f64> {
+        let coarse = Shooting {
+            steps: self.steps.div_ceil(2),
+            ..*self
+        };
+        let r = coarse.residual(x);
         let mut j = Matrix6::zeros();
         for c in 0..6 {
             let h = fd_step(x, c);
             let mut xp = *x;
             xp[c] += h;
-            j.set_column(c, &((self.residual(&xp) - r) / h));
+            j.set_column(c, &((coarse.residual(&xp) - r) / h));
         }
         j
     }
@@ -290,8 +301,8 @@ impl Shooting<'_> {
         let (mut jac, mut fresh) = match j0 {
             Some(j) => (j, false),
             None => {
-                integrations += 6;
-                (self.jacobian(&x, &r), true)
+                integrations += 7;
+                (self.jacobian(&x), true)
             }
         };
         let mut norm = r.norm();
@@ -332,8 +343,8 @@ impl Shooting<'_> {
                 if fresh {
                     return Err((norm, iter + 1, integrations));
                 }
-                jac = self.jacobian(&x, &r);
-                integrations += 6;
+                jac = self.jacobian(&x);
+                integrations += 7;
                 fresh = true;
             }
         }

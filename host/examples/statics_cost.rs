@@ -1,0 +1,36 @@
+//! A fixed workload of cold and warm statics solves, for instruction counts
+//! under `valgrind --tool=callgrind` (deterministic, unlike wall time on a
+//! shared machine): `cargo build --release -p tendril --example statics_cost`
+//! then `valgrind --tool=callgrind target/release/examples/statics_cost cold|warm`.
+
+use std::path::Path;
+
+use tendril::dataset::Sampler;
+use tendril::robot::Robot;
+use tendril::statics::{SolverSettings, Statics};
+
+fn main() -> anyhow::Result<()> {
+    let mode = std::env::args().nth(1).unwrap_or_else(|| "cold".into());
+    let robot = Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml"))?;
+    let statics = Statics::new(&robot, SolverSettings::default());
+    let cases = Sampler::Adjacent.draw(100, &robot.max_tensions(), 3);
+    let (mut solves, mut integrations) = (0usize, 0usize);
+    for t in &cases {
+        let first = statics.solve(t, None)?;
+        if mode == "warm" {
+            let mut next = t.clone();
+            let i = next.iter().position(|&x| x > 0.0).unwrap_or(0);
+            next[i] += if next[i] + 0.1 <= 10.0 { 0.1 } else { -0.1 };
+            let sol = statics.solve(&next, Some(&first.warm))?;
+            integrations += sol.integrations;
+        } else {
+            integrations += first.integrations;
+        }
+        solves += 1;
+    }
+    println!(
+        "{mode}: {solves} solves, {:.2} integrations per solve",
+        integrations as f64 / solves as f64
+    );
+    Ok(())
+}
