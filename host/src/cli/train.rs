@@ -192,6 +192,42 @@ impl TrainArgs {
     }
 }
 
+/// How to split the data: seed, held-out test fraction, validation fraction of the rest.
+#[derive(Clone, Copy, Debug)]
+pub struct SplitSpec {
+    /// Split and candidate seed.
+    pub seed: u64,
+    /// Held-out test fraction (0.03 by default).
+    pub test_fraction: f64,
+    /// Validation fraction carved from the training rows (0.1 by default).
+    pub valid_fraction: f64,
+}
+
+/// Where a training run writes.
+#[derive(Clone, Debug)]
+pub struct TrainPaths {
+    /// `.tnet` weight file.
+    pub out: PathBuf,
+    /// Training-log CSV.
+    pub log: PathBuf,
+    /// Learning-curve PNG.
+    pub plot: PathBuf,
+    /// Report JSON.
+    pub report: PathBuf,
+}
+
+impl TrainPaths {
+    /// `model.tnet` → `model.log.csv`, `model.curve.png`, `model.train.json` beside it.
+    pub fn beside(out: &Path) -> TrainPaths {
+        TrainPaths {
+            out: out.to_path_buf(),
+            log: sibling(out, ".log.csv"),
+            plot: sibling(out, ".curve.png"),
+            report: sibling(out, ".train.json"),
+        }
+    }
+}
+
 /// Everything a training run produced.
 pub struct Trained {
     /// The kept net (normalised units).
@@ -206,6 +242,7 @@ pub struct Trained {
 
 /// Train on `data` with `opts`, write the weight file, log CSV, report JSON and
 /// learning curve; the library entry point of `tendril train` (the main job uses it too).
+#[allow(clippy::too_many_arguments)] // the main job calls it with every path spelled out
 pub fn train_to_files(
     data: &Dataset,
     opts: &CascorOptions,
@@ -320,26 +357,32 @@ fn sibling(out: &Path, suffix: &str) -> PathBuf {
 pub fn run(a: TrainArgs) -> anyhow::Result<()> {
     let data = Dataset::read_csv(&a.data)?;
     let opts = a.options();
-    let log_path = a.log.clone().unwrap_or_else(|| sibling(&a.out, ".log.csv"));
-    let plot_path = a
-        .plot
-        .clone()
-        .unwrap_or_else(|| sibling(&a.out, ".curve.png"));
-    let report_path = a
-        .report
-        .clone()
-        .unwrap_or_else(|| sibling(&a.out, ".train.json"));
+    let mut paths = TrainPaths::beside(&a.out);
+    if let Some(p) = &a.log {
+        paths.log = p.clone();
+    }
+    if let Some(p) = &a.plot {
+        paths.plot = p.clone();
+    }
+    if let Some(p) = &a.report {
+        paths.report = p.clone();
+    }
+    let split = SplitSpec {
+        seed: a.seed,
+        test_fraction: a.test_fraction,
+        valid_fraction: a.valid_fraction,
+    };
     let go = || {
         train_to_files(
             &data,
             &opts,
-            a.seed,
-            a.test_fraction,
-            a.valid_fraction,
-            &a.out,
-            &log_path,
-            &plot_path,
-            &report_path,
+            split.seed,
+            split.test_fraction,
+            split.valid_fraction,
+            &paths.out,
+            &paths.log,
+            &paths.plot,
+            &paths.report,
         )
     };
     let t = match a.threads {
@@ -355,9 +398,9 @@ pub fn run(a: TrainArgs) -> anyhow::Result<()> {
         t.net.n_hidden(),
         t.report.seconds,
         t.test_rmse_norm100,
-        log_path.display(),
-        plot_path.display(),
-        report_path.display()
+        paths.log.display(),
+        paths.plot.display(),
+        paths.report.display()
     );
     Ok(())
 }

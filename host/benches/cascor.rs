@@ -1,0 +1,71 @@
+//! Cascade-correlation speed: f32 inference per query (the firmware's code
+//! path, via the host's decoded net) and a small training run. The full
+//! training figure (default dataset, 20,000 rows) is a `tendril train` wall
+//! time; BENCHMARKS.md gives the command.
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use nalgebra::DMatrix;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use tendril::learn::cascor::export::{decode, infer, to_bytes, Ranges};
+use tendril::learn::cascor::{train, CascadeNet, CascorOptions, OutputKind};
+
+fn random_net(hidden: usize) -> CascadeNet {
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    CascadeNet {
+        n_inputs: 7,
+        n_outputs: 4,
+        hidden: (0..hidden)
+            .map(|k| (0..8 + k).map(|_| rng.random_range(-1.0..1.0)).collect())
+            .collect(),
+        outputs: (0..4)
+            .map(|_| {
+                (0..8 + hidden)
+                    .map(|_| rng.random_range(-1.0..1.0))
+                    .collect()
+            })
+            .collect(),
+        output_kind: OutputKind::Linear,
+    }
+}
+
+fn inference(c: &mut Criterion) {
+    let ranges = Ranges {
+        input_lo: vec![-0.11, -0.11, 0.2, 0.9, -0.3, -0.3, -0.01],
+        input_hi: vec![0.16, 0.11, 0.4, 1.0, 0.3, 0.3, 0.01],
+        output_lo: vec![0.0; 4],
+        output_hi: vec![10.0; 4],
+    };
+    let pose = [0.03, -0.02, 0.37, 0.97, 0.05, 0.1, 0.001];
+    for hidden in [40, 64] {
+        let net = decode(&to_bytes(&random_net(hidden), &ranges).unwrap()).unwrap();
+        c.bench_function(&format!("cascor_infer_f32_{hidden}_hidden"), |b| {
+            b.iter(|| infer(&net, std::hint::black_box(&pose)))
+        });
+    }
+}
+
+fn training(c: &mut Criterion) {
+    let mut rng = ChaCha8Rng::seed_from_u64(2);
+    let n = 2000;
+    let x = DMatrix::from_fn(n, 2, |_, _| rng.random_range(0.0..1.0));
+    let y = DMatrix::from_fn(n, 1, |r, _| {
+        0.5 + 0.3 * (3.0f64 * x[(r, 0)]).sin() * (2.0f64 * x[(r, 1)]).cos()
+    });
+    let (vx, vy) = (x.rows(0, 200).into_owned(), y.rows(0, 200).into_owned());
+    let o = CascorOptions {
+        max_hidden: 8,
+        progress: false,
+        output_kinds: vec![OutputKind::Linear],
+        ..CascorOptions::default()
+    };
+    let mut g = c.benchmark_group("cascor_train");
+    g.sample_size(10);
+    g.bench_function("2000_rows_8_units", |b| {
+        b.iter(|| train(&x, &y, &vx, &vy, &o, 1).unwrap())
+    });
+    g.finish();
+}
+
+criterion_group!(benches, inference, training);
+criterion_main!(benches);
