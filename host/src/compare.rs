@@ -472,7 +472,9 @@ impl Comparison {
              Tension RMSE over all tendons (normalised units ×100 and newtons). Task-space error: \
              predicted tensions clamped to [0, τ_max] → Cosserat statics → tip, against the true tip; \
              test split in full, train split on a seeded subsample of {} rows. \
-             Inference time: single-row queries, mean over {} test rows. Best value per column in bold.\n\n",
+             Inference time: single-row queries, mean over {} test rows. Best value per column in bold. \
+             KNN (distance-weighted) and a deep tree reproduce their training rows by construction, \
+             so their train-split columns measure memorisation, not accuracy: judge on the test split.\n\n",
             self.robot,
             o.seed,
             self.entries.first().map_or(0, |e| e.train_task_rows),

@@ -25,6 +25,9 @@ pub struct LearnerBars {
 
 type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
+/// One bar series: legend label, colour, and the value it shows.
+type Series<'a> = (&'a str, RGBColor, fn(&LearnerBars) -> f64);
+
 /// Log-axis bounds covering every finite positive value with some headroom.
 fn log_bounds(values: impl Iterator<Item = f64>) -> (f64, f64) {
     let (lo, hi) = values
@@ -46,7 +49,7 @@ fn panel(
     rows: &[LearnerBars],
     caption: &str,
     y_desc: &str,
-    series: &[(&str, RGBColor, fn(&LearnerBars) -> f64)],
+    series: &[Series<'_>],
 ) -> DrawResult {
     let n = rows.len();
     let (lo, hi) = log_bounds(
