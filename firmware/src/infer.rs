@@ -1,8 +1,8 @@
 //! Cascade-correlation inference in `f32`: normalise the pose, run the
 //! cascade, de-normalise to newtons. One code path for host and MCU, so the
 //! two builds agree bit for bit (IEEE-754 `+`, `*`, `/` are exactly rounded
-//! everywhere, the summation order is fixed by this code, and `libm::expf` is
-//! plain Rust).
+//! everywhere, the summation order is fixed by this code, and the sigmoids'
+//! `exp` is `tendril_shared`'s own plain-`f32` polynomial, not a libm call).
 
 use tendril_shared::CascadeNet;
 
