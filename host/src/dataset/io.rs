@@ -25,8 +25,8 @@ pub struct Dataset {
 /// A dataset file that could not be read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum DatasetError {
-    /// I/O failure.
-    #[error("{}: {source}", path.display())]
+    /// I/O failure (the cause is the error's source, printed after the path).
+    #[error("{}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
