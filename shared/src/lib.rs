@@ -22,7 +22,6 @@ pub use net::{CascadeNet, Unit};
 pub use tnet::encode_to_vec;
 pub use tnet::{encode, encoded_len, Activation, Shape, TnetError, TnetView};
 
-
 /// `encode` into a fresh vector, for this crate's tests (no `std` feature needed).
 #[cfg(test)]
 fn encode_to_vec_for_tests(net: &TnetView<'_>) -> std::vec::Vec<u8> {

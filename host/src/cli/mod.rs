@@ -6,13 +6,13 @@ use clap::{Parser, Subcommand};
 pub mod common;
 mod compare;
 mod controller;
+pub mod evaluate;
 mod fk;
 pub mod generate;
+pub mod ik;
 mod planner;
 mod plant;
 mod sim;
-pub mod evaluate;
-pub mod ik;
 pub mod train;
 mod workspace;
 

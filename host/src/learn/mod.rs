@@ -13,4 +13,4 @@ pub mod mlp;
 pub mod rbf;
 pub mod tree;
 
-pub use learner::{Learner, LearnError, Split};
+pub use learner::{LearnError, Learner, Split};

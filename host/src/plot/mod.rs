@@ -2,8 +2,8 @@
 //! Figures are PNG (plotters' bitmap backend) with the bundled DejaVu Sans
 //! font, so drawing needs no system font library.
 
-pub mod learning_curve;
 pub mod compare;
+pub mod learning_curve;
 pub mod sim;
 
 use std::sync::Once;
