@@ -32,7 +32,7 @@ impl Default for SolverSettings {
     fn default() -> Self {
         SolverSettings {
             steps: 16,
-            tol: 1e-10,
+            tol: 5e-10,
             max_iter: 60,
         }
     }
