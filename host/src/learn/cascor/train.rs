@@ -740,3 +740,46 @@ fn log_unit(st: &State, row: &UnitLog) {
         row.seconds
     );
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The output phase's slopes Fᵀ·E′ (sigmoid-prime offset 0) must be the
+    /// gradient of ½‖outputs − y‖² with respect to the output weights, for
+    /// linear and sigmoid outputs: central differences of the loss itself.
+    #[test]
+    fn output_gradient_matches_finite_differences() {
+        let x = DMatrix::from_fn(40, 3, |r, c| ((r * 7 + c * 13) % 17) as f64 / 17.0);
+        let y = DMatrix::from_fn(40, 2, |r, c| ((r * 5 + c * 3) % 11) as f64 / 11.0);
+        for kind in [OutputKind::Linear, OutputKind::Sigmoid] {
+            let mut s = State::new(kind, OutputSolver::Quickprop, &x, &x, &y);
+            s.w = DMatrix::from_fn(s.w.nrows(), s.w.ncols(), |r, c| {
+                0.3 * ((r + 2 * c) as f64 + 0.5).sin()
+            });
+            let slopes = s.f.tr_mul(&s.error_prime(&y, 0.0));
+            let loss = |s: &State| 0.5 * (s.outputs(&s.f) - &y).norm_squared();
+            let h = 1e-6;
+            for i in 0..s.w.len() {
+                let w0 = s.w[i];
+                s.w[i] = w0 + h;
+                let plus = loss(&s);
+                s.w[i] = w0 - h;
+                let minus = loss(&s);
+                s.w[i] = w0;
+                let fd = (plus - minus) / (2.0 * h);
+                assert!(
+                    (fd - slopes[i]).abs() <= 1e-6 * fd.abs().max(1.0),
+                    "{kind:?} weight {i}: analytic {} vs finite difference {fd}",
+                    slopes[i]
+                );
+            }
+            // The offset (Fahlman's sigmoid-prime offset) deliberately biases
+            // the sigmoid gradient; the linear one has no derivative to offset.
+            if kind == OutputKind::Sigmoid {
+                let biased = s.f.tr_mul(&s.error_prime(&y, 0.1));
+                assert!((biased - &slopes).norm() > 1e-3);
+            }
+        }
+    }
+}
