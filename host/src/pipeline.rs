@@ -187,37 +187,43 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
             .join(", ")
     ))?;
 
-    // 5. Closed loop: planner, controller and plant as real processes over iceoryx2.
-    let sim_dir = out.join("sim");
+    // 5. Closed loop: planner, controller and plant as real processes over
+    // iceoryx2, first with the IK net alone, then with the integral correction.
     let exe = std::env::current_exe().context("locating the tendril executable")?;
-    let status = std::process::Command::new(exe)
-        .args([
-            "sim",
-            "--duration",
-            "10",
-            "--trajectory",
-            "circle",
-            "--correction",
-            "on",
-        ])
-        .arg("--robot")
-        .arg(robot_file)
-        .arg("--model")
-        .arg(&model)
-        .arg("--out")
-        .arg(&sim_dir)
-        .status()
-        .context("starting tendril sim")?;
-    if status.success() {
-        let sim_md = std::fs::read_to_string(sim_dir.join("report.md")).unwrap_or_default();
-        report.add(format!(
-            "## 5. Closed-loop simulation (30 mm circle, 0.2 Hz, correction on)\n\n{}\n\n![sim](sim/sim.png)\n",
-            sim_md.trim()
-        ))?;
-    } else {
-        report.add(format!(
-            "## 5. Closed-loop simulation\n\n`tendril sim` failed ({status}); see its log above.\n"
-        ))?;
+    for (k, (correction, dir, what)) in [
+        ("off", "sim-ik-only", "IK net alone"),
+        ("on", "sim", "with the integral correction"),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let sim_dir = out.join(dir);
+        let status = std::process::Command::new(&exe)
+            .args(["sim", "--duration", "10", "--trajectory", "circle"])
+            .args(["--correction", correction])
+            .arg("--robot")
+            .arg(robot_file)
+            .arg("--model")
+            .arg(&model)
+            .arg("--out")
+            .arg(&sim_dir)
+            .status()
+            .context("starting tendril sim")?;
+        let title = format!(
+            "## 5{}. Closed loop, 30 mm circle at 0.2 Hz, {what}",
+            ['a', 'b'][k]
+        );
+        if status.success() {
+            let sim_md = std::fs::read_to_string(sim_dir.join("report.md")).unwrap_or_default();
+            report.add(format!(
+                "{title}\n\n{}\n\n![sim]({dir}/sim.png)\n",
+                sim_md.trim()
+            ))?;
+        } else {
+            report.add(format!(
+                "{title}\n\n`tendril sim` failed ({status}); see its log above.\n"
+            ))?;
+        }
     }
 
     log::info!("report: {}", report.path.display());
