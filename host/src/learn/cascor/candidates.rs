@@ -147,11 +147,7 @@ pub fn objective_and_gradient(
             c.iter().map(|x| x.abs()).sum::<f64>() / ctx.sse_centred
         }
         Objective::Cascade2 => {
-            let c = ctx.e_perp.tr_mul(values);
-            let z = f.tr_mul(values);
-            let u = ctx.proj.solve(&z);
-            let vv = values.norm_squared();
-            let q = (vv - z.dot(&u)).max(0.0) + 1e-12 * vv + f64::MIN_POSITIVE;
+            let Cascade2Terms { c, u, q } = cascade2_terms(ctx, values);
             let c2 = c.norm_squared();
             // V⊥ = V − F u
             let mut v_perp = values.clone();
@@ -170,12 +166,27 @@ pub fn objective_and_gradient(
 /// Fraction of the projected residual SSE removed by installing a unit with
 /// activations `values` and re-solving the (linear) outputs.
 pub fn error_reduction(ctx: &Context<'_>, values: &DVector<f64>) -> f64 {
+    let Cascade2Terms { c, q, .. } = cascade2_terms(ctx, values);
+    (c.norm_squared() / (q * ctx.sse_perp)).min(1.0)
+}
+
+/// The pieces of the Cascade-2 score ‖E⊥ᵀV‖² / (q · SSE⊥) for activations V.
+struct Cascade2Terms {
+    /// C = E⊥ᵀ V, the new unit's covariance with the projected residual.
+    c: DVector<f64>,
+    /// u = (FᵀF)⁻¹ Fᵀ V: V's least-squares fit by the existing features.
+    u: DVector<f64>,
+    /// q = ‖V − F u‖², kept away from zero for a unit the features already span.
+    q: f64,
+}
+
+fn cascade2_terms(ctx: &Context<'_>, values: &DVector<f64>) -> Cascade2Terms {
     let c = ctx.e_perp.tr_mul(values);
     let z = ctx.f.tr_mul(values);
     let u = ctx.proj.solve(&z);
     let vv = values.norm_squared();
     let q = (vv - z.dot(&u)).max(0.0) + 1e-12 * vv + f64::MIN_POSITIVE;
-    (c.norm_squared() / (q * ctx.sse_perp)).min(1.0)
+    Cascade2Terms { c, u, q }
 }
 
 /// Train one candidate from its seed.
