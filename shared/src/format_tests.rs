@@ -7,7 +7,8 @@ use proptest::prelude::*;
 
 use crate::crc32::crc32;
 use crate::tnet::{self, Field, TnetError, MAGIC};
-use crate::{encode, encoded_len, Activation, CascadeNet, Shape, TnetView};
+use crate::net::ROW_PAD;
+use crate::{encode, encoded_len, weight_capacity, Activation, CascadeNet, Shape, TnetView};
 
 /// An owned net description with distinct, deterministic values.
 struct Owned {
@@ -80,7 +81,7 @@ fn find_f32(blob: &[u8], v: f32) -> usize {
     hits[0]
 }
 
-type Net = CascadeNet<7, 8, 4>;
+type Net = CascadeNet<7, 8, 4, { weight_capacity(7, 8, 4) }>;
 
 #[test]
 fn round_trip_preserves_every_value_in_the_documented_layout() {
@@ -97,23 +98,25 @@ fn round_trip_preserves_every_value_in_the_documented_layout() {
     assert_eq!(net.hidden_activation(), Activation::SymmetricSigmoid);
     assert_eq!(net.output_activation(), Activation::Linear);
     // Hidden unit k's row: [bias, inputs.., hidden 0..k-1], rows concatenated.
-    for (k, u) in net.hidden_units().iter().enumerate() {
+    for (k, u) in net.hidden_units().enumerate() {
         let off = o.shape.hidden_row_offset(k);
         let row = &o.hidden[off..off + o.shape.hidden_row_len(k)];
         assert_eq!(u.bias, row[0]);
-        assert_eq!(&u.inputs[..], &row[1..8]);
-        assert_eq!(&u.hidden[..k], &row[8..]);
-        assert!(
-            u.hidden[k..].iter().all(|&w| w == 0.0),
-            "padding stays zero"
-        );
+        assert_eq!(u.inputs, &row[1..8]);
+        assert_eq!(u.hidden, &row[8..]);
     }
-    for (j, u) in net.output_units().iter().enumerate() {
+    for (j, u) in net.output_units().enumerate() {
         let row = &o.output[j * 11..(j + 1) * 11];
         assert_eq!(u.bias, row[0]);
-        assert_eq!(&u.inputs[..], &row[1..8]);
-        assert_eq!(&u.hidden[..3], &row[8..11]);
+        assert_eq!(u.inputs, &row[1..8]);
+        assert_eq!(u.hidden, &row[8..11]);
     }
+    // Packed storage with the full input capacity is the file's own layout:
+    // hidden rows, output rows, then zeros.
+    let used = o.hidden.len() + o.output.len();
+    assert_eq!(&net.weights()[..o.hidden.len()], &o.hidden[..]);
+    assert_eq!(&net.weights()[o.hidden.len()..used], &o.output[..]);
+    assert!(net.weights()[used..].iter().all(|&w| w == 0.0));
     assert_eq!(
         tnet::read_header(&blob).unwrap(),
         (o.shape, Activation::SymmetricSigmoid, Activation::Linear)
@@ -141,7 +144,10 @@ fn a_net_without_hidden_units_and_fewer_inputs_than_capacity_decodes() {
     let o = Owned::new(3, 0, 1);
     let net = Net::decode(&o.blob()).unwrap();
     assert_eq!(net.hidden_units().len(), 0);
-    assert_eq!(net.output_units()[0].inputs[3..], [0.0; 4]);
+    let u = net.output_units().next().unwrap();
+    assert_eq!(u.inputs[..3], o.output[1..4]);
+    assert_eq!(u.inputs[3..], [0.0; 4]);
+    assert!(u.hidden.is_empty());
 }
 
 #[test]
@@ -206,11 +212,16 @@ fn shape_over_capacity_is_rejected_for_each_dimension() {
             "{e:?}"
         )
     };
-    over(CascadeNet::<6, 8, 4>::decode(&blob).map(|_| ()));
-    over(CascadeNet::<7, 2, 4>::decode(&blob).map(|_| ()));
-    over(CascadeNet::<7, 8, 3>::decode(&blob).map(|_| ()));
+    over(CascadeNet::<6, 8, 4, 1000>::decode(&blob).map(|_| ()));
+    over(CascadeNet::<7, 2, 4, 1000>::decode(&blob).map(|_| ()));
+    over(CascadeNet::<7, 8, 3, 1000>::decode(&blob).map(|_| ()));
+    // Weight storage: 3 hidden rows (8 + 9 + 10), 4 output rows of 11,
+    // and the padding the 8-wide dot product reads past the last row.
+    let needed = 27 + 44 + ROW_PAD;
+    assert_eq!(needed, weight_capacity(7, 3, 4));
+    over(CascadeNet::<7, 8, 4, { 27 + 44 + ROW_PAD - 1 }>::decode(&blob).map(|_| ()));
     assert!(
-        CascadeNet::<7, 3, 4>::decode(&blob).is_ok(),
+        CascadeNet::<7, 3, 4, { weight_capacity(7, 3, 4) }>::decode(&blob).is_ok(),
         "exact capacity fits"
     );
 }
@@ -365,14 +376,112 @@ fn encoder_reports_a_short_buffer_and_oversized_shapes() {
 }
 
 #[test]
-fn failed_decode_into_leaves_an_empty_net() {
+fn failed_decode_into_leaves_the_previous_net_untouched() {
     let good = Owned::new(7, 2, 2).blob();
     let mut net = Net::decode(&good).unwrap();
+    let before = net.clone();
+    // A corrupted byte (CRC mismatch), and a NaN weight behind a valid CRC:
+    // the second passes every structural check and fails only on the value,
+    // after the whole file was read, the case a writing decoder would have
+    // half-overwritten the net for.
     let mut bad = good.clone();
     bad[20] ^= 0xFF;
-    assert!(net.decode_into(&bad).is_err());
-    assert!(net.is_empty());
-    assert!(net.output_units().is_empty());
+    assert!(matches!(
+        net.decode_into(&bad),
+        Err(TnetError::CrcMismatch { .. })
+    ));
+    assert_eq!(net, before);
+    let o = Owned::new(7, 3, 4);
+    let mut nan = o.blob();
+    let at = find_f32(&nan, *o.output.last().unwrap());
+    nan[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    reseal(&mut nan);
+    assert!(matches!(
+        net.decode_into(&nan),
+        Err(TnetError::NonFinite {
+            field: Field::OutputWeights,
+            ..
+        })
+    ));
+    assert_eq!(net, before);
+    assert_eq!(Net::validate(&nan).err(), net.clone().decode_into(&nan).err());
+    // A smaller net decoded over a bigger one leaves zeros, not stale weights.
+    let mut big = Net::decode(&Owned::new(7, 8, 4).blob()).unwrap();
+    big.decode_into(&good).unwrap();
+    assert_eq!(big, before);
+}
+
+#[test]
+fn from_view_builds_the_net_the_decoder_builds() {
+    for (i, h, o) in [(7, 0, 1), (7, 3, 4), (3, 8, 2), (7, 8, 4)] {
+        let owned = Owned::new(i, h, o);
+        let decoded = Net::decode(&owned.blob()).unwrap();
+        assert_eq!(Net::from_view(&owned.view()), Ok(decoded));
+    }
+    // And rejects what the decoder rejects, with the same error.
+    let mut owned = Owned::new(7, 3, 4);
+    owned.hidden[5] = f32::INFINITY;
+    assert_eq!(
+        Net::from_view(&owned.view()),
+        Err(TnetError::NonFinite {
+            field: Field::HiddenWeights,
+            index: 5
+        })
+    );
+    let mut owned = Owned::new(7, 3, 4);
+    owned.output_hi[1] = owned.output_lo[1];
+    assert_eq!(
+        Net::from_view(&owned.view()),
+        Err(TnetError::EmptyRange {
+            field: Field::OutputLo,
+            index: 1
+        })
+    );
+    let owned = Owned::new(7, 9, 4);
+    assert!(matches!(
+        Net::from_view(&owned.view()),
+        Err(TnetError::ShapeOverCapacity { hidden: 9, .. })
+    ));
+    let mut owned = Owned::new(7, 3, 4);
+    owned.output.pop();
+    assert!(matches!(
+        Net::from_view(&owned.view()),
+        Err(TnetError::LengthMismatch {
+            field: Field::OutputWeights,
+            ..
+        })
+    ));
+}
+
+/// A net built in const context: what the firmware's build script emits.
+static CONST_NET: CascadeNet<2, 1, 1, { weight_capacity(2, 1, 1) }> =
+    match CascadeNet::from_view(&TnetView {
+        shape: Shape {
+            inputs: 2,
+            hidden: 1,
+            outputs: 1,
+        },
+        hidden_activation: Activation::SymmetricSigmoid,
+        output_activation: Activation::Linear,
+        input_lo: &[0.0, -1.0],
+        input_hi: &[1.0, 1.0],
+        output_lo: &[0.0],
+        output_hi: &[f32::from_bits(0x4120_0000)],
+        hidden_weights: &[0.5, 0.25, -0.25],
+        output_weights: &[1.0, 2.0, 3.0, 4.0],
+    }) {
+        Ok(n) => n,
+        Err(_) => panic!("invalid const net"),
+    };
+
+#[test]
+fn a_const_net_has_the_packed_layout() {
+    assert_eq!(CONST_NET.shape().hidden, 1);
+    assert_eq!(CONST_NET.output_hi(), &[10.0]);
+    assert_eq!(
+        CONST_NET.weights(),
+        &[0.5, 0.25, -0.25, 1.0, 2.0, 3.0, 4.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    );
 }
 
 proptest! {

@@ -1,57 +1,84 @@
 //! The decoded, fixed-capacity cascade net: what the firmware runs.
+//!
+//! # Storage
+//! All weights live in one flat `[f32; W]`, packed like the file itself
+//! (triangular, not one `1 + IN + MAX_HIDDEN` row per unit): hidden row `k`
+//! holds exactly `1 + IN + k` weights `[bias, input 0 … input IN−1,
+//! hidden 0 … hidden k−1]` at offset `k (1 + IN) + k (k − 1)/2`, and the
+//! output rows of `1 + IN + H` weights (`H` = the net's hidden units) follow
+//! the last hidden row. `IN` here is the *capacity*: a net with fewer inputs
+//! has zero weights in the missing input columns, so every row lines up with
+//! the inference's feature vector `[1, x̂_0 … x̂_{IN−1}, h_0, h_1, …]`.
+//! [`weight_capacity`] adds [`ROW_PAD`] zero slots after the largest net so
+//! that a dot product rounded up to a multiple of 8 never leaves the array.
+//!
+//! A 7-input, 64-hidden, 8-output net needs 3,111 `f32` (12.2 KiB) this way
+//! instead of 5,184 (20.3 KiB) with rectangular rows.
 
-use crate::tnet::{self, Activation, Field, Reader, Shape, TnetError};
+use crate::tnet::{self, Activation, Field, Reader, Shape, TnetError, TnetView};
 
-/// One unit's incoming weights, zero-padded to the capacity: the bias, one
-/// weight per input, one per (earlier) hidden unit. `#[repr(C)]` keeps the
-/// row contiguous in memory for the inference loop.
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[repr(C)]
-pub struct Unit<const IN: usize, const MAX_HIDDEN: usize> {
-    /// Weight of the constant +1 input.
-    pub bias: f32,
-    /// Weights of the normalised inputs (entries past the net's input count are 0).
-    pub inputs: [f32; IN],
-    /// Weights of the hidden units (for hidden unit `k`, entries `k..` are 0).
-    pub hidden: [f32; MAX_HIDDEN],
+/// Zero slots after the last row: the inference rounds every row's dot
+/// product up to a multiple of 8 terms, reading up to 7 entries past the row.
+pub const ROW_PAD: usize = 7;
+
+/// Offset of hidden row `k` for input capacity `inputs`: rows of
+/// `1 + inputs + j` weights for `j < k` before it.
+const fn hidden_offset(inputs: usize, k: usize) -> usize {
+    k * (1 + inputs) + k * k.saturating_sub(1) / 2
 }
 
-impl<const IN: usize, const MAX_HIDDEN: usize> Unit<IN, MAX_HIDDEN> {
-    /// All weights zero.
-    pub const ZERO: Self = Unit {
-        bias: 0.0,
-        inputs: [0.0; IN],
-        hidden: [0.0; MAX_HIDDEN],
-    };
+/// Storage a net with `hidden` units and `outputs` outputs needs with input
+/// capacity `inputs`: its hidden rows, its output rows and [`ROW_PAD`].
+const fn weights_needed(inputs: usize, hidden: usize, outputs: usize) -> usize {
+    hidden_offset(inputs, hidden) + outputs * (1 + inputs + hidden) + ROW_PAD
+}
 
-    /// The whole row as one slice, `[bias, inputs…, hidden…]`
-    /// (`1 + IN + MAX_HIDDEN` long): the inference loop runs one dot product
-    /// per unit over it.
-    pub fn as_slice(&self) -> &[f32] {
-        const {
-            assert!(core::mem::size_of::<Self>() == 4 * (1 + IN + MAX_HIDDEN));
-            assert!(core::mem::align_of::<Self>() == core::mem::align_of::<f32>());
-        }
-        // SAFETY: `Unit` is `#[repr(C)]` and made only of `f32`s (a scalar and
-        // two arrays), so it is `1 + IN + MAX_HIDDEN` contiguous, aligned,
-        // initialised `f32`s without padding (checked at compile time
-        // above); the pointer comes from the whole struct, so its provenance
-        // covers every element, and the borrow of `self` keeps it alive.
-        unsafe {
-            core::slice::from_raw_parts((self as *const Self).cast::<f32>(), 1 + IN + MAX_HIDDEN)
+/// The `W` (weight capacity) that holds every net up to `inputs` inputs,
+/// `max_hidden` hidden units and `outputs` outputs, padding included:
+/// write `CascadeNet<7, 64, 8, { weight_capacity(7, 64, 8) }>`.
+pub const fn weight_capacity(inputs: usize, max_hidden: usize, outputs: usize) -> usize {
+    weights_needed(inputs, max_hidden, outputs)
+}
+
+/// One unit's incoming weights, borrowed from a net's packed storage.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Row<'a> {
+    /// Weight of the constant +1 input.
+    pub bias: f32,
+    /// Weights of the normalised inputs, `IN` (the capacity) long; entries
+    /// past the net's input count are 0.
+    pub inputs: &'a [f32],
+    /// Weights of the earlier hidden units: `k` long for hidden unit `k`,
+    /// `shape().hidden` long for an output.
+    pub hidden: &'a [f32],
+}
+
+impl<'a> Row<'a> {
+    fn split<const IN: usize>(row: &'a [f32]) -> Row<'a> {
+        let (bias, rest) = match row.split_first() {
+            Some((b, rest)) => (*b, rest),
+            None => (0.0, row),
+        };
+        let (inputs, hidden) = rest.split_at_checked(IN).unwrap_or((rest, &[]));
+        Row {
+            bias,
+            inputs,
+            hidden,
         }
     }
 }
 
 /// A cascade-correlation net decoded from a `.tnet` file into fixed-capacity
-/// storage: up to `IN` inputs, `MAX_HIDDEN` hidden units and `OUT` outputs.
-/// No allocation; `size_of` is `4 (MAX_HIDDEN + OUT)(1 + IN + MAX_HIDDEN)`
-/// bytes plus the ranges, so pick capacities with the MCU's RAM in mind.
+/// storage: up to `IN` inputs, `MAX_HIDDEN` hidden units and `OUT` outputs,
+/// weights packed into `W` floats (see the [module docs](self); use
+/// [`weight_capacity`] for `W`). No allocation; `size_of` is about
+/// `4 (W + 2 IN + 2 OUT)` bytes, so pick capacities with the MCU's RAM in mind.
 ///
-/// Every value in a decoded net is finite and every range non-empty: the
-/// decoder guarantees it, and nothing else can build a non-empty net.
+/// Every value in a non-empty net is finite and every range non-empty: the
+/// decoder and [`CascadeNet::from_view`] guarantee it, and nothing else can
+/// build one.
 #[derive(Clone, Debug, PartialEq)]
-pub struct CascadeNet<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize> {
+pub struct CascadeNet<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize> {
     shape: Shape,
     hidden_activation: Activation,
     output_activation: Activation,
@@ -59,12 +86,11 @@ pub struct CascadeNet<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize
     input_hi: [f32; IN],
     output_lo: [f32; OUT],
     output_hi: [f32; OUT],
-    hidden: [Unit<IN, MAX_HIDDEN>; MAX_HIDDEN],
-    outputs: [Unit<IN, MAX_HIDDEN>; OUT],
+    weights: [f32; W],
 }
 
-impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize> Default
-    for CascadeNet<IN, MAX_HIDDEN, OUT>
+impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize> Default
+    for CascadeNet<IN, MAX_HIDDEN, OUT, W>
 {
     fn default() -> Self {
         Self::empty()
@@ -77,15 +103,101 @@ fn prefix<T>(a: &[T], n: usize) -> &[T] {
     a.get(..n).unwrap_or(a)
 }
 
-fn prefix_mut<T>(a: &mut [T], n: usize) -> &mut [T] {
-    let len = a.len();
-    match a.get_mut(..n.min(len)) {
-        Some(p) => p,
-        None => &mut [],
+/// Store `v` at `a[i]` if it exists (indices are checked against the
+/// capacity before any write; this keeps the code panic-free).
+fn put(a: &mut [f32], i: usize, v: f32) {
+    if let Some(slot) = a.get_mut(i) {
+        *slot = v;
     }
 }
 
-impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize> CascadeNet<IN, MAX_HIDDEN, OUT> {
+/// What the decoder learnt from a `.tnet` it has fully validated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct NetHeader {
+    /// Dimensions.
+    pub shape: Shape,
+    /// Activation of the hidden units.
+    pub hidden_activation: Activation,
+    /// Activation of the outputs.
+    pub output_activation: Activation,
+}
+
+/// Where a value read from the file goes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Dest {
+    InputLo(usize),
+    InputHi(usize),
+    OutputLo(usize),
+    OutputHi(usize),
+    /// Index into the packed weight storage.
+    Weight(usize),
+}
+
+/// Parse the whole file — header, every array, CRC — calling
+/// `visit(field, index_in_field, destination, value)` for each value in file
+/// order. Checks structure, capacity and CRC, not values (the visitor does).
+fn walk<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
+    bytes: &[u8],
+    mut visit: impl FnMut(Field, usize, Dest, f32),
+) -> Result<NetHeader, TnetError> {
+    let mut r = Reader::new(bytes);
+    let (shape, hidden_activation, output_activation) = tnet::header(&mut r)?;
+    let (ni, nh, no) = (shape.inputs, shape.hidden, shape.outputs);
+    if ni > IN || nh > H || no > OUT || weights_needed(IN, nh, no) > W {
+        return Err(TnetError::ShapeOverCapacity {
+            inputs: ni,
+            hidden: nh,
+            outputs: no,
+            cap_inputs: IN,
+            cap_hidden: H,
+            cap_outputs: OUT,
+        });
+    }
+    let ranges: [(Field, usize, fn(usize) -> Dest); 4] = [
+        (Field::InputLo, ni, Dest::InputLo),
+        (Field::InputHi, ni, Dest::InputHi),
+        (Field::OutputLo, no, Dest::OutputLo),
+        (Field::OutputHi, no, Dest::OutputHi),
+    ];
+    for (field, n, dest) in ranges {
+        r.seq_len(field, n)?;
+        for i in 0..n {
+            visit(field, i, dest(i), r.take()?);
+        }
+    }
+    // Row `k` of the file: bias, `ni` inputs, `k` hidden weights; in storage
+    // the inputs occupy `IN` columns (the rest stay 0).
+    let mut row = |r: &mut Reader<'_>, field: Field, file_at: usize, start: usize, hidden: usize| {
+        let cols = (0..1 + ni).map(|c| (c, start + c));
+        let hid = (0..hidden).map(|j| (1 + ni + j, start + 1 + IN + j));
+        for (c, at) in cols.chain(hid) {
+            visit(field, file_at + c, Dest::Weight(at), r.take()?);
+        }
+        Ok::<(), TnetError>(())
+    };
+    r.seq_len(Field::HiddenWeights, shape.hidden_weight_count())?;
+    for k in 0..nh {
+        let file_at = shape.hidden_row_offset(k);
+        row(&mut r, Field::HiddenWeights, file_at, hidden_offset(IN, k), k)?;
+    }
+    r.seq_len(Field::OutputWeights, shape.output_weight_count())?;
+    let out_base = hidden_offset(IN, nh);
+    for o in 0..no {
+        let file_at = o * shape.output_row_len();
+        let start = out_base + o * (1 + IN + nh);
+        row(&mut r, Field::OutputWeights, file_at, start, nh)?;
+    }
+    tnet::check_trailer(bytes, r.remaining())?;
+    Ok(NetHeader {
+        shape,
+        hidden_activation,
+        output_activation,
+    })
+}
+
+impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
+    CascadeNet<IN, MAX_HIDDEN, OUT, W>
+{
     /// A net with no inputs, no hidden units and no outputs; a placeholder for
     /// static storage (`const`, so it can initialise a `static`).
     pub const fn empty() -> Self {
@@ -103,9 +215,40 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize> CascadeNet<IN, 
             input_hi: [0.0; IN],
             output_lo: [0.0; OUT],
             output_hi: [0.0; OUT],
-            hidden: [Unit::ZERO; MAX_HIDDEN],
-            outputs: [Unit::ZERO; OUT],
+            weights: [0.0; W],
         }
+    }
+
+    /// Check a `.tnet` byte string completely — structure, capacity, CRC,
+    /// finite values, non-empty ranges — without writing anything. Exactly
+    /// the checks of [`CascadeNet::decode_into`], in the same order, so it
+    /// returns the same error.
+    pub fn validate(bytes: &[u8]) -> Result<NetHeader, TnetError> {
+        let mut lo_in = [0.0f32; IN];
+        let mut hi_in = [0.0f32; IN];
+        let mut lo_out = [0.0f32; OUT];
+        let mut hi_out = [0.0f32; OUT];
+        let mut first_bad: Option<TnetError> = None;
+        let header = walk::<IN, MAX_HIDDEN, OUT, W>(bytes, |field, index, dest, v| {
+            if first_bad.is_none() && !v.is_finite() {
+                first_bad = Some(TnetError::NonFinite { field, index });
+            }
+            match dest {
+                Dest::InputLo(i) => put(&mut lo_in, i, v),
+                Dest::InputHi(i) => put(&mut hi_in, i, v),
+                Dest::OutputLo(i) => put(&mut lo_out, i, v),
+                Dest::OutputHi(i) => put(&mut hi_out, i, v),
+                Dest::Weight(_) => {}
+            }
+        })?;
+        // Only now that the CRC vouches for the bytes, judge the values.
+        if let Some(e) = first_bad {
+            return Err(e);
+        }
+        let (ni, no) = (header.shape.inputs, header.shape.outputs);
+        tnet::check_ranges(Field::InputLo, prefix(&lo_in, ni), prefix(&hi_in, ni))?;
+        tnet::check_ranges(Field::OutputLo, prefix(&lo_out, no), prefix(&hi_out, no))?;
+        Ok(header)
     }
 
     /// Decode a `.tnet` byte string. Never panics: any byte string either
@@ -119,96 +262,159 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize> CascadeNet<IN, 
         Ok(net)
     }
 
-    /// Decode into `self`. On success `self` holds the new net; on error it is
-    /// left [empty](CascadeNet::empty) (never half-written), so a caller that
-    /// must keep running decodes into a spare buffer (the firmware's
-    /// double-buffered hot swap does).
+    /// Decode into `self`. The bytes are [validated](CascadeNet::validate)
+    /// completely before the first write: on error `self` is untouched (still
+    /// the net it was), on success it holds the new net.
     pub fn decode_into(&mut self, bytes: &[u8]) -> Result<(), TnetError> {
-        let result = self.try_decode(bytes);
-        if result.is_err() {
-            self.clear();
-        }
-        result
-    }
-
-    fn clear(&mut self) {
+        let header = Self::validate(bytes)?;
         *self = Self::empty();
+        let written = walk::<IN, MAX_HIDDEN, OUT, W>(bytes, |_, _, dest, v| match dest {
+            Dest::InputLo(i) => put(&mut self.input_lo, i, v),
+            Dest::InputHi(i) => put(&mut self.input_hi, i, v),
+            Dest::OutputLo(i) => put(&mut self.output_lo, i, v),
+            Dest::OutputHi(i) => put(&mut self.output_hi, i, v),
+            Dest::Weight(i) => put(&mut self.weights, i, v),
+        });
+        match written {
+            Ok(h) if h == header => {
+                self.shape = header.shape;
+                self.hidden_activation = header.hidden_activation;
+                self.output_activation = header.output_activation;
+                Ok(())
+            }
+            // Unreachable: the same bytes passed the same walk a moment
+            // ago. Never leave a half-written net behind, though.
+            Ok(_) => {
+                *self = Self::empty();
+                Err(TnetError::Malformed)
+            }
+            Err(e) => {
+                *self = Self::empty();
+                Err(e)
+            }
+        }
     }
 
-    fn try_decode(&mut self, bytes: &[u8]) -> Result<(), TnetError> {
-        let mut r = Reader::new(bytes);
-        let (shape, hidden_activation, output_activation) = tnet::header(&mut r)?;
-        if shape.inputs > IN || shape.hidden > MAX_HIDDEN || shape.outputs > OUT {
+    /// Build a net from a [`TnetView`] (the file's own layout) with the
+    /// decoder's checks: non-empty shape, capacity, array lengths, finite
+    /// values, non-empty ranges. `const`, so a build script can turn a
+    /// `.tnet` into a `static` in flash that is checked at compile time:
+    /// `static NET: N = match N::from_view(&VIEW) { Ok(n) => n, Err(_) => panic!("…") };`.
+    pub const fn from_view(view: &TnetView<'_>) -> Result<Self, TnetError> {
+        let s = view.shape;
+        let (ni, nh, no) = (s.inputs, s.hidden, s.outputs);
+        if ni == 0 || no == 0 {
+            return Err(TnetError::EmptyShape {
+                inputs: ni,
+                outputs: no,
+            });
+        }
+        if ni > IN || nh > MAX_HIDDEN || no > OUT || weights_needed(IN, nh, no) > W {
             return Err(TnetError::ShapeOverCapacity {
-                inputs: shape.inputs,
-                hidden: shape.hidden,
-                outputs: shape.outputs,
+                inputs: ni,
+                hidden: nh,
+                outputs: no,
                 cap_inputs: IN,
                 cap_hidden: MAX_HIDDEN,
                 cap_outputs: OUT,
             });
         }
-        self.clear();
-        let (ni, nh, no) = (shape.inputs, shape.hidden, shape.outputs);
-        r.float_seq(Field::InputLo, prefix_mut(&mut self.input_lo, ni))?;
-        r.float_seq(Field::InputHi, prefix_mut(&mut self.input_hi, ni))?;
-        r.float_seq(Field::OutputLo, prefix_mut(&mut self.output_lo, no))?;
-        r.float_seq(Field::OutputHi, prefix_mut(&mut self.output_hi, no))?;
-
-        r.seq_len(Field::HiddenWeights, shape.hidden_weight_count())?;
-        for (k, unit) in prefix_mut(&mut self.hidden, nh).iter_mut().enumerate() {
-            unit.bias = r.take()?;
-            r.floats(prefix_mut(&mut unit.inputs, ni))?;
-            r.floats(prefix_mut(&mut unit.hidden, k))?;
+        let arrays = [
+            (Field::InputLo, view.input_lo, ni),
+            (Field::InputHi, view.input_hi, ni),
+            (Field::OutputLo, view.output_lo, no),
+            (Field::OutputHi, view.output_hi, no),
+            (Field::HiddenWeights, view.hidden_weights, s.hidden_weight_count()),
+            (Field::OutputWeights, view.output_weights, s.output_weight_count()),
+        ];
+        let mut a = 0;
+        while a < arrays.len() {
+            let (field, values, expected) = arrays[a];
+            if values.len() != expected {
+                return Err(TnetError::LengthMismatch {
+                    field,
+                    expected,
+                    found: values.len(),
+                });
+            }
+            let mut i = 0;
+            while i < values.len() {
+                if !values[i].is_finite() {
+                    return Err(TnetError::NonFinite { field, index: i });
+                }
+                i += 1;
+            }
+            a += 1;
         }
-        r.seq_len(Field::OutputWeights, shape.output_weight_count())?;
-        for unit in prefix_mut(&mut self.outputs, no).iter_mut() {
-            unit.bias = r.take()?;
-            r.floats(prefix_mut(&mut unit.inputs, ni))?;
-            r.floats(prefix_mut(&mut unit.hidden, nh))?;
+        let mut net = Self::empty();
+        let mut i = 0;
+        while i < ni {
+            let (lo, hi) = (view.input_lo[i], view.input_hi[i]);
+            if hi <= lo {
+                return Err(TnetError::EmptyRange {
+                    field: Field::InputLo,
+                    index: i,
+                });
+            }
+            net.input_lo[i] = lo;
+            net.input_hi[i] = hi;
+            i += 1;
         }
-        tnet::check_trailer(bytes, r.remaining())?;
-
-        // Only now that the CRC vouches for the bytes, judge the values.
-        self.shape = shape;
-        self.hidden_activation = hidden_activation;
-        self.output_activation = output_activation;
-        tnet::check_finite(Field::InputLo, self.input_lo())?;
-        tnet::check_finite(Field::InputHi, self.input_hi())?;
-        tnet::check_finite(Field::OutputLo, self.output_lo())?;
-        tnet::check_finite(Field::OutputHi, self.output_hi())?;
-        let mut offset = 0;
-        for (k, unit) in self.hidden_units().iter().enumerate() {
-            check_row(Field::HiddenWeights, offset, unit, ni, k)?;
-            offset += shape.hidden_row_len(k);
+        let mut o = 0;
+        while o < no {
+            let (lo, hi) = (view.output_lo[o], view.output_hi[o]);
+            if hi <= lo {
+                return Err(TnetError::EmptyRange {
+                    field: Field::OutputLo,
+                    index: o,
+                });
+            }
+            net.output_lo[o] = lo;
+            net.output_hi[o] = hi;
+            o += 1;
         }
-        offset = 0;
-        for unit in self.output_units() {
-            check_row(Field::OutputWeights, offset, unit, ni, nh)?;
-            offset += shape.output_row_len();
+        // Every index below is in bounds: lengths were checked above and
+        // `weights_needed(IN, nh, no) <= W`.
+        let mut k = 0;
+        while k < nh + no {
+            let (src, file_at, start, hidden) = if k < nh {
+                (view.hidden_weights, s.hidden_row_offset(k), hidden_offset(IN, k), k)
+            } else {
+                let o = k - nh;
+                let start = hidden_offset(IN, nh) + o * (1 + IN + nh);
+                (view.output_weights, o * s.output_row_len(), start, nh)
+            };
+            let mut c = 0;
+            while c < 1 + ni + hidden {
+                let at = if c <= ni { start + c } else { start + IN + c - ni };
+                net.weights[at] = src[file_at + c];
+                c += 1;
+            }
+            k += 1;
         }
-        tnet::check_ranges(Field::InputLo, self.input_lo(), self.input_hi())?;
-        tnet::check_ranges(Field::OutputLo, self.output_lo(), self.output_hi())?;
-        Ok(())
+        net.shape = s;
+        net.hidden_activation = view.hidden_activation;
+        net.output_activation = view.output_activation;
+        Ok(net)
     }
 
     /// Dimensions of the decoded net (all zero for an empty net).
-    pub fn shape(&self) -> Shape {
+    pub const fn shape(&self) -> Shape {
         self.shape
     }
 
     /// `true` for the placeholder net that [`CascadeNet::empty`] makes.
-    pub fn is_empty(&self) -> bool {
+    pub const fn is_empty(&self) -> bool {
         self.shape.outputs == 0
     }
 
     /// Activation of the hidden units.
-    pub fn hidden_activation(&self) -> Activation {
+    pub const fn hidden_activation(&self) -> Activation {
         self.hidden_activation
     }
 
     /// Activation of the outputs.
-    pub fn output_activation(&self) -> Activation {
+    pub const fn output_activation(&self) -> Activation {
         self.output_activation
     }
 
@@ -232,44 +438,49 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize> CascadeNet<IN, 
         prefix(&self.output_hi, self.shape.outputs)
     }
 
-    /// The installed hidden units in cascade order (`shape().hidden` long).
-    pub fn hidden_units(&self) -> &[Unit<IN, MAX_HIDDEN>] {
-        prefix(&self.hidden, self.shape.hidden)
+    /// The whole packed weight storage ([module docs](self)): hidden rows,
+    /// then output rows, then zeros. What the inference loop walks.
+    pub const fn weights(&self) -> &[f32; W] {
+        &self.weights
     }
 
-    /// The output units (`shape().outputs` long).
-    pub fn output_units(&self) -> &[Unit<IN, MAX_HIDDEN>] {
-        prefix(&self.outputs, self.shape.outputs)
+    /// Offset of hidden row `k` in [`CascadeNet::weights`] (`1 + IN + k` long).
+    pub const fn hidden_row_offset(k: usize) -> usize {
+        hidden_offset(IN, k)
     }
-}
 
-/// Check one unit's used weights are finite; `offset` is the row's start in
-/// the flat file array so the error points at the file's index.
-fn check_row<const IN: usize, const H: usize>(
-    field: Field,
-    offset: usize,
-    unit: &Unit<IN, H>,
-    inputs: usize,
-    hidden: usize,
-) -> Result<(), TnetError> {
-    let at = |i: usize| TnetError::NonFinite {
-        field,
-        index: offset + i,
-    };
-    if !unit.bias.is_finite() {
-        return Err(at(0));
+    /// Offset of the first output row in [`CascadeNet::weights`]; output
+    /// rows are `1 + IN + shape().hidden` long.
+    pub const fn output_rows_offset(&self) -> usize {
+        hidden_offset(IN, self.shape.hidden)
     }
-    if let Some(i) = prefix(&unit.inputs, inputs)
-        .iter()
-        .position(|v| !v.is_finite())
-    {
-        return Err(at(1 + i));
+
+    /// Hidden unit `k`'s weights `[bias, IN inputs, k hidden]`, if installed.
+    pub fn hidden_row(&self, k: usize) -> Option<&[f32]> {
+        if k >= self.shape.hidden {
+            return None;
+        }
+        let start = hidden_offset(IN, k);
+        self.weights.get(start..start + 1 + IN + k)
     }
-    if let Some(i) = prefix(&unit.hidden, hidden)
-        .iter()
-        .position(|v| !v.is_finite())
-    {
-        return Err(at(1 + inputs + i));
+
+    /// Output `o`'s weights `[bias, IN inputs, every hidden unit]`, if present.
+    pub fn output_row(&self, o: usize) -> Option<&[f32]> {
+        if o >= self.shape.outputs {
+            return None;
+        }
+        let len = 1 + IN + self.shape.hidden;
+        let start = self.output_rows_offset() + o * len;
+        self.weights.get(start..start + len)
     }
-    Ok(())
+
+    /// The installed hidden units in cascade order (`shape().hidden` of them).
+    pub fn hidden_units(&self) -> impl ExactSizeIterator<Item = Row<'_>> + '_ {
+        (0..self.shape.hidden).map(|k| Row::split::<IN>(self.hidden_row(k).unwrap_or(&[])))
+    }
+
+    /// The output units (`shape().outputs` of them).
+    pub fn output_units(&self) -> impl ExactSizeIterator<Item = Row<'_>> + '_ {
+        (0..self.shape.outputs).map(|o| Row::split::<IN>(self.output_row(o).unwrap_or(&[])))
+    }
 }

@@ -545,20 +545,6 @@ impl<'a> Reader<'a> {
         }
     }
 
-    /// Fill `out` with `out.len()` consecutive `f32`s.
-    pub(crate) fn floats(&mut self, out: &mut [f32]) -> Result<(), TnetError> {
-        for v in out.iter_mut() {
-            *v = self.take()?;
-        }
-        Ok(())
-    }
-
-    /// Read a length-prefixed `[f32]` of exactly `dst.len()` entries.
-    pub(crate) fn float_seq(&mut self, field: Field, dst: &mut [f32]) -> Result<(), TnetError> {
-        self.seq_len(field, dst.len())?;
-        self.floats(dst)
-    }
-
     pub(crate) fn activation(&mut self) -> Result<Activation, TnetError> {
         let code: u8 = self.take()?;
         Activation::from_code(code).ok_or(TnetError::UnknownActivation { code })
