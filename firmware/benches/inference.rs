@@ -1,7 +1,8 @@
 //! Host speed of the firmware core (issue 6 target: ≤ 100 ns per inference
-//! of the default exported net). The net and poses are the ones the MCU
-//! binary embeds (`firmware/vectors/`), so this times exactly the code the
-//! QEMU parity test checks.
+//! of the default exported net). The net is the MCU binary's built-in
+//! [`tendril_firmware::DEFAULT_NET`] and the poses are its vectors
+//! (`firmware/vectors/`), so this times exactly the code the QEMU parity
+//! test checks.
 //!
 //! `cargo bench -p tendril-firmware --bench inference`
 
@@ -10,7 +11,7 @@ use std::hint::black_box;
 use criterion::{criterion_group, criterion_main, Criterion};
 use tendril_firmware::control::{control_step, ControlState, Setpoint, StepInput};
 use tendril_firmware::vectors::{self, HAS_SETPOINT};
-use tendril_firmware::{infer, McuNet, MCU_MAX_HIDDEN};
+use tendril_firmware::{infer, McuNet, DEFAULT_NET, MCU_MAX_HIDDEN};
 use tendril_shared::MAX_TENDONS;
 
 static NET: &[u8] = include_bytes!("../vectors/default.tnet");
@@ -25,7 +26,7 @@ fn poses() -> Vec<[f32; 7]> {
 }
 
 fn bench(c: &mut Criterion) {
-    let net = Box::new(McuNet::decode(NET).expect("embedded net decodes"));
+    let net = &DEFAULT_NET;
     let poses = poses();
     let s = net.shape();
     let name = format!(
@@ -39,7 +40,7 @@ fn bench(c: &mut Criterion) {
     c.bench_function(&name, |b| {
         b.iter(|| {
             i = (i + 1) % poses.len();
-            black_box(infer(&net, black_box(&poses[i])))
+            black_box(infer(net, black_box(&poses[i])))
         })
     });
 
@@ -58,11 +59,12 @@ fn bench(c: &mut Criterion) {
                 }),
                 feedback: None,
             };
-            black_box(control_step(&cfg, &net, black_box(&state), &input))
+            black_box(control_step(&cfg, net, black_box(&state), &input))
         })
     });
 
-    c.bench_function("decode .tnet (validate + CRC)", |b| {
+    let name = format!("decode .tnet {} bytes (validate + CRC + write)", NET.len());
+    c.bench_function(&name, |b| {
         let mut spare = Box::new(McuNet::empty());
         b.iter(|| spare.decode_into(black_box(NET)))
     });

@@ -1,26 +1,37 @@
-//! Regenerate the files the MCU binary embeds: `firmware/vectors/default.tnet`
-//! (a deterministic synthetic 7-12-4 net, or a copy of a trained `.tnet`) and
-//! `firmware/vectors/inputs.bin` (control-loop inputs inside that net's input
-//! box, plus NaN/∞/out-of-box/stale/clock-fault/watchdog/hot-swap cases).
+//! Regenerate the files the MCU binary embeds, in `firmware/vectors/`:
+//! - `default.tnet`: the built-in net (build.rs turns it into the flash
+//!   `DEFAULT_NET`): a copy of `--tnet FILE`, normally the net the main job
+//!   exports (`cargo run --release` writes `out/model.tnet`, deterministic
+//!   with seed 1), or with `--synthetic` a deterministic 7-12-4 net;
+//! - `inputs.bin`: control-loop inputs inside that net's input box, plus
+//!   NaN/∞/out-of-box/stale/clock-fault/watchdog/hot-swap cases;
+//! - `swap.tnet`: a small synthetic update (7-12-O, same input box and output
+//!   ranges) that the hot-swap steps load into the RAM slot;
+//! - `swap_nan.tnet`: the same with its last weight NaN and the CRC
+//!   recomputed (rejected only by the value checks).
 //!
 //! ```text
-//! cargo run -p tendril-firmware --example gen_vectors                       # synthetic net
-//! cargo run -p tendril-firmware --example gen_vectors -- --tnet model.tnet  # a trained net
+//! cargo run --release                                                        # writes out/model.tnet
+//! cargo run -p tendril-firmware --example gen_vectors -- --tnet out/model.tnet
+//! cargo run -p tendril-firmware --example gen_vectors                        # re-derive from default.tnet
+//! cargo run -p tendril-firmware --example gen_vectors -- --synthetic        # synthetic default net
 //! ```
-//! Options: `--tnet FILE`, `--out-dir DIR` (default `firmware/vectors`).
+//! Options: `--tnet FILE` (default: the current `default.tnet`),
+//! `--synthetic`, `--out-dir DIR` (default `firmware/vectors`).
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use tendril_firmware::synth::synthetic_blob;
+use tendril_firmware::synth::{synthetic_blob, synthetic_blob_with, Ranges};
 use tendril_firmware::vectors::{
     Record, VecHeader, HAS_FEEDBACK, HAS_SETPOINT, HEADER_LEN, RECORD_LEN, SWAP_BAD, SWAP_GOOD,
+    SWAP_NAN, SWAP_REVERT,
 };
 use tendril_firmware::MCU_MAX_HIDDEN;
-use tendril_shared::{CascadeNet, MAX_TENDONS};
+use tendril_shared::{weight_capacity, CascadeNet, MAX_TENDONS};
 
 /// Decode capacity for reading any trained net (checked against the MCU's after).
-type BigNet = CascadeNet<7, 256, MAX_TENDONS>;
+type BigNet = CascadeNet<7, 256, MAX_TENDONS, { weight_capacity(7, 256, MAX_TENDONS) }>;
 
 fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     let tmp = path.with_extension("tmp");
@@ -47,29 +58,31 @@ fn in_box(lo: &[f32], hi: &[f32], p: &[f32; 7]) -> bool {
 
 fn run() -> Result<(), String> {
     let mut tnet: Option<PathBuf> = None;
+    let mut synthetic = false;
     let mut out_dir = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/vectors"));
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--tnet" => tnet = Some(args.next().ok_or("--tnet needs a file")?.into()),
+            "--synthetic" => synthetic = true,
             "--out-dir" => out_dir = args.next().ok_or("--out-dir needs a directory")?.into(),
             "-h" | "--help" => {
-                println!("usage: gen_vectors [--tnet FILE] [--out-dir DIR]");
+                println!("usage: gen_vectors [--tnet FILE | --synthetic] [--out-dir DIR]");
                 return Ok(());
             }
             other => return Err(format!("unknown argument {other:?}")),
         }
     }
 
-    let blob = match &tnet {
-        Some(path) => std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?,
-        None => {
-            let mut buf = vec![0u8; 8192];
-            let n = synthetic_blob(20_261_122, 12, 4, 10.0, &mut buf)
-                .map_err(|e| format!("synthetic net: {e}"))?;
-            buf.truncate(n);
-            buf
-        }
+    let blob = if synthetic {
+        let mut buf = vec![0u8; 8192];
+        let n = synthetic_blob(20_261_122, 12, 4, 10.0, &mut buf)
+            .map_err(|e| format!("synthetic net: {e}"))?;
+        buf.truncate(n);
+        buf
+    } else {
+        let path = tnet.unwrap_or_else(|| out_dir.join("default.tnet"));
+        std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?
     };
     let net = Box::new(BigNet::decode(&blob).map_err(|e| format!("weight file: {e}"))?);
     let shape = net.shape();
@@ -81,7 +94,7 @@ fn run() -> Result<(), String> {
     }
     if shape.hidden > MCU_MAX_HIDDEN {
         return Err(format!(
-            "net has {} hidden units, the MCU build holds at most {MCU_MAX_HIDDEN}: raise MCU_MAX_HIDDEN in firmware/src/lib.rs (RAM grows quadratically)",
+            "net has {} hidden units, the MCU build holds at most {MCU_MAX_HIDDEN}: raise MCU_MAX_HIDDEN in firmware/src/lib.rs (flash and RAM grow quadratically)",
             shape.hidden
         ));
     }
@@ -164,20 +177,34 @@ fn run() -> Result<(), String> {
     seq += 1;
     push(now - 3 * ms, HAS_SETPOINT, seq, path(41), [0.0; 3]);
     now += ms;
-    // Hot swap: a truncated blob (rejected), then the full one (accepted).
-    now += ms;
-    seq += 1;
-    push(now, HAS_SETPOINT | SWAP_BAD, seq, path(42), [0.0; 3]);
-    now += ms;
-    seq += 1;
-    push(now, HAS_SETPOINT | SWAP_GOOD, seq, path(43), [0.0; 3]);
+    // Hot swap, each with a setpoint so the step's inference shows which net
+    // ran: while the flash net runs, a truncated and a NaN blob (rejected),
+    // then the update (accepted, RAM slot); while the RAM slot runs, the
+    // same two rejections, the update again (RAM over RAM), and back to the
+    // flash net.
+    let swaps = [
+        SWAP_BAD,
+        SWAP_NAN,
+        SWAP_GOOD,
+        0,
+        SWAP_NAN,
+        SWAP_BAD,
+        0,
+        SWAP_GOOD,
+        SWAP_REVERT,
+    ];
+    for (j, flag) in swaps.into_iter().enumerate() {
+        now += ms;
+        seq += 1;
+        push(now, HAS_SETPOINT | flag, seq, path(42 + j), [0.0; 3]);
+    }
     // Silence: the watchdog (20 ms) trips.
     for _ in 0..8 {
         now += 10 * ms;
         push(now, 0, 0, [0.0; 7], [0.0; 3]);
     }
     // Recovery.
-    for k in 44..64 {
+    for k in 52..72 {
         now += ms;
         seq += 1;
         let pose = path(k);
@@ -207,13 +234,38 @@ fn run() -> Result<(), String> {
     for (r, chunk) in recs.iter().zip(body.chunks_exact_mut(RECORD_LEN)) {
         r.write(chunk.try_into().map_err(|_| "record size")?);
     }
+
+    // The update: a 7-12-O net for the same box and tendons.
+    let mut swap = vec![0u8; 8192];
+    let ranges = Ranges {
+        input_lo: &lo,
+        input_hi: &hi,
+        output_lo: net.output_lo(),
+        output_hi: net.output_hi(),
+    };
+    let n = synthetic_blob_with(20_261_123, 12, &ranges, &mut swap)
+        .map_err(|e| format!("swap net: {e}"))?;
+    swap.truncate(n);
+    // Its last output weight sits just before the CRC: make it NaN, reseal.
+    let mut swap_nan = swap.clone();
+    let body = swap_nan.len() - 4;
+    swap_nan[body - 4..body].copy_from_slice(&f32::NAN.to_le_bytes());
+    let crc = tendril_shared::crc32::crc32(&swap_nan[..body]);
+    swap_nan[body..].copy_from_slice(&crc.to_le_bytes());
+
     std::fs::create_dir_all(&out_dir).map_err(|e| format!("{}: {e}", out_dir.display()))?;
     let tnet_path = out_dir.join("default.tnet");
     let vec_path = out_dir.join("inputs.bin");
-    write_atomic(&tnet_path, &blob).map_err(|e| format!("{}: {e}", tnet_path.display()))?;
-    write_atomic(&vec_path, &bytes).map_err(|e| format!("{}: {e}", vec_path.display()))?;
+    for (path, bytes) in [
+        (tnet_path.clone(), &blob),
+        (vec_path.clone(), &bytes),
+        (out_dir.join("swap.tnet"), &swap),
+        (out_dir.join("swap_nan.tnet"), &swap_nan),
+    ] {
+        write_atomic(&path, bytes).map_err(|e| format!("{}: {e}", path.display()))?;
+    }
     eprintln!(
-        "gen_vectors: wrote {} ({} bytes, net {}-{}-{}) and {} ({} steps)",
+        "gen_vectors: wrote {} ({} bytes, net {}-{}-{}), {} ({} steps), swap.tnet, swap_nan.tnet",
         tnet_path.display(),
         blob.len(),
         shape.inputs,

@@ -1,4 +1,5 @@
-//! Run many inferences of the embedded default net for load-independent cost
+//! Run many inferences of the built-in net ([`tendril_firmware::DEFAULT_NET`],
+//! generated from `firmware/vectors/default.tnet`) for load-independent cost
 //! measurements of the host build: instruction counts with callgrind and user
 //! CPU time (criterion's wall times are inflated on a loaded machine).
 //!
@@ -14,9 +15,8 @@ use std::hint::black_box;
 use std::process::ExitCode;
 
 use tendril_firmware::vectors::{self, HAS_SETPOINT};
-use tendril_firmware::{infer, McuNet};
+use tendril_firmware::{infer, DEFAULT_NET};
 
-static NET: &[u8] = include_bytes!("../vectors/default.tnet");
 static VECTORS: &[u8] = include_bytes!("../vectors/inputs.bin");
 
 fn main() -> ExitCode {
@@ -28,13 +28,7 @@ fn main() -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
-    let net = match McuNet::decode(NET) {
-        Ok(net) => Box::new(net),
-        Err(e) => {
-            eprintln!("infer_cost: embedded net does not decode: {e:?}");
-            return ExitCode::FAILURE;
-        }
-    };
+    let net = &DEFAULT_NET;
     let poses: Vec<[f32; 7]> = match vectors::parse(VECTORS) {
         Ok((_, recs)) => recs
             .filter(|r| r.flags & HAS_SETPOINT != 0 && r.pose.iter().all(|v| v.is_finite()))
@@ -51,7 +45,7 @@ fn main() -> ExitCode {
     }
     let mut acc = 0.0f32;
     for i in 0..n {
-        let y = infer(&net, black_box(&poses[i % poses.len()]));
+        let y = infer(net, black_box(&poses[i % poses.len()]));
         acc += y[0];
     }
     println!("{n} inferences, checksum {acc}");

@@ -305,8 +305,8 @@ pub struct StepOutput {
 }
 
 /// Whether every normalised coordinate of `pose` lies in `[−m, 1 + m]`.
-fn in_box<const H: usize, const OUT: usize>(
-    net: &CascadeNet<POSE_DIM, H, OUT>,
+fn in_box<const H: usize, const OUT: usize, const W: usize>(
+    net: &CascadeNet<POSE_DIM, H, OUT, W>,
     pose: &[f32; POSE_DIM],
     margin: f32,
 ) -> bool {
@@ -339,9 +339,9 @@ fn quaternion_ok(pose: &[f32; POSE_DIM], tol: f32) -> bool {
 /// differs from the previous command by at most `slew_rate · min(dt,
 /// max_dt)`; after `watchdog_ns` without an acceptable setpoint the status
 /// has [`Status::SAFE_HOLD`].
-pub fn control_step<const H: usize, const OUT: usize>(
+pub fn control_step<const H: usize, const OUT: usize, const W: usize>(
     cfg: &ControlConfig,
-    net: &CascadeNet<POSE_DIM, H, OUT>,
+    net: &CascadeNet<POSE_DIM, H, OUT, W>,
     state: &ControlState,
     input: &StepInput,
 ) -> (ControlState, StepOutput) {
@@ -503,8 +503,8 @@ pub fn control_step<const H: usize, const OUT: usize>(
     )
 }
 
-fn corrected_in_box<const H: usize, const OUT: usize>(
-    net: &CascadeNet<POSE_DIM, H, OUT>,
+fn corrected_in_box<const H: usize, const OUT: usize, const W: usize>(
+    net: &CascadeNet<POSE_DIM, H, OUT, W>,
     pose: &[f32; POSE_DIM],
     correction: &[f32; 3],
     margin: f32,

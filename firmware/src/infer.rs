@@ -4,7 +4,8 @@
 //! everywhere, the summation order is fixed by this code, and the sigmoids'
 //! `exp` is `tendril_shared`'s own plain-`f32` polynomial, not a libm call).
 
-use tendril_shared::CascadeNet;
+use tendril_shared::net::ROW_PAD;
+use tendril_shared::{Activation, CascadeNet};
 
 /// The first `n` entries of `a`, or all of it (capacities are checked by the
 /// decoder; this keeps indexing panic-free).
@@ -47,6 +48,35 @@ pub fn dot(w: &[f32], a: &[f32]) -> f32 {
         sum += x * y;
     }
     sum
+}
+
+/// [`dot`] for lengths that are a multiple of 8 (over the first
+/// `8 ⌊n/8⌋` products of the common length `n`): four interleaved partial
+/// sums, `(s0 + s1) + (s2 + s3)` — the same operations in the same order, so
+/// the same result bit for bit. The inference runs every row through this
+/// (rows are padded to whole blocks); on the M4 it is one call to the
+/// assembly kernel `tendril_dot8`, which also does the reduction.
+#[inline]
+pub fn dot8(w: &[f32], a: &[f32]) -> f32 {
+    let blocks = w.len().min(a.len()) / 8;
+    dot8_blocks(w, a, blocks)
+}
+
+#[cfg(not(all(target_arch = "arm", target_os = "none", target_abi = "eabihf")))]
+#[inline]
+fn dot8_blocks(w: &[f32], a: &[f32], blocks: usize) -> f32 {
+    let [s0, s1, s2, s3] = mac8(w, a, blocks);
+    (s0 + s1) + (s2 + s3)
+}
+
+#[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
+#[inline]
+fn dot8_blocks(w: &[f32], a: &[f32], blocks: usize) -> f32 {
+    let blocks = blocks.min(w.len() / 8).min(a.len() / 8);
+    // SAFETY: both slices hold at least `8 blocks` f32s (clamped above),
+    // which is all `tendril_dot8` reads (nothing for `blocks == 0`); it
+    // writes no memory and follows the AAPCS-VFP calling convention.
+    unsafe { tendril_dot8(w.as_ptr(), a.as_ptr(), blocks) }
 }
 
 /// The four partial sums over the first `blocks` blocks of eight:
@@ -109,6 +139,8 @@ struct Sums {
 extern "C" {
     /// `blocks` (≥ 1) blocks of eight `s[i mod 4] += w_i a_i` from zero.
     fn tendril_mac8(w: *const f32, a: *const f32, blocks: usize) -> Sums;
+    /// `blocks` (≥ 0) blocks of eight, reduced: `(s0 + s1) + (s2 + s3)`.
+    fn tendril_dot8(w: *const f32, a: *const f32, blocks: usize) -> f32;
 }
 
 #[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
@@ -141,44 +173,70 @@ core::arch::global_asm!(
     "    vpop {{s16-s19}}",
     "    bx lr",
     ".size tendril_mac8, .-tendril_mac8",
+    "",
+    ".section .text.tendril_dot8,\"ax\",%progbits",
+    ".global tendril_dot8",
+    ".type tendril_dot8,%function",
+    ".thumb_func",
+    "tendril_dot8:",
+    "    vpush {{s16-s19}}",
+    "    movs r3, #0",
+    "    vmov s0, s1, r3, r3",
+    "    vmov s2, s3, r3, r3",
+    "    cbz r2, 2f",
+    "1:",
+    "    vldmia r0!, {{s4-s11}}",
+    "    vldmia r1!, {{s12-s19}}",
+    "    vmla.f32 s0, s4, s12",
+    "    vmla.f32 s1, s5, s13",
+    "    vmla.f32 s2, s6, s14",
+    "    vmla.f32 s3, s7, s15",
+    "    vmla.f32 s0, s8, s16",
+    "    vmla.f32 s1, s9, s17",
+    "    vmla.f32 s2, s10, s18",
+    "    vmla.f32 s3, s11, s19",
+    "    subs r2, #1",
+    "    bne 1b",
+    "2:",
+    "    vadd.f32 s0, s0, s1",
+    "    vadd.f32 s2, s2, s3",
+    "    vadd.f32 s0, s0, s2",
+    "    vpop {{s16-s19}}",
+    "    bx lr",
+    ".size tendril_dot8, .-tendril_dot8",
 );
 
 /// The feature vector every unit dots its row with: `[1 (bias), x̂…, h…]`,
-/// laid out like [`tendril_shared::Unit`] so one slice covers it.
+/// then [`ROW_PAD`] zeros so a row's dot product rounded up to a multiple of
+/// 8 terms stays inside it.
 #[repr(C)]
 struct Features<const IN: usize, const H: usize> {
     one: f32,
     x: [f32; IN],
     h: [f32; H],
+    pad: [f32; ROW_PAD],
 }
 
 impl<const IN: usize, const H: usize> Features<IN, H> {
+    const LEN: usize = 1 + IN + H + ROW_PAD;
+
     fn as_slice(&self) -> &[f32] {
         const {
-            assert!(core::mem::size_of::<Self>() == 4 * (1 + IN + H));
+            assert!(core::mem::size_of::<Self>() == 4 * Self::LEN);
             assert!(core::mem::align_of::<Self>() == core::mem::align_of::<f32>());
         }
         // SAFETY: `#[repr(C)]`, only `f32`s, no padding (checked above):
-        // `1 + IN + H` contiguous initialised `f32`s; provenance from the
-        // whole struct.
-        unsafe { core::slice::from_raw_parts((self as *const Self).cast::<f32>(), 1 + IN + H) }
+        // `LEN` contiguous initialised `f32`s; provenance from the whole
+        // struct.
+        unsafe { core::slice::from_raw_parts((self as *const Self).cast::<f32>(), Self::LEN) }
     }
-}
-
-/// `len` rounded up to a multiple of 8, at most `cap`. Dotting a unit's row
-/// past its used length adds only `0 × 0` terms (unused weights are zero and
-/// so are the features of hidden units not yet computed), so the value is
-/// unchanged, and whole blocks of eight are cheaper on the M4 than a tail.
-#[inline]
-fn padded_len(len: usize, cap: usize) -> usize {
-    len.div_ceil(8).saturating_mul(8).min(cap)
 }
 
 /// Normalise `x` into the net's input box: `(x − lo) / (hi − lo)`, entries
 /// past the net's input count set to 0.
 #[inline]
-pub fn normalise<const IN: usize, const H: usize, const OUT: usize>(
-    net: &CascadeNet<IN, H, OUT>,
+pub fn normalise<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
+    net: &CascadeNet<IN, H, OUT, W>,
     x: &[f32; IN],
 ) -> [f32; IN] {
     let mut xn = [0.0f32; IN];
@@ -192,36 +250,80 @@ pub fn normalise<const IN: usize, const H: usize, const OUT: usize>(
 /// Tensions (newtons) the net predicts for pose `x` (`px, py, pz` in m,
 /// `qw, qx, qy, qz`); outputs past the net's output count are 0.
 ///
-/// Unit `k` computes `act(row_k · [1, x̂, h_0 … h_{k−1}])` over its
-/// `1 + IN + k` used weights (inputs past the net's count are 0 in both),
-/// padded with zero terms to a multiple of 8 ([`padded_len`]).
+/// Walks the packed weights ([`CascadeNet::weights`]) row by row: hidden
+/// unit `k` computes `act(row_k · [1, x̂, h_0 … h_{k−1}])` over its
+/// `1 + IN + k` weights, then each output dots its `1 + IN + H` weights with
+/// `[1, x̂, h…]`.
+///
+/// Every dot product runs over the row length rounded up to a multiple of
+/// 8, so it reads up to 7 weights past the row's end: the
+/// next row's first weights, or the zero padding after the last row. That
+/// is exact: the features those weights meet are hidden units not computed
+/// yet (still 0, since unit `k` sees only `h_0 … h_{k−1}`), hidden units the
+/// net does not have, or the feature vector's zero padding; and every stored
+/// weight is finite (the decoder rejects NaN/∞, unused storage is 0), so each
+/// extra product is ±0, and `s + ±0 = s` (at most the sign of a zero sum
+/// changes, which no activation or de-normalisation can see). Host and MCU
+/// run the same padded sums in the same order, so they agree bit for bit.
+///
 /// No checks on `x`: a NaN or huge pose gives NaN or extrapolated tensions,
 /// which the control step filters. An empty net gives all zeros.
-pub fn infer<const IN: usize, const H: usize, const OUT: usize>(
-    net: &CascadeNet<IN, H, OUT>,
+pub fn infer<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
+    net: &CascadeNet<IN, H, OUT, W>,
     x: &[f32; IN],
 ) -> [f32; OUT] {
     let mut f = Features {
         one: 1.0,
         x: normalise(net, x),
         h: [0.0f32; H],
+        pad: [0.0f32; ROW_PAD],
     };
-    let hidden_act = net.hidden_activation();
-    for (k, unit) in net.hidden_units().iter().enumerate() {
-        let len = padded_len(1 + IN + k, 1 + IN + H);
-        let s = dot(prefix(unit.as_slice(), len), prefix(f.as_slice(), len));
-        if let Some(slot) = f.h.get_mut(k) {
-            *slot = hidden_act.apply(s);
+    let w: &[f32] = net.weights();
+    let nh = net.shape().hidden.min(H);
+    // One loop per activation: no dispatch inside the hot loop.
+    let start = match net.hidden_activation() {
+        Activation::Linear => hidden_layer(w, &mut f, nh, |s| s),
+        Activation::Sigmoid => hidden_layer(w, &mut f, nh, |s| Activation::Sigmoid.apply(s)),
+        Activation::SymmetricSigmoid => {
+            hidden_layer(w, &mut f, nh, |s| Activation::SymmetricSigmoid.apply(s))
         }
-    }
-    let len = padded_len(1 + IN + net.shape().hidden, 1 + IN + H);
-    let feats = prefix(f.as_slice(), len);
+    };
+    let row_len = 1 + IN + nh;
+    let blocks = row_len.div_ceil(8);
+    let feats = f.as_slice();
     let out_act = net.output_activation();
     let mut y = [0.0f32; OUT];
     let ranges = net.output_lo().iter().zip(net.output_hi());
-    for ((yo, unit), (&lo, &hi)) in y.iter_mut().zip(net.output_units()).zip(ranges) {
-        let s = dot(prefix(unit.as_slice(), len), feats);
+    let mut rows = w.get(start..).unwrap_or(&[]);
+    for (yo, (&lo, &hi)) in y.iter_mut().zip(ranges) {
+        let s = dot8_blocks(rows, feats, blocks);
+        rows = rows.get(row_len..).unwrap_or(&[]);
         *yo = lo + out_act.apply(s) * (hi - lo);
     }
     y
+}
+
+/// The cascade's hidden units in order: `h_k = act(row_k · features)`, each
+/// row's dot product padded to whole blocks of 8. Returns the offset of the
+/// first output row.
+#[inline(always)]
+fn hidden_layer<const IN: usize, const H: usize>(
+    w: &[f32],
+    f: &mut Features<IN, H>,
+    nh: usize,
+    act: impl Fn(f32) -> f32,
+) -> usize {
+    let mut rows = w;
+    let mut start = 0;
+    for k in 0..nh {
+        // Row k and up to 7 weights after it: whole blocks of 8.
+        let row_len = 1 + IN + k;
+        let s = dot8_blocks(rows, f.as_slice(), row_len.div_ceil(8));
+        rows = rows.get(row_len..).unwrap_or(&[]);
+        start += row_len;
+        if let Some(slot) = f.h.get_mut(k) {
+            *slot = act(s);
+        }
+    }
+    start
 }

@@ -1,11 +1,12 @@
-//! A deterministic synthetic net: the placeholder `.tnet` the MCU binary
-//! embeds until a trained one replaces it, and a fixture for tests and
-//! benches. Weights come from SplitMix64, so a seed fixes the blob exactly.
+//! A deterministic synthetic net: the hot-swap update blob the MCU binary's
+//! vectors offer, and a fixture for tests and benches. Weights come from
+//! SplitMix64, so a seed fixes the blob exactly.
 
 use tendril_shared::{encode, Activation, Shape, TnetError, TnetView};
 
-/// Most weights [`synthetic_blob`] can produce (7 inputs, 16 hidden, 8 outputs needs 440).
-pub const MAX_WEIGHTS: usize = 1024;
+/// Most weights [`synthetic_blob`] can produce (7 inputs, 64 hidden, 8
+/// outputs needs 3,104).
+pub const MAX_WEIGHTS: usize = 4096;
 
 /// Input box of the synthetic net: a plausible tip workspace of the seed
 /// robot (`px, py` ±0.15 m, `pz` 0.30–0.40 m, a quaternion near identity).
@@ -36,7 +37,7 @@ impl SplitMix64 {
 
 /// Encode a 7-input net with `hidden` symmetric-sigmoid units and `outputs`
 /// linear outputs (range 0–`max_tension` N), weights uniform in [−1, 1],
-/// into `buf`; returns the length written.
+/// input box [`INPUT_LO`]–[`INPUT_HI`], into `buf`; returns the length written.
 pub fn synthetic_blob(
     seed: u64,
     hidden: usize,
@@ -44,10 +45,43 @@ pub fn synthetic_blob(
     max_tension: f32,
     buf: &mut [u8],
 ) -> Result<usize, TnetError> {
+    let lo = [0.0f32; 8];
+    let hi = [max_tension; 8];
+    let ranges = Ranges {
+        input_lo: &INPUT_LO,
+        input_hi: &INPUT_HI,
+        output_lo: lo.get(..outputs).unwrap_or(&lo),
+        output_hi: hi.get(..outputs).unwrap_or(&hi),
+    };
+    synthetic_blob_with(seed, hidden, &ranges, buf)
+}
+
+/// Normalisation ranges for [`synthetic_blob_with`] (their lengths set the
+/// net's input and output counts).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ranges<'a> {
+    /// Lower ends of the input box.
+    pub input_lo: &'a [f32],
+    /// Upper ends of the input box.
+    pub input_hi: &'a [f32],
+    /// Lower ends of the output ranges, N.
+    pub output_lo: &'a [f32],
+    /// Upper ends of the output ranges, N.
+    pub output_hi: &'a [f32],
+}
+
+/// Like [`synthetic_blob`] with given ranges: a net that fits the same robot
+/// and input box as another one (the hot-swap update for a trained net).
+pub fn synthetic_blob_with(
+    seed: u64,
+    hidden: usize,
+    ranges: &Ranges<'_>,
+    buf: &mut [u8],
+) -> Result<usize, TnetError> {
     let shape = Shape {
-        inputs: 7,
+        inputs: ranges.input_lo.len(),
         hidden,
-        outputs,
+        outputs: ranges.output_lo.len(),
     };
     let nh = shape.hidden_weight_count();
     let no = shape.output_weight_count();
@@ -60,16 +94,14 @@ pub fn synthetic_blob(
     let ow = rest
         .get(..no)
         .ok_or(TnetError::ShapeTooLarge { value: nh + no })?;
-    let lo = [0.0f32; 8];
-    let hi = [max_tension; 8];
     let view = TnetView {
         shape,
         hidden_activation: Activation::SymmetricSigmoid,
         output_activation: Activation::Linear,
-        input_lo: &INPUT_LO,
-        input_hi: &INPUT_HI,
-        output_lo: lo.get(..outputs).unwrap_or(&lo),
-        output_hi: hi.get(..outputs).unwrap_or(&hi),
+        input_lo: ranges.input_lo,
+        input_hi: ranges.input_hi,
+        output_lo: ranges.output_lo,
+        output_hi: ranges.output_hi,
         hidden_weights: hw,
         output_weights: ow,
     };

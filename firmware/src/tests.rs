@@ -6,18 +6,20 @@
 use std::vec::Vec;
 
 use proptest::prelude::*;
-use tendril_shared::{CascadeNet, TendonLimits, MAX_TENDONS};
+use tendril_shared::{weight_capacity, CascadeNet, TendonLimits, MAX_TENDONS};
 
 use crate::control::*;
 use crate::infer::{dot, infer};
-use crate::swap::{NetSlots, SwapError};
+use crate::swap::{FlashSlot, NetSlots, NetStore, SwapError};
 use crate::synth::{synthetic_blob, SplitMix64, INPUT_HI, INPUT_LO};
 use crate::vectors::{self, Record, VecHeader};
 
-type Net = CascadeNet<7, 16, 8>;
+type Net = CascadeNet<7, 16, 8, { weight_capacity(7, 16, 8) }>;
+
+type Net64 = CascadeNet<7, 64, 8, { weight_capacity(7, 64, 8) }>;
 
 fn blob(seed: u64, hidden: usize, outputs: usize) -> Vec<u8> {
-    let mut buf = std::vec![0u8; 8192];
+    let mut buf = std::vec![0u8; 16384];
     let n = synthetic_blob(seed, hidden, outputs, 10.0, &mut buf).unwrap();
     buf.truncate(n);
     buf
@@ -92,14 +94,30 @@ fn dot_matches_a_plain_sum_for_every_length() {
 #[test]
 fn inference_matches_an_f64_reference_of_the_documented_layout() {
     let mut rng = SplitMix64(99);
-    for &(seed, hidden, outputs) in &[(1u64, 0usize, 4usize), (2, 1, 1), (3, 12, 4), (4, 16, 8)] {
-        let net = Net::decode(&blob(seed, hidden, outputs)).unwrap();
+    let cases = [
+        (1u64, 0usize, 4usize),
+        (2, 1, 1),
+        (3, 12, 4),
+        (4, 16, 8),
+        (5, 64, 8),
+        (6, 63, 3),
+        (7, 9, 4),
+    ];
+    for &(seed, hidden, outputs) in &cases {
+        let b = blob(seed, hidden, outputs);
+        // Every case through the 64-unit MCU capacity; those that fit also
+        // through the 16-unit one (a different packing: same result).
+        let net = Net64::decode(&b).unwrap();
+        let small = Net::decode(&b).ok();
         for _ in 0..50 {
             let mut x = [0.0f32; 7];
             for i in 0..7 {
                 x[i] = rng.uniform(INPUT_LO[i], INPUT_HI[i]);
             }
             let y = infer(&net, &x);
+            if let Some(small) = &small {
+                assert_eq!(infer(small, &x), y);
+            }
             let r = reference(seed, hidden, outputs, &x);
             for o in 0..outputs {
                 let tol = 1e-4 * (1.0 + r[o].abs());
@@ -318,7 +336,7 @@ fn integral_loop_removes_a_constant_plant_offset() {
 fn a_rejected_blob_leaves_the_running_net_in_place() {
     let good = blob(3, 12, 4);
     let other = blob(8, 12, 4);
-    let mut slots = NetSlots::<7, 16, 8>::new();
+    let mut slots = NetSlots::<7, 16, 8, { weight_capacity(7, 16, 8) }>::new();
     slots.load(&good, (7, 4)).unwrap();
     let pose = mid_pose();
     let before = infer(slots.active(), &pose);
@@ -346,6 +364,74 @@ fn a_rejected_blob_leaves_the_running_net_in_place() {
     // Swapping back and forth keeps working (both buffers reused).
     slots.load(&good, (7, 4)).unwrap();
     assert_eq!(infer(slots.active(), &pose), before);
+}
+
+/// `b` with its last weight (just before the CRC) NaN and the CRC
+/// recomputed: passes every structural check, fails only on the value.
+fn nan_blob(b: &[u8]) -> Vec<u8> {
+    let mut bad = b.to_vec();
+    let body = bad.len() - 4;
+    bad[body - 4..body].copy_from_slice(&f32::NAN.to_le_bytes());
+    let crc = tendril_shared::crc32::crc32(&bad[..body]);
+    bad[body..].copy_from_slice(&crc.to_le_bytes());
+    bad
+}
+
+#[test]
+fn flash_slot_rejections_keep_the_running_net_flash_or_ram() {
+    let flash = Net64::decode(&blob(3, 12, 4)).unwrap();
+    let update = blob(8, 40, 4);
+    let update2 = blob(9, 5, 4);
+    let mut ram = std::boxed::Box::new(Net64::empty());
+    let mut store = FlashSlot::new(&flash, &mut ram);
+    let want = (7, 4);
+    let mut crc_flip = update.clone();
+    crc_flip[40] ^= 0x10;
+    let rejects: [(&str, Vec<u8>); 5] = [
+        ("NaN weight under a valid CRC", nan_blob(&update)),
+        ("truncated", update[..update.len() - 1].to_vec()),
+        ("corrupted byte", crc_flip),
+        ("wrong output count", blob(8, 40, 3)),
+        ("over capacity", blob(8, 65, 4)),
+    ];
+    let check_rejects = |store: &mut FlashSlot<'_, 7, 64, 8, { weight_capacity(7, 64, 8) }>,
+                         running: &Net64,
+                         on_ram: bool| {
+        for (what, b) in &rejects {
+            assert!(store.load(b, want).is_err(), "{what} accepted");
+            assert_eq!(store.active(), running, "{what} changed the running net");
+            assert_eq!(store.running_ram(), on_ram, "{what}");
+        }
+    };
+    // The flash net runs; rejections leave it.
+    check_rejects(&mut store, &flash, false);
+    assert!(core::ptr::eq(store.active(), &flash));
+    // An update goes to RAM and runs.
+    let expected = Net64::decode(&update).unwrap();
+    store.load(&update, want).unwrap();
+    assert!(store.running_ram());
+    assert_eq!(store.active(), &expected);
+    // While the RAM slot runs, every rejection leaves it intact, including
+    // the NaN blob that is only refused after the whole file was read.
+    check_rejects(&mut store, &expected, true);
+    // An update over the running RAM net; a smaller one leaves no stale weights.
+    store.load(&update2, want).unwrap();
+    assert_eq!(store.active(), &Net64::decode(&update2).unwrap());
+    check_rejects(&mut store, &Net64::decode(&update2).unwrap(), true);
+    // Back to flash.
+    assert!(store.revert());
+    assert!(!store.revert());
+    assert!(core::ptr::eq(store.active(), &flash));
+}
+
+#[test]
+fn the_flash_default_net_is_its_file_decoded_at_run_time() {
+    // build.rs generated DEFAULT_NET from this file through `from_view` in
+    // const context; the run-time decoder must give the same net.
+    let file = include_bytes!(env!("TENDRIL_FW_NET_FILE"));
+    let decoded = crate::McuNet::decode(file).unwrap();
+    assert_eq!(crate::DEFAULT_NET, decoded);
+    assert!(crate::DEFAULT_NET.shape().hidden <= crate::MCU_MAX_HIDDEN);
 }
 
 #[test]

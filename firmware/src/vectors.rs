@@ -20,7 +20,7 @@ use crate::control::{
     Status, StepInput, POSE_DIM,
 };
 use crate::infer::infer;
-use crate::swap::{NetSlots, SwapError};
+use crate::swap::{NetStore, SwapError};
 
 /// First four bytes of a vector file.
 pub const MAGIC: [u8; 4] = *b"TVEC";
@@ -35,10 +35,26 @@ pub const RECORD_LEN: usize = 56;
 pub const HAS_SETPOINT: u32 = 1 << 0;
 /// Record flag: the record carries feedback.
 pub const HAS_FEEDBACK: u32 = 1 << 1;
-/// Record flag: before this step, offer a truncated copy of the net (must be rejected).
+/// Record flag: before this step, offer a truncated copy of the update blob
+/// (must be rejected; the running net stays).
 pub const SWAP_BAD: u32 = 1 << 2;
-/// Record flag: before this step, offer the full net again (must be accepted).
+/// Record flag: before this step, offer the update blob (must be accepted).
 pub const SWAP_GOOD: u32 = 1 << 3;
+/// Record flag: before this step, offer the update blob with a NaN weight
+/// under a valid CRC (rejected only after the whole blob was read).
+pub const SWAP_NAN: u32 = 1 << 4;
+/// Record flag: before this step, go back to the built-in (flash) net.
+pub const SWAP_REVERT: u32 = 1 << 5;
+
+/// The hot-swap blobs a vector run offers (see the `SWAP_*` flags).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SwapBlobs<'a> {
+    /// A valid update (`firmware/vectors/swap.tnet`).
+    pub good: &'a [u8],
+    /// The same with a NaN weight and a recomputed CRC
+    /// (`firmware/vectors/swap_nan.tnet`).
+    pub nan: &'a [u8],
+}
 
 /// The run configuration a vector file carries.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -72,7 +88,7 @@ pub struct VecHeader {
 pub struct Record {
     /// Step time, ns.
     pub now_ns: u64,
-    /// `HAS_SETPOINT | HAS_FEEDBACK | SWAP_BAD | SWAP_GOOD` bits.
+    /// `HAS_SETPOINT | HAS_FEEDBACK | SWAP_*` bits.
     pub flags: u32,
     /// Setpoint sequence number.
     pub seq: u32,
@@ -96,7 +112,7 @@ pub enum VecError {
 /// Why [`run`] stopped.
 #[derive(Debug, PartialEq, Eq, thiserror::Error)]
 pub enum RunError {
-    /// The embedded net did not load.
+    /// The running net does not fit the vectors' robot.
     #[error("embedded net: {0}")]
     Net(#[from] SwapError),
     /// The vector file is malformed.
@@ -280,21 +296,50 @@ pub struct Summary {
     pub status_union: u32,
 }
 
-/// Load `blob` into `slots`, then for each record: apply the swap flags,
-/// print `infer <i> <bits…>` for a finite setpoint pose (raw net output),
-/// run the control step and print `step <i> <status> <bits…>`. First line
-/// `net <inputs> <hidden> <outputs> <macs>`, last `done <steps>`.
-pub fn run<const H: usize, const OUT: usize, W: fmt::Write>(
-    slots: &mut NetSlots<POSE_DIM, H, OUT>,
+/// Offer a blob to `store`, as a status bit.
+fn offer<const H: usize, const OUT: usize, const W: usize, S>(
+    store: &mut S,
     blob: &[u8],
+    want: (usize, usize),
+) -> Status
+where
+    S: NetStore<POSE_DIM, H, OUT, W>,
+{
+    match store.load(blob, want) {
+        Ok(()) => Status::WEIGHTS_SWAPPED,
+        Err(_) => Status::WEIGHTS_REJECTED,
+    }
+}
+
+/// Run the vectors on `store`'s running net: first line
+/// `net <inputs> <hidden> <outputs> <macs>`; then for each record apply the
+/// `SWAP_*` flags (in the order bad, NaN, good, revert), print
+/// `infer <i> <bits…>` for a finite setpoint pose (raw net output), run the
+/// control step and print `step <i> <status> <bits…>`; last line
+/// `done <steps>`.
+pub fn run<const H: usize, const OUT: usize, const W: usize, S, Wr>(
+    store: &mut S,
+    swap: &SwapBlobs<'_>,
     vectors: &[u8],
-    out: &mut W,
-) -> Result<Summary, RunError> {
+    out: &mut Wr,
+) -> Result<Summary, RunError>
+where
+    S: NetStore<POSE_DIM, H, OUT, W>,
+    Wr: fmt::Write,
+{
     let (header, records) = parse(vectors)?;
     let cfg = header.config()?;
     let n = cfg.limits.n_tendons();
-    slots.load(blob, (POSE_DIM, n))?;
-    let s = slots.active().shape();
+    let want = (POSE_DIM, n);
+    let s = store.active().shape();
+    if (s.inputs, s.outputs) != want {
+        return Err(RunError::Net(SwapError::ShapeMismatch {
+            inputs: s.inputs,
+            outputs: s.outputs,
+            want_inputs: want.0,
+            want_outputs: want.1,
+        }));
+    }
     writeln!(
         out,
         "net {} {} {} {}",
@@ -303,25 +348,28 @@ pub fn run<const H: usize, const OUT: usize, W: fmt::Write>(
         s.outputs,
         s.macs()
     )?;
-    let truncated = blob.get(..blob.len().saturating_sub(1)).unwrap_or(&[]);
+    let truncated = swap
+        .good
+        .get(..swap.good.len().saturating_sub(1))
+        .unwrap_or(&[]);
 
     let mut state = ControlState::new(&cfg.limits, &[0.0; MAX_TENDONS], 0);
     let mut sum = Summary::default();
     for (i, rec) in records.enumerate() {
         let mut pending = Status::empty();
         if rec.flags & SWAP_BAD != 0 {
-            match slots.load(truncated, (POSE_DIM, n)) {
-                Ok(()) => pending |= Status::WEIGHTS_SWAPPED,
-                Err(_) => pending |= Status::WEIGHTS_REJECTED,
-            }
+            pending |= offer(store, truncated, want);
+        }
+        if rec.flags & SWAP_NAN != 0 {
+            pending |= offer(store, swap.nan, want);
         }
         if rec.flags & SWAP_GOOD != 0 {
-            match slots.load(blob, (POSE_DIM, n)) {
-                Ok(()) => pending |= Status::WEIGHTS_SWAPPED,
-                Err(_) => pending |= Status::WEIGHTS_REJECTED,
-            }
+            pending |= offer(store, swap.good, want);
         }
-        let net = slots.active();
+        if rec.flags & SWAP_REVERT != 0 && store.revert() {
+            pending |= Status::WEIGHTS_SWAPPED;
+        }
+        let net = store.active();
         let has_sp = rec.flags & HAS_SETPOINT != 0;
         if has_sp && rec.pose.iter().all(|v| v.is_finite()) {
             let y = infer(net, &rec.pose);

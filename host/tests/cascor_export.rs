@@ -46,21 +46,18 @@ fn reencode(net: &HostNet) -> Vec<u8> {
     let s = net.shape();
     let hidden: Vec<f32> = net
         .hidden_units()
-        .iter()
-        .enumerate()
-        .flat_map(|(k, u)| {
+        .flat_map(|u| {
             std::iter::once(u.bias)
                 .chain(u.inputs[..s.inputs].iter().copied())
-                .chain(u.hidden[..k].iter().copied())
+                .chain(u.hidden.iter().copied())
         })
         .collect();
     let outputs: Vec<f32> = net
         .output_units()
-        .iter()
         .flat_map(|u| {
             std::iter::once(u.bias)
                 .chain(u.inputs[..s.inputs].iter().copied())
-                .chain(u.hidden[..s.hidden].iter().copied())
+                .chain(u.hidden.iter().copied())
         })
         .collect();
     let view = TnetView {

@@ -6,8 +6,8 @@ use std::vec::Vec;
 use proptest::prelude::*;
 
 use crate::crc32::crc32;
-use crate::tnet::{self, Field, TnetError, MAGIC};
 use crate::net::ROW_PAD;
+use crate::tnet::{self, Field, TnetError, MAGIC};
 use crate::{encode, encoded_len, weight_capacity, Activation, CascadeNet, Shape, TnetView};
 
 /// An owned net description with distinct, deterministic values.
@@ -404,11 +404,33 @@ fn failed_decode_into_leaves_the_previous_net_untouched() {
         })
     ));
     assert_eq!(net, before);
-    assert_eq!(Net::validate(&nan).err(), net.clone().decode_into(&nan).err());
+    assert_eq!(
+        Net::validate(&nan).err(),
+        net.clone().decode_into(&nan).err()
+    );
     // A smaller net decoded over a bigger one leaves zeros, not stale weights.
     let mut big = Net::decode(&Owned::new(7, 8, 4).blob()).unwrap();
     big.decode_into(&good).unwrap();
     assert_eq!(big, before);
+}
+
+#[test]
+fn checked_bytes_decode_only_into_a_net_they_fit() {
+    let blob = Owned::new(7, 6, 4).blob();
+    let checked = CascadeNet::<7, 16, 4, { weight_capacity(7, 16, 4) }>::check(&blob).unwrap();
+    assert_eq!(checked.header().shape, Owned::new(7, 6, 4).shape);
+    let mut fits = Net::empty();
+    fits.decode_checked(&checked).unwrap();
+    assert_eq!(fits, Net::decode(&blob).unwrap());
+    let mut small =
+        CascadeNet::<7, 5, 4, { weight_capacity(7, 5, 4) }>::decode(&Owned::new(7, 2, 4).blob())
+            .unwrap();
+    let before = small.clone();
+    assert!(matches!(
+        small.decode_checked(&checked),
+        Err(TnetError::ShapeOverCapacity { hidden: 6, .. })
+    ));
+    assert_eq!(small, before);
 }
 
 #[test]

@@ -17,7 +17,7 @@ pub mod tnet;
 mod format_tests;
 
 pub use limits::{LimitsError, TendonLimits, MAX_TENDONS};
-pub use net::{weight_capacity, CascadeNet, NetHeader, Row};
+pub use net::{weight_capacity, CascadeNet, Checked, NetHeader, Row};
 #[cfg(feature = "std")]
 pub use tnet::encode_to_vec;
 pub use tnet::{encode, encoded_len, Activation, Shape, TnetError, TnetView};

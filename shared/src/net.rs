@@ -122,6 +122,22 @@ pub struct NetHeader {
     pub output_activation: Activation,
 }
 
+/// A `.tnet` byte string that passed [`CascadeNet::check`]: every check
+/// the decoder makes, CRC included. Only `check` makes one (private fields),
+/// so [`CascadeNet::decode_checked`] can write it without checking again.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Checked<'a> {
+    bytes: &'a [u8],
+    header: NetHeader,
+}
+
+impl Checked<'_> {
+    /// What the file holds.
+    pub fn header(&self) -> &NetHeader {
+        &self.header
+    }
+}
+
 /// Where a value read from the file goes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Dest {
@@ -133,11 +149,13 @@ enum Dest {
     Weight(usize),
 }
 
-/// Parse the whole file — header, every array, CRC — calling
-/// `visit(field, index_in_field, destination, value)` for each value in file
-/// order. Checks structure, capacity and CRC, not values (the visitor does).
+/// Parse the whole file — header, every array, and (if `crc`) the CRC —
+/// calling `visit(field, index_in_field, destination, value)` for each value
+/// in file order. Checks structure and capacity, not values (the visitor
+/// does).
 fn walk<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
     bytes: &[u8],
+    crc: bool,
     mut visit: impl FnMut(Field, usize, Dest, f32),
 ) -> Result<NetHeader, TnetError> {
     let mut r = Reader::new(bytes);
@@ -162,23 +180,30 @@ fn walk<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
     for (field, n, dest) in ranges {
         r.seq_len(field, n)?;
         for i in 0..n {
-            visit(field, i, dest(i), r.take()?);
+            visit(field, i, dest(i), r.f32()?);
         }
     }
     // Row `k` of the file: bias, `ni` inputs, `k` hidden weights; in storage
     // the inputs occupy `IN` columns (the rest stay 0).
-    let mut row = |r: &mut Reader<'_>, field: Field, file_at: usize, start: usize, hidden: usize| {
-        let cols = (0..1 + ni).map(|c| (c, start + c));
-        let hid = (0..hidden).map(|j| (1 + ni + j, start + 1 + IN + j));
-        for (c, at) in cols.chain(hid) {
-            visit(field, file_at + c, Dest::Weight(at), r.take()?);
-        }
-        Ok::<(), TnetError>(())
-    };
+    let mut row =
+        |r: &mut Reader<'_>, field: Field, file_at: usize, start: usize, hidden: usize| {
+            let cols = (0..1 + ni).map(|c| (c, start + c));
+            let hid = (0..hidden).map(|j| (1 + ni + j, start + 1 + IN + j));
+            for (c, at) in cols.chain(hid) {
+                visit(field, file_at + c, Dest::Weight(at), r.f32()?);
+            }
+            Ok::<(), TnetError>(())
+        };
     r.seq_len(Field::HiddenWeights, shape.hidden_weight_count())?;
     for k in 0..nh {
         let file_at = shape.hidden_row_offset(k);
-        row(&mut r, Field::HiddenWeights, file_at, hidden_offset(IN, k), k)?;
+        row(
+            &mut r,
+            Field::HiddenWeights,
+            file_at,
+            hidden_offset(IN, k),
+            k,
+        )?;
     }
     r.seq_len(Field::OutputWeights, shape.output_weight_count())?;
     let out_base = hidden_offset(IN, nh);
@@ -187,7 +212,11 @@ fn walk<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
         let start = out_base + o * (1 + IN + nh);
         row(&mut r, Field::OutputWeights, file_at, start, nh)?;
     }
-    tnet::check_trailer(bytes, r.remaining())?;
+    if crc {
+        tnet::check_trailer(bytes, r.remaining())?;
+    } else if r.remaining().len() != 4 {
+        return Err(TnetError::Malformed);
+    }
     Ok(NetHeader {
         shape,
         hidden_activation,
@@ -224,12 +253,19 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
     /// the checks of [`CascadeNet::decode_into`], in the same order, so it
     /// returns the same error.
     pub fn validate(bytes: &[u8]) -> Result<NetHeader, TnetError> {
+        Self::check(bytes).map(|c| c.header)
+    }
+
+    /// [`CascadeNet::validate`], keeping the bytes for
+    /// [`CascadeNet::decode_checked`]: validate first, decide (e.g. whether
+    /// the shape suits the robot), then write.
+    pub fn check(bytes: &[u8]) -> Result<Checked<'_>, TnetError> {
         let mut lo_in = [0.0f32; IN];
         let mut hi_in = [0.0f32; IN];
         let mut lo_out = [0.0f32; OUT];
         let mut hi_out = [0.0f32; OUT];
         let mut first_bad: Option<TnetError> = None;
-        let header = walk::<IN, MAX_HIDDEN, OUT, W>(bytes, |field, index, dest, v| {
+        let header = walk::<IN, MAX_HIDDEN, OUT, W>(bytes, true, |field, index, dest, v| {
             if first_bad.is_none() && !v.is_finite() {
                 first_bad = Some(TnetError::NonFinite { field, index });
             }
@@ -248,7 +284,7 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
         let (ni, no) = (header.shape.inputs, header.shape.outputs);
         tnet::check_ranges(Field::InputLo, prefix(&lo_in, ni), prefix(&hi_in, ni))?;
         tnet::check_ranges(Field::OutputLo, prefix(&lo_out, no), prefix(&hi_out, no))?;
-        Ok(header)
+        Ok(Checked { bytes, header })
     }
 
     /// Decode a `.tnet` byte string. Never panics: any byte string either
@@ -266,9 +302,40 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
     /// completely before the first write: on error `self` is untouched (still
     /// the net it was), on success it holds the new net.
     pub fn decode_into(&mut self, bytes: &[u8]) -> Result<(), TnetError> {
-        let header = Self::validate(bytes)?;
-        *self = Self::empty();
-        let written = walk::<IN, MAX_HIDDEN, OUT, W>(bytes, |_, _, dest, v| match dest {
+        let checked = Self::check(bytes)?;
+        self.decode_checked(&checked)
+    }
+
+    /// Write a net that [`CascadeNet::check`] accepted into `self` (one
+    /// parse, no second CRC or value check: the bytes are borrowed, so they
+    /// are the ones that passed). Fails only if `checked` came from a type
+    /// with a larger capacity than `self`'s ([`TnetError::ShapeOverCapacity`],
+    /// `self` untouched).
+    pub fn decode_checked(&mut self, checked: &Checked<'_>) -> Result<(), TnetError> {
+        let (header, bytes) = (checked.header, checked.bytes);
+        let s = header.shape;
+        if s.inputs > IN || s.hidden > MAX_HIDDEN || s.outputs > OUT {
+            return Err(TnetError::ShapeOverCapacity {
+                inputs: s.inputs,
+                hidden: s.hidden,
+                outputs: s.outputs,
+                cap_inputs: IN,
+                cap_hidden: MAX_HIDDEN,
+                cap_outputs: OUT,
+            });
+        }
+        if weights_needed(IN, s.hidden, s.outputs) > W {
+            return Err(TnetError::ShapeOverCapacity {
+                inputs: s.inputs,
+                hidden: s.hidden,
+                outputs: s.outputs,
+                cap_inputs: IN,
+                cap_hidden: MAX_HIDDEN,
+                cap_outputs: OUT,
+            });
+        }
+        self.clear();
+        let written = walk::<IN, MAX_HIDDEN, OUT, W>(bytes, false, |_, _, dest, v| match dest {
             Dest::InputLo(i) => put(&mut self.input_lo, i, v),
             Dest::InputHi(i) => put(&mut self.input_hi, i, v),
             Dest::OutputLo(i) => put(&mut self.output_lo, i, v),
@@ -285,14 +352,31 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
             // Unreachable: the same bytes passed the same walk a moment
             // ago. Never leave a half-written net behind, though.
             Ok(_) => {
-                *self = Self::empty();
+                self.clear();
                 Err(TnetError::Malformed)
             }
             Err(e) => {
-                *self = Self::empty();
+                self.clear();
                 Err(e)
             }
         }
+    }
+
+    /// Make `self` [empty](CascadeNet::empty) in place (`*self = empty()`
+    /// would build the whole net on the stack first: 12 KiB on the MCU).
+    fn clear(&mut self) {
+        self.shape = Shape {
+            inputs: 0,
+            hidden: 0,
+            outputs: 0,
+        };
+        self.hidden_activation = Activation::Linear;
+        self.output_activation = Activation::Linear;
+        self.input_lo.fill(0.0);
+        self.input_hi.fill(0.0);
+        self.output_lo.fill(0.0);
+        self.output_hi.fill(0.0);
+        self.weights.fill(0.0);
     }
 
     /// Build a net from a [`TnetView`] (the file's own layout) with the
@@ -324,8 +408,16 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
             (Field::InputHi, view.input_hi, ni),
             (Field::OutputLo, view.output_lo, no),
             (Field::OutputHi, view.output_hi, no),
-            (Field::HiddenWeights, view.hidden_weights, s.hidden_weight_count()),
-            (Field::OutputWeights, view.output_weights, s.output_weight_count()),
+            (
+                Field::HiddenWeights,
+                view.hidden_weights,
+                s.hidden_weight_count(),
+            ),
+            (
+                Field::OutputWeights,
+                view.output_weights,
+                s.output_weight_count(),
+            ),
         ];
         let mut a = 0;
         while a < arrays.len() {
@@ -378,7 +470,12 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
         let mut k = 0;
         while k < nh + no {
             let (src, file_at, start, hidden) = if k < nh {
-                (view.hidden_weights, s.hidden_row_offset(k), hidden_offset(IN, k), k)
+                (
+                    view.hidden_weights,
+                    s.hidden_row_offset(k),
+                    hidden_offset(IN, k),
+                    k,
+                )
             } else {
                 let o = k - nh;
                 let start = hidden_offset(IN, nh) + o * (1 + IN + nh);
@@ -386,7 +483,11 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
             };
             let mut c = 0;
             while c < 1 + ni + hidden {
-                let at = if c <= ni { start + c } else { start + IN + c - ni };
+                let at = if c <= ni {
+                    start + c
+                } else {
+                    start + IN + c - ni
+                };
                 net.weights[at] = src[file_at + c];
                 c += 1;
             }

@@ -545,6 +545,20 @@ impl<'a> Reader<'a> {
         }
     }
 
+    /// One `f32`: postcard writes it as its 4 little-endian IEEE-754 bytes,
+    /// so read them directly (same result as `take::<f32>`, a fraction of the
+    /// instructions; the decoder reads thousands of these).
+    #[inline]
+    pub(crate) fn f32(&mut self) -> Result<f32, TnetError> {
+        match self.rest.split_first_chunk::<4>() {
+            Some((b, rest)) => {
+                self.rest = rest;
+                Ok(f32::from_le_bytes(*b))
+            }
+            None => Err(TnetError::Truncated),
+        }
+    }
+
     pub(crate) fn activation(&mut self) -> Result<Activation, TnetError> {
         let code: u8 = self.take()?;
         Activation::from_code(code).ok_or(TnetError::UnknownActivation { code })

@@ -1,28 +1,47 @@
 //! The MCU binary (Cortex-M4F, `thumbv7em-none-eabihf`, QEMU `mps2-an386`):
-//! runs the embedded test vectors through inference and the control step,
-//! prints every result over semihosting as hex `f32` bits, then measures
-//! instructions per inference (SysTick under `-icount shift=0`) and the stack
-//! high-water mark (painted stack), and exits 0 (ok) or 1 via semihosting.
+//! runs the embedded test vectors through inference, the control step and
+//! hot swaps, prints every result over semihosting as hex `f32` bits, then
+//! measures instructions per inference of the built-in net (SysTick under
+//! `-icount shift=0`) and the stack high-water mark (painted stack), and
+//! exits 0 (ok) or 1 via semihosting.
+//!
+//! The running net starts as [`tendril_firmware::DEFAULT_NET`], a `static` in
+//! flash that `firmware/build.rs` generates from `firmware/vectors/default.tnet`
+//! (or from the file named by `TENDRIL_FW_NET` at build time); hot-swapped
+//! updates go to one RAM slot ([`tendril_firmware::McuSlots`]).
 //!
 //! On the host the same file builds a twin that runs the same vectors
 //! through the same code and prints the same lines (minus measurements), so
 //! `cargo test --workspace` and `cargo clippy --all-targets` work unchanged.
 //!
-//! Embedded files (regenerate with
-//! `cargo run -p tendril-firmware --example gen_vectors`):
-//! `firmware/vectors/default.tnet` and `firmware/vectors/inputs.bin`.
+//! Embedded files, refreshed from the net the main job exports
+//! (`cargo run --release` writes `out/model.tnet`) with
+//! `cargo run -p tendril-firmware --example gen_vectors -- --tnet out/model.tnet`:
+//! `default.tnet` (that net), `inputs.bin` (control-loop inputs inside its
+//! input box), `swap.tnet` and `swap_nan.tnet` (a small update and a
+//! corrupted copy, for the hot-swap steps), all in `firmware/vectors/`.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
-/// The embedded weight file.
-static NET: &[u8] = include_bytes!("../../vectors/default.tnet");
 /// The embedded test vectors.
 static VECTORS: &[u8] = include_bytes!("../../vectors/inputs.bin");
+/// The hot-swap update blob.
+static SWAP: &[u8] = include_bytes!("../../vectors/swap.tnet");
+/// The update blob with a NaN weight under a valid CRC.
+static SWAP_NAN: &[u8] = include_bytes!("../../vectors/swap_nan.tnet");
+
+/// The swap blobs of the vector run.
+const BLOBS: tendril_firmware::vectors::SwapBlobs<'static> = tendril_firmware::vectors::SwapBlobs {
+    good: SWAP,
+    nan: SWAP_NAN,
+};
 
 #[cfg(not(target_os = "none"))]
 fn main() {
-    let mut slots = Box::new(tendril_firmware::McuSlots::new());
+    use tendril_firmware::{McuNet, McuSlots, DEFAULT_NET};
+    let mut ram = Box::new(McuNet::empty());
+    let mut store = McuSlots::new(&DEFAULT_NET, &mut ram);
     let mut out = String::new();
-    match tendril_firmware::vectors::run(&mut slots, NET, VECTORS, &mut out) {
+    match tendril_firmware::vectors::run(&mut store, &BLOBS, VECTORS, &mut out) {
         Ok(_) => print!("{out}"),
         Err(e) => {
             print!("{out}");
@@ -43,10 +62,10 @@ mod mcu {
     use tendril_firmware::control::{control_step, ControlState, Setpoint, StepInput};
     use tendril_firmware::infer::{dot, infer};
     use tendril_firmware::vectors::{self, HAS_SETPOINT};
-    use tendril_firmware::{McuNet, McuSlots, POSE_DIM};
+    use tendril_firmware::{McuNet, McuSlots, DEFAULT_NET, POSE_DIM};
     use tendril_shared::{Activation, MAX_TENDONS};
 
-    use super::{NET, VECTORS};
+    use super::{BLOBS, SWAP, VECTORS};
 
     /// Semihosting stdout, buffered per line (one host call per line).
     struct Out {
@@ -180,7 +199,7 @@ mod mcu {
     static DOT_A: [f32; 64] = [0.5; 64];
 
     #[inline(never)]
-    fn bench(net: &McuNet, out: &mut Out) {
+    fn bench(net: &McuNet, spare: &mut McuNet, out: &mut Out) {
         systick_start();
         const CAL: u32 = 200_000;
         let cal_ticks = ticks(|| spin(black_box(CAL)));
@@ -284,11 +303,33 @@ mod mcu {
                 );
             }
         }
+
+        // Hot swap: full validation alone, and validation + decode into the
+        // RAM slot, of the update blob.
+        const DREPS: u64 = 8;
+        let t_val = ticks(|| {
+            for _ in 0..DREPS {
+                let _ = black_box(McuNet::validate(black_box(SWAP)));
+            }
+        });
+        let t_dec = ticks(|| {
+            for _ in 0..DREPS {
+                let _ = black_box(spare.decode_into(black_box(SWAP)));
+            }
+        });
+        let _ = writeln!(
+            out,
+            "bench swap_bytes {} validate_x100 {} decode_x100 {}",
+            SWAP.len(),
+            per_rep_x100(t_val, 0, DREPS, cal_instr, cal_ticks),
+            per_rep_x100(t_dec, 0, DREPS, cal_instr, cal_ticks)
+        );
     }
 
     #[entry]
     fn main() -> ! {
-        static mut SLOTS: McuSlots = McuSlots::new();
+        // The hot-swap RAM slot: all zeros, so it sits in .bss.
+        static mut RAM_NET: McuNet = McuNet::empty();
         let floor = paint_stack();
         if log::set_logger(&LOGGER).is_ok() {
             log::set_max_level(log::LevelFilter::Info);
@@ -298,17 +339,19 @@ mod mcu {
             buf: [0; 200],
             len: 0,
         };
-        let ok = match vectors::run(SLOTS, NET, VECTORS, &mut out) {
+        let mut store = McuSlots::new(&DEFAULT_NET, &mut *RAM_NET);
+        let ok = match vectors::run(&mut store, &BLOBS, VECTORS, &mut out) {
             Ok(_) => true,
             Err(e) => {
                 let _ = writeln!(out, "error {e}");
                 false
             }
         };
+        drop(store);
         // Stack of the run itself (control steps, inference, printing).
         let _ = writeln!(out, "stack_run {}", stack_high_water(floor));
         if ok {
-            bench(SLOTS.active(), &mut out);
+            bench(&DEFAULT_NET, RAM_NET, &mut out);
         }
         let _ = writeln!(out, "stack_total {}", stack_high_water(floor));
         out.flush();

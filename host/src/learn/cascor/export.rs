@@ -16,7 +16,12 @@ pub const HOST_MAX_HIDDEN: usize = 64;
 
 /// The host's fixed-capacity decoded net: 7 pose inputs, up to
 /// [`HOST_MAX_HIDDEN`] hidden units, up to 8 tendons.
-pub type HostNet = tendril_shared::CascadeNet<POSE_DIM, HOST_MAX_HIDDEN, MAX_TENDONS>;
+pub type HostNet = tendril_shared::CascadeNet<
+    POSE_DIM,
+    HOST_MAX_HIDDEN,
+    MAX_TENDONS,
+    { tendril_shared::weight_capacity(POSE_DIM, HOST_MAX_HIDDEN, MAX_TENDONS) },
+>;
 
 /// Why a net could not be exported or a `.tnet` file not loaded.
 #[derive(Debug, thiserror::Error)]
