@@ -1,5 +1,6 @@
 //! Arbitrary sequences of control-step inputs (any f32 bit patterns, any
-//! timing, any sequence numbers) against the embedded default net: the
+//! timing, any sequence numbers) against the built-in flash net
+//! (`tendril_firmware::DEFAULT_NET`, the default exported net): the
 //! command must stay finite, inside [0, max_tension], and within the slew
 //! limit of the previous command.
 #![no_main]
@@ -9,10 +10,8 @@ use tendril_firmware::control::{
     control_step, ControlConfig, ControlState, Feedback, IntegralConfig, SafeHold, Setpoint,
     StepInput,
 };
-use tendril_firmware::McuNet;
+use tendril_firmware::DEFAULT_NET;
 use tendril_shared::{TendonLimits, MAX_TENDONS};
-
-static NET: &[u8] = include_bytes!("../../firmware/vectors/default.tnet");
 
 fn f32_at(b: &[u8], i: usize) -> f32 {
     let mut w = [0u8; 4];
@@ -26,7 +25,7 @@ fuzz_target!(|data: &[u8]| {
     let Some((&head, body)) = data.split_first() else {
         return;
     };
-    let net = Box::new(McuNet::decode(NET).expect("embedded net decodes"));
+    let net = &DEFAULT_NET;
     let n = net.shape().outputs;
     let max_t = 10.0f32;
     let rate = 100.0f32;
@@ -73,7 +72,7 @@ fuzz_target!(|data: &[u8]| {
         };
         let prev = st.command;
         let dt_s = now.saturating_sub(st.last_step_ns).min(cfg.max_dt_ns) as f32 * 1e-9;
-        let (next, out) = control_step(&cfg, &net, &st, &input);
+        let (next, out) = control_step(&cfg, net, &st, &input);
         for i in 0..MAX_TENDONS {
             let c = out.command[i];
             assert!(c.is_finite() && c >= 0.0 && c <= max_t, "range: {c}");
