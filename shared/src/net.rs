@@ -149,6 +149,9 @@ enum Dest {
     Weight(usize),
 }
 
+/// Maps an index within a range array to its destination.
+type DestOf = fn(usize) -> Dest;
+
 /// Parse the whole file — header, every array, and (if `crc`) the CRC —
 /// calling `visit(field, index_in_field, destination, value)` for each value
 /// in file order. Checks structure and capacity, not values (the visitor
@@ -171,7 +174,7 @@ fn walk<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
             cap_outputs: OUT,
         });
     }
-    let ranges: [(Field, usize, fn(usize) -> Dest); 4] = [
+    let ranges: [(Field, usize, DestOf); 4] = [
         (Field::InputLo, ni, Dest::InputLo),
         (Field::InputHi, ni, Dest::InputHi),
         (Field::OutputLo, no, Dest::OutputLo),

@@ -339,15 +339,16 @@ mod mcu {
             buf: [0; 200],
             len: 0,
         };
-        let mut store = McuSlots::new(&DEFAULT_NET, &mut *RAM_NET);
-        let ok = match vectors::run(&mut store, &BLOBS, VECTORS, &mut out) {
-            Ok(_) => true,
-            Err(e) => {
-                let _ = writeln!(out, "error {e}");
-                false
+        let ok = {
+            let mut store = McuSlots::new(&DEFAULT_NET, &mut *RAM_NET);
+            match vectors::run(&mut store, &BLOBS, VECTORS, &mut out) {
+                Ok(_) => true,
+                Err(e) => {
+                    let _ = writeln!(out, "error {e}");
+                    false
+                }
             }
         };
-        drop(store);
         // Stack of the run itself (control steps, inference, printing).
         let _ = writeln!(out, "stack_run {}", stack_high_water(floor));
         if ok {
