@@ -1,0 +1,121 @@
+//! The firmware as a robot controller would flash it, for measuring the image
+//! size without the test harness (`tendril-fw` also carries the test
+//! vectors, the hot-swap test blobs, hex printing and the instruction
+//! benchmarks): the built-in net in flash, one RAM slot for hot swaps, the
+//! control step, the `.tnet` decoder and the semihosting logger.
+//!
+//! The "hardware" is three mailboxes in RAM (setpoint in, tension command
+//! out, weight update in) that a real board would fill from its bus; here
+//! nothing fills them, so the loop runs `STEPS` steps on an empty setpoint
+//! (the watchdog holds) and exits 0 through semihosting.
+//!
+//! `cargo build -p tendril-firmware --bin tendril-fw-core --release --target thumbv7em-none-eabihf`
+//! then `llvm-size` on `target/thumbv7em-none-eabihf/release/tendril-fw-core`.
+#![cfg_attr(target_os = "none", no_std, no_main)]
+
+#[cfg(not(target_os = "none"))]
+fn main() {
+    // The host build has nothing to drive: see `tendril-fw` for the twin.
+}
+
+#[cfg(target_os = "none")]
+mod mcu {
+    use core::ptr::{addr_of, addr_of_mut, read_volatile, write_volatile};
+
+    use cortex_m_rt::entry;
+    use cortex_m_semihosting::{debug, hio};
+    use tendril_firmware::control::{control_step, ControlConfig, ControlState, Setpoint};
+    use tendril_firmware::{McuNet, McuSlots, NetStore, StepInput, DEFAULT_NET, POSE_DIM};
+    use tendril_shared::{TendonLimits, MAX_TENDONS};
+
+    /// Steps to run before exiting (a real controller loops forever).
+    const STEPS: u32 = 1000;
+    /// Control period, ns.
+    const PERIOD_NS: u64 = 1_000_000;
+
+    /// Setpoint mailbox: sequence number (0 = none yet) and pose.
+    static mut SETPOINT: (u64, [f32; POSE_DIM]) = (0, [0.0; POSE_DIM]);
+    /// Command mailbox.
+    static mut COMMAND: [f32; MAX_TENDONS] = [0.0; MAX_TENDONS];
+    /// Weight-update mailbox: address and length of a received blob (0 = none).
+    static mut UPDATE: (usize, usize) = (0, 0);
+
+    /// `log` records on the semihosting console.
+    struct SemihostingLogger;
+
+    impl log::Log for SemihostingLogger {
+        fn enabled(&self, _: &log::Metadata) -> bool {
+            true
+        }
+        fn log(&self, record: &log::Record) {
+            if let Ok(mut h) = hio::hstdout() {
+                let _ = core::fmt::Write::write_fmt(
+                    &mut h,
+                    format_args!("log {} {}\n", record.level(), record.args()),
+                );
+            }
+        }
+        fn flush(&self) {}
+    }
+
+    static LOGGER: SemihostingLogger = SemihostingLogger;
+
+    #[entry]
+    fn main() -> ! {
+        static mut RAM_NET: McuNet = McuNet::empty();
+        if log::set_logger(&LOGGER).is_ok() {
+            log::set_max_level(log::LevelFilter::Info);
+        }
+        let n = DEFAULT_NET.shape().outputs;
+        let ok = match TendonLimits::uniform(n, 10.0, 500.0) {
+            Ok(limits) => {
+                let cfg = ControlConfig::new(limits);
+                let mut store = McuSlots::new(&DEFAULT_NET, &mut *RAM_NET);
+                let mut state = ControlState::new(&cfg.limits, &[0.0; MAX_TENDONS], 0);
+                for k in 1..=STEPS {
+                    // SAFETY: single-threaded; the mailboxes are plain data
+                    // read and written whole, volatile so the compiler keeps
+                    // the "bus" accesses.
+                    let (update, (seq, pose)) = unsafe {
+                        (
+                            read_volatile(addr_of!(UPDATE)),
+                            read_volatile(addr_of!(SETPOINT)),
+                        )
+                    };
+                    if update.1 != 0 {
+                        // SAFETY: the bus driver guarantees the blob stays
+                        // valid until the mailbox is cleared below.
+                        let blob =
+                            unsafe { core::slice::from_raw_parts(update.0 as *const u8, update.1) };
+                        let _ = store.load(blob, (POSE_DIM, n));
+                        unsafe { write_volatile(addr_of_mut!(UPDATE), (0, 0)) };
+                    }
+                    let input = StepInput {
+                        now_ns: u64::from(k) * PERIOD_NS,
+                        setpoint: (seq != 0).then_some(Setpoint { seq, pose }),
+                        feedback: None,
+                    };
+                    let (next, out) = control_step(&cfg, store.active(), &state, &input);
+                    state = next;
+                    unsafe { write_volatile(addr_of_mut!(COMMAND), out.command) };
+                }
+                true
+            }
+            Err(_) => false,
+        };
+        debug::exit(if ok {
+            debug::EXIT_SUCCESS
+        } else {
+            debug::EXIT_FAILURE
+        });
+        #[allow(clippy::empty_loop)]
+        loop {}
+    }
+
+    #[panic_handler]
+    fn panic(_: &core::panic::PanicInfo) -> ! {
+        debug::exit(debug::EXIT_FAILURE);
+        #[allow(clippy::empty_loop)]
+        loop {}
+    }
+}
