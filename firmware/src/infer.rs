@@ -282,58 +282,104 @@ pub fn infer<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
     net: &CascadeNet<IN, H, OUT, W>,
     x: &[f32; IN],
 ) -> [f32; OUT] {
+    let shape = net.shape();
+    let (nh, no) = (shape.hidden, shape.outputs);
+    let w: &[f32] = net.weights();
+    let out_start = CascadeNet::<IN, H, OUT, W>::hidden_row_offset(nh);
+    let row_len = 1 + IN + nh;
+    // The one bounds check of the whole inference. Row `r` (hidden or
+    // output) starts at `start_r` and its padded dot product reads
+    // `[start_r, start_r + 8⌈len_r/8⌉) ⊂ [start_r, start_r + len_r + 7)`
+    // of the weights, all inside `[0, out_start + no·row_len + ROW_PAD)`,
+    // and `[0, 8⌈len_r/8⌉) ⊂ [0, 1 + IN + nh + 7)` of the features
+    // (`nh ≤ H`). A decoded net always passes (the decoder checked exactly
+    // this storage bound); anything else gives zeros.
+    if nh > H || no > OUT || out_start + no * row_len + ROW_PAD > w.len() {
+        return [0.0; OUT];
+    }
     let mut f = Features {
         one: 1.0,
         x: normalise(net, x),
         h: [0.0f32; H],
         pad: [0.0f32; ROW_PAD],
     };
-    let w: &[f32] = net.weights();
-    let nh = net.shape().hidden.min(H);
     // One loop per activation: no dispatch inside the hot loop.
-    let start = match net.hidden_activation() {
+    match net.hidden_activation() {
         Activation::Linear => hidden_layer(w, &mut f, nh, |s| s),
         Activation::Sigmoid => hidden_layer(w, &mut f, nh, |s| Activation::Sigmoid.apply(s)),
         Activation::SymmetricSigmoid => {
             hidden_layer(w, &mut f, nh, |s| Activation::SymmetricSigmoid.apply(s))
         }
-    };
-    let row_len = 1 + IN + nh;
+    }
     let blocks = row_len.div_ceil(8);
     let feats = f.as_slice();
     let out_act = net.output_activation();
     let mut y = [0.0f32; OUT];
     let ranges = net.output_lo().iter().zip(net.output_hi());
-    let mut rows = w.get(start..).unwrap_or(&[]);
+    let mut start = out_start;
     for (yo, (&lo, &hi)) in y.iter_mut().zip(ranges) {
-        let s = dot8_blocks(rows, feats, blocks);
-        rows = rows.get(row_len..).unwrap_or(&[]);
+        // SAFETY: output row `o` starts at `out_start + o·row_len` with
+        // `o < no`; its padded read is inside `w` and the features by the
+        // check at the top.
+        let s = unsafe { dot8_raw(w.as_ptr().add(start), feats.as_ptr(), blocks) };
+        start += row_len;
         *yo = lo + out_act.apply(s) * (hi - lo);
     }
     y
 }
 
 /// The cascade's hidden units in order: `h_k = act(row_k · features)`, each
-/// row's dot product padded to whole blocks of 8. Returns the offset of the
-/// first output row.
+/// row's dot product padded to whole blocks of 8. The caller checked that
+/// the `nh` rows and their padding lie inside `w` ([`infer`]).
 #[inline(always)]
 fn hidden_layer<const IN: usize, const H: usize>(
     w: &[f32],
     f: &mut Features<IN, H>,
     nh: usize,
     act: impl Fn(f32) -> f32,
-) -> usize {
-    let mut rows = w;
+) {
     let mut start = 0;
-    for k in 0..nh {
-        // Row k and up to 7 weights after it: whole blocks of 8.
+    for k in 0..nh.min(H) {
         let row_len = 1 + IN + k;
-        let s = dot8_blocks(rows, f.as_slice(), row_len.div_ceil(8));
-        rows = rows.get(row_len..).unwrap_or(&[]);
+        // SAFETY: row `k < nh` and its padding lie inside `w`, and the
+        // first `8⌈row_len/8⌉ ≤ 1 + IN + H + 7` features inside `f`, as
+        // `infer` checked; the pointers are taken afresh for each row.
+        let s = unsafe {
+            dot8_raw(
+                w.as_ptr().add(start),
+                f.as_slice().as_ptr(),
+                row_len.div_ceil(8),
+            )
+        };
         start += row_len;
         if let Some(slot) = f.h.get_mut(k) {
             *slot = act(s);
         }
     }
-    start
+}
+
+/// [`dot8`] over `8 blocks` entries at raw pointers, without bounds checks
+/// (the inference checks its whole layout once instead of once per row).
+///
+/// # Safety
+/// `w` and `a` must be valid for reads of `8 blocks` `f32`s.
+#[inline(always)]
+unsafe fn dot8_raw(w: *const f32, a: *const f32, blocks: usize) -> f32 {
+    #[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
+    {
+        // SAFETY: the caller's contract is `tendril_dot8`'s.
+        unsafe { tendril_dot8(w, a, blocks) }
+    }
+    #[cfg(not(all(target_arch = "arm", target_os = "none", target_abi = "eabihf")))]
+    {
+        let n = 8 * blocks;
+        // SAFETY: the caller guarantees `n` readable `f32`s at each pointer.
+        let (w, a) = unsafe {
+            (
+                core::slice::from_raw_parts(w, n),
+                core::slice::from_raw_parts(a, n),
+            )
+        };
+        dot8_blocks(w, a, blocks)
+    }
 }
