@@ -35,7 +35,12 @@ use crate::robot::Robot;
 pub const NET_CAPACITY: usize = 64;
 
 /// The double-buffered net the controller runs.
-pub type Slots = NetSlots<POSE_DIM, NET_CAPACITY, MAX_TENDONS>;
+pub type Slots = NetSlots<
+    POSE_DIM,
+    NET_CAPACITY,
+    MAX_TENDONS,
+    { tendril_shared::weight_capacity(POSE_DIM, NET_CAPACITY, MAX_TENDONS) },
+>;
 
 /// Everything the controller process needs.
 #[derive(Clone, Debug)]
