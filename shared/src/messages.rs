@@ -35,6 +35,9 @@ pub mod setpoint_flags {
     pub const HAS_VELOCITY: u32 = 1 << 1;
     /// Last setpoint of the trajectory; the planner stops after it.
     pub const FINAL: u32 = 1 << 2;
+    /// `tangent` is valid: the controller may move the setpoint along the
+    /// robot's reachable poses instead of guessing how they bend.
+    pub const HAS_TANGENT: u32 = 1 << 3;
 }
 
 /// Desired tip pose, planner → controller.
@@ -48,6 +51,12 @@ pub struct Setpoint {
     /// Time derivative of `pose` (per second): lets the controller lead the
     /// motors by their lag instead of trailing the trajectory.
     pub velocity: [f32; 7],
+    /// `∂pose/∂px` and `∂pose/∂py` along the robot's reachable poses at this
+    /// setpoint (per metre). A bending continuum robot reaches a 2-D family
+    /// of poses, so a correction of the tip's lateral position must also
+    /// change height and orientation, the way the robot's own statics do;
+    /// the planner, which has the statics, says how (first order).
+    pub tangent: [[f32; 7]; 2],
     /// [`setpoint_flags`] bits.
     pub flags: u32,
     /// Explicit padding (keeps the layout free of implicit holes); zero.
@@ -215,7 +224,7 @@ mod tests {
         // Size = sum of field sizes: no compiler-inserted holes whose bytes
         // would be undefined in shared memory.
         assert_eq!(size_of::<Header>(), 16);
-        assert_eq!(size_of::<Setpoint>(), 16 + 7 * 4 * 2 + 4 + 4);
+        assert_eq!(size_of::<Setpoint>(), 16 + 7 * 4 * 4 + 4 + 4);
         assert_eq!(
             size_of::<TensionCommand>(),
             16 + 8 + MAX_TENDONS * 4 + 4 + 4
