@@ -160,6 +160,7 @@ fn latency(samples: usize, spin: bool) -> (Summary, Summary) {
                 },
                 pose,
                 velocity: [0.0; 7],
+                tangent: [[0.0; 7]; 2],
                 flags,
                 reserved: 0,
             },

@@ -188,18 +188,47 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
     ))?;
 
     // 5. Closed loop: planner, controller and plant as real processes over
-    // iceoryx2, first with the IK net alone, then with the integral correction.
+    // iceoryx2, with the IK net alone and with the integral correction, on
+    // the 30 mm circle and on step targets (steady state).
     let exe = std::env::current_exe().context("locating the tendril executable")?;
-    for (k, (correction, dir, what)) in [
-        ("off", "sim-ik-only", "IK net alone"),
-        ("on", "sim", "with the integral correction"),
-    ]
-    .into_iter()
-    .enumerate()
-    {
+    let runs = [
+        (
+            "circle",
+            "off",
+            "sim-ik-only",
+            "30 mm circle at 0.2 Hz, IK net alone",
+        ),
+        (
+            "circle",
+            "on",
+            "sim",
+            "30 mm circle at 0.2 Hz, with the integral correction",
+        ),
+        (
+            "steps",
+            "off",
+            "sim-steps-ik-only",
+            "10 mm steps, IK net alone",
+        ),
+        (
+            "steps",
+            "on",
+            "sim-steps",
+            "10 mm steps, with the integral correction",
+        ),
+    ];
+    let mut summary = String::from(
+        "## 5. Closed loop (planner → controller → plant over iceoryx2)\n\n\
+         Tracking error from the plant's true tip against the planner's path; steady state is \
+         the mean true error over the last 0.5 s of each ≥ 1 s stretch with one target. \
+         The steps' RMS and max include the 14 mm jumps between targets.\n\n\
+         | run | correction | RMS (mm) | max (mm) | steady state, worst target (mm) |\n|---|---|---|---|---|\n",
+    );
+    let mut sections = Vec::new();
+    for (k, (trajectory, correction, dir, what)) in runs.into_iter().enumerate() {
         let sim_dir = out.join(dir);
         let status = std::process::Command::new(&exe)
-            .args(["sim", "--duration", "10", "--trajectory", "circle"])
+            .args(["sim", "--duration", "10", "--trajectory", trajectory])
             .args(["--correction", correction])
             .arg("--robot")
             .arg(robot_file)
@@ -209,22 +238,37 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
             .arg(&sim_dir)
             .status()
             .context("starting tendril sim")?;
-        let title = format!(
-            "## 5{}. Closed loop, 30 mm circle at 0.2 Hz, {what}",
-            ['a', 'b'][k]
-        );
-        if status.success() {
+        let title = format!("### 5{}. {what}", ['a', 'b', 'c', 'd'][k]);
+        let json: Option<serde_json::Value> = std::fs::read(sim_dir.join("report.json"))
+            .ok()
+            .and_then(|b| serde_json::from_slice(&b).ok());
+        if let (true, Some(r)) = (status.success(), json) {
+            let num = |key: &str| r[key].as_f64().map_or("–".into(), |v| format!("{v:.3}"));
+            let _ = writeln!(
+                summary,
+                "| {trajectory} ({dir}) | {correction} | {} | {} | {} |",
+                num("rms_tracking_error_mm"),
+                num("max_tracking_error_mm"),
+                num("max_steady_state_error_mm")
+            );
             let sim_md = std::fs::read_to_string(sim_dir.join("report.md")).unwrap_or_default();
-            report.add(format!(
+            sections.push(format!(
                 "{title}\n\n{}\n\n![sim]({dir}/sim.png)\n",
                 sim_md.trim()
-            ))?;
+            ));
         } else {
-            report.add(format!(
+            let _ = writeln!(
+                summary,
+                "| {trajectory} ({dir}) | {correction} | failed | | |"
+            );
+            sections.push(format!(
                 "{title}\n\n`tendril sim` failed ({status}); see its log above.\n"
-            ))?;
+            ));
         }
     }
+    summary.push('\n');
+    summary.push_str(&sections.join("\n"));
+    report.add(summary)?;
 
     log::info!("report: {}", report.path.display());
     Ok(())

@@ -19,8 +19,10 @@ pub enum OnOff {
 /// Where the integral correction runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum CorrectionMode {
-    /// Host side, arc-consistent (default).
-    Arc,
+    /// Host side: the lateral integral moves the setpoint along the
+    /// robot's reachable poses (default).
+    #[value(name = "host", alias = "arc")]
+    Host,
     /// The firmware's position-only integral.
     Fw,
 }
@@ -44,17 +46,25 @@ pub struct LoopOpts {
     /// Integral correction of the measured tip error.
     #[arg(long, value_enum, default_value_t = OnOff::On)]
     pub correction: OnOff,
-    /// Where the correction runs: `arc` = host side, lateral integral applied
-    /// as a constant-curvature bend (the corrected setpoint stays a
-    /// reachable pose); `fw` = the firmware's position-only integral.
-    #[arg(long, value_enum, default_value_t = CorrectionMode::Arc)]
+    /// Where the correction runs: `host` = host side, the lateral integral
+    /// moves the setpoint along the reachable poses (the planner's statics
+    /// tangent; a constant-curvature bend for pose tables without one), so
+    /// the net sees poses like its training data; `fw` = the firmware's
+    /// position-only integral (off the reachable poses: for comparison).
+    #[arg(long, value_enum, default_value_t = CorrectionMode::Host)]
     pub correction_mode: CorrectionMode,
     /// Integral gain of the correction, 1/s.
     #[arg(long, default_value_t = 10.0)]
     pub ki: f64,
-    /// Bound on the correction per axis, mm.
-    #[arg(long, default_value_t = 10.0)]
+    /// Bound on the correction per axis, mm (a few times the IK net's
+    /// largest error is enough; the shift along the reachable poses is first
+    /// order, accurate to ~2 µm at 1 mm).
+    #[arg(long, default_value_t = 3.0)]
     pub correction_limit_mm: f64,
+    /// Integrate only while the lateral tip error is at most this, mm
+    /// (integral separation: larger errors are transients, not IK error).
+    #[arg(long, default_value_t = 2.0)]
+    pub correction_window_mm: f64,
     /// Motor-lag lead: setpoints are advanced by velocity × lead, ms
     /// (≈ motor time constant + half a period; 0 = off).
     #[arg(long, default_value_t = 20.5)]
@@ -82,13 +92,14 @@ impl LoopOpts {
             format!("--ki={}", self.ki),
             format!(
                 "--correction-mode={}",
-                if self.correction_mode == CorrectionMode::Arc {
-                    "arc"
+                if self.correction_mode == CorrectionMode::Host {
+                    "host"
                 } else {
                     "fw"
                 }
             ),
             format!("--correction-limit-mm={}", self.correction_limit_mm),
+            format!("--correction-window-mm={}", self.correction_window_mm),
             format!("--lead-ms={}", self.lead_ms),
             format!("--slew={}", self.slew),
         ];
@@ -113,6 +124,7 @@ impl LoopOpts {
             0.0
         };
         cfg.correction_limit = self.correction_limit_mm * 1e-3;
+        cfg.correction_window = self.correction_window_mm * 1e-3;
         cfg.firmware_integral = self.correction_mode == CorrectionMode::Fw;
         cfg.lead = self.lead_ms * 1e-3;
         cfg.slew_rate = self.slew;

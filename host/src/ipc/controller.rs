@@ -67,6 +67,9 @@ pub struct ControllerConfig {
     pub firmware_integral: bool,
     /// Bound on the integral correction per axis (m).
     pub correction_limit: f64,
+    /// The host-side correction integrates only while the lateral tip error
+    /// is at most this (m): see [`super::correction::LateralIntegral`].
+    pub correction_window: f64,
     /// Motor-lag lead (s): advance the setpoint by velocity · lead.
     pub lead: f64,
     /// Slew-rate limit (N/s) per tendon.
@@ -95,7 +98,8 @@ impl ControllerConfig {
             watchdog_periods: 2.5,
             ki: 0.0,
             firmware_integral: false,
-            correction_limit: 0.01,
+            correction_limit: 0.003,
+            correction_window: 0.002,
             lead: 0.021,
             slew_rate: 200.0,
             box_margin: 0.05,
@@ -246,7 +250,12 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
     let mut cmd_seq = 0u64;
     let mut overran = false;
     let arc_mode = cfg.ki > 0.0 && !cfg.firmware_integral;
-    let mut integral = super::correction::ArcIntegral::default();
+    let mut integral = super::correction::LateralIntegral::default();
+    let gains = super::correction::IntegralGains {
+        ki: cfg.ki,
+        limit: cfg.correction_limit,
+        window: cfg.correction_window,
+    };
     let mut last_good_sp: Option<Setpoint> = None;
     let length = robot.length;
     let mut last_flush = start;
@@ -350,12 +359,19 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
 
         // Host-side arc-consistent correction (see `correction`): move the
         // setpoint handed to the firmware along the arc by the integral.
+        // With the planner's tangent the shift follows the robot's own
+        // reachable poses; without it (a pose table) a constant-curvature arc.
         if arc_mode {
-            if let Some(sp) = fw_sp.as_mut() {
+            if let (Some(sp), Some(s)) = (fw_sp.as_mut(), last_sp) {
                 if sp.pose.iter().all(|v| v.is_finite()) {
                     let pose = sp.pose.map(|v| v as f64);
-                    sp.pose =
-                        super::correction::arc_shift(&pose, integral.c, length).map(|v| v as f32);
+                    let shifted = if s.flags & setpoint_flags::HAS_TANGENT != 0 {
+                        let tangent = s.tangent.map(|row| row.map(|v| v as f64));
+                        super::correction::family_shift(&pose, &tangent, integral.c)
+                    } else {
+                        super::correction::arc_shift(&pose, integral.c, length)
+                    };
+                    sp.pose = shifted.map(|v| v as f32);
                 }
             }
         }
@@ -373,11 +389,14 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
         }
         // Integrate only while tracking an accepted setpoint with fresh
         // feedback; a rejected or injected setpoint never reaches the integral.
+        // Nor while the slew limit holds the command back: the motors are
+        // still on their way, and integrating that lag is wind-up.
         let tracking = !status.intersects(
             Status::SAFE_HOLD
                 | Status::NO_SETPOINT
                 | Status::OUT_OF_WORKSPACE
-                | Status::SETPOINT_REJECTED,
+                | Status::SETPOINT_REJECTED
+                | Status::SLEW_LIMITED,
         ) && !stale;
         if arc_mode && tracking {
             if let (Some(s), Some(f)) = (last_good_sp, &fw_fb) {
@@ -387,13 +406,7 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
                     desired[1] += s.velocity[1] as f64 * cfg.lead;
                 }
                 let measured = [f.tip_position[0] as f64, f.tip_position[1] as f64];
-                integral.update(
-                    desired,
-                    measured,
-                    cfg.ki,
-                    period_ns as f64 * 1e-9,
-                    cfg.correction_limit,
-                );
+                integral.update(desired, measured, &gains, period_ns as f64 * 1e-9);
             }
         }
         if arc_mode && integral.c != [0.0, 0.0] {

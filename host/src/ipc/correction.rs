@@ -91,22 +91,77 @@ pub fn arc_shift(pose: &[f64; 7], c: [f64; 2], l: f64) -> [f64; 7] {
     [x1, y1, z1, q[0], q[1], q[2], q[3]]
 }
 
+/// The pose `pose` moved laterally by `c = (cx, cy)` (m) along the robot's
+/// own reachable family, to first order: `pose + [∂pose/∂px ∂pose/∂py] c`,
+/// quaternion re-normalised with `w ≥ 0`. The tangent comes from the
+/// planner's statics ([`super::trajectory::Lifter::lift_with_tangent`]), so
+/// unlike [`arc_shift`] it includes gravity and the real tendon routing: the
+/// net sees a pose like the ones it was trained on, and the loop gain of
+/// the correction stays close to one (the arc shift, off the family, gave a
+/// wrong-signed gain in parts of the workspace).
+pub fn family_shift(pose: &[f64; 7], tangent: &[[f64; 7]; 2], c: [f64; 2]) -> [f64; 7] {
+    let mut out = [0.0; 7];
+    for (k, v) in out.iter_mut().enumerate() {
+        *v = pose[k] + tangent[0][k] * c[0] + tangent[1][k] * c[1];
+    }
+    let n = out[3..].iter().map(|v| v * v).sum::<f64>().sqrt();
+    let sign = if out[3] < 0.0 { -1.0 } else { 1.0 };
+    if n > 0.0 && n.is_finite() {
+        for v in &mut out[3..] {
+            *v *= sign / n;
+        }
+    }
+    out
+}
+
 /// The integral outer loop on the lateral tip error.
+///
+/// Integral separation: the loop integrates only while the error is inside
+/// `window`. It exists to remove the IK net's sub-millimetre residual; a
+/// large error is a transient (the motors catching up with a step, the
+/// settle from the gravity-sagged start) that the feed-forward is already
+/// removing, and integrating it winds the correction up to its bound, where
+/// the first-order shift is no longer accurate and the loop stalls
+/// (measured before this rule: 0.74 mm steady-state error at (0, 60) mm
+/// with the correction pinned at −10 mm, against 0.03 mm with no
+/// correction at all).
 #[derive(Clone, Debug, Default)]
-pub struct ArcIntegral {
+pub struct LateralIntegral {
     /// Correction (m), base frame x and y.
     pub c: [f64; 2],
 }
 
-impl ArcIntegral {
-    /// Integrate `ki · (desired − measured) · dt` on x and y, each clamped to ±`limit`.
-    pub fn update(&mut self, desired: [f64; 2], measured: [f64; 2], ki: f64, dt: f64, limit: f64) {
-        for k in 0..2 {
-            let e = desired[k] - measured[k];
-            if e.is_finite() {
-                self.c[k] = (self.c[k] + ki * e * dt).clamp(-limit, limit);
-            }
+/// Gains and bounds of [`LateralIntegral`].
+#[derive(Clone, Copy, Debug)]
+pub struct IntegralGains {
+    /// Integral gain (1/s).
+    pub ki: f64,
+    /// Bound on the correction per axis (m).
+    pub limit: f64,
+    /// Integrate only while the lateral error is at most this (m).
+    pub window: f64,
+}
+
+impl LateralIntegral {
+    /// Integrate `ki · (desired − measured) · dt` on x and y, each clamped to
+    /// ±`limit`, if the error is finite and inside the window. Returns
+    /// whether it integrated.
+    pub fn update(
+        &mut self,
+        desired: [f64; 2],
+        measured: [f64; 2],
+        gains: &IntegralGains,
+        dt: f64,
+    ) -> bool {
+        let e = [desired[0] - measured[0], desired[1] - measured[1]];
+        let norm = e[0].hypot(e[1]);
+        if !(norm.is_finite() && norm <= gains.window) {
+            return false;
         }
+        for (c, e) in self.c.iter_mut().zip(e) {
+            *c = (*c + gains.ki * e * dt).clamp(-gains.limit, gains.limit);
+        }
+        true
     }
 }
 
@@ -167,8 +222,17 @@ mod tests {
         for k in 0..7 {
             assert!((s[k] - p[k]).abs() < 1e-12);
         }
-        let mut i = ArcIntegral::default();
-        i.update([1.0, 0.0], [0.0, 0.0], 10.0, 1.0, 0.005);
+        let gains = IntegralGains {
+            ki: 10.0,
+            limit: 0.005,
+            window: 2.0,
+        };
+        let mut i = LateralIntegral::default();
+        assert!(i.update([1.0, 0.0], [0.0, 0.0], &gains, 1.0));
+        assert_eq!(i.c, [0.005, 0.0]);
+        // Outside the window, or NaN: no change.
+        assert!(!i.update([3.0, 0.0], [0.0, 0.0], &gains, 1.0));
+        assert!(!i.update([f64::NAN, 0.0], [0.0, 0.0], &gains, 1.0));
         assert_eq!(i.c, [0.005, 0.0]);
     }
 }

@@ -95,6 +95,13 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
         };
         let mut pose = point.pose.map(|v| v as f32);
         let mut velocity = point.velocity.map(|v| v as f32);
+        let tangent = match point.tangent {
+            Some(d) => {
+                flags |= setpoint_flags::HAS_TANGENT;
+                d.map(|row| row.map(|v| v as f32))
+            }
+            None => [[0.0; 7]; 2],
+        };
         let clean = pose;
         let mut injected = false;
         if cfg
@@ -117,7 +124,7 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
             pose[0] += 1.0;
             injected = true;
             velocity = [0.0; 7];
-            flags &= !setpoint_flags::HAS_VELOCITY;
+            flags &= !(setpoint_flags::HAS_VELOCITY | setpoint_flags::HAS_TANGENT);
         }
         seq += 1;
         let stamp = now_ns();
@@ -128,6 +135,7 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
             },
             pose,
             velocity,
+            tangent,
             flags,
             reserved: 0,
         };

@@ -12,6 +12,10 @@ use nalgebra::{Matrix2, Vector2};
 use super::IpcError;
 use crate::statics::{Statics, WarmStart};
 
+/// `[∂pose/∂px, ∂pose/∂py]`: how a reachable pose changes when its tip
+/// moves laterally (per metre).
+pub type Tangent = [[f64; 7]; 2];
+
 /// A desired tip pose and its time derivative at one instant.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PosePoint {
@@ -19,6 +23,9 @@ pub struct PosePoint {
     pub pose: [f64; 7],
     /// d(pose)/dt (per second).
     pub velocity: [f64; 7],
+    /// The reachable family's tangent at `pose`, if the trajectory knows it
+    /// (lifted paths do; a pose table does not).
+    pub tangent: Option<Tangent>,
 }
 
 /// Bend vector (N) → tensions: each tendon pulls by the bend's component
@@ -67,6 +74,41 @@ impl<'a> Lifter<'a> {
 
     /// The reachable pose whose tip is at lateral position `xy` (m).
     pub fn lift(&mut self, xy: [f64; 2]) -> Result<[f64; 7], IpcError> {
+        self.lift_with_tangent(xy).map(|(pose, _)| pose)
+    }
+
+    /// The reachable pose at lateral position `xy` (m) and its tangent
+    /// `[∂pose/∂px, ∂pose/∂py]` along the reachable family: with bend `b`,
+    /// `∂pose/∂xy = (∂pose/∂b)(∂xy/∂b)⁻¹`, by forward differences on `b`
+    /// at the converged bend (two more warm solves).
+    pub fn lift_with_tangent(&mut self, xy: [f64; 2]) -> Result<([f64; 7], Tangent), IpcError> {
+        let pose = self.lift_pose(xy)?;
+        let h = 1e-3; // N: small against the bends used (≥ 0.1 N per mm)
+        let bend = self.bend;
+        let warm = self.warm.clone();
+        let (px, _) = self.tip(&(bend + Vector2::new(h, 0.0)))?;
+        let (py, _) = self.tip(&(bend + Vector2::new(0.0, h)))?;
+        self.warm = warm;
+        let dx: Vec<f64> = (0..7).map(|k| (px[k] - pose[k]) / h).collect();
+        let dy: Vec<f64> = (0..7).map(|k| (py[k] - pose[k]) / h).collect();
+        let j = Matrix2::new(dx[0], dy[0], dx[1], dy[1]);
+        let Some(ji) = j.try_inverse() else {
+            return Err(IpcError::Config(format!(
+                "tip position ({:.1}, {:.1}) mm: the robot cannot move laterally there",
+                xy[0] * 1e3,
+                xy[1] * 1e3
+            )));
+        };
+        let mut tangent = [[0.0; 7]; 2];
+        for k in 0..7 {
+            let row = nalgebra::RowVector2::new(dx[k], dy[k]) * ji;
+            tangent[0][k] = row[0];
+            tangent[1][k] = row[1];
+        }
+        Ok((pose, tangent))
+    }
+
+    fn lift_pose(&mut self, xy: [f64; 2]) -> Result<[f64; 7], IpcError> {
         let target = Vector2::new(xy[0], xy[1]);
         let h = 1e-4; // N, finite-difference step on the bend
         let mut bend = self.bend;
@@ -146,6 +188,8 @@ pub enum Shape {
 pub struct Trajectory {
     times: Vec<f64>,
     poses: Vec<[f64; 7]>,
+    /// One per pose, or empty (a pose table).
+    tangents: Vec<Tangent>,
     /// Repeats after its last time (circle, figure eight).
     periodic: bool,
     /// Piecewise-constant targets (steps, hold): no interpolation, zero velocity.
@@ -160,12 +204,16 @@ impl Trajectory {
     pub fn new(shape: &Shape, statics: &Statics) -> Result<Trajectory, IpcError> {
         let mut lifter = Lifter::new(statics);
         match shape {
-            Shape::Hold(xy) => Ok(Trajectory {
-                times: vec![0.0],
-                poses: vec![lifter.lift(*xy)?],
-                periodic: false,
-                stepwise: true,
-            }),
+            Shape::Hold(xy) => {
+                let (pose, tangent) = lifter.lift_with_tangent(*xy)?;
+                Ok(Trajectory {
+                    times: vec![0.0],
+                    poses: vec![pose],
+                    tangents: vec![tangent],
+                    periodic: false,
+                    stepwise: true,
+                })
+            }
             Shape::Steps { targets, dwell } => {
                 if targets.is_empty() || *dwell <= 0.0 {
                     return Err(IpcError::Config(
@@ -174,13 +222,17 @@ impl Trajectory {
                 }
                 let mut times = Vec::new();
                 let mut poses = Vec::new();
+                let mut tangents = Vec::new();
                 for (i, xy) in targets.iter().enumerate() {
+                    let (pose, tangent) = lifter.lift_with_tangent(*xy)?;
                     times.push(i as f64 * dwell);
-                    poses.push(lifter.lift(*xy)?);
+                    poses.push(pose);
+                    tangents.push(tangent);
                 }
                 Ok(Trajectory {
                     times,
                     poses,
+                    tangents,
                     periodic: false,
                     stepwise: true,
                 })
@@ -205,6 +257,7 @@ impl Trajectory {
                 let n = ((period / TABLE_DT).ceil() as usize).max(16);
                 let mut times = Vec::with_capacity(n + 1);
                 let mut poses = Vec::with_capacity(n + 1);
+                let mut tangents = Vec::with_capacity(n + 1);
                 for i in 0..=n {
                     let t = period * i as f64 / n as f64;
                     let a = std::f64::consts::TAU * freq * t;
@@ -216,12 +269,15 @@ impl Trajectory {
                     } else {
                         [center[0] + radius * a.cos(), center[1] + radius * a.sin()]
                     };
+                    let (pose, tangent) = lifter.lift_with_tangent(xy)?;
                     times.push(t);
-                    poses.push(lifter.lift(xy)?);
+                    poses.push(pose);
+                    tangents.push(tangent);
                 }
                 Ok(Trajectory {
                     times,
                     poses,
+                    tangents,
                     periodic: true,
                     stepwise: false,
                 })
@@ -235,6 +291,7 @@ impl Trajectory {
                 Ok(Trajectory {
                     times: rows.iter().map(|r| r.0).collect(),
                     poses: rows.iter().map(|r| r.1).collect(),
+                    tangents: Vec::new(),
                     periodic: false,
                     stepwise: false,
                 })
@@ -261,9 +318,11 @@ impl Trajectory {
             .rposition(|&ti| ti <= t)
             .unwrap_or_default();
         if self.stepwise || i + 1 >= n {
+            let i = i.min(n - 1);
             return PosePoint {
-                pose: self.poses[i.min(n - 1)],
+                pose: self.poses[i],
                 velocity: [0.0; 7],
+                tangent: self.tangents.get(i).copied(),
             };
         }
         let (t0, t1) = (self.times[i], self.times[i + 1]);
@@ -279,7 +338,23 @@ impl Trajectory {
         for v in &mut pose[3..] {
             *v /= qn;
         }
-        PosePoint { pose, velocity }
+        let tangent = match (self.tangents.get(i), self.tangents.get(i + 1)) {
+            (Some(a), Some(b)) => {
+                let mut d = [[0.0; 7]; 2];
+                for (j, row) in d.iter_mut().enumerate() {
+                    for (k, v) in row.iter_mut().enumerate() {
+                        *v = a[j][k] + f * (b[j][k] - a[j][k]);
+                    }
+                }
+                Some(d)
+            }
+            _ => None,
+        };
+        PosePoint {
+            pose,
+            velocity,
+            tangent,
+        }
     }
 }
 
@@ -365,6 +440,41 @@ mod tests {
             );
             // Tangent: velocity ⟂ radius.
             assert!((p.pose[0] * p.velocity[0] + p.pose[1] * p.velocity[1]).abs() < 1e-5);
+        }
+    }
+
+    /// The tangent predicts the exact lift of a nearby point to second
+    /// order: the error of `pose + D c` against `lift(xy + c)` falls about
+    /// 4× when `c` halves, and the position part is exact.
+    #[test]
+    fn tangent_predicts_nearby_lifts_to_second_order() {
+        let s = statics();
+        for xy in [[0.0, 0.06], [0.03, -0.02], [-0.05, 0.0]] {
+            let mut lifter = Lifter::new(&s);
+            let (pose, d) = lifter.lift_with_tangent(xy).unwrap();
+            let mut errs = Vec::new();
+            for scale in [1.0, 0.5, 0.25] {
+                let c = [0.002 * scale, -0.0012 * scale];
+                let exact = lifter.lift([xy[0] + c[0], xy[1] + c[1]]).unwrap();
+                let guess = crate::ipc::correction::family_shift(&pose, &d, c);
+                assert!((guess[0] - exact[0]).abs() < 1e-7 && (guess[1] - exact[1]).abs() < 1e-7);
+                let err = (2..7)
+                    .map(|k| (guess[k] - exact[k]).abs())
+                    .fold(0.0, f64::max);
+                // A pure shift without the tangent is off by the change itself.
+                let moved = (2..7)
+                    .map(|k| (pose[k] - exact[k]).abs())
+                    .fold(0.0, f64::max);
+                assert!(
+                    err < 0.05 * moved,
+                    "xy {xy:?} c {c:?}: {err:e} vs {moved:e}"
+                );
+                errs.push(err);
+            }
+            for w in errs.windows(2) {
+                let ratio = w[0] / w[1];
+                assert!((2.5..6.0).contains(&ratio), "xy {xy:?}: errors {errs:?}");
+            }
         }
     }
 }
