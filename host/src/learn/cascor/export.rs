@@ -136,7 +136,7 @@ pub fn write_tnet(path: &Path, net: &CascadeNet, ranges: &Ranges) -> Result<(), 
     })
 }
 
-/// Decode `.tnet` bytes into the host's fixed-capacity net (boxed: ~21 KiB).
+/// Decode `.tnet` bytes into the host's fixed-capacity net (boxed: ~12 KiB).
 pub fn decode(bytes: &[u8]) -> Result<Box<HostNet>, TnetError> {
     let mut net = Box::<HostNet>::default();
     net.decode_into(bytes)?;
