@@ -20,7 +20,7 @@ fn prefix(a: &[f32], n: usize) -> &[f32] {
 ///
 /// Four independent accumulators break the add-latency chain (the host build
 /// runs several times faster); blocks of eight products let the M4 fetch
-/// eight weights and eight activations with two `vldmia` ([`mac8`]). The
+/// eight weights and eight activations with two `vldmia` (`mac8`). The
 /// order of operations is fixed by this code, not by the compiler, so every
 /// target computes the same roundings.
 #[inline]

@@ -3,7 +3,7 @@
 //! control step with its safety limits. Plain `no_std` Rust, no allocation,
 //! testable on the host.
 //!
-//! - [`infer`]: pose → tensions through a decoded [`tendril_shared::CascadeNet`];
+//! - [`mod@infer`]: pose → tensions through a decoded [`tendril_shared::CascadeNet`];
 //! - [`control`]: the pure control step and its [`control::Status`] word;
 //! - [`swap`]: hot swap of the weights (flash default + one RAM slot on the MCU);
 //! - [`vectors`]: the test-vector format and the runner shared by the MCU

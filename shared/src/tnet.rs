@@ -77,7 +77,7 @@ impl Activation {
 
     /// Apply the activation in `f32`, the exact code the firmware runs: only
     /// exactly rounded `+ − × ÷`, comparisons and bit moves, so host and MCU
-    /// builds give bit-identical results. The sigmoids use [`exp_neg`]
+    /// builds give bit-identical results. The sigmoids use `exp_neg`
     /// instead of `libm::expf` (≈ 54 Cortex-M4F instructions with range
     /// checks, a `vdiv` and `scalbnf`; the hidden units' sigmoids were 38 % of
     /// an inference). Absolute error ≤ 1e-6 over every `f32` (measured
