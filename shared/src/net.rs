@@ -103,14 +103,6 @@ fn prefix<T>(a: &[T], n: usize) -> &[T] {
     a.get(..n).unwrap_or(a)
 }
 
-/// Store `v` at `a[i]` if it exists (indices are checked against the
-/// capacity before any write; this keeps the code panic-free).
-fn put(a: &mut [f32], i: usize, v: f32) {
-    if let Some(slot) = a.get_mut(i) {
-        *slot = v;
-    }
-}
-
 /// What the decoder learnt from a `.tnet` it has fully validated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct NetHeader {
@@ -138,28 +130,59 @@ impl Checked<'_> {
     }
 }
 
-/// Where a value read from the file goes.
+/// Where a run of consecutive values read from the file goes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Dest {
-    InputLo(usize),
-    InputHi(usize),
-    OutputLo(usize),
-    OutputHi(usize),
-    /// Index into the packed weight storage.
-    Weight(usize),
+    InputLo,
+    InputHi,
+    OutputLo,
+    OutputHi,
+    /// The packed weight storage, from this index on.
+    Weights(usize),
 }
 
-/// Maps an index within a range array to its destination.
-type DestOf = fn(usize) -> Dest;
+/// The little-endian word in a 4-byte chunk (`chunks_exact(4)` gives only
+/// those; the pattern keeps the code free of panicking indexing).
+#[inline]
+fn word(c: &[u8]) -> u32 {
+    match c {
+        [a, b, c, d] => u32::from_le_bytes([*a, *b, *c, *d]),
+        _ => 0,
+    }
+}
+
+/// The `f32`s of a little-endian byte run (postcard writes an `f32` as its
+/// four IEEE-754 bytes), in order.
+fn floats(bytes: &[u8]) -> impl Iterator<Item = f32> + '_ {
+    bytes.chunks_exact(4).map(|c| f32::from_bits(word(c)))
+}
+
+/// Index of the first NaN or ±∞ in a byte run of `f32`s: exponent bits all
+/// ones (a bit test instead of a float compare; same answer as `is_finite`).
+fn first_non_finite(bytes: &[u8]) -> Option<usize> {
+    bytes
+        .chunks_exact(4)
+        .position(|c| word(c) & 0x7f80_0000 == 0x7f80_0000)
+}
+
+/// Store the byte run's `f32`s at the start of `dst` (as many as fit: the
+/// capacity was checked before; this keeps the code panic-free).
+fn fill(dst: &mut [f32], bytes: &[u8]) {
+    for (d, v) in dst.iter_mut().zip(floats(bytes)) {
+        *d = v;
+    }
+}
 
 /// Parse the whole file — header, every array, and (if `crc`) the CRC —
-/// calling `visit(field, index_in_field, destination, value)` for each value
-/// in file order. Checks structure and capacity, not values (the visitor
-/// does).
+/// calling `visit(field, index_in_field, destination, bytes)` for each run
+/// of consecutive `f32`s, in file order: each range array whole, and each
+/// weight row as two runs (bias and inputs; earlier hidden units), because
+/// in storage the inputs occupy `IN` columns (the rest stay 0). Checks
+/// structure and capacity, not values (the visitor does).
 fn walk<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
     bytes: &[u8],
     crc: bool,
-    mut visit: impl FnMut(Field, usize, Dest, f32),
+    mut visit: impl FnMut(Field, usize, Dest, &[u8]),
 ) -> Result<NetHeader, TnetError> {
     let mut r = Reader::new(bytes);
     let (shape, hidden_activation, output_activation) = tnet::header(&mut r)?;
@@ -174,7 +197,7 @@ fn walk<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
             cap_outputs: OUT,
         });
     }
-    let ranges: [(Field, usize, DestOf); 4] = [
+    let ranges = [
         (Field::InputLo, ni, Dest::InputLo),
         (Field::InputHi, ni, Dest::InputHi),
         (Field::OutputLo, no, Dest::OutputLo),
@@ -182,19 +205,13 @@ fn walk<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
     ];
     for (field, n, dest) in ranges {
         r.seq_len(field, n)?;
-        for i in 0..n {
-            visit(field, i, dest(i), r.f32()?);
-        }
+        visit(field, 0, dest, r.f32_run(n)?);
     }
-    // Row `k` of the file: bias, `ni` inputs, `k` hidden weights; in storage
-    // the inputs occupy `IN` columns (the rest stay 0).
     let mut row =
         |r: &mut Reader<'_>, field: Field, file_at: usize, start: usize, hidden: usize| {
-            let cols = (0..1 + ni).map(|c| (c, start + c));
-            let hid = (0..hidden).map(|j| (1 + ni + j, start + 1 + IN + j));
-            for (c, at) in cols.chain(hid) {
-                visit(field, file_at + c, Dest::Weight(at), r.f32()?);
-            }
+            visit(field, file_at, Dest::Weights(start), r.f32_run(1 + ni)?);
+            let at = file_at + 1 + ni;
+            visit(field, at, Dest::Weights(start + 1 + IN), r.f32_run(hidden)?);
             Ok::<(), TnetError>(())
         };
     r.seq_len(Field::HiddenWeights, shape.hidden_weight_count())?;
@@ -268,16 +285,21 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
         let mut lo_out = [0.0f32; OUT];
         let mut hi_out = [0.0f32; OUT];
         let mut first_bad: Option<TnetError> = None;
-        let header = walk::<IN, MAX_HIDDEN, OUT, W>(bytes, true, |field, index, dest, v| {
-            if first_bad.is_none() && !v.is_finite() {
-                first_bad = Some(TnetError::NonFinite { field, index });
+        let header = walk::<IN, MAX_HIDDEN, OUT, W>(bytes, true, |field, at, dest, run| {
+            if first_bad.is_none() {
+                if let Some(i) = first_non_finite(run) {
+                    first_bad = Some(TnetError::NonFinite {
+                        field,
+                        index: at + i,
+                    });
+                }
             }
             match dest {
-                Dest::InputLo(i) => put(&mut lo_in, i, v),
-                Dest::InputHi(i) => put(&mut hi_in, i, v),
-                Dest::OutputLo(i) => put(&mut lo_out, i, v),
-                Dest::OutputHi(i) => put(&mut hi_out, i, v),
-                Dest::Weight(_) => {}
+                Dest::InputLo => fill(&mut lo_in, run),
+                Dest::InputHi => fill(&mut hi_in, run),
+                Dest::OutputLo => fill(&mut lo_out, run),
+                Dest::OutputHi => fill(&mut hi_out, run),
+                Dest::Weights(_) => {}
             }
         })?;
         // Only now that the CRC vouches for the bytes, judge the values.
@@ -338,12 +360,12 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
             });
         }
         self.clear();
-        let written = walk::<IN, MAX_HIDDEN, OUT, W>(bytes, false, |_, _, dest, v| match dest {
-            Dest::InputLo(i) => put(&mut self.input_lo, i, v),
-            Dest::InputHi(i) => put(&mut self.input_hi, i, v),
-            Dest::OutputLo(i) => put(&mut self.output_lo, i, v),
-            Dest::OutputHi(i) => put(&mut self.output_hi, i, v),
-            Dest::Weight(i) => put(&mut self.weights, i, v),
+        let written = walk::<IN, MAX_HIDDEN, OUT, W>(bytes, false, |_, _, dest, run| match dest {
+            Dest::InputLo => fill(&mut self.input_lo, run),
+            Dest::InputHi => fill(&mut self.input_hi, run),
+            Dest::OutputLo => fill(&mut self.output_lo, run),
+            Dest::OutputHi => fill(&mut self.output_hi, run),
+            Dest::Weights(i) => fill(self.weights.get_mut(i..).unwrap_or(&mut []), run),
         });
         match written {
             Ok(h) if h == header => {

@@ -545,15 +545,16 @@ impl<'a> Reader<'a> {
         }
     }
 
-    /// One `f32`: postcard writes it as its 4 little-endian IEEE-754 bytes,
-    /// so read them directly (same result as `take::<f32>`, a fraction of the
-    /// instructions; the decoder reads thousands of these).
+    /// The bytes of `n` consecutive `f32`s (postcard writes an `f32` as its
+    /// 4 little-endian IEEE-754 bytes, no framing), taken in one step: the
+    /// decoder reads thousands of them.
     #[inline]
-    pub(crate) fn f32(&mut self) -> Result<f32, TnetError> {
-        match self.rest.split_first_chunk::<4>() {
-            Some((b, rest)) => {
+    pub(crate) fn f32_run(&mut self, n: usize) -> Result<&'a [u8], TnetError> {
+        let len = n.checked_mul(4).ok_or(TnetError::Truncated)?;
+        match self.rest.split_at_checked(len) {
+            Some((run, rest)) => {
                 self.rest = rest;
-                Ok(f32::from_le_bytes(*b))
+                Ok(run)
             }
             None => Err(TnetError::Truncated),
         }
