@@ -86,7 +86,10 @@ fn dot8_blocks(w: &[f32], a: &[f32], blocks: usize) -> f32 {
 #[inline]
 fn mac8(w: &[f32], a: &[f32], blocks: usize) -> [f32; 4] {
     let (w8, a8) = (blocks_of_8(w), blocks_of_8(a));
-    let (w8, a8) = (w8.get(..blocks).unwrap_or(w8), a8.get(..blocks).unwrap_or(a8));
+    let (w8, a8) = (
+        w8.get(..blocks).unwrap_or(w8),
+        a8.get(..blocks).unwrap_or(a8),
+    );
     let mut s = [0.0f32; 4];
     // Lane j of the four sums only ever sees products j, j+4, j+8, … in
     // order, so a SIMD build (x86 SSE: one `mulps` + `addps` per four
