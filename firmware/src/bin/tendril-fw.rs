@@ -7,7 +7,8 @@
 //!
 //! The running net starts as [`tendril_firmware::DEFAULT_NET`], a `static` in
 //! flash that `firmware/build.rs` generates from `firmware/vectors/default.tnet`
-//! (or from the file named by `TENDRIL_FW_NET` at build time); hot-swapped
+//! (or from the file named by `TENDRIL_FW_NET` at build time, absolute or
+//! relative to the workspace root: `TENDRIL_FW_NET=out/model.tnet cargo fw`); hot-swapped
 //! updates go to one RAM slot ([`tendril_firmware::McuSlots`]).
 //!
 //! On the host the same file builds a twin that runs the same vectors
