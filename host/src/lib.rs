@@ -8,6 +8,7 @@ pub mod cli;
 pub mod compare;
 pub mod dataset;
 pub mod evaluate;
+pub mod firmware_parity;
 pub mod fsutil;
 pub mod ipc;
 pub mod learn;

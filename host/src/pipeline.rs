@@ -187,6 +187,10 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
             .join(", ")
     ))?;
 
+    // 4b. Firmware parity: the exported net in the MCU binary's flash,
+    // under QEMU, against the host build of the same core.
+    report.add(firmware_parity_section(&model))?;
+
     // 5. Closed loop: planner, controller and plant as real processes over
     // iceoryx2, with the IK net alone and with the integral correction, on
     // the 30 mm circle and on step targets (steady state).
@@ -272,6 +276,55 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
 
     log::info!("report: {}", report.path.display());
     Ok(())
+}
+
+/// The report section of the firmware-parity stage; a missing QEMU or
+/// target skips it with the reason, a mismatch is reported as a failure.
+fn firmware_parity_section(model: &Path) -> String {
+    let title = "## 4b. Firmware parity (Cortex-M4F under QEMU vs host)";
+    let Some(root) = crate::firmware_parity::workspace_root() else {
+        return format!("{title}\n\nSkipped: not run from the source checkout.\n");
+    };
+    let target_dir = std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join("target"))
+        .join("mcu-parity");
+    log::info!(
+        "firmware parity: building the MCU binary with {}",
+        model.display()
+    );
+    match crate::firmware_parity::check(&root, model, &target_dir) {
+        Ok(r) => {
+            let instr = match (r.instructions_per_inference, r.instruction_budget) {
+                (Some(i), Some(b)) => {
+                    format!("{i:.0} M4F instructions per inference (budget {b:.0})")
+                }
+                _ => "instructions per inference not printed".into(),
+            };
+            format!(
+                "{title}\n\n`{}` built into flash ({}-{}-{}, {} multiply-accumulates): {} result \
+                 lines compared, {} bit-identical, largest relative difference {:.1e} (≤ 1e-6 \
+                 required); {instr}; stack {} bytes.\n",
+                model.display(),
+                r.net[0],
+                r.net[1],
+                r.net[2],
+                r.net[3],
+                r.lines,
+                r.bit_identical,
+                r.max_relative_difference,
+                r.stack_bytes.map_or("–".into(), |b| b.to_string()),
+            )
+        }
+        Err(e @ crate::firmware_parity::ParityError::Unavailable(_)) => {
+            log::warn!("{e}");
+            format!("{title}\n\n{e}.\n")
+        }
+        Err(e) => {
+            log::error!("{e}");
+            format!("{title}\n\n**{e}**\n")
+        }
+    }
 }
 
 /// Backbone shapes for the workspace figure: unloaded, and half / full pull
