@@ -11,6 +11,7 @@ use std::time::Instant;
 use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::DMatrix;
 
+use crate::dataset::split::{SPLIT_SEED, TEST_FRACTION, VALID_FRACTION};
 use crate::dataset::{prepare, Dataset, Prepared};
 use crate::evaluate::{
     task_space_errors, tension_rmse, tension_rmse_normalised, EvalError, SplitMetrics,
@@ -86,9 +87,9 @@ pub struct CompareOptions {
 impl Default for CompareOptions {
     fn default() -> Self {
         CompareOptions {
-            test_fraction: 0.03,
-            valid_fraction: 0.1,
-            seed: 1,
+            test_fraction: TEST_FRACTION,
+            valid_fraction: VALID_FRACTION,
+            seed: SPLIT_SEED,
             train_task_rows: 1000,
             timing_queries: 300,
             progress: true,
@@ -270,7 +271,7 @@ pub fn compare(
             name: name.clone(),
             source,
         })?;
-        let train_seconds = t.elapsed().as_secs_f64();
+        let train_seconds = l.fit_seconds().unwrap_or(t.elapsed().as_secs_f64());
         bar.set_message(format!("evaluating {name}"));
         let infer_us = time_queries(l.as_ref(), &p.test_x, opts.timing_queries);
         let eval_err = |source| CompareError::Eval {

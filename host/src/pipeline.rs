@@ -22,7 +22,8 @@ use crate::dataset::split::{prepare, SPLIT_SEED, TEST_FRACTION, VALID_FRACTION};
 use crate::dataset::{Dataset, Sidecar};
 use crate::fsutil::write_atomic;
 use crate::learn::cascor::export::read_tnet;
-use crate::learn::cascor::CascorOptions;
+use crate::learn::cascor::{Cascor, CascorOptions};
+use crate::learn::learner::{Learner, Prefitted, Split};
 use crate::plot::workspace::{draw_workspace, Shape};
 use crate::robot::DEFAULT_ROBOT;
 use crate::statics::{SolverSettings, Statics};
@@ -172,10 +173,28 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
         test.len(),
         metrics.table("test")
     ))?;
-    let _ = trained;
 
     // 4. The comparison with the six baselines (the paper's Table II, Figure 3).
-    let comparison = compare(&data, &robot, all_learners(), &CompareOptions::default())?;
+    // Cascade correlation enters already trained: same data, split and seed
+    // (`Prefitted` checks the split and would retrain on any other).
+    let opts = CompareOptions::default();
+    let p = prepare(&data, opts.test_fraction, opts.valid_fraction, opts.seed);
+    let split = |x, y| Split { x, y };
+    let prefitted = Prefitted::new(
+        Cascor::from_trained(
+            CascorOptions::default(),
+            trained.net,
+            trained.report.clone(),
+        ),
+        split(&p.train_x, &p.train_y),
+        split(&p.valid_x, &p.valid_y),
+        trained.report.seconds,
+    );
+    let mut learners = all_learners();
+    if let Some(slot) = learners.iter_mut().find(|l| l.name() == prefitted.name()) {
+        *slot = Box::new(prefitted);
+    }
+    let comparison = compare(&data, &robot, learners, &opts)?;
     let written = comparison.write(&out.join("compare"))?;
     report.add(format!(
         "## 4. Comparison with six baselines\n\n{}\n\nFiles: {}\n\n![comparison](compare/compare.png)\n",

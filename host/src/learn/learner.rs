@@ -61,4 +61,119 @@ pub trait Learner: Send {
 
     /// The hyper-parameters chosen by `fit`, for the comparison table.
     fn describe(&self) -> String;
+
+    /// Wall time of the last fit (s), when the learner knows it better than
+    /// a clock around `fit` (a [`Prefitted`] learner); `None`: time the call.
+    fn fit_seconds(&self) -> Option<f64> {
+        None
+    }
+}
+
+/// Cheap fingerprint of a (train, valid) split: row counts and sums.
+/// Enough to tell the split a model was fitted on from another one.
+fn split_fingerprint(train: &Split<'_>, valid: &Split<'_>) -> [f64; 6] {
+    [
+        train.x.nrows() as f64,
+        valid.x.nrows() as f64,
+        train.x.sum(),
+        train.y.sum(),
+        valid.x.sum(),
+        valid.y.sum(),
+    ]
+}
+
+/// A learner already fitted on a known split, handed to a comparison so it
+/// is not trained twice (the main job trains cascade correlation once, for
+/// the weight file). `fit` on that same split keeps the model and reports
+/// the original training time; on any other split it trains afresh.
+pub struct Prefitted<L> {
+    inner: L,
+    fingerprint: [f64; 6],
+    seconds: Option<f64>,
+}
+
+impl<L: Learner> Prefitted<L> {
+    /// `inner`, fitted on (`train`, `valid`) in `seconds` of wall time.
+    pub fn new(inner: L, train: Split<'_>, valid: Split<'_>, seconds: f64) -> Prefitted<L> {
+        Prefitted {
+            inner,
+            fingerprint: split_fingerprint(&train, &valid),
+            seconds: Some(seconds),
+        }
+    }
+}
+
+impl<L: Learner> Learner for Prefitted<L> {
+    fn name(&self) -> &str {
+        self.inner.name()
+    }
+
+    fn fit(&mut self, train: Split<'_>, valid: Split<'_>, seed: u64) -> Result<(), LearnError> {
+        if self.seconds.is_some() && split_fingerprint(&train, &valid) == self.fingerprint {
+            return Ok(());
+        }
+        self.seconds = None;
+        self.inner.fit(train, valid, seed)
+    }
+
+    fn predict(&self, x: &DMatrix<f64>) -> DMatrix<f64> {
+        self.inner.predict(x)
+    }
+
+    fn parameter_count(&self) -> usize {
+        self.inner.parameter_count()
+    }
+
+    fn describe(&self) -> String {
+        self.inner.describe()
+    }
+
+    fn fit_seconds(&self) -> Option<f64> {
+        self.seconds
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Counts its fits; predicts the fit count.
+    struct Counter(usize);
+
+    impl Learner for Counter {
+        fn name(&self) -> &str {
+            "counter"
+        }
+        fn fit(&mut self, _: Split<'_>, _: Split<'_>, _: u64) -> Result<(), LearnError> {
+            self.0 += 1;
+            Ok(())
+        }
+        fn predict(&self, x: &DMatrix<f64>) -> DMatrix<f64> {
+            DMatrix::from_element(x.nrows(), 1, self.0 as f64)
+        }
+        fn parameter_count(&self) -> usize {
+            0
+        }
+        fn describe(&self) -> String {
+            String::new()
+        }
+    }
+
+    #[test]
+    fn prefitted_keeps_its_model_on_its_split_and_retrains_on_another() {
+        let x = DMatrix::from_fn(6, 2, |i, j| (i * 2 + j) as f64);
+        let y = DMatrix::from_fn(6, 1, |i, _| i as f64);
+        let (xv, yv) = (x.rows(0, 2).into_owned(), y.rows(0, 2).into_owned());
+        let s = |x, y| Split { x, y };
+        let mut p = Prefitted::new(Counter(1), s(&x, &y), s(&xv, &yv), 2.5);
+        p.fit(s(&x, &y), s(&xv, &yv), 0).unwrap();
+        assert_eq!(p.predict(&x)[0], 1.0, "refitted on its own split");
+        assert_eq!(p.fit_seconds(), Some(2.5));
+        // Another split (one value changed): train afresh, time the call.
+        let mut y2 = y.clone();
+        y2[3] += 1.0;
+        p.fit(s(&x, &y2), s(&xv, &yv), 0).unwrap();
+        assert_eq!(p.predict(&x)[0], 2.0);
+        assert_eq!(p.fit_seconds(), None);
+    }
 }

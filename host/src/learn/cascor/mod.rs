@@ -42,6 +42,16 @@ impl Cascor {
         }
     }
 
+    /// A learner holding a net trained elsewhere (by [`train::train`] with
+    /// these options), e.g. to wrap in a [`crate::learn::learner::Prefitted`].
+    pub fn from_trained(options: CascorOptions, net: CascadeNet, report: TrainReport) -> Cascor {
+        Cascor {
+            options,
+            net: Some(net),
+            report: Some(report),
+        }
+    }
+
     /// The trained net, once `fit` has succeeded.
     pub fn net(&self) -> Option<&CascadeNet> {
         self.net.as_ref()
