@@ -6,7 +6,9 @@
 //!    step and publishes the tension command; this process receives it.
 //!    Reported: one-way setpoint hop (stamp → child receive), and the chain
 //!    setpoint stamp → command received (two hops + the control step).
-//!    Both with event-driven wake-ups (default, no busy wait) and spinning.
+//!    With event-driven wake-ups (default, no busy wait), event-driven with
+//!    both processes on one CPU and the receiver at the higher real-time
+//!    priority (what `tendril sim` does), and spinning.
 //! 2. controller lateness and overruns over a long `tendril sim` run at 1 kHz.
 //!
 //! `cargo bench -p tendril --bench ipc -- [--samples N] [--lateness-secs S] [--skip-sim]`
@@ -18,7 +20,10 @@ use std::time::Duration;
 
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::*;
-use tendril::ipc::clock::{now_ns, sleep_until, tighten_timer_slack, try_realtime};
+use tendril::ipc::clock::{
+    allowed_cpus, now_ns, pin_to_cpu, set_allowed_cpus, sleep_until, tighten_timer_slack,
+    try_realtime,
+};
 use tendril::ipc::controller::Slots;
 use tendril::ipc::fixture::quick_net;
 use tendril::ipc::stats::Summary;
@@ -68,8 +73,35 @@ fn wait_for<T: transport::Message>(
     }
 }
 
+/// How the child waits, and where the two processes run.
+#[derive(Clone, Copy, PartialEq)]
+enum Mode {
+    /// Sleep on the event; both at SCHED_FIFO 50, unpinned.
+    Event,
+    /// Sleep on the event; both on one CPU, the child at 55 (above the parent).
+    Pinned,
+    /// Busy-poll; both at 50, unpinned.
+    Spin,
+}
+
+impl Mode {
+    fn name(self) -> &'static str {
+        match self {
+            Mode::Event => "event",
+            Mode::Pinned => "event, one CPU, receiver above sender",
+            Mode::Spin => "spin",
+        }
+    }
+}
+
+/// The CPU the pinned mode uses.
+fn bench_cpu() -> usize {
+    allowed_cpus().last().copied().unwrap_or(0)
+}
+
 /// The child: a controller that reacts to each setpoint immediately.
-fn child(prefix: &str, spin: bool) {
+fn child(prefix: &str, mode: Mode) {
+    let spin = mode == Mode::Spin;
     let r = robot();
     let statics = Statics::new(&r, SolverSettings::default());
     let mut slots: Box<Slots> = Box::default();
@@ -88,7 +120,12 @@ fn child(prefix: &str, spin: bool) {
     let ev = sp_event(&node, prefix);
     let listener = ev.listener_builder().create().unwrap();
     tighten_timer_slack();
-    try_realtime(50);
+    if mode == Mode::Pinned {
+        pin_to_cpu(bench_cpu());
+        try_realtime(55);
+    } else {
+        try_realtime(50);
+    }
     while let Some(sp) = wait_for(spin, &listener, &sub) {
         let t_recv = now_ns();
         let input = StepInput {
@@ -119,8 +156,9 @@ fn child(prefix: &str, spin: bool) {
     }
 }
 
-/// Run one latency measurement with a child in `spin` or event mode.
-fn latency(samples: usize, spin: bool) -> (Summary, Summary) {
+/// Run one latency measurement with a child in `mode`.
+fn latency(samples: usize, mode: Mode) -> (Summary, Summary) {
+    let spin = mode == Mode::Spin;
     let prefix = format!(
         "tendril-bench-{}-{}",
         std::process::id(),
@@ -134,13 +172,13 @@ fn latency(samples: usize, spin: bool) -> (Summary, Summary) {
     let cmd_sub = transport::subscriber(&services.tension_cmd).unwrap();
     let listener = transport::listener(&services.tension_cmd_event).unwrap();
     let mut kid = Command::new(std::env::current_exe().unwrap())
-        .env(
-            CHILD_ENV,
-            format!("{prefix},{}", if spin { "spin" } else { "event" }),
-        )
+        .env(CHILD_ENV, format!("{prefix},{}", mode as u8))
         .spawn()
         .unwrap();
     tighten_timer_slack();
+    if mode == Mode::Pinned {
+        pin_to_cpu(bench_cpu());
+    }
     try_realtime(50);
 
     // A reachable pose in the quick net's box (tip 15 mm off axis).
@@ -242,7 +280,12 @@ fn sim_lateness(secs: f64, realtime: bool) -> serde_json::Value {
 fn main() {
     if let Ok(spec) = std::env::var(CHILD_ENV) {
         let (prefix, mode) = spec.split_once(',').unwrap();
-        child(prefix, mode == "spin");
+        let mode = match mode {
+            "1" => Mode::Pinned,
+            "2" => Mode::Spin,
+            _ => Mode::Event,
+        };
+        child(prefix, mode);
         return;
     }
     let args: Vec<String> = std::env::args().collect();
@@ -259,11 +302,15 @@ fn main() {
         "| mode | hop p50 | hop p99 | hop p99.9 | chain p50 | chain p99 | chain p99.9 | samples |"
     );
     println!("|---|---|---|---|---|---|---|---|");
-    for spin in [false, true] {
-        let (hop, chain) = latency(samples, spin);
+    let cpus = allowed_cpus();
+    for mode in [Mode::Event, Mode::Pinned, Mode::Spin] {
+        let (hop, chain) = latency(samples, mode);
+        // Undo the pinned mode's affinity: a spinning FIFO child on our one
+        // CPU would starve us.
+        set_allowed_cpus(&cpus);
         println!(
             "| {} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} | {} |",
-            if spin { "spin" } else { "event" },
+            mode.name(),
             hop.p50,
             hop.p99,
             hop.p999,

@@ -154,6 +154,9 @@ pub struct ControllerArgs {
     /// Statistics JSON written at exit.
     #[arg(long)]
     pub stats: Option<PathBuf>,
+    /// Pin to this CPU.
+    #[arg(long)]
+    pub cpu: Option<usize>,
 }
 
 /// Run `tendril controller`.
@@ -164,6 +167,7 @@ pub fn run(args: ControllerArgs) -> anyhow::Result<()> {
     cfg.duration = args.duration;
     cfg.log = args.log;
     cfg.stats = args.stats;
+    cfg.cpu = args.cpu;
     let stats = crate::ipc::controller::run(&cfg)?;
     log::info!(
         "controller: {} cycles, {} overruns, lateness p50 {:.1} µs p99 {:.1} µs",

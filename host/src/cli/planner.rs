@@ -160,6 +160,9 @@ pub struct PlannerArgs {
     /// Run under SCHED_FIFO once the trajectory is prepared.
     #[arg(long)]
     pub realtime: bool,
+    /// Pin to this CPU.
+    #[arg(long)]
+    pub cpu: Option<usize>,
 }
 
 /// Run `tendril planner`.
@@ -178,6 +181,7 @@ pub fn run(args: PlannerArgs) -> anyhow::Result<()> {
         },
         log: args.log,
         realtime: args.realtime,
+        cpu: args.cpu,
     };
     let sent = crate::ipc::planner::run(&cfg)?;
     log::info!("planner: sent {sent} setpoints");

@@ -138,6 +138,9 @@ pub struct PlantArgs {
     /// Run under SCHED_FIFO once the model is set up.
     #[arg(long)]
     pub realtime: bool,
+    /// Pin to this CPU.
+    #[arg(long)]
+    pub cpu: Option<usize>,
 }
 
 /// Run `tendril plant`.
@@ -153,6 +156,7 @@ pub fn run(args: PlantArgs) -> anyhow::Result<()> {
         log: args.log,
         stats: args.stats,
         realtime: args.realtime,
+        cpu: args.cpu,
     };
     let stats = crate::ipc::plant::run(&cfg)?;
     log::info!(

