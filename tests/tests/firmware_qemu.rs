@@ -18,144 +18,35 @@
 //! `CI=true`, where it fails: CI installs both (`.ci/run`).
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
 use std::sync::Mutex;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use tendril_firmware::vectors::{self, SwapBlobs, HAS_SETPOINT, SWAP_GOOD, SWAP_REVERT};
-use tendril_firmware::{infer, McuNet, McuSlots};
+use tendril::firmware_parity::{self as parity, ParityError};
+use tendril_firmware::vectors::{self, HAS_SETPOINT, SWAP_GOOD, SWAP_REVERT};
+use tendril_firmware::{infer, McuNet};
 use tendril_tests::workspace_root;
 
 /// Builds share one target directory (and the ELF path): one at a time.
 static BUILD: Mutex<()> = Mutex::new(());
 
-const TARGET: &str = "thumbv7em-none-eabihf";
-
 fn in_ci() -> bool {
     std::env::var("CI").as_deref() == Ok("true")
 }
 
-/// Skip (locally) or fail (CI) with a loud message.
-fn missing(what: &str) {
-    if in_ci() {
-        panic!("firmware parity test cannot run in CI: {what}");
-    }
-    eprintln!("\n*** SKIPPING firmware QEMU parity test: {what} ***\n");
-}
-
-fn have_qemu() -> bool {
-    Command::new("qemu-system-arm")
-        .arg("--version")
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .map(|s| s.success())
-        .unwrap_or(false)
-}
-
-fn have_target() -> bool {
-    let out = Command::new("rustc").args(["--print", "sysroot"]).output();
-    match out {
-        Ok(o) if o.status.success() => {
-            let sysroot = String::from_utf8_lossy(&o.stdout).trim().to_string();
-            Path::new(&sysroot)
-                .join("lib/rustlib")
-                .join(TARGET)
-                .exists()
-        }
-        _ => false,
-    }
-}
-
 /// Build the MCU binary in its own target directory (the outer `cargo test`
 /// holds the lock on the normal one), with `TENDRIL_FW_NET` set to `net` or
-/// unset, and copy the ELF to a path of its own named by `label`.
+/// unset.
 fn build_mcu_binary(root: &Path, net: Option<&Path>, label: &str) -> PathBuf {
     let _guard = BUILD.lock().unwrap_or_else(|e| e.into_inner());
     let base = std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| root.join("target"));
-    let target_dir = base.join("thumbv7em-parity");
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let mut cmd = Command::new(cargo);
-    cmd.args([
-        "build",
-        "-p",
-        "tendril-firmware",
-        "--bin",
-        "tendril-fw",
-        "--release",
-        "--target",
-        TARGET,
-    ])
-    .env("CARGO_TARGET_DIR", &target_dir)
-    .current_dir(root);
-    match net {
-        Some(p) => cmd.env("TENDRIL_FW_NET", p),
-        None => cmd.env_remove("TENDRIL_FW_NET"),
-    };
-    let status = cmd.status().expect("spawn cargo build for the MCU binary");
-    assert!(status.success(), "cargo build of the MCU binary failed");
-    let elf = target_dir.join(TARGET).join("release").join("tendril-fw");
-    let copy = target_dir.join(format!("tendril-fw-{label}"));
-    std::fs::copy(&elf, &copy).expect("copy the MCU binary");
-    copy
+    parity::build_mcu_binary(root, net, &base.join("thumbv7em-parity"), label)
+        .unwrap_or_else(|e| panic!("{e}"))
 }
 
-/// Run the ELF under QEMU with a time limit; returns (exit success, stdout).
-fn run_qemu(elf: &Path) -> (bool, String) {
-    let mut child = Command::new("qemu-system-arm")
-        .args([
-            "-M",
-            "mps2-an386",
-            "-cpu",
-            "cortex-m4",
-            "-nographic",
-            "-semihosting-config",
-            "enable=on,target=native",
-            "-icount",
-            "shift=0",
-            "-kernel",
-        ])
-        .arg(elf)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .expect("spawn qemu-system-arm");
-    let mut stdout = child.stdout.take().expect("piped stdout");
-    let reader = std::thread::spawn(move || {
-        let mut s = String::new();
-        std::io::Read::read_to_string(&mut stdout, &mut s).map(|_| s)
-    });
-    let deadline = Instant::now() + Duration::from_secs(120);
-    let status = loop {
-        if let Some(st) = child.try_wait().expect("wait for qemu") {
-            break st;
-        }
-        if Instant::now() > deadline {
-            let _ = child.kill();
-            let _ = child.wait();
-            panic!("QEMU did not exit within 120 s (firmware hung?)");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    };
-    let out = reader
-        .join()
-        .expect("reader thread")
-        .expect("qemu stdout is UTF-8");
-    (status.success(), out)
-}
-
-/// The comparable lines: `net`, `infer`, `step`, `done` (measurements and
-/// the stack line differ by design).
-fn result_lines(out: &str) -> Vec<&str> {
-    out.lines()
-        .filter(|l| {
-            let k = l.split(' ').next().unwrap_or("");
-            matches!(k, "net" | "infer" | "step" | "done")
-        })
-        .collect()
+fn bits(word: &str) -> f32 {
+    f32::from_bits(u32::from_str_radix(word, 16).expect("hex bits"))
 }
 
 fn close(a: f32, b: f32) -> bool {
@@ -165,10 +56,6 @@ fn close(a: f32, b: f32) -> bool {
     (a - b).abs() <= 1e-6 * a.abs().max(b.abs())
 }
 
-fn bits(word: &str) -> f32 {
-    f32::from_bits(u32::from_str_radix(word, 16).expect("hex bits"))
-}
-
 /// Run the MCU binary built with `flash_net` (the file; `env` = whether via
 /// `TENDRIL_FW_NET`) and compare it with the host run of the same files;
 /// returns the MCU output.
@@ -176,27 +63,22 @@ fn check_parity(flash_net: &Path, env: bool, label: &str) -> String {
     let root = workspace_root();
     let vectors_dir = root.join("firmware").join("vectors");
     let elf = build_mcu_binary(&root, env.then_some(flash_net), label);
-    let (ok, mcu_out) = run_qemu(&elf);
+    let (ok, mcu_out) =
+        parity::run_qemu(&elf, Duration::from_secs(120)).unwrap_or_else(|e| panic!("{e}"));
     assert!(ok, "MCU binary exited with failure; output:\n{mcu_out}");
-
-    let read = |name: &str| std::fs::read(vectors_dir.join(name)).expect(name);
-    let flash_blob = std::fs::read(flash_net).expect("flash net file");
-    let (good, nan, vecs) = (read("swap.tnet"), read("swap_nan.tnet"), read("inputs.bin"));
-    let flash = Box::new(McuNet::decode(&flash_blob).expect("flash net decodes"));
-    let update = Box::new(McuNet::decode(&good).expect("swap.tnet decodes"));
-    let mut ram = Box::new(McuNet::empty());
-    let mut store = McuSlots::new(&flash, &mut ram);
-    let blobs = SwapBlobs {
-        good: &good,
-        nan: &nan,
-    };
-    let mut host_out = String::new();
-    vectors::run(&mut store, &blobs, &vecs, &mut host_out).expect("host run of the vectors");
-
-    let mcu = result_lines(&mcu_out);
-    let host = result_lines(&host_out);
-    assert!(host.len() > 100, "too few host lines: {}", host.len());
-    assert_eq!(mcu.len(), host.len(), "line counts differ\nMCU:\n{mcu_out}");
+    let host_out = parity::host_run(&root, flash_net).unwrap_or_else(|e| panic!("{e}"));
+    let (lines, identical, worst) =
+        parity::compare_outputs(&mcu_out, &host_out, 1e-6).unwrap_or_else(|e| panic!("{e}"));
+    assert!(lines > 100, "too few result lines: {lines}");
+    let mcu = parity::result_lines(&mcu_out);
+    let flash = Box::new(
+        McuNet::decode(&std::fs::read(flash_net).expect("flash net")).expect("flash net decodes"),
+    );
+    let update = Box::new(
+        McuNet::decode(&std::fs::read(vectors_dir.join("swap.tnet")).expect("swap.tnet"))
+            .expect("swap.tnet decodes"),
+    );
+    let vecs = std::fs::read(vectors_dir.join("inputs.bin")).expect("inputs.bin");
     let s = flash.shape();
     assert_eq!(
         mcu[0],
@@ -204,23 +86,6 @@ fn check_parity(flash_net: &Path, env: bool, label: &str) -> String {
         "the MCU does not run {}",
         flash_net.display()
     );
-    let mut identical = 0;
-    for (m, h) in mcu.iter().zip(&host) {
-        if m == h {
-            identical += 1;
-            continue;
-        }
-        let mt: Vec<&str> = m.split(' ').collect();
-        let ht: Vec<&str> = h.split(' ').collect();
-        assert_eq!(mt.len(), ht.len(), "MCU `{m}` vs host `{h}`");
-        // kind, index and (for step lines) the status word must be equal.
-        let fixed = if mt[0] == "step" { 3 } else { 2 };
-        assert_eq!(mt[..fixed], ht[..fixed], "MCU `{m}` vs host `{h}`");
-        for (a, b) in mt[fixed..].iter().zip(&ht[fixed..]) {
-            let (fa, fb) = (bits(a), bits(b));
-            assert!(close(fa, fb), "MCU `{m}` vs host `{h}`: {fa} vs {fb}");
-        }
-    }
 
     // Which net must have run each inference: the flash net, or the update
     // from an accepted swap until a revert (rejected blobs change nothing).
@@ -266,8 +131,7 @@ fn check_parity(flash_net: &Path, env: bool, label: &str) -> String {
         "{checked} {on_update_count}"
     );
     eprintln!(
-        "firmware parity ({label}): {} lines compared, {identical} bit-identical; {checked} inferences checked against the expected net",
-        host.len()
+        "firmware parity ({label}): {lines} lines compared, {identical} bit-identical (worst relative difference {worst:e}); {checked} inferences checked against the expected net"
     );
     let done = mcu.last().copied().unwrap_or("");
     assert!(done.starts_with("done "), "MCU output ends with `{done}`");
@@ -275,15 +139,16 @@ fn check_parity(flash_net: &Path, env: bool, label: &str) -> String {
 }
 
 fn prerequisites() -> bool {
-    if !have_qemu() {
-        missing("qemu-system-arm not found (apt-get install qemu-system-arm)");
-        return false;
+    match parity::prerequisites() {
+        Ok(()) => true,
+        Err(e @ ParityError::Unavailable(_)) if !in_ci() => {
+            eprintln!("\n*** SKIPPING firmware QEMU parity test: {e} ***\n");
+            false
+        }
+        Err(e) => panic!(
+            "firmware parity test cannot run (CI installs qemu-system-arm and the target): {e}"
+        ),
     }
-    if !have_target() {
-        missing("Rust target thumbv7em-none-eabihf not installed (rustup target add thumbv7em-none-eabihf)");
-        return false;
-    }
-    true
 }
 
 #[test]
