@@ -56,6 +56,7 @@ fn bench(c: &mut Criterion) {
                 setpoint: Some(Setpoint {
                     seq,
                     pose: poses[seq as usize % poses.len()],
+                    tangent: None,
                 }),
                 feedback: None,
             };

@@ -167,7 +167,11 @@ fn cfg4() -> ControlConfig {
 }
 
 fn sp(seq: u64, pose: [f32; 7]) -> Option<Setpoint> {
-    Some(Setpoint { seq, pose })
+    Some(Setpoint {
+        seq,
+        pose,
+        tangent: None,
+    })
 }
 
 fn input(now_ns: u64, setpoint: Option<Setpoint>) -> StepInput {
@@ -285,6 +289,118 @@ fn net_with_wrong_output_count_is_refused() {
     assert_eq!(o.command, [0.0; MAX_TENDONS]);
 }
 
+/// A plant whose tip is the commanded lateral position shifted by `bias`;
+/// runs the loop with `tangent` for `steps` periods and returns the state.
+fn run_lateral_bias(
+    cfg: &ControlConfig,
+    tangent: Option<[[f32; 7]; 2]>,
+    bias: [f32; 2],
+    steps: u64,
+) -> ControlState {
+    let net = Net::decode(&blob(3, 12, 4)).unwrap();
+    let pose = mid_pose();
+    let mut st = ControlState::new(&cfg.limits, &[0.0; MAX_TENDONS], 0);
+    for k in 1..steps {
+        let p = corrected_pose(&st);
+        let inp = StepInput {
+            now_ns: k * 1_000_000,
+            setpoint: Some(Setpoint {
+                seq: k,
+                pose,
+                tangent,
+            }),
+            feedback: Some(Feedback {
+                seq: k,
+                tip_position: [p[0] - bias[0], p[1] - bias[1], pose[2]],
+            }),
+        };
+        st = control_step(cfg, &net, &st, &inp).0;
+    }
+    st
+}
+
+#[test]
+fn integral_loop_moves_the_setpoint_along_the_tangent() {
+    let mut cfg = cfg4();
+    cfg.integral = IntegralConfig {
+        ki: 50.0,
+        limit: 0.01,
+        feedback_timeout_ns: 5_000_000,
+        window: 0.01,
+    };
+    // A tangent that also tilts the tip: moving in x changes z and qy.
+    let mut d = [[0.0f32; 7]; 2];
+    d[0][0] = 1.0;
+    d[0][2] = -0.2;
+    d[0][5] = 2.5;
+    d[1][1] = 1.0;
+    d[1][4] = -2.5;
+    let bias = [0.002f32, -0.001];
+    let st = run_lateral_bias(&cfg, Some(d), bias, 2000);
+    assert!(
+        (st.correction[0] - bias[0]).abs() < 1e-6,
+        "{:?}",
+        st.correction
+    );
+    assert!(
+        (st.correction[1] - bias[1]).abs() < 1e-6,
+        "{:?}",
+        st.correction
+    );
+    assert_eq!(
+        st.correction[2], 0.0,
+        "height follows the tangent, not the integral"
+    );
+    let p = corrected_pose(&st);
+    let pose = mid_pose();
+    for k in 0..7 {
+        let want = pose[k] + d[0][k] * st.correction[0] + d[1][k] * st.correction[1];
+        assert!(
+            (p[k] - want).abs() < 1e-7,
+            "component {k}: {} vs {want}",
+            p[k]
+        );
+    }
+    // A non-finite tangent is dropped: the position alone moves.
+    let mut bad = d;
+    bad[1][3] = f32::NAN;
+    let st = run_lateral_bias(&cfg, Some(bad), bias, 2000);
+    assert!(st.tangent.is_none());
+    assert!((corrected_pose(&st)[5] - mid_pose()[5]).abs() < 1e-9);
+    assert!((st.correction[0] - bias[0]).abs() < 1e-6);
+}
+
+#[test]
+fn integral_loop_waits_out_large_errors_and_slewing() {
+    let mut cfg = cfg4();
+    cfg.integral = IntegralConfig {
+        ki: 50.0,
+        limit: 0.01,
+        feedback_timeout_ns: 5_000_000,
+        window: 0.002,
+    };
+    // 3 mm off: outside the 2 mm window, nothing is integrated.
+    let st = run_lateral_bias(&cfg, None, [0.003, 0.0], 500);
+    assert_eq!(st.correction, [0.0; 3]);
+    // 1 mm off: inside, removed.
+    let st = run_lateral_bias(&cfg, None, [0.001, 0.0], 2000);
+    assert!(
+        (st.correction[0] - 0.001).abs() < 1e-6,
+        "{:?}",
+        st.correction
+    );
+    // A slew limit so tight the command never reaches its target: no
+    // integration while the tip is still on its way.
+    let mut slow = cfg4();
+    slow.limits = TendonLimits::uniform(4, 10.0, 1e-3).unwrap();
+    slow.integral = cfg.integral;
+    // (The first step integrates once, ki·e·dt = 5e-5 m: nothing was
+    // commanded yet, so nothing was held back.)
+    let st = run_lateral_bias(&slow, None, [0.001, 0.0], 500);
+    assert!(st.slew_limited);
+    assert!(st.correction[0] <= 5.0001e-5, "{:?}", st.correction);
+}
+
 #[test]
 fn integral_loop_removes_a_constant_plant_offset() {
     // Plant: the measured tip is the pose the net was asked for, shifted by a
@@ -294,6 +410,7 @@ fn integral_loop_removes_a_constant_plant_offset() {
         ki: 50.0,
         limit: 0.01,
         feedback_timeout_ns: 5_000_000,
+        window: f32::INFINITY,
     };
     let net = Net::decode(&blob(3, 12, 4)).unwrap();
     let pose = mid_pose();
@@ -546,6 +663,7 @@ fn config_strategy() -> impl Strategy<Value = ControlConfig> {
                 ki,
                 limit: 0.02,
                 feedback_timeout_ns: 4_000_000,
+                window: f32::INFINITY,
             };
             c
         })
@@ -576,7 +694,11 @@ proptest! {
             now = if ev.dt_ns < 0 { now.saturating_sub(ev.dt_ns.unsigned_abs()) } else { now + ev.dt_ns as u64 };
             let inp = StepInput {
                 now_ns: now,
-                setpoint: ev.setpoint.map(|(seq, pose, _)| Setpoint { seq, pose }),
+                setpoint: ev.setpoint.map(|(seq, pose, _)| Setpoint {
+                    seq,
+                    pose,
+                    tangent: None,
+                }),
                 feedback: ev.feedback.map(|tip| Feedback { seq: now, tip_position: tip }),
             };
             let (s, o) = control_step(&cfg, &net, &st, &inp);

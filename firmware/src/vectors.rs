@@ -225,6 +225,7 @@ impl VecHeader {
             ki: self.ki,
             limit: self.integral_limit,
             feedback_timeout_ns: self.feedback_timeout_ns,
+            window: f32::INFINITY,
         };
         Ok(cfg)
     }
@@ -383,6 +384,7 @@ where
             setpoint: has_sp.then_some(Setpoint {
                 seq: u64::from(rec.seq),
                 pose: rec.pose,
+                tangent: None,
             }),
             feedback: (rec.flags & HAS_FEEDBACK != 0).then_some(Feedback {
                 seq: i as u64 + 1,

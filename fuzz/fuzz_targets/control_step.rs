@@ -40,6 +40,7 @@ fuzz_target!(|data: &[u8]| {
             ki: 50.0,
             limit: 0.01,
             feedback_timeout_ns: 4_000_000,
+            window: 0.002,
         };
     }
     let mut now: u64 = 1 << 40;
@@ -64,6 +65,8 @@ fuzz_target!(|data: &[u8]| {
             setpoint: (flags & 1 != 0).then_some(Setpoint {
                 seq: u64::from(word(8)),
                 pose,
+                // Arbitrary (NaN, ∞, huge) tangents from the same bytes.
+                tangent: (flags & 4 != 0).then_some([pose, pose.map(|v| -3.0 * v)]),
             }),
             feedback: (flags & 2 != 0).then_some(Feedback {
                 seq: now,

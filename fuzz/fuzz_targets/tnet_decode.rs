@@ -51,7 +51,11 @@ fuzz_target!(|input: &[u8]| {
     let st = ControlState::new(&cfg.limits, &[0.0; MAX_TENDONS], 0);
     let input = StepInput {
         now_ns: 1_000_000,
-        setpoint: Some(Setpoint { seq: 1, pose }),
+        setpoint: Some(Setpoint {
+            seq: 1,
+            pose,
+            tangent: None,
+        }),
         feedback: None,
     };
     let (_, out) = control_step(&cfg, net, &st, &input);

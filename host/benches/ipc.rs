@@ -133,6 +133,7 @@ fn child(prefix: &str, mode: Mode) {
             setpoint: Some(FwSetpoint {
                 seq: sp.header.seq,
                 pose: sp.pose,
+                tangent: None,
             }),
             feedback: None,
         };

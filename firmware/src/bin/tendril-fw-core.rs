@@ -92,7 +92,11 @@ mod mcu {
                     }
                     let input = StepInput {
                         now_ns: u64::from(k) * PERIOD_NS,
-                        setpoint: (seq != 0).then_some(Setpoint { seq, pose }),
+                        setpoint: (seq != 0).then_some(Setpoint {
+                            seq,
+                            pose,
+                            tangent: None,
+                        }),
                         feedback: None,
                     };
                     let (next, out) = control_step(&cfg, store.active(), &state, &input);

@@ -290,7 +290,11 @@ mod mcu {
                         if let Some(p) = poses.get(i % k) {
                             let input = StepInput {
                                 now_ns: 1_000_000,
-                                setpoint: Some(Setpoint { seq: 1, pose: *p }),
+                                setpoint: Some(Setpoint {
+                                    seq: 1,
+                                    pose: *p,
+                                    tangent: None,
+                                }),
                                 feedback: None,
                             };
                             black_box(control_step(&cfg, net, black_box(&st), &input));

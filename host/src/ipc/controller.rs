@@ -218,6 +218,7 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
             ki: cfg.ki as f32,
             limit: cfg.correction_limit as f32,
             feedback_timeout_ns: 20 * period_ns,
+            window: cfg.correction_window as f32,
         };
     }
 
@@ -324,9 +325,12 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
                     *p += v * cfg.lead as f32;
                 }
             }
+            // The planner's tangent, for the firmware's own integral loop.
+            let tangent = (s.flags & setpoint_flags::HAS_TANGENT != 0).then_some(s.tangent);
             fw_sp = Some(FwSetpoint {
                 seq: local_sp_seq,
                 pose,
+                tangent,
             });
             last_sp = Some(s);
         }
