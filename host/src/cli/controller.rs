@@ -48,7 +48,7 @@ pub struct LoopOpts {
     pub correction: OnOff,
     /// Where the correction runs: `host` = host side, the lateral integral
     /// moves the setpoint along the reachable poses (the planner's statics
-    /// tangent; a constant-curvature bend for pose tables without one), so
+    /// tangent; a constant-curvature bend when there is none), so
     /// the net sees poses like its training data; `fw` = the firmware's
     /// position-only integral (off the reachable poses: for comparison).
     #[arg(long, value_enum, default_value_t = CorrectionMode::Host)]

@@ -371,7 +371,7 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
         // Host-side arc-consistent correction (see `correction`): move the
         // setpoint handed to the firmware along the arc by the integral.
         // With the planner's tangent the shift follows the robot's own
-        // reachable poses; without it (a pose table) a constant-curvature arc.
+        // reachable poses; without it (a pose table with a row out of reach) a constant-curvature arc.
         if arc_mode {
             if let (Some(sp), Some(s)) = (fw_sp.as_mut(), last_sp) {
                 if sp.pose.iter().all(|v| v.is_finite()) {

@@ -288,10 +288,22 @@ impl Trajectory {
                         "pose table needs rows with increasing times".into(),
                     ));
                 }
+                // The table's poses are the user's; their tangents come from
+                // the reachable pose at the same lateral position. If some
+                // row's position is out of reach there are none, and the
+                // correction falls back to a constant-curvature arc.
+                let tangents: Result<Vec<Tangent>, IpcError> = rows
+                    .iter()
+                    .map(|(_, p)| lifter.lift_with_tangent([p[0], p[1]]).map(|(_, d)| d))
+                    .collect();
+                let tangents = tangents.unwrap_or_else(|e| {
+                    log::warn!("pose table: no tangents for the correction ({e})");
+                    Vec::new()
+                });
                 Ok(Trajectory {
                     times: rows.iter().map(|r| r.0).collect(),
                     poses: rows.iter().map(|r| r.1).collect(),
-                    tangents: Vec::new(),
+                    tangents,
                     periodic: false,
                     stepwise: false,
                 })
@@ -476,5 +488,38 @@ mod tests {
                 assert!((2.5..6.0).contains(&ratio), "xy {xy:?}: errors {errs:?}");
             }
         }
+    }
+
+    #[test]
+    fn pose_tables_get_the_tangent_of_the_reachable_pose_at_each_row() {
+        let s = statics();
+        let xys = [[0.01, 0.0], [0.0, 0.02], [-0.015, -0.005]];
+        let mut lifter = Lifter::new(&s);
+        let lifted: Vec<([f64; 7], Tangent)> = xys
+            .iter()
+            .map(|&xy| lifter.lift_with_tangent(xy).unwrap())
+            .collect();
+        let rows: Vec<(f64, [f64; 7])> = lifted
+            .iter()
+            .enumerate()
+            .map(|(i, (p, _))| (i as f64, *p))
+            .collect();
+        let traj = Trajectory::new(&Shape::Table(rows.clone()), &s).unwrap();
+        for (i, (_, d)) in lifted.iter().enumerate() {
+            let got = traj.sample(i as f64).tangent.expect("a tangent");
+            for j in 0..2 {
+                for k in 0..7 {
+                    assert!(
+                        (got[j][k] - d[j][k]).abs() < 1e-4,
+                        "row {i}: {got:?} vs {d:?}"
+                    );
+                }
+            }
+        }
+        // A row out of reach: no tangents (the correction falls back).
+        let mut far = rows;
+        far[1].1[0] = 0.5;
+        let traj = Trajectory::new(&Shape::Table(far), &s).unwrap();
+        assert!(traj.sample(0.0).tangent.is_none());
     }
 }
