@@ -257,7 +257,7 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
     let mut in_hold = false;
     let mut cmd_seq = 0u64;
     let mut overran = false;
-    let arc_mode = cfg.ki > 0.0 && !cfg.firmware_integral;
+    let host_correction = cfg.ki > 0.0 && !cfg.firmware_integral;
     let mut integral = super::correction::LateralIntegral::default();
     let gains = super::correction::IntegralGains {
         ki: cfg.ki,
@@ -368,11 +368,11 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
             extra |= command_status::PLANT_STALE;
         }
 
-        // Host-side arc-consistent correction (see `correction`): move the
-        // setpoint handed to the firmware along the arc by the integral.
-        // With the planner's tangent the shift follows the robot's own
-        // reachable poses; without it (a pose table with a row out of reach) a constant-curvature arc.
-        if arc_mode {
+        // Host-side correction (see `correction`): move the setpoint handed
+        // to the firmware by the integral, along the robot's reachable poses
+        // (the planner's tangent), or along a constant-curvature arc when a
+        // setpoint comes without one.
+        if host_correction {
             if let (Some(sp), Some(s)) = (fw_sp.as_mut(), last_sp) {
                 if sp.pose.iter().all(|v| v.is_finite()) {
                     let pose = sp.pose.map(|v| v as f64);
@@ -409,7 +409,7 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
                 | Status::SETPOINT_REJECTED
                 | Status::SLEW_LIMITED,
         ) && !stale;
-        if arc_mode && tracking {
+        if host_correction && tracking {
             if let (Some(s), Some(f)) = (last_good_sp, &fw_fb) {
                 let mut desired = [s.pose[0] as f64, s.pose[1] as f64];
                 if s.flags & setpoint_flags::HAS_VELOCITY != 0 {
@@ -420,7 +420,7 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
                 integral.update(desired, measured, &gains, period_ns as f64 * 1e-9);
             }
         }
-        if arc_mode && integral.c != [0.0, 0.0] {
+        if host_correction && integral.c != [0.0, 0.0] {
             extra |= command_status::CORRECTION;
         }
         if status.contains(Status::NONFINITE_SETPOINT) {
