@@ -64,9 +64,9 @@ pub struct ControllerConfig {
     pub watchdog_periods: f64,
     /// Integral gain of the outer loop (1/s); 0 = IK alone.
     pub ki: f64,
-    /// Where the integral correction runs: `true` = the firmware's
-    /// position-only loop, `false` = host-side arc-consistent correction
-    /// ([`super::correction`]) with the firmware loop off.
+    /// Where the integral correction runs: `true` = the firmware's loop
+    /// (along the setpoint's tangent if it has one, else position only),
+    /// `false` = host side ([`super::correction`]) with the firmware loop off.
     pub firmware_integral: bool,
     /// Bound on the integral correction per axis (m).
     pub correction_limit: f64,

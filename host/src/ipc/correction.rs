@@ -7,13 +7,20 @@
 //! Shifting the position of a setpoint while keeping its orientation (what a
 //! position-only integral does) lands off the surface; a net trained on
 //! exact statics data can then return nonsense (measured: all tensions
-//! negative → clamped to zero, tip sagging 24 mm off a 30 mm circle). Here
-//! the lateral correction `c` is applied as a change of a constant-curvature
-//! arc: the bend angle θ follows the lateral distance d through
-//! d = L (1 − cos θ)/θ, the tip orientation is rotated by the change of
-//! (θ, bending plane) and the height by the change of L sin θ / θ. Exact for
-//! an inextensible constant-curvature arc; a first-order model elsewhere,
-//! which is all a slowly integrated correction needs.
+//! negative → clamped to zero, tip sagging 24 mm off a 30 mm circle, and the
+//! trained cascade net diverging to 31 mm RMS).
+//!
+//! Two ways to stay on the surface:
+//! - [`family_shift`] (used whenever the setpoint carries one): the
+//!   planner's statics tangent `∂pose/∂(x, y)`, first order, gravity and
+//!   routing included;
+//! - [`arc_shift`] (fallback): the lateral correction `c` applied as a change
+//!   of a constant-curvature arc: the bend angle θ follows the lateral
+//!   distance d through d = L (1 − cos θ)/θ, the tip orientation is rotated
+//!   by the change of (θ, bending plane) and the height by the change of
+//!   L sin θ / θ. Exact for an inextensible constant-curvature arc, but it
+//!   ignores gravity, which on the default robot was enough to turn the
+//!   loop's gain negative in parts of the workspace.
 
 /// Bend angle θ (rad) of a constant-curvature arc of length `l` whose tip
 /// lies at lateral distance `d` from the axis (Newton on d = L(1−cos θ)/θ).
