@@ -142,13 +142,18 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
         ));
     }
     let label = format!(
-        "trajectory {:?}, correction {:?}, lead {} ms, motor τ {} ms, noise {} mm, {} s",
+        "trajectory {:?}, correction {:?} ({:?}, ki {}/s), lead {} ms, motor τ {} ms, noise {} mm, \
+         {} s, real-time {}, pinned {:?}",
         args.traj.trajectory,
         args.tuning.correction,
+        args.tuning.correction_mode,
+        args.tuning.ki,
         args.tuning.lead_ms,
         args.plant.motor_tau_ms,
         args.plant.noise_mm,
-        args.duration
+        args.duration,
+        if realtime { "on" } else { "off" },
+        args.pin
     );
     let cfg = SimConfig {
         exe,
