@@ -125,7 +125,13 @@ impl<L: Learner> Learner for Prefitted<L> {
     }
 
     fn describe(&self) -> String {
-        self.inner.describe()
+        match self.seconds {
+            Some(_) => format!(
+                "{}; trained once before the comparison on this split (time of that run)",
+                self.inner.describe()
+            ),
+            None => self.inner.describe(),
+        }
     }
 
     fn fit_seconds(&self) -> Option<f64> {
