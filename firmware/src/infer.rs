@@ -7,53 +7,15 @@
 use tendril_shared::net::ROW_PAD;
 use tendril_shared::{Activation, CascadeNet};
 
-/// The first `n` entries of `a`, or all of it (capacities are checked by the
-/// decoder; this keeps indexing panic-free).
-#[inline]
-fn prefix(a: &[f32], n: usize) -> &[f32] {
-    a.get(..n).unwrap_or(a)
-}
-
-/// Dot product over the common length of `w` and `a`, with four interleaved
-/// partial sums (`s[i mod 4] += w_i a_i`, in index order) combined as
-/// `(s0 + s1) + (s2 + s3)`, then the last `len mod 4` products added in order.
+/// Dot product over the first `8 ⌊n/8⌋` products of the common length `n`
+/// of `w` and `a`, with four interleaved partial sums (`s[i mod 4] += w_i a_i`,
+/// in index order) combined as `(s0 + s1) + (s2 + s3)`.
 ///
 /// Four independent accumulators break the add-latency chain (the host build
 /// runs several times faster); blocks of eight products let the M4 fetch
-/// eight weights and eight activations with two `vldmia` (`mac8`). The
-/// order of operations is fixed by this code, not by the compiler, so every
-/// target computes the same roundings.
-#[inline]
-pub fn dot(w: &[f32], a: &[f32]) -> f32 {
-    let n = w.len().min(a.len());
-    let (w, a) = (prefix(w, n), prefix(a, n));
-    let blocks = n / 8;
-    let mut s = mac8(w, a, blocks);
-    let done = blocks * 8;
-    let (w_rest, a_rest) = (w.get(done..).unwrap_or(&[]), a.get(done..).unwrap_or(&[]));
-    let w4 = w_rest.chunks_exact(4);
-    let a4 = a_rest.chunks_exact(4);
-    let (w_tail, a_tail) = (w4.remainder(), a4.remainder());
-    for (wq, aq) in w4.zip(a4) {
-        if let ([w0, w1, w2, w3], [a0, a1, a2, a3], [s0, s1, s2, s3]) = (wq, aq, &mut s) {
-            *s0 += w0 * a0;
-            *s1 += w1 * a1;
-            *s2 += w2 * a2;
-            *s3 += w3 * a3;
-        }
-    }
-    let [s0, s1, s2, s3] = s;
-    let mut sum = (s0 + s1) + (s2 + s3);
-    for (x, y) in w_tail.iter().zip(a_tail) {
-        sum += x * y;
-    }
-    sum
-}
-
-/// [`dot`] for lengths that are a multiple of 8 (over the first
-/// `8 ⌊n/8⌋` products of the common length `n`): four interleaved partial
-/// sums, `(s0 + s1) + (s2 + s3)` — the same operations in the same order, so
-/// the same result bit for bit. The inference runs every row through this
+/// eight weights and eight activations with two `vldmia`. The order of
+/// operations is fixed by this code, not by the compiler, so every target
+/// computes the same roundings. The inference runs every row through this
 /// (rows are padded to whole blocks); on the M4 it is one call to the
 /// assembly kernel `tendril_dot8`, which also does the reduction.
 #[inline]
@@ -69,6 +31,13 @@ fn dot8_blocks(w: &[f32], a: &[f32], blocks: usize) -> f32 {
     (s0 + s1) + (s2 + s3)
 }
 
+/// Cortex-M4F version: the same operations in the same order, in the
+/// assembly routine `tendril_dot8` below. LLVM would emit one `vldr` per
+/// operand (3 instructions per MAC); two `vldmia` and eight `vmla.f32` per
+/// block make it 1.5. `vmla.f32` is the non-fused multiply-accumulate: the
+/// product is rounded before the add, exactly like `s += w * a` in Rust, so
+/// the results stay bit-identical to the host build (the QEMU parity test
+/// checks).
 #[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
 #[inline]
 fn dot8_blocks(w: &[f32], a: &[f32], blocks: usize) -> f32 {
@@ -118,41 +87,8 @@ fn blocks_of_8(s: &[f32]) -> &[[f32; 8]] {
     unsafe { core::slice::from_raw_parts(s.as_ptr().cast::<[f32; 8]>(), s.len() / 8) }
 }
 
-/// Cortex-M4F version of [`mac8`]: the same operations in the same order,
-/// in the assembly routine `tendril_mac8` below. LLVM emits one `vldr` per operand
-/// (3 instructions per MAC); two `vldmia` and eight `vmla.f32` per block make
-/// it 1.5. `vmla.f32` is the non-fused multiply-accumulate: the product is
-/// rounded before the add, exactly like `s += w * a` in Rust (which LLVM
-/// itself compiles to `vmla.f32`), so the results stay bit-identical to the
-/// host build (the QEMU parity test checks).
-#[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
-#[inline]
-fn mac8(w: &[f32], a: &[f32], blocks: usize) -> [f32; 4] {
-    let blocks = blocks.min(w.len() / 8).min(a.len() / 8);
-    if blocks == 0 {
-        return [0.0; 4];
-    }
-    // SAFETY: both slices hold at least `8 blocks` f32s (clamped above) and
-    // `blocks >= 1`, which is all `tendril_mac8` reads; it writes no memory
-    // and follows the AAPCS-VFP calling convention.
-    let s = unsafe { tendril_mac8(w.as_ptr(), a.as_ptr(), blocks) };
-    [s.s0, s.s1, s.s2, s.s3]
-}
-
-/// Four partial sums, returned in `s0–s3` (an AAPCS-VFP homogeneous aggregate).
-#[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
-#[repr(C)]
-struct Sums {
-    s0: f32,
-    s1: f32,
-    s2: f32,
-    s3: f32,
-}
-
 #[cfg(all(target_arch = "arm", target_os = "none", target_abi = "eabihf"))]
 extern "C" {
-    /// `blocks` (≥ 1) blocks of eight `s[i mod 4] += w_i a_i` from zero.
-    fn tendril_mac8(w: *const f32, a: *const f32, blocks: usize) -> Sums;
     /// `blocks` (≥ 0) blocks of eight, reduced: `(s0 + s1) + (s2 + s3)`.
     fn tendril_dot8(w: *const f32, a: *const f32, blocks: usize) -> f32;
 }
@@ -162,32 +98,6 @@ core::arch::global_asm!(
     ".syntax unified",
     ".fpu fpv4-sp-d16",
     ".thumb",
-    ".section .text.tendril_mac8,\"ax\",%progbits",
-    ".global tendril_mac8",
-    ".type tendril_mac8,%function",
-    ".thumb_func",
-    "tendril_mac8:",
-    "    vpush {{s16-s19}}",
-    "    movs r3, #0",
-    "    vmov s0, s1, r3, r3",
-    "    vmov s2, s3, r3, r3",
-    "1:",
-    "    vldmia r0!, {{s4-s11}}",
-    "    vldmia r1!, {{s12-s19}}",
-    "    vmla.f32 s0, s4, s12",
-    "    vmla.f32 s1, s5, s13",
-    "    vmla.f32 s2, s6, s14",
-    "    vmla.f32 s3, s7, s15",
-    "    vmla.f32 s0, s8, s16",
-    "    vmla.f32 s1, s9, s17",
-    "    vmla.f32 s2, s10, s18",
-    "    vmla.f32 s3, s11, s19",
-    "    subs r2, #1",
-    "    bne 1b",
-    "    vpop {{s16-s19}}",
-    "    bx lr",
-    ".size tendril_mac8, .-tendril_mac8",
-    "",
     ".section .text.tendril_dot8,\"ax\",%progbits",
     ".global tendril_dot8",
     ".type tendril_dot8,%function",

@@ -61,7 +61,7 @@ mod mcu {
     use cortex_m_rt::entry;
     use cortex_m_semihosting::{debug, hio};
     use tendril_firmware::control::{control_step, ControlState, Setpoint, StepInput};
-    use tendril_firmware::infer::{dot, infer};
+    use tendril_firmware::infer::{dot8, infer};
     use tendril_firmware::vectors::{self, HAS_SETPOINT};
     use tendril_firmware::{McuNet, McuSlots, DEFAULT_NET, POSE_DIM};
     use tendril_shared::{Activation, MAX_TENDONS};
@@ -273,7 +273,7 @@ mod mcu {
         });
         let t_dot = ticks(|| {
             for _ in 0..REPS {
-                black_box(dot(black_box(w), black_box(a)));
+                black_box(dot8(black_box(w), black_box(a)));
             }
         });
         let _ = writeln!(
