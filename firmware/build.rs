@@ -16,7 +16,7 @@ use std::fmt::Write as _;
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use tendril_shared::{weight_capacity, CascadeNet};
+use tendril_shared::{weight_capacity, CascadeNet, Row};
 
 /// Decode capacity for reading whatever net the user points at (the
 /// firmware's own capacity is checked by the generated const code).
@@ -43,24 +43,16 @@ fn default_net_source(path: &Path) -> Result<String, String> {
     net.decode_into(&bytes)
         .map_err(|e| format!("{}: {e}", path.display()))?;
     let s = net.shape();
-    let hidden: Vec<f32> = net
-        .hidden_units()
-        .flat_map(|u| {
-            let inputs = u.inputs.get(..s.inputs).unwrap_or(u.inputs).to_vec();
-            std::iter::once(u.bias)
-                .chain(inputs)
-                .chain(u.hidden.iter().copied())
-        })
-        .collect();
-    let output: Vec<f32> = net
-        .output_units()
-        .flat_map(|u| {
-            let inputs = u.inputs.get(..s.inputs).unwrap_or(u.inputs).to_vec();
-            std::iter::once(u.bias)
-                .chain(inputs)
-                .chain(u.hidden.iter().copied())
-        })
-        .collect();
+    // A row as the file stores it: bias, the used inputs, the hidden weights.
+    let row = |u: Row<'_>| {
+        let inputs = u.inputs.get(..s.inputs).unwrap_or(u.inputs).to_vec();
+        std::iter::once(u.bias)
+            .chain(inputs)
+            .chain(u.hidden.iter().copied())
+            .collect::<Vec<f32>>()
+    };
+    let hidden: Vec<f32> = net.hidden_units().flat_map(row).collect();
+    let output: Vec<f32> = net.output_units().flat_map(row).collect();
     let display = path.display().to_string().replace('\\', "/");
     let mut src = String::new();
     let _ = writeln!(
