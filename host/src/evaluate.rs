@@ -10,6 +10,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::statics::Statics;
 
+pub mod job;
+
 /// Summary of a list of non-negative errors.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ErrorStats {

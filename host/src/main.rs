@@ -1,15 +1,37 @@
-//! `tendril`: thin shell over the library — parse the command line, run,
-//! turn an error into one line on stderr and a non-zero exit.
+//! `tendril`: thin shell over the library — parse the command line, set up
+//! the console, run, turn an error into one line on stderr and a non-zero exit.
 
-fn main() -> std::process::ExitCode {
-    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("info"))
-        .format_timestamp(None)
-        .init();
-    match tendril::cli::run() {
-        Ok(()) => std::process::ExitCode::SUCCESS,
+use std::process::ExitCode;
+
+use clap::Parser;
+
+fn main() -> ExitCode {
+    quiet_broken_pipe();
+    let cli = tendril::cli::Cli::parse();
+    tendril::cli::console::init(cli.verbosity());
+    match tendril::cli::run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(_) if tendril::interrupt::stop_requested() => {
+            eprintln!("tendril: interrupted; no output was written or changed");
+            ExitCode::from(tendril::interrupt::EXIT_INTERRUPTED)
+        }
         Err(e) => {
             eprintln!("tendril: error: {e:#}");
-            std::process::ExitCode::FAILURE
+            ExitCode::FAILURE
         }
+    }
+}
+
+/// Let a closed stdout (`tendril ik … | head -1`) end the process quietly, as
+/// it ends `cat` or `grep`: the Rust runtime ignores SIGPIPE, so a write to
+/// the closed pipe would fail and `print!` panic (exit 101). With SIGPIPE's
+/// default disposition restored, the kernel ends the process instead. Every
+/// file the process writes is written atomically, so nothing is left half-done.
+fn quiet_broken_pipe() {
+    #[cfg(unix)]
+    // SAFETY: called first thing in `main`, before any other thread exists;
+    // SIG_DFL is a valid disposition for SIGPIPE.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }

@@ -13,19 +13,18 @@ use std::time::Instant;
 
 use anyhow::Context;
 
-use crate::cli::common::RobotArg;
-use crate::cli::evaluate::evaluate_net;
-use crate::cli::generate::{generate_dataset, is_up_to_date, GenerateArgs};
-use crate::cli::train::train_to_files;
 use crate::compare::{all_learners, compare, CompareOptions};
-use crate::dataset::split::{prepare, SPLIT_SEED, TEST_FRACTION, VALID_FRACTION};
+use crate::dataset::split::prepare;
 use crate::dataset::{Dataset, Sidecar};
+use crate::evaluate::job::evaluate_net;
 use crate::fsutil::write_atomic;
+use crate::interrupt::stop_flag;
 use crate::learn::cascor::export::read_tnet;
+use crate::learn::cascor::job::{self as train_job, SplitSpec, TrainJob, TrainOutputs};
 use crate::learn::cascor::{Cascor, CascorOptions};
 use crate::learn::learner::{Learner, Prefitted, Split};
 use crate::plot::workspace::{draw_workspace, Shape};
-use crate::robot::DEFAULT_ROBOT;
+use crate::robot::{Robot, DEFAULT_ROBOT};
 use crate::statics::{SolverSettings, Statics};
 
 /// Where the main job writes.
@@ -75,35 +74,12 @@ pub fn run_default() -> anyhow::Result<()> {
 pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let mut report = Report::new(out);
-    let robot_arg = RobotArg {
-        robot: robot_file.to_path_buf(),
-    };
-    let (robot, _) = robot_arg.load()?;
+    let robot = Robot::load(robot_file)?;
     log::info!("robot: {robot}");
 
     // 1. Dataset (reused when the sidecar says it was made the same way).
     let data_path = out.join("data.csv");
-    let gen = GenerateArgs {
-        robot: robot_arg.clone(),
-        samples: 20_000,
-        seed: 1,
-        sampler: None,
-        out: data_path.clone(),
-        max_failure_fraction: 0.001,
-        test_fraction: crate::dataset::split::TEST_FRACTION,
-        steps: SolverSettings::default().steps,
-        quiet: false,
-    };
-    let sidecar = if is_up_to_date(&gen, &data_path) {
-        log::info!(
-            "reusing {} (same robot, sampler, seed, count)",
-            data_path.display()
-        );
-        Sidecar::read(&Sidecar::path_for(&data_path))?
-    } else {
-        log::info!("generating {} samples", gen.samples);
-        generate_dataset(&gen)?
-    };
+    let sidecar = dataset(robot_file, &data_path)?;
     let data = Dataset::read_csv(&data_path)?;
     report.add(format!(
         "## 1. Dataset\n\n`{}`: {} rows ({} requested), sampler `{}`, seed {}, {} RK4 steps; \
@@ -140,22 +116,37 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
 
     // 3. Cascade-correlation training, export and task-space evaluation.
     let model = out.join("model.tnet");
+    let split = SplitSpec::default();
     let t0 = Instant::now();
-    let trained = train_to_files(
-        &data,
-        &CascorOptions::default(),
-        SPLIT_SEED,
-        TEST_FRACTION,
-        VALID_FRACTION,
-        &model,
-        &out.join("train_log.csv"),
-        &out.join("learning_curve.png"),
-        &out.join("train_report.json"),
+    log::info!(
+        "training the cascade-correlation net on {} rows",
+        data.len()
+    );
+    let trained = train_job::run(
+        &TrainJob {
+            data: &data,
+            data_file: Some(data_path.clone()),
+            options: CascorOptions::default(),
+            split,
+            outputs: TrainOutputs {
+                model: model.clone(),
+                log: out.join("train_log.csv"),
+                curve: out.join("learning_curve.png"),
+                report: out.join("train_report.json"),
+            },
+            threads: None,
+        },
+        stop_flag(),
     )?;
     let train_seconds = t0.elapsed().as_secs_f64();
     let net = read_tnet(&model)?;
-    let test = prepare(&data, TEST_FRACTION, VALID_FRACTION, SPLIT_SEED).test;
+    let test = prepare(&data, split.test_fraction, split.valid_fraction, split.seed).test;
     let metrics = evaluate_net(&statics, &net, &test)?;
+    log::info!(
+        "trained {} hidden units in {train_seconds:.1} s; test tip error mean {:.3} mm",
+        net.shape().hidden,
+        metrics.position_mm.mean
+    );
     write_atomic(
         &out.join("evaluation.json"),
         serde_json::to_string_pretty(&metrics)?.as_bytes(),
@@ -194,6 +185,7 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
     if let Some(slot) = learners.iter_mut().find(|l| l.name() == prefitted.name()) {
         *slot = Box::new(prefitted);
     }
+    log::info!("comparing with six baselines");
     let comparison = compare(&data, &robot, learners, &opts)?;
     let written = comparison.write(&out.join("compare"))?;
     report.add(format!(
@@ -295,6 +287,35 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
 
     log::info!("report: {}", report.path.display());
     Ok(())
+}
+
+/// Stage 1's dataset at `data_path` for the robot in `robot_file`: reused when
+/// its sidecar says it was made the same way, else generated. The pipeline's
+/// one seam to dataset generation (20 000 samples, seed 1, the default
+/// sampler and solver).
+fn dataset(robot_file: &Path, data_path: &Path) -> anyhow::Result<Sidecar> {
+    let request = crate::cli::generate::GenerateArgs {
+        robot: crate::cli::common::RobotArg {
+            robot: robot_file.to_path_buf(),
+        },
+        samples: 20_000,
+        seed: 1,
+        sampler: None,
+        out: data_path.to_path_buf(),
+        max_failure_fraction: 0.001,
+        test_fraction: crate::dataset::split::TEST_FRACTION,
+        steps: SolverSettings::default().steps,
+        quiet: false,
+    };
+    if crate::cli::generate::is_up_to_date(&request, data_path) {
+        log::info!(
+            "dataset: reusing {} (same robot, sampler, seed, count)",
+            data_path.display()
+        );
+        return Ok(Sidecar::read(&Sidecar::path_for(data_path))?);
+    }
+    log::info!("dataset: generating {} samples", request.samples);
+    crate::cli::generate::generate_dataset(&request)
 }
 
 /// The report section of the firmware-parity stage; a missing QEMU or

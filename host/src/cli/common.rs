@@ -1,8 +1,6 @@
 //! Arguments and helpers several subcommands share.
 
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::OnceLock;
 
 use anyhow::Context;
 
@@ -34,19 +32,6 @@ pub fn parse_list(text: &str, what: &str) -> anyhow::Result<Vec<f64>> {
         .collect()
 }
 
-/// A flag set by Ctrl-C, so long commands stop between work units and
-/// write nothing half-done. Installs the handler on first use.
-pub fn stop_flag() -> &'static AtomicBool {
-    static STOP: OnceLock<&'static AtomicBool> = OnceLock::new();
-    STOP.get_or_init(|| {
-        let flag: &'static AtomicBool = Box::leak(Box::new(AtomicBool::new(false)));
-        // If a handler is already installed (a library user's), keep theirs.
-        let _ = ctrlc::set_handler(move || {
-            if flag.swap(true, Ordering::SeqCst) {
-                std::process::exit(130);
-            }
-            eprintln!("\ninterrupted: finishing the current step, writing nothing partial (Ctrl-C again to abort)");
-        });
-        flag
-    })
-}
+/// The Ctrl-C stop flag: the first Ctrl-C asks long commands to stop
+/// between work units, writing nothing (see [`crate::interrupt`]).
+pub use crate::interrupt::stop_flag;

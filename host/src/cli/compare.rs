@@ -4,11 +4,12 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use super::common::RobotArg;
-use crate::compare::{all_learners, compare, CompareOptions};
-use crate::dataset::Dataset;
+use crate::compare::job::{self, CompareJob};
+use crate::compare::CompareOptions;
 
 /// Train cascade correlation and the six baselines on the same split and
-/// compare them (tension RMSE, task-space error, time, size).
+/// compare them (tension RMSE, task-space error, time, size). The dataset
+/// needs at least 50 rows.
 #[derive(clap::Args, Debug)]
 pub struct CompareArgs {
     /// Dataset CSV (from `tendril generate`).
@@ -22,10 +23,10 @@ pub struct CompareArgs {
     /// Seed of the split and of every learner.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Fraction of rows held out for testing.
+    /// Fraction of rows held out for testing, in (0, 0.5].
     #[arg(long, default_value_t = 0.03)]
     pub test_fraction: f64,
-    /// Fraction of the training rows used for validation (hyper-parameter choice).
+    /// Fraction of the training rows used for validation (hyper-parameter choice), in (0, 0.5].
     #[arg(long, default_value_t = 0.1)]
     pub valid_fraction: f64,
     /// Training rows pushed through the statics for the train-split task-space error (0 = all).
@@ -36,33 +37,33 @@ pub struct CompareArgs {
     pub dump_splits: Option<PathBuf>,
 }
 
-/// Run `tendril compare`.
-pub fn run(args: CompareArgs) -> anyhow::Result<()> {
-    for (name, v) in [
-        ("--test-fraction", args.test_fraction),
-        ("--valid-fraction", args.valid_fraction),
-    ] {
-        if !(v > 0.0 && v < 1.0) {
-            anyhow::bail!("{name} must be strictly between 0 and 1, got {v}");
+impl CompareArgs {
+    /// The comparison these arguments describe.
+    pub fn job(&self) -> CompareJob {
+        CompareJob {
+            data: self.data.clone(),
+            robot: self.robot.robot.clone(),
+            out_dir: self.out.clone(),
+            options: CompareOptions {
+                test_fraction: self.test_fraction,
+                valid_fraction: self.valid_fraction,
+                seed: self.seed,
+                train_task_rows: self.train_task_rows,
+                dump_splits: self.dump_splits.clone(),
+                ..CompareOptions::default()
+            },
         }
     }
+}
+
+/// Run `tendril compare`.
+pub fn run(args: CompareArgs) -> anyhow::Result<()> {
     let t = Instant::now();
-    let data = Dataset::read_csv(&args.data)?;
-    let (robot, _) = args.robot.load()?;
-    let opts = CompareOptions {
-        test_fraction: args.test_fraction,
-        valid_fraction: args.valid_fraction,
-        seed: args.seed,
-        train_task_rows: args.train_task_rows,
-        dump_splits: args.dump_splits,
-        ..CompareOptions::default()
-    };
-    let cmp = compare(&data, &robot, all_learners(), &opts)?;
-    let files = cmp.write(&args.out)?;
-    for f in &files {
+    let r = job::run(&args.job())?;
+    for f in &r.files {
         log::info!("wrote {}", f.display());
     }
-    for b in cmp.beats() {
+    for b in r.comparison.beats() {
         log::info!("{b}");
     }
     log::info!("comparison took {:.1} s", t.elapsed().as_secs_f64());

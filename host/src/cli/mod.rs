@@ -1,10 +1,11 @@
 //! Command-line interface: one file per subcommand, each an argument struct
-//! plus a call into the library. The contract is `DESIGN.md` §7.
+//! plus a call into the library. The contract is `docs/design.md` §7.
 
 use clap::{Parser, Subcommand};
 
 pub mod common;
 mod compare;
+pub mod console;
 mod controller;
 pub mod evaluate;
 mod fk;
@@ -25,6 +26,23 @@ mod workspace;
 pub struct Cli {
     #[command(subcommand)]
     command: Option<Command>,
+    /// More detail on stderr (-v: per-unit training detail, -vv: trace); RUST_LOG wins.
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    verbose: u8,
+    /// Only warnings and errors on stderr (and no training progress bar); RUST_LOG wins.
+    #[arg(short = 'q', global = true, conflicts_with = "verbose")]
+    quiet_console: bool,
+}
+
+impl Cli {
+    /// The console verbosity `-v`/`-q` ask for.
+    pub fn verbosity(&self) -> console::Verbosity {
+        if self.quiet_console {
+            console::Verbosity(-1)
+        } else {
+            console::Verbosity(self.verbose.min(i8::MAX as u8) as i8)
+        }
+    }
 }
 
 // Parsed once per process: the size of the largest variant does not matter.
@@ -55,9 +73,8 @@ enum Command {
     Evaluate(evaluate::EvaluateArgs),
 }
 
-/// Parse `std::env::args` and run the chosen subcommand.
-pub fn run() -> anyhow::Result<()> {
-    let cli = Cli::parse();
+/// Run the subcommand `cli` names (the whole pipeline without one).
+pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         None => crate::pipeline::run_default(),
         Some(Command::Fk(a)) => fk::run(a),

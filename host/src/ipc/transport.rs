@@ -142,8 +142,8 @@ impl Services {
 /// resources of dead nodes (a crashed predecessor), which is how a restarted
 /// process takes over a killed one's place.
 pub fn node(name: &str) -> Result<Node<Svc>, IpcError> {
-    // iceoryx2 logs to the console itself; keep it to warnings and errors.
-    set_log_level(LogLevel::Warn);
+    // iceoryx2 logs to the console itself; keep it to errors (IOX2_LOG_LEVEL wins).
+    set_log_level_from_env_or(LogLevel::Error);
     let node_name =
         NodeName::new(name).map_err(|e| IpcError::BadName(format!("node name {name:?}: {e:?}")))?;
     NodeBuilder::new()

@@ -40,6 +40,9 @@ pub enum LearnError {
     /// A numerical step failed (singular system, divergence).
     #[error("numerical failure: {0}")]
     Numerical(String),
+    /// Training was stopped (Ctrl-C) before it finished; nothing was produced.
+    #[error("interrupted")]
+    Interrupted,
 }
 
 /// A regression learner trained on normalised data.

@@ -27,20 +27,22 @@ pub type HostNet = tendril_shared::CascadeNet<
 #[derive(Debug, thiserror::Error)]
 pub enum ExportError {
     /// The format rejected the net or the bytes.
-    #[error("{path}: {source}")]
+    // The cause is part of the message and deliberately not a `source`:
+    // error chains printed with `{:#}` would repeat it.
+    #[error("{path}: {cause}")]
     Format {
         /// The file concerned (or "<memory>").
         path: String,
         /// What the format says.
-        source: TnetError,
+        cause: TnetError,
     },
     /// Reading or writing the file failed.
-    #[error("{path}: {source}")]
+    #[error("{path}: {cause}")]
     Io {
         /// The file concerned.
         path: String,
         /// The I/O error.
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// Normalisation ranges that disagree with the net's shape.
     #[error("{0}")]
@@ -115,24 +117,24 @@ pub fn to_bytes(net: &CascadeNet, ranges: &Ranges) -> Result<Vec<u8>, ExportErro
         hidden_weights: &hidden,
         output_weights: &outputs,
     };
-    tendril_shared::encode_to_vec(&view).map_err(|source| ExportError::Format {
+    tendril_shared::encode_to_vec(&view).map_err(|cause| ExportError::Format {
         path: "<memory>".into(),
-        source,
+        cause,
     })
 }
 
 /// Write `net` with `ranges` to `path` atomically.
 pub fn write_tnet(path: &Path, net: &CascadeNet, ranges: &Ranges) -> Result<(), ExportError> {
     let bytes = to_bytes(net, ranges).map_err(|e| match e {
-        ExportError::Format { source, .. } => ExportError::Format {
+        ExportError::Format { cause, .. } => ExportError::Format {
             path: path.display().to_string(),
-            source,
+            cause,
         },
         other => other,
     })?;
-    crate::fsutil::write_atomic(path, &bytes).map_err(|source| ExportError::Io {
+    crate::fsutil::write_atomic(path, &bytes).map_err(|cause| ExportError::Io {
         path: path.display().to_string(),
-        source,
+        cause,
     })
 }
 
@@ -145,13 +147,13 @@ pub fn decode(bytes: &[u8]) -> Result<Box<HostNet>, TnetError> {
 
 /// Read and decode a `.tnet` file; errors name the file and the problem.
 pub fn read_tnet(path: &Path) -> Result<Box<HostNet>, ExportError> {
-    let bytes = std::fs::read(path).map_err(|source| ExportError::Io {
+    let bytes = std::fs::read(path).map_err(|cause| ExportError::Io {
         path: path.display().to_string(),
-        source,
+        cause,
     })?;
-    decode(&bytes).map_err(|source| ExportError::Format {
+    decode(&bytes).map_err(|cause| ExportError::Format {
         path: path.display().to_string(),
-        source,
+        cause,
     })
 }
 

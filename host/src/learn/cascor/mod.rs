@@ -5,12 +5,21 @@
 //! - [`net`]: the trained network (f64) and its activations;
 //! - [`quickprop`]: the optimiser and Fahlman's patience test;
 //! - [`candidates`]: candidate objectives, gradients, the parallel pool;
-//! - [`train`]: the grow-and-freeze loop and the choice of output configuration;
+//! - [`options`]: the hyper-parameters;
+//! - `outputs`: cached features and the output solvers (ridge, Quickprop);
+//! - `growth`: the candidate phase and installation of a unit;
+//! - [`train`]: the grow-and-freeze loop, the choice of output configuration,
+//!   stopping and progress;
+//! - [`job`]: a whole `tendril train` run — split, train, write every output;
 //! - [`export`]: the `.tnet` weight file (`DESIGN.md` §5).
 
 pub mod candidates;
 pub mod export;
+mod growth;
+pub mod job;
 pub mod net;
+pub mod options;
+mod outputs;
 pub mod quickprop;
 pub mod train;
 
@@ -18,8 +27,9 @@ use nalgebra::DMatrix;
 
 pub use candidates::Objective;
 pub use net::{CascadeNet, OutputKind};
+pub use options::{CascorOptions, ObjectiveChoice, OutputSolver};
 pub use quickprop::QuickpropParams;
-pub use train::{train, CascorOptions, ObjectiveChoice, OutputSolver, TrainReport, UnitLog};
+pub use train::{train, train_with_stop, TrainReport, UnitLog};
 
 use crate::learn::{LearnError, Learner, Split};
 

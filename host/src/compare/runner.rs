@@ -1,0 +1,241 @@
+//! Fitting, timing and evaluating every learner on one split: same
+//! normalisation, validation-only tuning, the same metrics for all.
+
+use std::path::Path;
+use std::time::Instant;
+
+use indicatif::{ProgressBar, ProgressStyle};
+use nalgebra::DMatrix;
+
+use super::{CompareError, CompareOptions, Comparison, Entry};
+use crate::dataset::{prepare, Dataset, Prepared};
+use crate::evaluate::{
+    task_space_errors, tension_rmse, tension_rmse_normalised, EvalError, SplitMetrics,
+};
+use crate::learn::{Learner, Split};
+use crate::robot::Robot;
+use crate::statics::{SolverSettings, Statics};
+
+/// Mean wall time of one single-row prediction over up to `count` test rows.
+fn time_queries(l: &dyn Learner, x: &DMatrix<f64>, count: usize) -> f64 {
+    let n = x.nrows().min(count.max(1));
+    let rows: Vec<DMatrix<f64>> = (0..n).map(|i| x.rows(i, 1).into_owned()).collect();
+    // Warm caches and lazily built state first.
+    let _ = l.predict(&rows[0]);
+    let t = Instant::now();
+    let mut sink = 0.0;
+    for r in &rows {
+        sink += l.predict(r)[0];
+    }
+    let us = t.elapsed().as_secs_f64() * 1e6 / n as f64;
+    std::hint::black_box(sink);
+    us
+}
+
+/// `k` seeded distinct indices of `0..n`, sorted (all of them when `k` is 0 or ≥ n).
+fn subsample(n: usize, k: usize, seed: u64) -> Vec<usize> {
+    if k == 0 || k >= n {
+        return (0..n).collect();
+    }
+    let mut r = crate::learn::linalg::rng(seed ^ 0x7a5c_0b1e);
+    let mut v = rand::seq::index::sample(&mut r, n, k).into_vec();
+    v.sort_unstable();
+    v
+}
+
+/// The `docs/design.md` §4 metrics of predicted tensions (newtons): tension RMSE
+/// over every row, task-space error over the rows `task_idx`.
+fn split_metrics(
+    statics: &Statics,
+    p: &Prepared,
+    pred: &DMatrix<f64>,
+    truth: &DMatrix<f64>,
+    poses: &DMatrix<f64>,
+    task_idx: &[usize],
+    infer_us: f64,
+) -> Result<SplitMetrics, EvalError> {
+    let task = task_space_errors(
+        statics,
+        &pred.select_rows(task_idx),
+        &poses.select_rows(task_idx),
+    )?;
+    Ok(SplitMetrics {
+        samples: pred.nrows(),
+        tension_rmse_norm100: tension_rmse_normalised(pred, truth, &p.y_range.lo, &p.y_range.hi)?,
+        tension_rmse_newton: tension_rmse(pred, truth)?,
+        position_mm: task.position_stats(),
+        orientation_deg: task.orientation_stats(),
+        failed_solves: task.failed,
+        inference_ns_per_query: infer_us * 1e3,
+    })
+}
+
+/// Train, time and evaluate every learner on one split of `data`.
+pub fn compare(
+    data: &Dataset,
+    robot: &Robot,
+    mut learners: Vec<Box<dyn Learner>>,
+    opts: &CompareOptions,
+) -> Result<Comparison, CompareError> {
+    if data.n_tendons != robot.n_tendons() {
+        return Err(CompareError::BadInput(format!(
+            "dataset has {} tension columns but robot {} has {} tendons",
+            data.n_tendons,
+            robot.name,
+            robot.n_tendons()
+        )));
+    }
+    if data.len() < 50 {
+        return Err(CompareError::BadInput(format!(
+            "dataset has only {} rows; the comparison needs at least 50",
+            data.len()
+        )));
+    }
+    let p = prepare(data, opts.test_fraction, opts.valid_fraction, opts.seed);
+    if let Some(dir) = &opts.dump_splits {
+        dump_splits(&p, dir)?;
+    }
+    let statics = Statics::new(robot, SolverSettings::default());
+    // Physical-unit truth of the fit split (validation rows excluded) and of the test split.
+    let fit_poses = p.x_range.denormalise(&p.train_x);
+    let fit_tensions = p.y_range.denormalise(&p.train_y);
+    let task_idx = subsample(p.train_x.nrows(), opts.train_task_rows, opts.seed);
+    let bar = if opts.progress && log::log_enabled!(log::Level::Info) {
+        ProgressBar::new(learners.len() as u64)
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} learners, {elapsed} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    bar.set_prefix("compare");
+    let mut entries = Vec::new();
+    for l in learners.iter_mut() {
+        let name = l.name().to_string();
+        bar.set_message(format!("training {name}"));
+        log::debug!("compare: training {name}");
+        let t = Instant::now();
+        l.fit(
+            Split {
+                x: &p.train_x,
+                y: &p.train_y,
+            },
+            Split {
+                x: &p.valid_x,
+                y: &p.valid_y,
+            },
+            opts.seed,
+        )
+        .map_err(|source| CompareError::Learn {
+            name: name.clone(),
+            source,
+        })?;
+        let train_seconds = l.fit_seconds().unwrap_or(t.elapsed().as_secs_f64());
+        bar.set_message(format!("evaluating {name}"));
+        let infer_us = time_queries(l.as_ref(), &p.test_x, opts.timing_queries);
+        let eval_err = |source| CompareError::Eval {
+            name: name.clone(),
+            source,
+        };
+        let pred_fit = p.y_range.denormalise(&l.predict(&p.train_x));
+        let train = split_metrics(
+            &statics,
+            &p,
+            &pred_fit,
+            &fit_tensions,
+            &fit_poses,
+            &task_idx,
+            infer_us,
+        )
+        .map_err(eval_err)?;
+        let pred_test = p.y_range.denormalise(&l.predict(&p.test_x));
+        let all_test: Vec<usize> = (0..p.test.len()).collect();
+        let test = split_metrics(
+            &statics,
+            &p,
+            &pred_test,
+            &p.test.tensions,
+            &p.test.poses,
+            &all_test,
+            infer_us,
+        )
+        .map_err(eval_err)?;
+        log::debug!(
+            "compare: {name}: test RMSE×100 {:.3}, tip mean {:.3} mm, train {:.1} s",
+            test.tension_rmse_norm100,
+            test.position_mm.mean,
+            train_seconds
+        );
+        entries.push(Entry {
+            name,
+            hyper: l.describe(),
+            parameters: l.parameter_count(),
+            train_seconds,
+            infer_us,
+            train,
+            train_task_rows: task_idx.len(),
+            test,
+        });
+        bar.inc(1);
+    }
+    bar.finish_with_message("done");
+    Ok(Comparison {
+        robot: robot.name.clone(),
+        sizes: (p.train_x.nrows(), p.valid_x.nrows(), p.test_x.nrows()),
+        options: opts.clone(),
+        entries,
+    })
+}
+
+/// Write the normalised splits as `fit.csv`, `valid.csv`, `test.csv`
+/// (columns `x0..`, then `y0..`) into `dir`.
+pub fn dump_splits(p: &Prepared, dir: &Path) -> Result<(), CompareError> {
+    let werr = |path: &Path, why: String| CompareError::Write {
+        path: path.to_path_buf(),
+        why,
+    };
+    std::fs::create_dir_all(dir).map_err(|e| werr(dir, e.to_string()))?;
+    for (name, x, y) in [
+        ("fit.csv", &p.train_x, &p.train_y),
+        ("valid.csv", &p.valid_x, &p.valid_y),
+        ("test.csv", &p.test_x, &p.test_y),
+    ] {
+        let path = dir.join(name);
+        crate::fsutil::write_atomic_with(&path, |w: &mut dyn std::io::Write| {
+            let head: Vec<String> = (0..x.ncols())
+                .map(|j| format!("x{j}"))
+                .chain((0..y.ncols()).map(|j| format!("y{j}")))
+                .collect();
+            writeln!(w, "{}", head.join(","))?;
+            for i in 0..x.nrows() {
+                let row: Vec<String> = x
+                    .row(i)
+                    .iter()
+                    .chain(y.row(i).iter())
+                    .map(|v| format!("{v:e}"))
+                    .collect();
+                writeln!(w, "{}", row.join(","))?;
+            }
+            Ok(())
+        })
+        .map_err(|e| werr(&path, e.to_string()))?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn subsample_is_sorted_distinct_and_seeded() {
+        let a = subsample(1000, 50, 3);
+        assert_eq!(a.len(), 50);
+        assert!(a.windows(2).all(|w| w[0] < w[1]));
+        assert_eq!(a, subsample(1000, 50, 3));
+        assert_ne!(a, subsample(1000, 50, 4));
+        assert_eq!(subsample(10, 0, 1), (0..10).collect::<Vec<_>>());
+    }
+}

@@ -1,0 +1,448 @@
+//! One training run as a typed job — what `tendril train` and the main job
+//! both do: split a dataset, train a cascade-correlation net, and write the
+//! `.tnet` weight file, the training log, the learning curve and a report
+//! (`docs/design.md` §4, §5).
+//!
+//! Nothing is written until training has finished and every output path has
+//! been checked: an invalid request, a collision between paths or a Ctrl-C
+//! leaves every existing file as it was.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use serde::Serialize;
+
+use super::export::{write_tnet, ExportError, Ranges, HOST_MAX_HIDDEN};
+use super::{train_with_stop, CascadeNet, CascorOptions, TrainReport};
+use crate::dataset::split::{SPLIT_SEED, TEST_FRACTION, VALID_FRACTION};
+use crate::dataset::{prepare, Dataset};
+use crate::fsutil::{check_distinct, write_atomic, write_atomic_with, PathCollision};
+use crate::learn::LearnError;
+
+/// Fewest dataset rows a training run accepts: enough that the default
+/// fractions leave a test split of at least 2 rows and a validation split of
+/// at least 5 (the comparison asks for the same).
+pub const MIN_TRAIN_ROWS: usize = 50;
+
+/// Largest held-out test (or validation) fraction: beyond half, the net
+/// would be fitted on fewer rows than it is judged on.
+pub const MAX_HELD_OUT_FRACTION: f64 = 0.5;
+
+/// How to split the data.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct SplitSpec {
+    /// Seed of the split and of every candidate's initial weights.
+    pub seed: u64,
+    /// Held-out test fraction, in (0, [`MAX_HELD_OUT_FRACTION`]].
+    pub test_fraction: f64,
+    /// Validation fraction carved from the training rows, in [0, [`MAX_HELD_OUT_FRACTION`]].
+    pub valid_fraction: f64,
+}
+
+impl Default for SplitSpec {
+    fn default() -> Self {
+        SplitSpec {
+            seed: SPLIT_SEED,
+            test_fraction: TEST_FRACTION,
+            valid_fraction: VALID_FRACTION,
+        }
+    }
+}
+
+impl SplitSpec {
+    /// Check the fractions; the error names the option and its range.
+    pub fn validate(&self) -> Result<(), TrainError> {
+        let t = self.test_fraction;
+        if !(t > 0.0 && t <= MAX_HELD_OUT_FRACTION) {
+            return Err(TrainError::BadInput(format!(
+                "--test-fraction must be in (0, {MAX_HELD_OUT_FRACTION}], got {t}"
+            )));
+        }
+        let v = self.valid_fraction;
+        if !(0.0..=MAX_HELD_OUT_FRACTION).contains(&v) {
+            return Err(TrainError::BadInput(format!(
+                "--valid-fraction must be in [0, {MAX_HELD_OUT_FRACTION}], got {v}"
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Where a training run writes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrainOutputs {
+    /// `.tnet` weight file.
+    pub model: PathBuf,
+    /// Training-log CSV (one row per installed unit).
+    pub log: PathBuf,
+    /// Learning-curve PNG.
+    pub curve: PathBuf,
+    /// Report JSON (choices made, learning curve, test RMSE).
+    pub report: PathBuf,
+}
+
+impl TrainOutputs {
+    /// `model.tnet` → `model.log.csv`, `model.curve.png`, `model.train.json` beside it.
+    pub fn beside(model: &Path) -> TrainOutputs {
+        TrainOutputs {
+            model: model.to_path_buf(),
+            log: sibling(model, ".log.csv"),
+            curve: sibling(model, ".curve.png"),
+            report: sibling(model, ".train.json"),
+        }
+    }
+}
+
+fn sibling(model: &Path, suffix: &str) -> PathBuf {
+    let stem = model
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "model".into());
+    model.with_file_name(format!("{stem}{suffix}"))
+}
+
+/// A training run: the data, how to train and split, where to write.
+#[derive(Clone, Debug)]
+pub struct TrainJob<'a> {
+    /// The dataset (physical units).
+    pub data: &'a Dataset,
+    /// The file `data` was read from, if any: no output may overwrite it.
+    pub data_file: Option<PathBuf>,
+    /// Trainer hyper-parameters.
+    pub options: CascorOptions,
+    /// The split.
+    pub split: SplitSpec,
+    /// Output files.
+    pub outputs: TrainOutputs,
+    /// Worker threads (`None`: rayon's default, all cores).
+    pub threads: Option<usize>,
+}
+
+/// Rows in each split.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct SplitSizes {
+    /// Rows the net was fitted on.
+    pub train: usize,
+    /// Validation rows (stopping and choices).
+    pub valid: usize,
+    /// Held-out test rows.
+    pub test: usize,
+}
+
+/// What a training run produced (everything it wrote is also in memory here).
+#[derive(Clone, Debug)]
+pub struct TrainResult {
+    /// The kept net (normalised units).
+    pub net: CascadeNet,
+    /// What training did.
+    pub report: TrainReport,
+    /// Normalisation ranges baked into the weight file.
+    pub ranges: Ranges,
+    /// Rows per split.
+    pub sizes: SplitSizes,
+    /// Test tension RMSE, normalised ×100 (f64 net).
+    pub test_rmse_norm100: f64,
+}
+
+/// Why a training run failed; nothing was written.
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    /// The request is invalid (too few rows, a fraction out of range, a cap too large).
+    #[error("{0}")]
+    BadInput(String),
+    /// Two of the job's files are the same file.
+    #[error(transparent)]
+    Paths(#[from] PathCollision),
+    /// Training failed or was interrupted.
+    #[error("training: {0}")]
+    Learn(#[from] LearnError),
+    /// The worker pool could not be built.
+    #[error("worker threads: {0}")]
+    Threads(String),
+    /// The weight file could not be written.
+    #[error("writing the weight file: {0}")]
+    Export(#[from] ExportError),
+    /// Another output could not be written.
+    #[error("writing {}: {why}", path.display())]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        why: String,
+    },
+}
+
+impl TrainError {
+    /// Whether the run ended because a stop was requested (Ctrl-C).
+    pub fn is_interrupted(&self) -> bool {
+        matches!(self, TrainError::Learn(LearnError::Interrupted))
+    }
+}
+
+/// The report JSON written beside the weight file.
+#[derive(Serialize)]
+struct ReportFile<'a> {
+    data_rows: usize,
+    train_rows: usize,
+    valid_rows: usize,
+    test_rows: usize,
+    seed: u64,
+    options: &'a CascorOptions,
+    report: &'a TrainReport,
+    hidden_units: usize,
+    parameters: usize,
+    test_tension_rmse_norm100: f64,
+}
+
+/// Check `job`, train, and write the weight file, log, learning curve and
+/// report. `stop` is checked before every unit and once more before anything
+/// is written: once set, the run returns [`LearnError::Interrupted`] and
+/// every existing output is left as it was.
+pub fn run(job: &TrainJob<'_>, stop: &AtomicBool) -> Result<TrainResult, TrainError> {
+    check(job)?;
+    let train = || train_and_write(job, stop);
+    match job.threads {
+        Some(n) => rayon::ThreadPoolBuilder::new()
+            .num_threads(n.max(1))
+            .build()
+            .map_err(|e| TrainError::Threads(e.to_string()))?
+            .install(train),
+        None => train(),
+    }
+}
+
+/// Everything that can be refused before training starts.
+fn check(job: &TrainJob<'_>) -> Result<(), TrainError> {
+    let o = &job.outputs;
+    let inputs: Vec<(&str, &Path)> = job
+        .data_file
+        .iter()
+        .map(|p| ("--data", p.as_path()))
+        .collect();
+    check_distinct(
+        &inputs,
+        &[
+            ("--out", &o.model),
+            ("--log", &o.log),
+            ("--plot", &o.curve),
+            ("--report", &o.report),
+        ],
+    )?;
+    job.split.validate()?;
+    if job.data.len() < MIN_TRAIN_ROWS {
+        return Err(TrainError::BadInput(format!(
+            "the dataset has {} row{}; training needs at least {MIN_TRAIN_ROWS}",
+            job.data.len(),
+            if job.data.len() == 1 { "" } else { "s" }
+        )));
+    }
+    if job.options.max_hidden > HOST_MAX_HIDDEN {
+        return Err(TrainError::BadInput(format!(
+            "--max-hidden {} exceeds the decoder capacity {HOST_MAX_HIDDEN}",
+            job.options.max_hidden
+        )));
+    }
+    Ok(())
+}
+
+fn train_and_write(job: &TrainJob<'_>, stop: &AtomicBool) -> Result<TrainResult, TrainError> {
+    let data = job.data;
+    let s = job.split;
+    let p = prepare(data, s.test_fraction, s.valid_fraction, s.seed);
+    let sizes = SplitSizes {
+        train: p.train_x.nrows(),
+        valid: p.valid_x.nrows(),
+        test: p.test_x.nrows(),
+    };
+    log::debug!(
+        "training on {} rows, validating on {}, testing on {} ({} tendons)",
+        sizes.train,
+        sizes.valid,
+        sizes.test,
+        data.n_tendons
+    );
+    let (net, report) = train_with_stop(
+        &p.train_x,
+        &p.train_y,
+        &p.valid_x,
+        &p.valid_y,
+        &job.options,
+        s.seed,
+        stop,
+    )?;
+    // The last unit may have finished after Ctrl-C: still write nothing.
+    if stop.load(Ordering::SeqCst) {
+        return Err(LearnError::Interrupted.into());
+    }
+    let test_pred = net.predict(&p.test_x);
+    let test_rmse_norm100 =
+        100.0 * ((&test_pred - &p.test_y).norm_squared() / p.test_y.len() as f64).sqrt();
+    let ranges = Ranges {
+        input_lo: p.x_range.lo.clone(),
+        input_hi: p.x_range.hi.clone(),
+        output_lo: p.y_range.lo.clone(),
+        output_hi: p.y_range.hi.clone(),
+    };
+    let o = &job.outputs;
+    // The plot first: it is the output most likely to fail, and a failure
+    // then leaves the other files as they were.
+    crate::plot::learning_curve::draw_learning_curve(
+        &report.history,
+        report.best_hidden,
+        &format!(
+            "Cascade correlation learning curve ({} outputs, {})",
+            report.output_kind, report.output_solver
+        ),
+        &o.curve,
+    )
+    .map_err(|e| TrainError::Write {
+        path: o.curve.clone(),
+        why: e.to_string(),
+    })?;
+    write_tnet(&o.model, &net, &ranges)?;
+    write_log(&o.log, &report)?;
+    let file = ReportFile {
+        data_rows: data.len(),
+        train_rows: sizes.train,
+        valid_rows: sizes.valid,
+        test_rows: sizes.test,
+        seed: s.seed,
+        options: &job.options,
+        report: &report,
+        hidden_units: net.n_hidden(),
+        parameters: net.parameter_count(),
+        test_tension_rmse_norm100: test_rmse_norm100,
+    };
+    let werr = |why: String| TrainError::Write {
+        path: o.report.clone(),
+        why,
+    };
+    // Through a `Value`, so keys come out sorted as in every earlier report.
+    let json = serde_json::to_value(&file)
+        .and_then(|v| serde_json::to_string_pretty(&v))
+        .map_err(|e| werr(e.to_string()))?;
+    write_atomic(&o.report, json.as_bytes()).map_err(|e| werr(e.to_string()))?;
+    log::debug!(
+        "kept {} hidden units ({} outputs, {}); test tension RMSE {:.4} (normalised ×100)",
+        net.n_hidden(),
+        report.output_kind,
+        report.output_solver,
+        test_rmse_norm100
+    );
+    Ok(TrainResult {
+        net,
+        report,
+        ranges,
+        sizes,
+        test_rmse_norm100,
+    })
+}
+
+/// The training log: one CSV row per installed unit.
+fn write_log(path: &Path, report: &TrainReport) -> Result<(), TrainError> {
+    write_atomic_with(path, |w| {
+        writeln!(w, "hidden_units,train_rmse_norm100,valid_rmse_norm100,objective,score,error_removed,candidate_epochs,output_epochs,seconds")?;
+        for r in &report.history {
+            writeln!(
+                w,
+                "{},{},{},{},{},{},{},{},{:.3}",
+                r.hidden,
+                100.0 * r.train_rmse,
+                100.0 * r.valid_rmse,
+                r.objective.map_or(String::new(), |o| o.to_string()),
+                r.score,
+                r.reduction,
+                r.candidate_epochs,
+                r.output_epochs,
+                r.seconds
+            )?;
+        }
+        Ok(())
+    })
+    .map_err(|e| TrainError::Write {
+        path: path.to_path_buf(),
+        why: e.to_string(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::DMatrix;
+
+    fn rows(n: usize) -> Dataset {
+        Dataset {
+            n_tendons: 2,
+            tensions: DMatrix::from_fn(n, 2, |i, j| (i + j) as f64 / n as f64),
+            poses: DMatrix::from_fn(n, 7, |i, j| ((i * (j + 3)) % 11) as f64 / 11.0),
+        }
+    }
+
+    fn job<'a>(data: &'a Dataset, dir: &Path) -> TrainJob<'a> {
+        TrainJob {
+            data,
+            data_file: None,
+            options: CascorOptions {
+                max_hidden: 2,
+                progress: false,
+                ..CascorOptions::default()
+            },
+            split: SplitSpec::default(),
+            outputs: TrainOutputs::beside(&dir.join("m.tnet")),
+            threads: Some(1),
+        }
+    }
+
+    fn nothing_written(dir: &Path) -> bool {
+        std::fs::read_dir(dir).unwrap().next().is_none()
+    }
+
+    #[test]
+    fn fewer_rows_than_the_minimum_are_refused_before_writing() {
+        let dir = tempfile::tempdir().unwrap();
+        let data = rows(MIN_TRAIN_ROWS - 1);
+        let err = run(&job(&data, dir.path()), &AtomicBool::new(false)).unwrap_err();
+        assert!(matches!(err, TrainError::BadInput(_)), "{err}");
+        assert!(err.to_string().contains("at least 50"), "{err}");
+        assert!(nothing_written(dir.path()));
+    }
+
+    #[test]
+    fn test_fraction_outside_its_range_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let data = rows(200);
+        for bad in [0.0, 0.51, 0.99, 1.5, -0.1, f64::NAN] {
+            let mut j = job(&data, dir.path());
+            j.split.test_fraction = bad;
+            let err = run(&j, &AtomicBool::new(false)).unwrap_err();
+            assert!(err.to_string().contains("--test-fraction"), "{bad}: {err}");
+        }
+        let mut j = job(&data, dir.path());
+        j.split.valid_fraction = 0.7;
+        assert!(run(&j, &AtomicBool::new(false))
+            .unwrap_err()
+            .to_string()
+            .contains("--valid-fraction"));
+        assert!(nothing_written(dir.path()));
+    }
+
+    #[test]
+    fn a_log_path_equal_to_the_model_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let data = rows(200);
+        let mut j = job(&data, dir.path());
+        j.outputs.log = j.outputs.model.clone();
+        let err = run(&j, &AtomicBool::new(false)).unwrap_err();
+        assert!(matches!(err, TrainError::Paths(_)), "{err}");
+        assert!(nothing_written(dir.path()));
+    }
+
+    #[test]
+    fn a_stop_before_training_writes_nothing() {
+        let dir = tempfile::tempdir().unwrap();
+        let data = rows(200);
+        let err = run(&job(&data, dir.path()), &AtomicBool::new(true)).unwrap_err();
+        assert!(err.is_interrupted(), "{err}");
+        assert!(nothing_written(dir.path()));
+    }
+}

@@ -1,0 +1,114 @@
+//! Hyper-parameters of cascade-correlation training (`DESIGN.md` §4): which
+//! output configurations are tried, the two Quickprop phases, stopping.
+
+use serde::{Deserialize, Serialize};
+
+use super::net::OutputKind;
+use super::quickprop::QuickpropParams;
+
+/// How the output weights are trained.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum OutputSolver {
+    /// Fahlman's Quickprop descent on the squared error.
+    Quickprop,
+    /// Exact ridge least squares over the cached features (linear outputs only),
+    /// the ridge strength chosen on the validation split.
+    Ridge,
+}
+
+impl std::fmt::Display for OutputSolver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            OutputSolver::Quickprop => "quickprop",
+            OutputSolver::Ridge => "ridge",
+        })
+    }
+}
+
+/// Which candidate objectives the pool uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ObjectiveChoice {
+    /// Every candidate maximises Fahlman's covariance.
+    Covariance,
+    /// Every candidate maximises Cascade 2's error reduction.
+    Cascade2,
+    /// Half the pool each; the installed unit is chosen by validation, so the
+    /// objective is picked per unit.
+    Mixed,
+}
+
+/// Hyper-parameters of [`super::train`]; defaults follow Fahlman's cascor code where it has one.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CascorOptions {
+    /// Hidden-unit cap (the firmware's capacity bounds it; ≤ 64).
+    pub max_hidden: usize,
+    /// Candidates trained per installed unit.
+    pub pool: usize,
+    /// Candidate objective(s).
+    pub objective: ObjectiveChoice,
+    /// Output activations to try (`[Linear, Sigmoid]` = choose by validation).
+    pub output_kinds: Vec<OutputKind>,
+    /// Output solvers to try for linear outputs (sigmoid outputs always use Quickprop).
+    pub output_solvers: Vec<OutputSolver>,
+    /// Output-phase Quickprop (ε is divided by the number of patterns).
+    pub output: QuickpropParams,
+    /// Candidate-phase Quickprop (ε is divided by patterns × candidate fan-in).
+    pub candidate: QuickpropParams,
+    /// Sigmoid-prime offset in the output error of sigmoid outputs (Fahlman: 0.1).
+    pub output_prime_offset: f64,
+    /// Sigmoid-prime offset in the candidate gradient.
+    pub candidate_prime_offset: f64,
+    /// Ridge strengths tried, relative to the mean diagonal of the Gram matrix.
+    pub ridge_lambdas: Vec<f64>,
+    /// Stop after this many installed units without a new best validation RMSE.
+    pub valid_patience: usize,
+    /// Stop once the validation RMSE (normalised units) is at or below this.
+    pub target_rmse: f64,
+    /// Hidden units grown by every output configuration before validation picks one
+    /// (only when more than one configuration is allowed).
+    pub pilot_units: usize,
+    /// Train candidates on a fixed random subset of this many training rows
+    /// (re-drawn per unit; 0 = all rows). Installation and outputs use all rows.
+    pub candidate_patterns: usize,
+    /// Show a progress bar on stderr.
+    pub progress: bool,
+}
+
+impl Default for CascorOptions {
+    fn default() -> Self {
+        CascorOptions {
+            max_hidden: 64,
+            pool: 8,
+            objective: ObjectiveChoice::Cascade2,
+            output_kinds: vec![OutputKind::Linear, OutputKind::Sigmoid],
+            output_solvers: vec![OutputSolver::Ridge, OutputSolver::Quickprop],
+            output: QuickpropParams {
+                mu: 2.0,
+                epsilon: 0.35,
+                decay: 1e-4,
+                patience: 8,
+                threshold: 0.01,
+                max_epochs: 1000,
+            },
+            // Fahlman: ε 1.0, patience 8, threshold 3 %. With normalised objectives that
+            // leaves candidates almost untrained on the IK data (test RMSE ×100 0.21 vs
+            // 0.065 at 40 units, BENCHMARKS.md), so the defaults train them longer.
+            candidate: QuickpropParams {
+                mu: 2.0,
+                epsilon: 1000.0,
+                decay: 0.0,
+                patience: 25,
+                threshold: 0.01,
+                max_epochs: 1000,
+            },
+            output_prime_offset: 0.1,
+            candidate_prime_offset: 0.1,
+            ridge_lambdas: vec![1e-12, 1e-10, 1e-8, 1e-6, 1e-4],
+            valid_patience: 8,
+            target_rmse: 0.0,
+            pilot_units: 3,
+            candidate_patterns: 3000,
+            progress: true,
+        }
+    }
+}
