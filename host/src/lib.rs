@@ -10,6 +10,7 @@ pub mod dataset;
 pub mod evaluate;
 pub mod firmware_parity;
 pub mod fsutil;
+pub mod ik_net;
 pub mod interrupt;
 pub mod ipc;
 pub mod learn;

@@ -129,3 +129,103 @@ fn failing_solves_are_counted_and_fail_the_command_past_the_threshold() {
     );
     assert!(ok.status.success());
 }
+
+#[test]
+fn absurd_sample_counts_are_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("d.csv");
+    let out = generate(&path, &["--samples", "1000000000"], 2);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--samples must be between 1 and 20000000"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}
+
+#[test]
+fn an_output_named_like_its_sidecar_is_refused_before_writing() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("x.json");
+    let out = generate(&path, &["--samples", "20"], 2);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("same file"), "{err}");
+    assert!(!path.exists());
+}
+
+#[test]
+fn an_unwritable_output_says_the_os_error_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("plain");
+    std::fs::write(&file, "not a directory").unwrap();
+    let out = generate(&file.join("d.csv"), &["--samples", "20"], 2);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.matches("os error").count(), 1, "{err}");
+}
+
+#[test]
+fn one_sample_is_reported_as_one_row() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = generate(&dir.path().join("d.csv"), &["--samples", "1"], 1);
+    assert!(out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("wrote 1 row to"), "{err}");
+}
+
+#[test]
+fn ctrl_c_stops_generation_at_once_and_keeps_the_old_dataset() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("d.csv");
+    let side = Sidecar::path_for(&path);
+    std::fs::write(&path, "old rows").unwrap();
+    std::fs::write(&side, "old sidecar").unwrap();
+    let mut child = Command::new(tendril_bin())
+        .args(["generate", "--quiet", "--samples", "5000000", "--out"])
+        .arg(&path)
+        .current_dir(workspace_root())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait until rows are streaming into the temporary file.
+    let streaming = |d: &std::path::Path| {
+        std::fs::read_dir(d)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .any(|e| {
+                e.file_name().to_string_lossy().ends_with(".tmp")
+                    && e.metadata().map(|m| m.len() > 1000).unwrap_or(false)
+            })
+    };
+    let start = std::time::Instant::now();
+    while !streaming(dir.path()) {
+        assert!(
+            start.elapsed() < std::time::Duration::from_secs(60),
+            "no rows written within a minute"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let kill = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let sent = std::time::Instant::now();
+    let status = child.wait().unwrap();
+    // Honoured within the chunk in flight, not after the 5 M samples.
+    assert!(
+        sent.elapsed() < std::time::Duration::from_secs(10),
+        "took {:?} to stop",
+        sent.elapsed()
+    );
+    assert!(!status.success());
+    assert_eq!(std::fs::read_to_string(&path).unwrap(), "old rows");
+    assert_eq!(std::fs::read_to_string(&side).unwrap(), "old sidecar");
+    let names: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(names.len(), 2, "left behind: {names:?}");
+}

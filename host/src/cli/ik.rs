@@ -1,13 +1,12 @@
-//! `tendril ik`: tensions for a tip pose through a `.tnet` net, decoded by the
-//! same `tendril-shared` decoder and evaluated by the same f32 `infer` as the
-//! firmware, so host and MCU agree bit for bit.
+//! `tendril ik`: tensions for tip poses through a `.tnet` net, checked and
+//! clamped to the robot's limits by [`crate::ik_net`].
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Context};
+use anyhow::bail;
 
-use crate::dataset::POSE_COLUMNS;
-use crate::learn::cascor::export::{infer, read_tnet};
+use super::common::{parse_list, RobotArg};
+use crate::ik_net::{solve_csv, IkNet};
 
 /// Inverse kinematics: tip pose → tendon tensions (N) with a trained net.
 #[derive(clap::Args, Debug)]
@@ -15,6 +14,9 @@ pub struct IkArgs {
     /// Weight file written by `tendril train`.
     #[arg(long, value_name = "FILE")]
     pub model: PathBuf,
+    /// The robot the net drives: tensions are clamped to its limits.
+    #[command(flatten)]
+    pub robot: RobotArg,
     /// One pose: px,py,pz,qw,qx,qy,qz (m, unit quaternion w first).
     #[arg(
         long,
@@ -23,44 +25,52 @@ pub struct IkArgs {
         conflicts_with = "input"
     )]
     pub pose: Option<String>,
-    /// Print `{"tensions":[...]}` instead of plain numbers.
+    /// Print `{"tensions":[...],"raw":[...]}` (clamped, unclamped) instead of plain numbers.
     #[arg(long)]
     pub json: bool,
+    /// Answer poses outside the net's training ranges (with a warning) instead of refusing them.
+    #[arg(long)]
+    pub allow_extrapolation: bool,
     /// Batch input CSV with columns px,py,pz,qw,qx,qy,qz (others ignored).
     #[arg(long, value_name = "CSV", requires = "output")]
     pub input: Option<PathBuf>,
-    /// Batch output CSV: t0..t{T-1} (N), one row per input row; written atomically.
+    /// Batch output CSV: t0.. (clamped) and raw_t0.. (net output), N; written atomically.
     #[arg(long, value_name = "CSV", requires = "input")]
     pub output: Option<PathBuf>,
 }
 
-fn parse_pose(text: &str) -> anyhow::Result<[f64; 7]> {
-    let v = super::common::parse_list(text, "--pose")?;
-    if v.len() != 7 {
-        bail!(
-            "--pose needs 7 numbers px,py,pz,qw,qx,qy,qz, got {}",
-            v.len()
-        );
-    }
-    if v.iter().any(|x| !x.is_finite()) {
-        bail!("--pose has a non-finite number");
-    }
-    let mut p = [0.0; 7];
-    p.copy_from_slice(&v);
-    Ok(p)
-}
-
 /// Run `tendril ik`.
 pub fn run(a: IkArgs) -> anyhow::Result<()> {
-    let net = read_tnet(&a.model)?;
-    let outputs = net.shape().outputs;
+    let (robot, _) = a.robot.load()?;
+    let ik = IkNet::load(&a.model, &robot, a.allow_extrapolation)?;
     if let Some(text) = &a.pose {
-        let pose = parse_pose(text)?;
-        let t = infer(&net, &pose);
+        let values = parse_list(text, "--pose")?;
+        let Ok(pose) = <[f64; 7]>::try_from(values.as_slice()) else {
+            bail!(
+                "--pose needs 7 numbers px,py,pz,qw,qx,qy,qz, got {}",
+                values.len()
+            );
+        };
+        let answer = ik.solve(&pose)?;
+        if !answer.extrapolated.is_empty() {
+            log::warn!(
+                "pose outside the net's training range in {}: the net extrapolates",
+                answer.extrapolated.join(", ")
+            );
+        }
+        if answer.clamped() {
+            log::warn!(
+                "net output {:?} N clamped to the robot's limits",
+                answer.raw
+            );
+        }
         if a.json {
-            println!("{}", serde_json::json!({ "tensions": t }));
+            println!(
+                "{}",
+                serde_json::json!({ "tensions": answer.tensions, "raw": answer.raw })
+            );
         } else {
-            let s: Vec<String> = t.iter().map(|x| x.to_string()).collect();
+            let s: Vec<String> = answer.tensions.iter().map(f64::to_string).collect();
             println!("{}", s.join(","));
         }
         return Ok(());
@@ -68,58 +78,14 @@ pub fn run(a: IkArgs) -> anyhow::Result<()> {
     let (Some(input), Some(output)) = (&a.input, &a.output) else {
         bail!("give --pose px,py,pz,qw,qx,qy,qz or --input poses.csv --output tensions.csv");
     };
-    let mut reader = csv::ReaderBuilder::new()
-        .has_headers(true)
-        .from_path(input)
-        .with_context(|| format!("{}: cannot open", input.display()))?;
-    let header: Vec<String> = reader
-        .headers()
-        .with_context(|| format!("{}: unreadable header", input.display()))?
-        .iter()
-        .map(|s| s.trim().to_string())
-        .collect();
-    let cols: Vec<usize> = POSE_COLUMNS
-        .iter()
-        .map(|c| {
-            header.iter().position(|h| h == c).with_context(|| {
-                format!(
-                    "{}: missing column {c} (need px,py,pz,qw,qx,qy,qz)",
-                    input.display()
-                )
-            })
-        })
-        .collect::<anyhow::Result<_>>()?;
-    let mut rows = Vec::new();
-    for (i, rec) in reader.records().enumerate() {
-        let rec = rec.with_context(|| format!("{}: row {}", input.display(), i + 2))?;
-        let mut pose = [0.0; 7];
-        for (k, &c) in cols.iter().enumerate() {
-            let s = rec.get(c).unwrap_or("").trim();
-            pose[k] = s
-                .parse::<f64>()
-                .ok()
-                .filter(|x| x.is_finite())
-                .with_context(|| {
-                    format!(
-                        "{}: row {}, column {}: {s:?} is not a finite number",
-                        input.display(),
-                        i + 2,
-                        POSE_COLUMNS[k]
-                    )
-                })?;
-        }
-        rows.push(infer(&net, &pose));
-    }
-    crate::fsutil::write_atomic_with(output, |w| {
-        let head: Vec<String> = (0..outputs).map(|i| format!("t{i}")).collect();
-        writeln!(w, "{}", head.join(","))?;
-        for t in &rows {
-            let s: Vec<String> = t.iter().map(|x| x.to_string()).collect();
-            writeln!(w, "{}", s.join(","))?;
-        }
-        Ok(())
-    })
-    .with_context(|| format!("writing {}", output.display()))?;
-    eprintln!("wrote {} ({} rows)", output.display(), rows.len());
+    let s = solve_csv(&ik, input, output)?;
+    eprintln!(
+        "wrote {} ({} {}, {} clamped, {} extrapolated)",
+        output.display(),
+        s.rows,
+        if s.rows == 1 { "row" } else { "rows" },
+        s.clamped,
+        s.extrapolated
+    );
     Ok(())
 }

@@ -6,12 +6,14 @@
 //! (first sample cold, the rest warm-started from their predecessor), and
 //! chunks are independent. So a row's value never depends on which thread or
 //! in what order the chunks ran.
+//!
+//! Bounded memory whatever the count: samples are drawn, ordered and solved
+//! one block of [`BLOCK`] at a time, and each block's rows go to a sink (the
+//! CSV being written) before the next block is drawn (docs/design.md §3).
 
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressStyle};
-use nalgebra::DMatrix;
 use rayon::prelude::*;
 
 use super::io::ColumnRange;
@@ -38,30 +40,117 @@ pub struct GenerateOptions {
     pub progress: bool,
 }
 
-/// The outcome of a generation run.
-#[derive(Clone, Debug)]
-pub struct Generated {
-    /// Rows that solved, in sample order.
-    pub data: Dataset,
+/// What a streamed generation run counted (the rows themselves went to the sink).
+#[derive(Clone, Debug, Default)]
+pub struct Tally {
+    /// Rows that solved and were handed to the sink.
+    pub kept: usize,
     /// Warm-started solves that failed and were re-solved cold.
     pub resolved_cold: usize,
     /// Samples dropped because the cold solve also failed.
     pub dropped: usize,
     /// The first few failures, for the log.
     pub failures: Vec<(Vec<f64>, SolveError)>,
-    /// Wall time, s.
-    pub seconds: f64,
+    /// Per-column minima and maxima of the kept rows (tensions, then pose).
+    pub lo: Vec<f64>,
+    /// See `lo`.
+    pub hi: Vec<f64>,
 }
 
-/// Why generation stopped.
+/// Failures kept in [`Tally::failures`] for the log.
+const FAILURES_KEPT: usize = 10;
+
+/// Why a streamed generation run stopped.
 #[derive(Debug, thiserror::Error)]
-pub enum GenerateError {
+pub enum StreamError {
     /// Ctrl-C or another stop request.
     #[error("interrupted; nothing was written")]
     Interrupted,
-    /// Nothing to generate.
-    #[error("--samples must be at least 1")]
-    NoSamples,
+    /// The sink failed to take a row.
+    #[error("writing a row")]
+    Sink(#[source] std::io::Error),
+}
+
+/// Samples drawn, ordered and solved at a time: bounds memory (≈ 20 MB of
+/// solutions) whatever the count. A count up to one block draws and orders
+/// exactly as an unblocked run would, so the default 20,000-sample dataset is
+/// the one it always was.
+pub const BLOCK: usize = 32_768;
+
+/// Seed of block `b`: the run's seed for the first block, a splitmix64 mix of
+/// the seed and the block index after it (independent streams per block).
+fn block_seed(seed: u64, b: usize) -> u64 {
+    if b == 0 {
+        return seed;
+    }
+    let mut z = seed ^ (b as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// Generate `opts.samples` rows, handing each solved row (tensions, pose) to
+/// `sink` in sample order as its block completes; memory stays bounded by
+/// [`BLOCK`]. `stop` is polled between chunks of [`CHUNK`] solves; when it is
+/// set, returns [`StreamError::Interrupted`] and the caller discards what the
+/// sink got.
+pub fn generate_rows<F>(
+    statics: &Statics,
+    opts: &GenerateOptions,
+    stop: &AtomicBool,
+    mut sink: F,
+) -> Result<Tally, StreamError>
+where
+    F: FnMut(&[f64], &[f64; 7]) -> std::io::Result<()>,
+{
+    let max = statics.robot().max_tensions();
+    let width = max.len() + 7;
+    let mut tally = Tally {
+        lo: vec![f64::INFINITY; width],
+        hi: vec![f64::NEG_INFINITY; width],
+        ..Tally::default()
+    };
+    let bar = solve_bar(opts.samples, opts.progress);
+    let mut done = 0;
+    for b in 0.. {
+        if done >= opts.samples {
+            break;
+        }
+        if stop.load(Ordering::Relaxed) {
+            return Err(StreamError::Interrupted);
+        }
+        let len = BLOCK.min(opts.samples - done);
+        done += len;
+        let tensions = opts.sampler.draw(len, &max, block_seed(opts.seed, b));
+        let order = snake_order(&tensions, &max, SNAKE_CELLS);
+        let outcomes =
+            solve_batch(statics, &tensions, &order, &bar, stop).ok_or(StreamError::Interrupted)?;
+        for (t, outcome) in tensions.into_iter().zip(outcomes) {
+            let sol = match outcome {
+                Outcome::Solved(s) => s,
+                Outcome::ResolvedCold(s) => {
+                    tally.resolved_cold += 1;
+                    s
+                }
+                Outcome::Failed(e) => {
+                    tally.dropped += 1;
+                    if tally.failures.len() < FAILURES_KEPT {
+                        tally.failures.push((t, e));
+                    }
+                    continue;
+                }
+            };
+            let pose = sol.pose();
+            for (k, &x) in t.iter().chain(&pose).enumerate() {
+                tally.lo[k] = tally.lo[k].min(x);
+                tally.hi[k] = tally.hi[k].max(x);
+            }
+            sink(&t, &pose).map_err(StreamError::Sink)?;
+            tally.kept += 1;
+        }
+    }
+    bar.finish_and_clear();
+    Ok(tally)
 }
 
 /// Outcome of one sample of a batch solve.
@@ -159,72 +248,12 @@ pub fn solve_bar(len: usize, visible: bool) -> ProgressBar {
     b
 }
 
-/// Generate a dataset. `stop` is polled between chunks (set it from a Ctrl-C
-/// handler); when it is set, returns [`GenerateError::Interrupted`].
-pub fn generate(
-    statics: &Statics,
-    opts: &GenerateOptions,
-    stop: &AtomicBool,
-) -> Result<Generated, GenerateError> {
-    if opts.samples == 0 {
-        return Err(GenerateError::NoSamples);
-    }
-    let start = Instant::now();
-    let max = statics.robot().max_tensions();
-    let tensions = opts.sampler.draw(opts.samples, &max, opts.seed);
-    let order = snake_order(&tensions, &max, SNAKE_CELLS);
-    let bar = solve_bar(opts.samples, opts.progress);
-    let outcomes =
-        solve_batch(statics, &tensions, &order, &bar, stop).ok_or(GenerateError::Interrupted)?;
-    bar.finish_and_clear();
-
-    let (mut resolved_cold, mut dropped) = (0, 0);
-    let mut failures = Vec::new();
-    let mut kept_t = Vec::with_capacity(opts.samples * max.len());
-    let mut kept_p = Vec::with_capacity(opts.samples * 7);
-    for (t, outcome) in tensions.into_iter().zip(outcomes) {
-        let sol = match outcome {
-            Outcome::Solved(s) => s,
-            Outcome::ResolvedCold(s) => {
-                resolved_cold += 1;
-                s
-            }
-            Outcome::Failed(e) => {
-                dropped += 1;
-                if failures.len() < 10 {
-                    failures.push((t, e));
-                }
-                continue;
-            }
-        };
-        kept_t.extend_from_slice(&t);
-        kept_p.extend_from_slice(&sol.pose());
-    }
-    let n = kept_p.len() / 7;
-    Ok(Generated {
-        data: Dataset {
-            n_tendons: max.len(),
-            tensions: DMatrix::from_row_slice(n, max.len(), &kept_t),
-            poses: DMatrix::from_row_slice(n, 7, &kept_p),
-        },
-        resolved_cold,
-        dropped,
-        failures,
-        seconds: start.elapsed().as_secs_f64(),
-    })
-}
-
-/// Per-column value ranges of a dataset, for the sidecar.
-pub fn column_ranges(data: &Dataset) -> Vec<ColumnRange> {
-    let names = Dataset::header(data.n_tendons);
-    let columns = data.tensions.column_iter().chain(data.poses.column_iter());
-    names
+/// Per-column value ranges, for the sidecar, from the minima `lo` and maxima
+/// `hi` of the columns of a dataset with `n_tendons` tendons.
+pub fn column_ranges(n_tendons: usize, lo: &[f64], hi: &[f64]) -> Vec<ColumnRange> {
+    Dataset::header(n_tendons)
         .into_iter()
-        .zip(columns)
-        .map(|(column, c)| ColumnRange {
-            column,
-            min: c.min(),
-            max: c.max(),
-        })
+        .zip(lo.iter().zip(hi))
+        .map(|(column, (&min, &max))| ColumnRange { column, min, max })
         .collect()
 }

@@ -2,6 +2,7 @@
 //! sidecar that says how the rows were made. Reading checks the header and
 //! every value; writing is atomic.
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use nalgebra::DMatrix;
@@ -184,19 +185,11 @@ impl Dataset {
     /// round-trip formatting, so reading back gives bit-identical numbers.
     pub fn write_csv(&self, path: &Path) -> Result<(), DatasetError> {
         write_atomic_with(path, |w| {
-            writeln!(w, "{}", Self::header(self.n_tendons).join(","))?;
-            let mut line = String::with_capacity(256);
+            let mut rows = RowWriter::new(w, self.n_tendons)?;
             for i in 0..self.len() {
-                line.clear();
-                for j in 0..self.n_tendons {
-                    push_value(&mut line, self.tensions[(i, j)]);
-                }
-                for j in 0..7 {
-                    push_value(&mut line, self.poses[(i, j)]);
-                }
-                line.pop();
-                line.push('\n');
-                w.write_all(line.as_bytes())?;
+                let t = self.tensions.row(i);
+                let p = self.poses.row(i);
+                rows.write(t.iter().chain(p.iter()).copied())?;
             }
             Ok(())
         })
@@ -207,10 +200,44 @@ impl Dataset {
     }
 }
 
-fn push_value(line: &mut String, x: f64) {
-    line.push_str(&format_value(x));
-    line.push(',');
+/// Writes dataset CSV rows one at a time (the header first), so a dataset
+/// can be streamed to disk as it is generated.
+pub struct RowWriter<W: Write> {
+    out: W,
+    line: String,
 }
+
+impl<W: Write> RowWriter<W> {
+    /// Write the header for `n_tendons` tendons and get ready for rows.
+    pub fn new(mut out: W, n_tendons: usize) -> std::io::Result<Self> {
+        writeln!(out, "{}", Dataset::header(n_tendons).join(","))?;
+        Ok(RowWriter {
+            out,
+            line: String::with_capacity(256),
+        })
+    }
+
+    /// Write one row: the tensions, then px, py, pz, qw, qx, qy, qz.
+    pub fn write(&mut self, values: impl Iterator<Item = f64>) -> std::io::Result<()> {
+        self.line.clear();
+        for x in values {
+            self.line.push_str(&format_value(x));
+            self.line.push(',');
+        }
+        self.line.pop();
+        self.line.push('\n');
+        self.out.write_all(self.line.as_bytes())
+    }
+
+    /// The underlying writer.
+    pub fn into_inner(self) -> W {
+        self.out
+    }
+}
+
+/// An upper bound on the bytes of one CSV value: the longest shortest
+/// round-trip text of an f64 (`-2.2250738585072014e-308`) and its separator.
+pub const MAX_VALUE_BYTES: u64 = 25;
 
 /// Shortest text that reads back as exactly `x`: plain decimal for ordinary
 /// magnitudes, scientific notation for tiny or huge ones (Rust's `Display`

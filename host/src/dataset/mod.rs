@@ -1,4 +1,4 @@
-//! The tension ↔ tip-pose dataset (`DESIGN.md` §3): sampling tensions,
+//! The tension ↔ tip-pose dataset (docs/design.md §3): sampling tensions,
 //! solving the statics for each, CSV + JSON sidecar, the train/test split and
 //! min–max normalisation.
 //!
@@ -10,6 +10,7 @@
 
 pub mod generate;
 pub mod io;
+pub mod job;
 pub mod sample;
 pub mod split;
 

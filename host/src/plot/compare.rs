@@ -23,26 +23,10 @@ pub struct LearnerBars {
     pub tip_p95_mm: f64,
 }
 
-type DrawResult = Result<(), Box<dyn std::error::Error>>;
+use super::{draw_atomically, log_bounds, DrawResult};
 
 /// One bar series: legend label, colour, and the value it shows.
 type Series<'a> = (&'a str, RGBColor, fn(&LearnerBars) -> f64);
-
-/// Log-axis bounds covering every finite positive value with some headroom.
-fn log_bounds(values: impl Iterator<Item = f64>) -> (f64, f64) {
-    let (lo, hi) = values
-        .filter(|v| v.is_finite() && *v > 0.0)
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
-            (lo.min(v), hi.max(v))
-        });
-    if !lo.is_finite() {
-        return (0.01, 1.0);
-    }
-    (
-        10f64.powf(lo.log10().floor()),
-        10f64.powf((hi * 1.8).log10().ceil()),
-    )
-}
 
 fn panel(
     area: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
@@ -55,7 +39,10 @@ fn panel(
     let (lo, hi) = log_bounds(
         rows.iter()
             .flat_map(|r| series.iter().map(move |s| (s.2)(r))),
-    );
+    )
+    .unwrap_or((0.01, 1.0));
+    // A bar or label outside the axis would be drawn off the chart.
+    let shown = |v: f64| v.is_finite() && (lo..=hi).contains(&v);
     let mut chart = ChartBuilder::on(area)
         .caption(caption, ("sans-serif", 24))
         .margin(14)
@@ -75,7 +62,7 @@ fn panel(
         let bars: Vec<_> = rows
             .iter()
             .enumerate()
-            .filter(|(_, r)| value(r).is_finite() && value(r) > 0.0)
+            .filter(|(_, r)| shown(value(r)))
             .map(|(i, r)| {
                 let x0 = i as f64 - 0.4 + si as f64 * width;
                 Rectangle::new([(x0, lo), (x0 + width * 0.92, value(r))], color.filled())
@@ -88,7 +75,7 @@ fn panel(
         chart.draw_series(
             rows.iter()
                 .enumerate()
-                .filter(|(_, r)| value(r).is_finite())
+                .filter(|(_, r)| shown(value(r)))
                 .map(|(i, r)| {
                     let x = i as f64 - 0.4 + (si as f64 + 0.1) * width;
                     Text::new(
@@ -123,11 +110,15 @@ fn panel(
 
 /// Draw the grouped bar chart of `rows` into a PNG at `out` (written via a
 /// temporary file and a rename, so a failed draw leaves no partial figure).
+/// Values a log axis cannot show (zero, negative, NaN) get no bar; no
+/// learner at all is an error.
 pub fn draw_comparison(rows: &[LearnerBars], title: &str, out: &Path) -> DrawResult {
     super::init_fonts();
-    let tmp = out.with_extension("tmp.png");
-    {
-        let root = BitMapBackend::new(&tmp, (1500, 1100)).into_drawing_area();
+    if rows.is_empty() {
+        return Err("comparison: no learner to plot".into());
+    }
+    draw_atomically(out, |tmp| {
+        let root = BitMapBackend::new(tmp, (1500, 1100)).into_drawing_area();
         root.fill(&WHITE)?;
         let root = root.titled(title, ("sans-serif", 28))?;
         let (top, bottom) = root.split_vertically(530);
@@ -152,9 +143,8 @@ pub fn draw_comparison(rows: &[LearnerBars], title: &str, out: &Path) -> DrawRes
             ],
         )?;
         root.present()?;
-    }
-    std::fs::rename(&tmp, out)?;
-    Ok(())
+        Ok(())
+    })
 }
 
 #[cfg(test)]
@@ -178,5 +168,32 @@ mod tests {
         let bytes = std::fs::read(&out).unwrap();
         assert_eq!(&bytes[1..4], b"PNG");
         assert!(!dir.path().join("c.tmp.png").exists());
+    }
+
+    #[test]
+    fn degenerate_values_are_drawn_or_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let bars = |v: f64, w: f64| LearnerBars {
+            name: "L".into(),
+            train_rmse: v,
+            test_rmse: w,
+            tip_mean_mm: v,
+            tip_p95_mm: w,
+        };
+        let cases = [
+            ("zero", vec![bars(0.0, 0.0)]),
+            ("constant", vec![bars(2.0, 2.0), bars(2.0, 2.0)]),
+            ("nan", vec![bars(f64::NAN, f64::NAN)]),
+            ("mixed", vec![bars(-1.0, f64::INFINITY), bars(1e-300, 5.0)]),
+        ];
+        for (name, rows) in cases {
+            let out = dir.path().join(format!("{name}.png"));
+            draw_comparison(&rows, name, &out).unwrap();
+            assert_eq!(&std::fs::read(&out).unwrap()[1..4], b"PNG");
+        }
+        let out = dir.path().join("none.png");
+        let err = draw_comparison(&[], "none", &out).unwrap_err();
+        assert!(err.to_string().contains("no learner"), "{err}");
+        assert!(!out.exists());
     }
 }

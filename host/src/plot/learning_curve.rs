@@ -5,13 +5,14 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
+use super::{draw_atomically, log_bounds, DrawResult};
 use crate::learn::cascor::UnitLog;
-
-type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
 /// Draw the learning curve in `history` into a PNG at `out` (written
 /// atomically: drawn to a temporary file beside it, then renamed); `best`
-/// marks the kept net's hidden-unit count.
+/// marks the kept net's hidden-unit count. RMSE values that a log axis cannot
+/// show (zero, NaN) are left out; when none is left the axes are drawn with a
+/// note saying so. An empty history is an error.
 pub fn draw_learning_curve(
     history: &[UnitLog],
     best: usize,
@@ -20,19 +21,26 @@ pub fn draw_learning_curve(
 ) -> DrawResult {
     super::init_fonts();
     if history.is_empty() {
-        return Err("learning curve: empty history".into());
+        return Err("learning curve: empty history, nothing to plot".into());
     }
-    let ys = history
+    let percent = |v: f64| 100.0 * v;
+    let bounds = log_bounds(
+        history
+            .iter()
+            .flat_map(|r| [r.train_rmse, r.valid_rmse])
+            .map(percent),
+    );
+    let (lo, hi) = bounds.unwrap_or((0.01, 1.0));
+    let shown = |v: f64| v.is_finite() && (lo..=hi).contains(&v);
+    let nmax = history
         .iter()
-        .flat_map(|r| [r.train_rmse, r.valid_rmse])
-        .filter(|v| v.is_finite() && *v > 0.0)
-        .map(|v| 100.0 * v);
-    let lo = ys.clone().fold(f64::INFINITY, f64::min).max(1e-6) / 1.5;
-    let hi = ys.fold(f64::NEG_INFINITY, f64::max).max(lo * 2.0) * 1.5;
-    let nmax = history.iter().map(|r| r.hidden).max().unwrap_or(0).max(1) as f64;
-    let tmp = out.with_extension("tmp.png");
-    {
-        let root = BitMapBackend::new(&tmp, (1000, 650)).into_drawing_area();
+        .map(|r| r.hidden)
+        .chain([best])
+        .max()
+        .unwrap_or(0)
+        .max(1) as f64;
+    draw_atomically(out, |tmp| {
+        let root = BitMapBackend::new(tmp, (1000, 650)).into_drawing_area();
         root.fill(&WHITE)?;
         let mut chart = ChartBuilder::on(&root)
             .caption(title, ("sans-serif", 24))
@@ -46,16 +54,22 @@ pub fn draw_learning_curve(
             .y_desc("RMSE (normalised ×100)")
             .label_style(("sans-serif", 15))
             .draw()?;
+        if bounds.is_none() {
+            chart.draw_series([Text::new(
+                "every RMSE is zero or not finite: nothing to show on a log axis",
+                (nmax * 0.05, (lo * hi).sqrt()),
+                ("sans-serif", 18),
+            )])?;
+        }
         let series = [("train", BLUE, true), ("validation", RED, false)];
         for (label, color, train) in series {
             let pts: Vec<(f64, f64)> = history
                 .iter()
                 .map(|r| {
-                    (
-                        r.hidden as f64,
-                        100.0 * if train { r.train_rmse } else { r.valid_rmse },
-                    )
+                    let v = if train { r.train_rmse } else { r.valid_rmse };
+                    (r.hidden as f64, percent(v))
                 })
+                .filter(|&(_, y)| shown(y))
                 .collect();
             chart
                 .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))?
@@ -80,7 +94,59 @@ pub fn draw_learning_curve(
             .label_font(("sans-serif", 15))
             .draw()?;
         root.present()?;
+        Ok(())
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn history(rmse: &[(f64, f64)]) -> Vec<UnitLog> {
+        rmse.iter()
+            .enumerate()
+            .map(|(hidden, &(train_rmse, valid_rmse))| UnitLog {
+                hidden,
+                train_rmse,
+                valid_rmse,
+                score: f64::NAN,
+                reduction: 0.0,
+                objective: None,
+                candidate_epochs: 0,
+                output_epochs: 0,
+                seconds: 0.0,
+            })
+            .collect()
     }
-    std::fs::rename(&tmp, out)?;
-    Ok(())
+
+    fn assert_png(path: &Path) {
+        let bytes = std::fs::read(path).unwrap();
+        assert_eq!(&bytes[1..4], b"PNG");
+        assert!(!path.with_extension("tmp.png").exists());
+    }
+
+    #[test]
+    fn degenerate_curves_are_drawn_or_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let cases: [(&str, Vec<(f64, f64)>); 6] = [
+            ("zero", vec![(0.0, 0.0); 4]),
+            ("constant", vec![(0.25, 0.25); 4]),
+            ("nan", vec![(f64::NAN, f64::NAN); 3]),
+            ("single", vec![(0.1, 0.2)]),
+            (
+                "mixed",
+                vec![(0.0, f64::INFINITY), (1e-300, 0.3), (5.0, -1.0)],
+            ),
+            ("tiny", vec![(f64::MIN_POSITIVE, 1e-200)]),
+        ];
+        for (name, rmse) in cases {
+            let out = dir.path().join(format!("{name}.png"));
+            draw_learning_curve(&history(&rmse), 0, name, &out).unwrap();
+            assert_png(&out);
+        }
+        let out = dir.path().join("empty.png");
+        let err = draw_learning_curve(&[], 0, "empty", &out).unwrap_err();
+        assert!(err.to_string().contains("empty history"), "{err}");
+        assert!(!out.exists());
+    }
 }

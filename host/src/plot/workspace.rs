@@ -14,17 +14,18 @@ pub struct Shape {
     pub points: Vec<Vector3<f64>>,
 }
 
-type DrawResult = Result<(), Box<dyn std::error::Error>>;
+use super::{draw_atomically, linear_bounds, DrawResult};
 
-fn range_mm(v: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
-    let lo = v.clone().fold(f64::INFINITY, f64::min) * 1e3;
-    let hi = v.fold(f64::NEG_INFINITY, f64::max) * 1e3;
-    let pad = ((hi - lo) * 0.05).max(1.0);
-    (lo - pad, hi + pad)
+/// Axis range in mm over the finite values (m), padded by 5 % and at least
+/// 1 mm, so a constant column or an empty set still gets a visible axis.
+fn range_mm(v: impl Iterator<Item = f64>) -> (f64, f64) {
+    linear_bounds(v.map(|x| x * 1e3), 0.05, 1.0)
 }
 
 /// Draw the tip cloud of `poses` (n × 7, metres) in three projections and
 /// `shapes` in the x–z plane into a PNG at `out` (written atomically).
+/// Non-finite points are left out; an empty cloud or shape list gives empty
+/// panels. `poses` with fewer than 3 columns is an error.
 pub fn draw_workspace(
     poses: &DMatrix<f64>,
     shapes: &[Shape],
@@ -32,9 +33,15 @@ pub fn draw_workspace(
     out: &Path,
 ) -> DrawResult {
     super::init_fonts();
-    let tmp = out.with_extension("tmp.png");
-    {
-        let root = BitMapBackend::new(&tmp, (1400, 1200)).into_drawing_area();
+    if poses.ncols() < 3 {
+        return Err(format!(
+            "workspace: poses need px, py, pz columns, got {}",
+            poses.ncols()
+        )
+        .into());
+    }
+    draw_atomically(out, |tmp| {
+        let root = BitMapBackend::new(tmp, (1400, 1200)).into_drawing_area();
         root.fill(&WHITE)?;
         let root = root.titled(title, ("sans-serif", 28))?;
         let panels = root.split_evenly((2, 2));
@@ -63,11 +70,15 @@ pub fn draw_workspace(
             chart.draw_series(
                 xs.iter()
                     .zip(ys.iter())
+                    .filter(|(x, y)| x.is_finite() && y.is_finite())
                     .map(|(&x, &y)| Circle::new((x * 1e3, y * 1e3), 1, BLUE.mix(0.35).filled())),
             )?;
         }
         // Backbone shapes in the x–z plane.
-        let all = shapes.iter().flat_map(|s| s.points.iter());
+        let all = shapes
+            .iter()
+            .flat_map(|s| s.points.iter())
+            .filter(|p| p.x.is_finite() && p.z.is_finite());
         let (x0, x1) = range_mm(all.clone().map(|p| p.x));
         let (z0, z1) = range_mm(all.map(|p| p.z));
         let mut chart = ChartBuilder::on(&panels[3])
@@ -86,7 +97,10 @@ pub fn draw_workspace(
             let color = Palette99::pick(k).to_rgba();
             chart
                 .draw_series(LineSeries::new(
-                    s.points.iter().map(|p| (p.x * 1e3, p.z * 1e3)),
+                    s.points
+                        .iter()
+                        .filter(|p| p.x.is_finite() && p.z.is_finite())
+                        .map(|p| (p.x * 1e3, p.z * 1e3)),
                     color.stroke_width(2),
                 ))?
                 .label(s.label.clone())
@@ -101,7 +115,50 @@ pub fn draw_workspace(
             .label_font(("sans-serif", 14))
             .draw()?;
         root.present()?;
+        Ok(())
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn assert_png(path: &Path) {
+        let bytes = std::fs::read(path).unwrap();
+        assert_eq!(&bytes[1..4], b"PNG");
+        assert!(!path.with_extension("tmp.png").exists());
     }
-    std::fs::rename(&tmp, out)?;
-    Ok(())
+
+    #[test]
+    fn degenerate_clouds_and_shapes_are_drawn_or_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let constant = DMatrix::from_fn(5, 7, |_, j| if j == 3 { 1.0 } else { 0.02 });
+        let nan = DMatrix::from_element(4, 7, f64::NAN);
+        let mut mixed = constant.clone();
+        mixed[(0, 0)] = f64::INFINITY;
+        mixed[(1, 2)] = f64::NAN;
+        let line = Shape {
+            label: "flat".into(),
+            points: vec![Vector3::zeros(); 3],
+        };
+        let broken = Shape {
+            label: "nan".into(),
+            points: vec![Vector3::new(f64::NAN, 0.0, f64::NAN)],
+        };
+        let cases = [
+            ("empty", DMatrix::zeros(0, 7), vec![]),
+            ("constant", constant, vec![line]),
+            ("nan", nan, vec![broken]),
+            ("mixed", mixed, vec![]),
+        ];
+        for (name, poses, shapes) in cases {
+            let out = dir.path().join(format!("{name}.png"));
+            draw_workspace(&poses, &shapes, name, &out).unwrap();
+            assert_png(&out);
+        }
+        let out = dir.path().join("narrow.png");
+        let err = draw_workspace(&DMatrix::zeros(3, 2), &[], "narrow", &out).unwrap_err();
+        assert!(err.to_string().contains("px, py, pz"), "{err}");
+        assert!(!out.exists());
+    }
 }

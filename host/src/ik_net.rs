@@ -1,0 +1,337 @@
+//! Inverse kinematics through a trained `.tnet` net, guarded so that it never
+//! hands out an impossible tension (docs/design.md §5, §7): the quaternion's
+//! sign is normalised (w ≥ 0, as in the dataset), a non-unit or non-finite
+//! pose is refused, a pose outside the net's training ranges is refused (or
+//! flagged, when extrapolation is allowed), and the net's raw output is
+//! reported beside the tensions clamped to the robot's limits.
+//!
+//! The net is evaluated by the firmware's own f32 `infer`, so the raw output
+//! is bit-identical to what the MCU computes from the same file.
+
+use std::path::{Path, PathBuf};
+
+use crate::dataset::POSE_COLUMNS;
+use crate::learn::cascor::export::{infer, read_tnet, HostNet};
+use crate::robot::Robot;
+
+/// Largest accepted deviation of |q| from 1 (a quaternion within it is
+/// renormalised; the dataset's are unit to ~1e-15).
+pub const UNIT_TOLERANCE: f64 = 1e-3;
+/// How far beyond its training range (as a fraction of the range) an input
+/// may lie before the pose counts as outside the trained region: the
+/// held-out rows of a dataset can exceed the training rows' extremes by a
+/// hair.
+pub const RANGE_MARGIN: f64 = 0.01;
+
+/// Why no tensions could be given for a pose.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum IkError {
+    /// The `.tnet` file could not be loaded (the reason, said once).
+    #[error("{0}")]
+    Model(String),
+    /// The net and the robot disagree on the tendon count.
+    #[error("the net drives {net} tendons but {robot} has {robot_tendons}")]
+    TendonCount {
+        /// Outputs of the net.
+        net: usize,
+        /// Robot name.
+        robot: String,
+        /// Tendons of the robot.
+        robot_tendons: usize,
+    },
+    /// A pose value is NaN or infinite.
+    #[error("pose {column} = {value} is not a finite number")]
+    NotFinite {
+        /// Column name.
+        column: &'static str,
+        /// The value.
+        value: f64,
+    },
+    /// The quaternion is not of unit length.
+    #[error(
+        "quaternion (qw, qx, qy, qz) has norm {norm}, not 1 (tolerance {UNIT_TOLERANCE}): \
+         give a unit quaternion"
+    )]
+    NotUnit {
+        /// Its norm.
+        norm: f64,
+    },
+    /// A pose value lies outside the range the net was trained on.
+    #[error(
+        "pose {column} = {value} is outside the net's training range [{lo}, {hi}]: the net \
+         would extrapolate (pass --allow-extrapolation to get clamped tensions anyway)"
+    )]
+    OutsideTrainedRange {
+        /// Column name.
+        column: &'static str,
+        /// The (sign-normalised) value.
+        value: f64,
+        /// Training minimum.
+        lo: f64,
+        /// Training maximum.
+        hi: f64,
+    },
+    /// A batch input row is malformed or its pose is refused.
+    #[error("{}: line {line}: {why}", path.display())]
+    Row {
+        /// The input file.
+        path: PathBuf,
+        /// 1-based line number (header = line 1).
+        line: usize,
+        /// What is wrong.
+        why: String,
+    },
+    /// A batch file could not be read or written.
+    #[error("{}: {why}", path.display())]
+    File {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        why: String,
+    },
+    /// The net produced a NaN or infinite tension.
+    #[error("the net's output for tendon {tendon} is {value}, not a finite tension")]
+    NonFiniteOutput {
+        /// Tendon index.
+        tendon: usize,
+        /// The value.
+        value: f64,
+    },
+}
+
+/// The tensions for one pose.
+#[derive(Clone, Debug, PartialEq)]
+pub struct IkAnswer {
+    /// Tensions clamped to the robot's limits [0, τ_max], N.
+    pub tensions: Vec<f64>,
+    /// The net's output before clamping, N.
+    pub raw: Vec<f64>,
+    /// Pose columns outside the trained range (only with extrapolation allowed).
+    pub extrapolated: Vec<&'static str>,
+}
+
+impl IkAnswer {
+    /// Whether any tension had to be clamped.
+    pub fn clamped(&self) -> bool {
+        self.tensions != self.raw
+    }
+}
+
+/// A `.tnet` net with the robot limits it answers within.
+pub struct IkNet {
+    net: Box<HostNet>,
+    max_tension: Vec<f64>,
+    allow_extrapolation: bool,
+}
+
+impl IkNet {
+    /// Load the net at `model` for `robot`. With `allow_extrapolation`, poses
+    /// outside the trained ranges are answered (and listed in
+    /// [`IkAnswer::extrapolated`]) instead of refused.
+    pub fn load(model: &Path, robot: &Robot, allow_extrapolation: bool) -> Result<IkNet, IkError> {
+        let net = read_tnet(model).map_err(|e| IkError::Model(e.to_string()))?;
+        Self::new(net, robot, allow_extrapolation)
+    }
+
+    /// Wrap a decoded net for `robot`.
+    pub fn new(
+        net: Box<HostNet>,
+        robot: &Robot,
+        allow_extrapolation: bool,
+    ) -> Result<IkNet, IkError> {
+        let outputs = net.shape().outputs;
+        if outputs != robot.n_tendons() {
+            return Err(IkError::TendonCount {
+                net: outputs,
+                robot: robot.name.clone(),
+                robot_tendons: robot.n_tendons(),
+            });
+        }
+        Ok(IkNet {
+            net,
+            max_tension: robot.max_tensions(),
+            allow_extrapolation,
+        })
+    }
+
+    /// Tendons the net drives.
+    pub fn tendons(&self) -> usize {
+        self.max_tension.len()
+    }
+
+    /// Check and normalise `pose` (px, py, pz m; qw, qx, qy, qz): finite,
+    /// unit quaternion renormalised with w ≥ 0.
+    pub fn normalise(pose: &[f64; 7]) -> Result<[f64; 7], IkError> {
+        for (&value, column) in pose.iter().zip(POSE_COLUMNS) {
+            if !value.is_finite() {
+                return Err(IkError::NotFinite { column, value });
+            }
+        }
+        let norm = pose[3..].iter().map(|q| q * q).sum::<f64>().sqrt();
+        if (norm - 1.0).abs() > UNIT_TOLERANCE {
+            return Err(IkError::NotUnit { norm });
+        }
+        // q and −q are the same rotation; the dataset (and so the net) uses w ≥ 0.
+        let sign = if pose[3] < 0.0 { -1.0 } else { 1.0 };
+        let mut out = *pose;
+        for q in &mut out[3..] {
+            *q *= sign / norm;
+        }
+        Ok(out)
+    }
+
+    /// Tensions for `pose`: see the module documentation for the checks.
+    pub fn solve(&self, pose: &[f64; 7]) -> Result<IkAnswer, IkError> {
+        let pose = Self::normalise(pose)?;
+        let mut extrapolated = Vec::new();
+        let ranges = self.net.input_lo().iter().zip(self.net.input_hi());
+        for ((&value, column), (&lo, &hi)) in pose.iter().zip(POSE_COLUMNS).zip(ranges) {
+            let (lo, hi) = (f64::from(lo), f64::from(hi));
+            let margin = RANGE_MARGIN * (hi - lo);
+            if value < lo - margin || value > hi + margin {
+                if !self.allow_extrapolation {
+                    return Err(IkError::OutsideTrainedRange {
+                        column,
+                        value,
+                        lo,
+                        hi,
+                    });
+                }
+                extrapolated.push(column);
+            }
+        }
+        let raw: Vec<f64> = infer(&self.net, &pose).into_iter().map(f64::from).collect();
+        if let Some((tendon, &value)) = raw.iter().enumerate().find(|(_, t)| !t.is_finite()) {
+            return Err(IkError::NonFiniteOutput { tendon, value });
+        }
+        let tensions = raw
+            .iter()
+            .zip(&self.max_tension)
+            .map(|(&t, &max)| t.clamp(0.0, max))
+            .collect();
+        Ok(IkAnswer {
+            tensions,
+            raw,
+            extrapolated,
+        })
+    }
+}
+
+/// What a batch run did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct BatchSummary {
+    /// Rows answered.
+    pub rows: usize,
+    /// Rows with at least one tension clamped to the limits.
+    pub clamped: usize,
+    /// Rows outside the trained ranges (answered: extrapolation allowed).
+    pub extrapolated: usize,
+}
+
+/// Answer every pose of the CSV at `input` (columns px, py, pz, qw, qx, qy,
+/// qz; others ignored) and write `output` atomically: `t0..` (clamped, N)
+/// then `raw_t0..` (the net's output, N), one row per input row. A refused
+/// row fails the whole batch, naming its line; nothing is written then.
+pub fn solve_csv(ik: &IkNet, input: &Path, output: &Path) -> Result<BatchSummary, IkError> {
+    let file_error = |path: &Path, why: String| IkError::File {
+        path: path.to_path_buf(),
+        why,
+    };
+    if crate::dataset::job::same_file(input, output) {
+        return Err(file_error(
+            output,
+            "the output would overwrite the input; choose another --output".into(),
+        ));
+    }
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(true)
+        .from_path(input)
+        .map_err(|e| file_error(input, e.to_string()))?;
+    let header: Vec<String> = reader
+        .headers()
+        .map_err(|e| file_error(input, format!("unreadable header: {e}")))?
+        .iter()
+        .map(|s| s.trim().to_string())
+        .collect();
+    let cols: Vec<usize> = POSE_COLUMNS
+        .iter()
+        .map(|c| {
+            header.iter().position(|h| h == c).ok_or_else(|| {
+                file_error(
+                    input,
+                    format!("missing column {c} (need px,py,pz,qw,qx,qy,qz)"),
+                )
+            })
+        })
+        .collect::<Result<_, _>>()?;
+    let mut answers = Vec::new();
+    let mut summary = BatchSummary::default();
+    for (i, record) in reader.records().enumerate() {
+        let line = i + 2;
+        let row_error = |why: String| IkError::Row {
+            path: input.to_path_buf(),
+            line,
+            why,
+        };
+        let record = record.map_err(|e| row_error(e.to_string()))?;
+        let mut pose = [0.0; 7];
+        for (k, &c) in cols.iter().enumerate() {
+            let text = record.get(c).unwrap_or("").trim();
+            pose[k] = text.parse::<f64>().map_err(|_| {
+                row_error(format!(
+                    "column {}: {text:?} is not a number",
+                    POSE_COLUMNS[k]
+                ))
+            })?;
+        }
+        let answer = ik.solve(&pose).map_err(|e| row_error(e.to_string()))?;
+        summary.rows += 1;
+        summary.clamped += usize::from(answer.clamped());
+        summary.extrapolated += usize::from(!answer.extrapolated.is_empty());
+        answers.push(answer);
+    }
+    let n = ik.tendons();
+    crate::fsutil::write_atomic_with(output, |w| {
+        let head: Vec<String> = (0..n)
+            .map(|i| format!("t{i}"))
+            .chain((0..n).map(|i| format!("raw_t{i}")))
+            .collect();
+        writeln!(w, "{}", head.join(","))?;
+        for a in &answers {
+            let cells: Vec<String> = a
+                .tensions
+                .iter()
+                .chain(&a.raw)
+                .map(f64::to_string)
+                .collect();
+            writeln!(w, "{}", cells.join(","))?;
+        }
+        Ok(())
+    })
+    .map_err(|e| file_error(output, e.to_string()))?;
+    Ok(summary)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quaternion_sign_and_length_are_normalised_or_refused() {
+        let p = IkNet::normalise(&[0.0, 0.0, 0.4, -0.6, 0.0, -0.8, 0.0]).unwrap();
+        assert_eq!(&p[3..], &[0.6, 0.0, 0.8, 0.0]);
+        let near = IkNet::normalise(&[0.0, 0.0, 0.4, 1.0005, 0.0, 0.0, 0.0]).unwrap();
+        assert_eq!(near[3], 1.0);
+        for bad in [
+            [0.0, 0.0, 0.4, 0.0, 0.0, 0.0, 0.0],
+            [0.0, 0.0, 0.4, 0.99, -0.05, 0.1, 0.0],
+        ] {
+            assert!(matches!(
+                IkNet::normalise(&bad),
+                Err(IkError::NotUnit { .. })
+            ));
+        }
+        let e = IkNet::normalise(&[1e39 * 1e300, 0.0, 0.4, 1.0, 0.0, 0.0, 0.0]).unwrap_err();
+        assert!(e.to_string().contains("px"), "{e}");
+    }
+}
