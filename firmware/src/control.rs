@@ -1,4 +1,4 @@
-//! The control step (DESIGN §5): a pure, deterministic function of
+//! The control step (docs/design.md §5): a pure, deterministic function of
 //! (state, setpoint, feedback, time) → (state, tension command), with every
 //! safety decision recorded in a [`Status`] word.
 //!
@@ -28,39 +28,41 @@
 
 use core::fmt;
 
+use tendril_shared::messages::command_status as wire;
 use tendril_shared::{CascadeNet, TendonLimits, MAX_TENDONS};
 
 use crate::infer::infer;
 
-/// Pose dimension: `px, py, pz` (m), `qw, qx, qy, qz`.
-pub const POSE_DIM: usize = 7;
+pub use tendril_shared::POSE_DIM;
 
 /// One tension per tendon slot (N); slots past the tendon count are 0.
 pub type Tensions = [f32; MAX_TENDONS];
 
-/// What the control step did this period, as bits. The low bits equal
-/// `tendril_shared::messages::command_status` so `bits()` can be sent as
-/// `TensionCommand::status`; bits 16 and up say why in more detail.
+/// What the control step did this period, as bits. The summary bits are
+/// `tendril_shared::messages::command_status`'s (defined there, taken from
+/// there) so `bits()` can be sent as `TensionCommand::status`; the detail
+/// bits, 16 and up, say why and stay clear of the wire bits (a compile-time
+/// check below).
 #[derive(Clone, Copy, Default, PartialEq, Eq, Hash)]
 pub struct Status(u32);
 
 impl Status {
     /// Watchdog fired (or the net is unusable): tensions are a safe hold.
-    pub const SAFE_HOLD: Status = Status(1 << 0);
+    pub const SAFE_HOLD: Status = Status(wire::SAFE_HOLD);
     /// The setpoint of this step was rejected (NaN/∞, quaternion, workspace).
-    pub const SETPOINT_REJECTED: Status = Status(1 << 1);
+    pub const SETPOINT_REJECTED: Status = Status(wire::SETPOINT_REJECTED);
     /// A tension hit its range or slew limit.
-    pub const SATURATED: Status = Status(1 << 2);
+    pub const SATURATED: Status = Status(wire::SATURATED);
     /// Integral loop enabled but no fresh feedback: correction frozen.
-    pub const PLANT_STALE: Status = Status(1 << 3);
+    pub const PLANT_STALE: Status = Status(wire::PLANT_STALE);
     /// The integral correction changed the pose sent to the net.
-    pub const CORRECTION: Status = Status(1 << 4);
+    pub const CORRECTION: Status = Status(wire::CORRECTION);
     /// A new weight blob replaced the net before this step.
-    pub const WEIGHTS_SWAPPED: Status = Status(1 << 5);
+    pub const WEIGHTS_SWAPPED: Status = Status(wire::WEIGHTS_SWAPPED);
     /// A weight blob was rejected before this step; the old net ran.
-    pub const WEIGHTS_REJECTED: Status = Status(1 << 6);
+    pub const WEIGHTS_REJECTED: Status = Status(wire::WEIGHTS_REJECTED);
     /// No acceptable setpoint yet: holding the initial command.
-    pub const NO_SETPOINT: Status = Status(1 << 8);
+    pub const NO_SETPOINT: Status = Status(wire::NO_SETPOINT);
     /// A new setpoint was accepted this step.
     pub const NEW_SETPOINT: Status = Status(1 << 16);
     /// The setpoint's sequence number was not newer than the last: ignored.
@@ -85,6 +87,20 @@ impl Status {
     pub const BAD_FEEDBACK: Status = Status(1 << 26);
     /// The corrected pose left the box: integral frozen, uncorrected pose used.
     pub const CORRECTION_LIMITED: Status = Status(1 << 27);
+
+    /// Every detail bit (none of them a wire bit).
+    const DETAIL: u32 = Status::NEW_SETPOINT.0
+        | Status::STALE_SETPOINT.0
+        | Status::NONFINITE_SETPOINT.0
+        | Status::BAD_QUATERNION.0
+        | Status::OUT_OF_WORKSPACE.0
+        | Status::NONFINITE_OUTPUT.0
+        | Status::RANGE_CLAMPED.0
+        | Status::SLEW_LIMITED.0
+        | Status::CLOCK_FAULT.0
+        | Status::NET_MISMATCH.0
+        | Status::BAD_FEEDBACK.0
+        | Status::CORRECTION_LIMITED.0;
 
     /// No bits set.
     pub const fn empty() -> Status {
@@ -117,6 +133,9 @@ impl Status {
     }
 }
 
+// The detail bits must not change the meaning of a status word on the wire.
+const _: () = assert!(Status::DETAIL & wire::WIRE_MASK == 0);
+
 impl core::ops::BitOr for Status {
     type Output = Status;
     fn bitor(self, rhs: Status) -> Status {
@@ -137,7 +156,7 @@ impl fmt::Debug for Status {
 }
 
 /// Integral outer loop: `c += ki · (p_setpoint − p_measured) · dt`, applied
-/// to the setpoint before inference (DESIGN §5: removes the net's
+/// to the setpoint before inference (docs/design.md §5: removes the net's
 /// steady-state error). `ki = 0` disables it.
 ///
 /// With a setpoint tangent ([`Setpoint::tangent`]) only the lateral error is

@@ -5,7 +5,7 @@
 //! `exp` is `tendril_shared`'s own plain-`f32` polynomial, not a libm call).
 
 use tendril_shared::net::ROW_PAD;
-use tendril_shared::{Activation, CascadeNet};
+use tendril_shared::{weight_capacity, Activation, CascadeNet};
 
 /// Dot product over the first `8 ⌊n/8⌋` products of the common length `n`
 /// of `w` and `a`, with four interleaved partial sums (`s[i mod 4] += w_i a_i`,
@@ -59,19 +59,23 @@ fn mac8(w: &[f32], a: &[f32], blocks: usize) -> [f32; 4] {
         w8.get(..blocks).unwrap_or(w8),
         a8.get(..blocks).unwrap_or(a8),
     );
-    let mut s = [0.0f32; 4];
+    let [mut s0, mut s1, mut s2, mut s3] = [0.0f32; 4];
     // Lane j of the four sums only ever sees products j, j+4, j+8, … in
     // order, so a SIMD build (x86 SSE: one `mulps` + `addps` per four
     // products) rounds exactly like the scalar M4 code.
     for (w8, a8) in w8.iter().zip(a8) {
-        for j in 0..4 {
-            s[j] += w8[j] * a8[j];
-        }
-        for j in 0..4 {
-            s[j] += w8[j + 4] * a8[j + 4];
-        }
+        let [w0, w1, w2, w3, w4, w5, w6, w7] = *w8;
+        let [a0, a1, a2, a3, a4, a5, a6, a7] = *a8;
+        s0 += w0 * a0;
+        s1 += w1 * a1;
+        s2 += w2 * a2;
+        s3 += w3 * a3;
+        s0 += w4 * a4;
+        s1 += w5 * a5;
+        s2 += w6 * a6;
+        s3 += w7 * a7;
     }
-    s
+    [s0, s1, s2, s3]
 }
 
 /// The whole blocks of eight at the start of `s` (what `<[f32]>::as_chunks`
@@ -191,26 +195,37 @@ pub fn normalise<const IN: usize, const H: usize, const OUT: usize, const W: usi
 /// run the same padded sums in the same order, so they agree bit for bit.
 ///
 /// No checks on `x`: a NaN or huge pose gives NaN or extrapolated tensions,
-/// which the control step filters. An empty net gives all zeros.
+/// which the control step filters. An empty net (no outputs) gives all
+/// zeros, as it has no output to compute.
+///
+/// There is no bad-shape case to report: a `CascadeNet` exists only with a
+/// shape that fits its capacity (every constructor checks), and the storage
+/// bound of the largest such net is checked at compile time here, so every
+/// padded read below is in bounds for every value of the type.
 pub fn infer<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
     net: &CascadeNet<IN, H, OUT, W>,
     x: &[f32; IN],
 ) -> [f32; OUT] {
+    const {
+        assert!(
+            W >= weight_capacity(IN, H, OUT),
+            "inference needs the weight storage of the largest net of its capacity"
+        );
+    }
     let shape = net.shape();
-    let (nh, no) = (shape.hidden, shape.outputs);
+    // `min` is a no-op for every net a constructor made (hidden ≤ H); it
+    // makes the bound below hold for the type itself. The outputs are the
+    // `no ≤ OUT` output ranges the last loop zips with.
+    let nh = shape.hidden.min(H);
     let w: &[f32] = net.weights();
     let out_start = CascadeNet::<IN, H, OUT, W>::hidden_row_offset(nh);
     let row_len = 1 + IN + nh;
-    // The one bounds check of the whole inference. Row `r` (hidden or
-    // output) starts at `start_r` and its padded dot product reads
-    // `[start_r, start_r + 8⌈len_r/8⌉) ⊂ [start_r, start_r + len_r + 7)`
-    // of the weights, all inside `[0, out_start + no·row_len + ROW_PAD)`,
-    // and `[0, 8⌈len_r/8⌉) ⊂ [0, 1 + IN + nh + 7)` of the features
-    // (`nh ≤ H`). A decoded net always passes (the decoder checked exactly
-    // this storage bound); anything else gives zeros.
-    if nh > H || no > OUT || out_start + no * row_len + ROW_PAD > w.len() {
-        return [0.0; OUT];
-    }
+    // Row `r` (hidden or output) starts at `start_r` and its padded dot
+    // product reads `[start_r, start_r + 8⌈len_r/8⌉) ⊂ [start_r, start_r +
+    // len_r + 7)` of the weights, all inside `[0, out_start + no·row_len +
+    // ROW_PAD) ⊂ [0, weight_capacity(IN, H, OUT)) ⊂ [0, W)` (nh ≤ H, no ≤
+    // OUT, and the compile-time check above), and `[0, 8⌈len_r/8⌉) ⊂ [0, 1
+    // + IN + nh + 7)` of the features.
     let mut f = Features {
         one: 1.0,
         x: normalise(net, x),
@@ -233,8 +248,8 @@ pub fn infer<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
     let mut start = out_start;
     for (yo, (&lo, &hi)) in y.iter_mut().zip(ranges) {
         // SAFETY: output row `o` starts at `out_start + o·row_len` with
-        // `o < no`; its padded read is inside `w` and the features by the
-        // check at the top.
+        // `o < no` (`y` zips with the `no` output ranges); its padded read
+        // is inside `w` and the features by the bound above.
         let s = unsafe { dot8_raw(w.as_ptr().add(start), feats.as_ptr(), blocks) };
         start += row_len;
         *yo = lo + out_act.apply(s) * (hi - lo);
@@ -243,8 +258,8 @@ pub fn infer<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
 }
 
 /// The cascade's hidden units in order: `h_k = act(row_k · features)`, each
-/// row's dot product padded to whole blocks of 8. The caller checked that
-/// the `nh` rows and their padding lie inside `w` ([`infer`]).
+/// row's dot product padded to whole blocks of 8. The caller guarantees
+/// that the `nh` rows and their padding lie inside `w` ([`infer`]).
 #[inline(always)]
 fn hidden_layer<const IN: usize, const H: usize>(
     w: &[f32],
@@ -256,8 +271,8 @@ fn hidden_layer<const IN: usize, const H: usize>(
     for k in 0..nh.min(H) {
         let row_len = 1 + IN + k;
         // SAFETY: row `k < nh` and its padding lie inside `w`, and the
-        // first `8⌈row_len/8⌉ ≤ 1 + IN + H + 7` features inside `f`, as
-        // `infer` checked; the pointers are taken afresh for each row.
+        // first `8⌈row_len/8⌉ ≤ 1 + IN + H + 7` features inside `f`, by
+        // `infer`'s bound; the pointers are taken afresh for each row.
         let s = unsafe {
             dot8_raw(
                 w.as_ptr().add(start),
@@ -273,7 +288,7 @@ fn hidden_layer<const IN: usize, const H: usize>(
 }
 
 /// [`dot8`] over `8 blocks` entries at raw pointers, without bounds checks
-/// (the inference checks its whole layout once instead of once per row).
+/// (the inference's layout is in bounds by construction, see [`infer`]).
 ///
 /// # Safety
 /// `w` and `a` must be valid for reads of `8 blocks` `f32`s.

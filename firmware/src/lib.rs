@@ -6,10 +6,27 @@
 //! - [`mod@infer`]: pose → tensions through a decoded [`tendril_shared::CascadeNet`];
 //! - [`control`]: the pure control step and its [`control::Status`] word;
 //! - [`swap`]: hot swap of the weights (flash default + one RAM slot on the MCU);
-//! - [`vectors`]: the test-vector format and the runner shared by the MCU
-//!   binary and the host parity test.
+//! - `vectors` and `synth` (cargo feature `harness`, off by default):
+//!   the test-vector format and runner shared by the MCU test image and the
+//!   host parity test, and a deterministic synthetic net; test harnesses,
+//!   not part of a controller build.
 #![no_std]
 #![deny(missing_docs)]
+// Panic freedom is checked, not promised: no unwrap/expect/panic/indexing
+// outside tests (CI also checks that `tendril-fw-core` links no
+// `core::panicking` symbol: scripts/check-panic-free).
+#![cfg_attr(
+    not(test),
+    deny(
+        clippy::unwrap_used,
+        clippy::expect_used,
+        clippy::panic,
+        clippy::indexing_slicing,
+        clippy::unreachable,
+        clippy::todo,
+        clippy::unimplemented
+    )
+)]
 
 #[cfg(test)]
 extern crate std;
@@ -20,7 +37,9 @@ mod tests;
 pub mod control;
 pub mod infer;
 pub mod swap;
+#[cfg(any(test, feature = "harness"))]
 pub mod synth;
+#[cfg(any(test, feature = "harness"))]
 pub mod vectors;
 
 pub use control::{
@@ -31,22 +50,16 @@ pub use infer::infer;
 pub use swap::{FlashSlot, NetSlots, NetStore, SwapError};
 
 /// Capacity the MCU binary is built with: at most this many hidden units
-/// (the trainer's cap, so every exported net fits).
-pub const MCU_MAX_HIDDEN: usize = 64;
+/// (`tendril_shared::MAX_HIDDEN`, the trainer's cap, so every exported net fits).
+pub const MCU_MAX_HIDDEN: usize = tendril_shared::MAX_HIDDEN;
 
-/// Packed weight storage of an [`McuNet`]:
+/// Packed weight storage of an [`McuNet`] (`tendril_shared::MAX_WEIGHTS`):
 /// [`tendril_shared::weight_capacity`]`(7, 64, 8)` = 3,111 `f32` (12.2 KiB).
-pub const MCU_WEIGHTS: usize =
-    tendril_shared::weight_capacity(POSE_DIM, MCU_MAX_HIDDEN, tendril_shared::MAX_TENDONS);
+pub const MCU_WEIGHTS: usize = tendril_shared::MAX_WEIGHTS;
 
-/// The MCU binary's net type: 7 pose inputs, [`MCU_MAX_HIDDEN`] hidden
-/// units, up to 8 tendons.
-pub type McuNet = tendril_shared::CascadeNet<
-    POSE_DIM,
-    MCU_MAX_HIDDEN,
-    { tendril_shared::MAX_TENDONS },
-    MCU_WEIGHTS,
->;
+/// The MCU binary's net type, `tendril_shared::IkNet`: 7 pose inputs,
+/// [`MCU_MAX_HIDDEN`] hidden units, up to 8 tendons.
+pub type McuNet = tendril_shared::IkNet;
 
 /// The MCU binary's net store: [`DEFAULT_NET`] in flash plus one RAM slot
 /// for hot-swapped updates.

@@ -1,4 +1,4 @@
-//! Hot swap of the running net (DESIGN §5). A new blob is validated
+//! Hot swap of the running net (docs/design.md §5). A new blob is validated
 //! completely (structure, capacity, CRC, finite values, ranges, and the
 //! robot's input/output counts) before a single byte of any net is written,
 //! so a rejected blob changes nothing and the next control step runs on the

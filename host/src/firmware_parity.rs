@@ -4,7 +4,8 @@
 //! vectors, and compare every inference and control-step line (≤ 1e-6
 //! relative; the code is written to be bit-identical). Also reads the
 //! binary's own measurements: instructions per inference (SysTick under
-//! `-icount shift=0`) against the budget, and the painted stack.
+//! `-icount shift=0`) against its budget (2.5 per multiply-accumulate + 45
+//! per sigmoid), and the painted stack.
 //!
 //! The main job runs this on `out/model.tnet`; the QEMU test in `tests/`
 //! runs it on the committed default net. It needs the source checkout (to
@@ -49,7 +50,7 @@ pub struct ParityReport {
     pub max_relative_difference: f64,
     /// M4F instructions per inference (QEMU `-icount shift=0`), if printed.
     pub instructions_per_inference: Option<f64>,
-    /// The budget: 2.5 per multiply-accumulate + 45 per sigmoid.
+    /// The instruction budget: 2.5 per multiply-accumulate + 45 per sigmoid.
     pub instruction_budget: Option<f64>,
     /// Stack high-water mark of the vector run (bytes, painted stack).
     pub stack_bytes: Option<u64>,
@@ -105,7 +106,8 @@ pub fn build_mcu_binary(
 ) -> Result<PathBuf, ParityError> {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let mut cmd = Command::new(cargo);
-    cmd.args(["build", "-p", "tendril-firmware", "--bin", "tendril-fw"])
+    cmd.args(["build", "-p", "tendril-firmware", "--features", "harness"])
+        .args(["--bin", "tendril-fw"])
         .args(["--release", "--target", TARGET])
         .env("CARGO_TARGET_DIR", target_dir)
         .current_dir(root);

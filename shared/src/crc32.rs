@@ -6,16 +6,18 @@ const POLY: u32 = 0xEDB8_8320;
 
 const fn make_table() -> [u32; 256] {
     let mut table = [0u32; 256];
-    let mut i = 0;
-    while i < 256 {
-        let mut c = i as u32;
+    let mut i = 0u32;
+    let mut rest: &mut [u32] = &mut table;
+    while let [slot, tail @ ..] = rest {
+        let mut c = i;
         let mut k = 0;
         while k < 8 {
             c = if c & 1 != 0 { POLY ^ (c >> 1) } else { c >> 1 };
             k += 1;
         }
-        table[i] = c;
+        *slot = c;
         i += 1;
+        rest = tail;
     }
     table
 }
@@ -42,8 +44,10 @@ impl Crc32 {
     pub fn update(&mut self, bytes: &[u8]) {
         let mut c = self.0;
         for &b in bytes {
-            // The index is masked to 0..=255, so it can never be out of range.
-            c = TABLE[((c ^ u32::from(b)) & 0xFF) as usize] ^ (c >> 8);
+            // The index is masked to 0..=255: never out of range, and the
+            // compiler drops the `get`'s bounds check.
+            let entry = TABLE.get(((c ^ u32::from(b)) & 0xFF) as usize);
+            c = entry.copied().unwrap_or(0) ^ (c >> 8);
         }
         self.0 = c;
     }

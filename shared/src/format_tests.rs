@@ -124,6 +124,40 @@ fn round_trip_preserves_every_value_in_the_documented_layout() {
 }
 
 #[test]
+fn shape_encoded_len_is_the_encoders_length() {
+    // Shapes whose varints (dimensions and array lengths) take 1, 2 and 3
+    // bytes: 127/128 weights, 16,384+ weights.
+    for (i, h, o) in [
+        (7, 0, 1),
+        (7, 3, 4),
+        (1, 0, 127),
+        (7, 64, 8),
+        (16, 120, 16),
+        (7, 200, 8),
+    ] {
+        let owned = Owned::new(i, h, o);
+        let shape = owned.shape;
+        assert_eq!(
+            shape.encoded_len(),
+            encoded_len(&owned.view()).unwrap(),
+            "{shape:?}"
+        );
+        assert_eq!(shape.encoded_len(), owned.blob().len(), "{shape:?}");
+    }
+    // The bound `messages` checks at compile time: the largest net fits.
+    let max = Shape {
+        inputs: crate::POSE_DIM,
+        hidden: crate::MAX_HIDDEN,
+        outputs: crate::MAX_TENDONS,
+    };
+    // 3,134 floats (ranges 2·7 + 2·8, hidden 64·8 + 64·63/2 = 2,528,
+    // outputs 8·72 = 576) = 12,536 B; magic 4, version 1, dims 3,
+    // activations 2, six lengths 1+1+1+1+2+2 = 8, CRC 4.
+    assert_eq!(max.encoded_len(), 12_558);
+    assert!(max.encoded_len() <= crate::messages::WEIGHT_UPDATE_CAPACITY);
+}
+
+#[test]
 fn row_offsets_sum_the_row_lengths() {
     let s = Shape {
         inputs: 7,

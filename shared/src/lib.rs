@@ -3,10 +3,25 @@
 //! versioned `.tnet` weight format.
 #![no_std]
 #![deny(missing_docs)]
+// Panic freedom is checked, not promised: the firmware links this crate.
+#![cfg_attr(
+    not(test),
+    deny(
+        clippy::unwrap_used,
+        clippy::expect_used,
+        clippy::panic,
+        clippy::indexing_slicing,
+        clippy::unreachable,
+        clippy::todo,
+        clippy::unimplemented
+    )
+)]
 
 #[cfg(any(feature = "std", test))]
 extern crate std;
 
+pub mod activation;
+pub mod capacity;
 pub mod crc32;
 pub mod limits;
 pub mod messages;
@@ -16,11 +31,13 @@ pub mod tnet;
 #[cfg(test)]
 mod format_tests;
 
-pub use limits::{LimitsError, TendonLimits, MAX_TENDONS};
+pub use activation::Activation;
+pub use capacity::{IkNet, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS, POSE_DIM};
+pub use limits::{LimitsError, TendonLimits};
 pub use net::{weight_capacity, CascadeNet, Checked, NetHeader, Row};
 #[cfg(feature = "std")]
 pub use tnet::encode_to_vec;
-pub use tnet::{encode, encoded_len, Activation, Shape, TnetError, TnetView};
+pub use tnet::{encode, encoded_len, Shape, TnetError, TnetView};
 
 /// `encode` into a fresh vector, for this crate's tests (no `std` feature needed).
 #[cfg(test)]

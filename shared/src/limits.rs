@@ -2,8 +2,7 @@
 //! `[0, max_tension]` (tendons can only pull) and the slew rate (how fast a
 //! motor may change its tension, N/s).
 
-/// The most tendons any tendril robot has (robot files allow 1–8).
-pub const MAX_TENDONS: usize = 8;
+pub use crate::capacity::MAX_TENDONS;
 
 /// Why a set of limits was refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]

@@ -1,5 +1,5 @@
 //! Fixed-size, `#[repr(C)]` messages of the planner → controller → plant loop
-//! (DESIGN §6). They travel through iceoryx2 shared memory as plain bytes, so
+//! (docs/design.md §6). They travel through iceoryx2 shared memory as plain bytes, so
 //! every field is a number or an array of numbers (no pointers, no `bool`, no
 //! enums with invalid bit patterns) and the layout is pinned by tests below.
 //! The host wraps them for iceoryx2 (`ZeroCopySend`); this crate stays
@@ -11,11 +11,24 @@
 //! processes on one machine, so receive time minus stamp is the one-way
 //! latency).
 
-pub use crate::limits::MAX_TENDONS;
+pub use crate::capacity::MAX_TENDONS;
+use crate::capacity::{MAX_HIDDEN, POSE_DIM};
+use crate::tnet::Shape;
 
-/// Bytes a [`WeightUpdate`] can carry: enough for a `.tnet` of 7 inputs,
-/// 4 outputs and well over 64 hidden units (≈ 13 KiB at 64 units).
+/// Bytes a [`WeightUpdate`] can carry: more than twice the largest net a
+/// controller accepts (12.5 KiB for 7-64-8; checked at compile time).
 pub const WEIGHT_UPDATE_CAPACITY: usize = 32 * 1024;
+
+const _: () = assert!(
+    Shape {
+        inputs: POSE_DIM,
+        hidden: MAX_HIDDEN,
+        outputs: MAX_TENDONS,
+    }
+    .encoded_len()
+        <= WEIGHT_UPDATE_CAPACITY,
+    "the largest net must fit a WeightUpdate"
+);
 
 /// Sequence number and send time, first field of every message.
 #[repr(C)]
@@ -64,7 +77,14 @@ pub struct Setpoint {
 }
 
 /// Bits of [`TensionCommand::status`]: what the controller did this period.
+///
+/// These are the one definition of the wire bits: the firmware's
+/// `control::Status` takes its summary bits from here and keeps its detail
+/// bits above [`command_status::WIRE_MASK`] (checked at compile time there).
 pub mod command_status {
+    /// The bits this module defines (the low 16); a controller may send
+    /// more detailed bits above them.
+    pub const WIRE_MASK: u32 = 0xFFFF;
     /// The setpoint watchdog fired: tensions are a safe hold, not tracking.
     pub const SAFE_HOLD: u32 = 1 << 0;
     /// The latest setpoint was rejected (NaN/∞, bad quaternion, out of workspace).
@@ -83,6 +103,17 @@ pub mod command_status {
     pub const OVERRUN: u32 = 1 << 7;
     /// No setpoint has been received yet: holding the initial tensions.
     pub const NO_SETPOINT: u32 = 1 << 8;
+
+    const ALL: u32 = SAFE_HOLD
+        | SETPOINT_REJECTED
+        | SATURATED
+        | PLANT_STALE
+        | CORRECTION
+        | WEIGHTS_SWAPPED
+        | WEIGHTS_REJECTED
+        | OVERRUN
+        | NO_SETPOINT;
+    const _: () = assert!(ALL & !WIRE_MASK == 0, "wire bits stay in WIRE_MASK");
 }
 
 /// Tendon tensions to apply, controller → plant.
@@ -137,7 +168,7 @@ pub struct PlantState {
     pub reserved: u32,
 }
 
-/// A new `.tnet` for the running controller (hot swap, DESIGN §5): the
+/// A new `.tnet` for the running controller (hot swap, docs/design.md §5): the
 /// controller validates the bytes fully before the swap and keeps the old
 /// net on any error.
 #[repr(C)]
@@ -181,7 +212,7 @@ impl WeightUpdate {
             len: bytes.len() as u32,
             ..WeightUpdate::default()
         };
-        msg.bytes[..bytes.len()].copy_from_slice(bytes);
+        msg.bytes.get_mut(..bytes.len())?.copy_from_slice(bytes);
         Some(msg)
     }
 }

@@ -103,6 +103,51 @@ fn prefix<T>(a: &[T], n: usize) -> &[T] {
     a.get(..n).unwrap_or(a)
 }
 
+/// `s[i]` without a panic path, usable in `const fn` (`<[T]>::get` is not).
+const fn get(s: &[f32], i: usize) -> Option<f32> {
+    match s.split_at_checked(i) {
+        Some((_, [v, ..])) => Some(*v),
+        _ => None,
+    }
+}
+
+/// `s[i] = v` without a panic path, usable in `const fn`; whether `i` was
+/// in bounds.
+const fn set(s: &mut [f32], i: usize, v: f32) -> bool {
+    match s.split_at_mut_checked(i) {
+        Some((_, [slot, ..])) => {
+            *slot = v;
+            true
+        }
+        _ => false,
+    }
+}
+
+/// Copy the first `n` normalisation ranges `src` into `dst`, refusing an
+/// empty one (`hi <= lo`) as [`TnetError::EmptyRange`] of `field`; `const`
+/// for [`CascadeNet::from_view`].
+const fn copy_ranges(
+    field: Field,
+    src: (&[f32], &[f32]),
+    n: usize,
+    dst: (&mut [f32], &mut [f32]),
+) -> Result<(), TnetError> {
+    let mut i = 0;
+    while i < n {
+        let (Some(lo), Some(hi)) = (get(src.0, i), get(src.1, i)) else {
+            return Err(TnetError::Malformed);
+        };
+        if hi <= lo {
+            return Err(TnetError::EmptyRange { field, index: i });
+        }
+        if !(set(dst.0, i, lo) && set(dst.1, i, hi)) {
+            return Err(TnetError::Malformed);
+        }
+        i += 1;
+    }
+    Ok(())
+}
+
 /// What the decoder learnt from a `.tnet` it has fully validated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct NetHeader {
@@ -444,54 +489,49 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
                 s.output_weight_count(),
             ),
         ];
-        let mut a = 0;
-        while a < arrays.len() {
-            let (field, values, expected) = arrays[a];
-            if values.len() != expected {
+        let mut rest: &[(Field, &[f32], usize)] = &arrays;
+        while let [(field, values, expected), tail @ ..] = rest {
+            if values.len() != *expected {
                 return Err(TnetError::LengthMismatch {
-                    field,
-                    expected,
+                    field: *field,
+                    expected: *expected,
                     found: values.len(),
                 });
             }
             let mut i = 0;
-            while i < values.len() {
-                if !values[i].is_finite() {
-                    return Err(TnetError::NonFinite { field, index: i });
+            let mut vs: &[f32] = values;
+            while let [v, more @ ..] = vs {
+                if !v.is_finite() {
+                    return Err(TnetError::NonFinite {
+                        field: *field,
+                        index: i,
+                    });
                 }
                 i += 1;
+                vs = more;
             }
-            a += 1;
+            rest = tail;
         }
         let mut net = Self::empty();
-        let mut i = 0;
-        while i < ni {
-            let (lo, hi) = (view.input_lo[i], view.input_hi[i]);
-            if hi <= lo {
-                return Err(TnetError::EmptyRange {
-                    field: Field::InputLo,
-                    index: i,
-                });
-            }
-            net.input_lo[i] = lo;
-            net.input_hi[i] = hi;
-            i += 1;
+        if let Err(e) = copy_ranges(
+            Field::InputLo,
+            (view.input_lo, view.input_hi),
+            ni,
+            (&mut net.input_lo, &mut net.input_hi),
+        ) {
+            return Err(e);
         }
-        let mut o = 0;
-        while o < no {
-            let (lo, hi) = (view.output_lo[o], view.output_hi[o]);
-            if hi <= lo {
-                return Err(TnetError::EmptyRange {
-                    field: Field::OutputLo,
-                    index: o,
-                });
-            }
-            net.output_lo[o] = lo;
-            net.output_hi[o] = hi;
-            o += 1;
+        if let Err(e) = copy_ranges(
+            Field::OutputLo,
+            (view.output_lo, view.output_hi),
+            no,
+            (&mut net.output_lo, &mut net.output_hi),
+        ) {
+            return Err(e);
         }
-        // Every index below is in bounds: lengths were checked above and
-        // `weights_needed(IN, nh, no) <= W`.
+        // Every index below is in bounds (lengths were checked above and
+        // `weights_needed(IN, nh, no) <= W`); `get`/`set` only keep the
+        // code free of panic paths.
         let mut k = 0;
         while k < nh + no {
             let (src, file_at, start, hidden) = if k < nh {
@@ -513,7 +553,12 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
                 } else {
                     start + IN + c - ni
                 };
-                net.weights[at] = src[file_at + c];
+                let Some(w) = get(src, file_at + c) else {
+                    return Err(TnetError::Malformed);
+                };
+                if !set(&mut net.weights, at, w) {
+                    return Err(TnetError::Malformed);
+                }
                 c += 1;
             }
             k += 1;

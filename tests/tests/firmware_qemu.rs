@@ -1,9 +1,9 @@
-//! Parity of the firmware core on the MCU and on the host (issue 6): build
+//! Parity of the firmware core on the MCU and on the host: build
 //! the `thumbv7em-none-eabihf` binary, run it in QEMU (`mps2-an386`,
 //! Cortex-M4F), and compare every printed inference and control command with
 //! the host build of the same code on the same files, to ≤ 1e-6 relative
-//! (the code is written to be bit-identical; the tolerance is the issue's
-//! contract).
+//! (the code is written to be bit-identical; the tolerance is the
+//! contract, docs/design.md §5).
 //!
 //! The MCU runs the net its build script compiled into flash
 //! (`firmware/vectors/default.tnet`, the default exported net, 7-64-4); the
@@ -14,8 +14,11 @@
 //! blob). A second test builds the binary with `TENDRIL_FW_NET` pointing at
 //! another file and checks that net is the one that runs.
 //!
-//! Without `qemu-system-arm` or the target this test skips loudly, unless
-//! `CI=true`, where it fails: CI installs both (`.ci/run`).
+//! Without `qemu-system-arm` or the target these tests fail with a
+//! one-line "install …" message: a test that cannot run does not pass.
+//! `scripts/test` checks both first and, when one is missing and cannot be
+//! installed, runs every other test and reports these two as not run
+//! (non-zero exit); CI installs both (`.ci/run`).
 
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -28,10 +31,6 @@ use tendril_tests::workspace_root;
 
 /// Builds share one target directory (and the ELF path): one at a time.
 static BUILD: Mutex<()> = Mutex::new(());
-
-fn in_ci() -> bool {
-    std::env::var("CI").as_deref() == Ok("true")
-}
 
 /// Build the MCU binary in its own target directory (the outer `cargo test`
 /// holds the lock on the normal one), with `TENDRIL_FW_NET` set to `net` or
@@ -138,24 +137,20 @@ fn check_parity(flash_net: &Path, env: bool, label: &str) -> String {
     mcu_out
 }
 
-fn prerequisites() -> bool {
+/// Fail (not pass) when the test cannot run, naming what to install.
+fn require_prerequisites() {
     match parity::prerequisites() {
-        Ok(()) => true,
-        Err(e @ ParityError::Unavailable(_)) if !in_ci() => {
-            eprintln!("\n*** SKIPPING firmware QEMU parity test: {e} ***\n");
-            false
+        Ok(()) => {}
+        Err(ParityError::Unavailable(what)) => {
+            panic!("firmware QEMU parity test cannot run: {what}")
         }
-        Err(e) => panic!(
-            "firmware parity test cannot run (CI installs qemu-system-arm and the target): {e}"
-        ),
+        Err(e) => panic!("firmware QEMU parity test cannot run: {e}"),
     }
 }
 
 #[test]
 fn mcu_build_under_qemu_matches_host_build() {
-    if !prerequisites() {
-        return;
-    }
+    require_prerequisites();
     let default = workspace_root().join("firmware/vectors/default.tnet");
     let out = check_parity(&default, false, "default");
     // The default exported net: 7 inputs, 64 hidden units, 4 tendons.
@@ -164,9 +159,7 @@ fn mcu_build_under_qemu_matches_host_build() {
 
 #[test]
 fn tendril_fw_net_selects_the_flash_net() {
-    if !prerequisites() {
-        return;
-    }
+    require_prerequisites();
     // Any valid net for the same robot will do: the 7-12-4 update blob.
     let other = workspace_root().join("firmware/vectors/swap.tnet");
     let out = check_parity(&other, true, "env");

@@ -11,7 +11,18 @@
 //!
 //! `cargo build -p tendril-firmware --bin tendril-fw-core --release --target thumbv7em-none-eabihf`
 //! then `llvm-size` on `target/thumbv7em-none-eabihf/release/tendril-fw-core`.
+//! `scripts/check-panic-free` (run by CI) checks that this image links no
+//! `core::panicking` symbol.
 #![cfg_attr(target_os = "none", no_std, no_main)]
+#![deny(
+    clippy::unwrap_used,
+    clippy::expect_used,
+    clippy::panic,
+    clippy::indexing_slicing,
+    clippy::unreachable,
+    clippy::todo,
+    clippy::unimplemented
+)]
 
 #[cfg(not(target_os = "none"))]
 fn main() {
