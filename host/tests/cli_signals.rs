@@ -15,35 +15,9 @@ fn tendril() -> Command {
     Command::new(env!("CARGO_BIN_EXE_tendril"))
 }
 
-/// `tendril fk … | head -1` where the reader is gone before the first write:
-/// the process must end without a panic (it used to exit 101, "failed
-/// printing to stdout").
-#[test]
-fn closed_stdout_ends_fk_quietly() {
-    for args in [
-        vec!["fk", "--tensions", "2,0,0,0"],
-        vec!["fk", "--tensions", "2,0,0,0", "--json", "--shape", "2000"],
-    ] {
-        let mut child = tendril()
-            .args(&args)
-            .arg("--robot")
-            .arg(robot())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("start tendril");
-        // Close the only reader before the child can write: its first write
-        // meets a broken pipe.
-        drop(child.stdout.take());
-        let out = child.wait_with_output().expect("wait for tendril");
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert_ne!(out.status.code(), Some(101), "{args:?}: {stderr}");
-        assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
-        assert!(!stderr.contains("Broken pipe"), "{args:?}: {stderr}");
-    }
-}
-
-/// The same through a real `head -1`, as a user types it.
+/// `tendril fk … | head`: the reader leaves after one byte of a long
+/// output, so the next write meets a broken pipe. The process must end
+/// without a panic (it used to exit 101, "failed printing to stdout").
 #[test]
 fn fk_piped_into_head_exits_without_a_panic() {
     let script = format!(
