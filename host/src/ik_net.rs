@@ -10,6 +10,7 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::dataset::io::format_value;
 use crate::dataset::POSE_COLUMNS;
 use crate::learn::cascor::export::{infer, read_tnet, HostNet};
 use crate::robot::Robot;
@@ -58,8 +59,9 @@ pub enum IkError {
     },
     /// A pose value lies outside the range the net was trained on.
     #[error(
-        "pose {column} = {value} is outside the net's training range [{lo}, {hi}]: the net \
-         would extrapolate (pass --allow-extrapolation to get clamped tensions anyway)"
+        "pose {column} = {} is outside the net's training range [{lo:.6}, {hi:.6}]: the net \
+         would extrapolate (pass --allow-extrapolation to get clamped tensions anyway)",
+        format_value(*value)
     )]
     OutsideTrainedRange {
         /// Column name.
@@ -108,10 +110,17 @@ pub struct IkAnswer {
     pub raw: Vec<f64>,
     /// Pose columns outside the trained range (only with extrapolation allowed).
     pub extrapolated: Vec<&'static str>,
+    /// Tendons whose raw output lay beyond their limits by more than
+    /// [`LIMIT_SLACK`] of the limit: the net asked for an impossible tension.
+    pub beyond_limits: Vec<usize>,
 }
 
+/// Overshoot of a tendon's range, as a fraction of its limit, that clamping
+/// absorbs without flagging: the net's own error near a range end (a few mN).
+pub const LIMIT_SLACK: f64 = 0.01;
+
 impl IkAnswer {
-    /// Whether any tension had to be clamped.
+    /// Whether any tension had to be clamped, however little.
     pub fn clamped(&self) -> bool {
         self.tensions != self.raw
     }
@@ -209,10 +218,18 @@ impl IkNet {
             .zip(&self.max_tension)
             .map(|(&t, &max)| t.clamp(0.0, max))
             .collect();
+        let beyond_limits = raw
+            .iter()
+            .zip(&self.max_tension)
+            .enumerate()
+            .filter(|(_, (&t, &max))| t < -LIMIT_SLACK * max || t > (1.0 + LIMIT_SLACK) * max)
+            .map(|(k, _)| k)
+            .collect();
         Ok(IkAnswer {
             tensions,
             raw,
             extrapolated,
+            beyond_limits,
         })
     }
 }
@@ -222,8 +239,8 @@ impl IkNet {
 pub struct BatchSummary {
     /// Rows answered.
     pub rows: usize,
-    /// Rows with at least one tension clamped to the limits.
-    pub clamped: usize,
+    /// Rows where the net asked for a tension beyond a limit (clamped).
+    pub beyond_limits: usize,
     /// Rows outside the trained ranges (answered: extrapolation allowed).
     pub extrapolated: usize,
 }
@@ -286,7 +303,7 @@ pub fn solve_csv(ik: &IkNet, input: &Path, output: &Path) -> Result<BatchSummary
         }
         let answer = ik.solve(&pose).map_err(|e| row_error(e.to_string()))?;
         summary.rows += 1;
-        summary.clamped += usize::from(answer.clamped());
+        summary.beyond_limits += usize::from(!answer.beyond_limits.is_empty());
         summary.extrapolated += usize::from(!answer.extrapolated.is_empty());
         answers.push(answer);
     }

@@ -58,9 +58,9 @@ pub fn run(a: IkArgs) -> anyhow::Result<()> {
                 answer.extrapolated.join(", ")
             );
         }
-        if answer.clamped() {
+        if !answer.beyond_limits.is_empty() {
             log::warn!(
-                "net output {:?} N clamped to the robot's limits",
+                "net output {:?} N is beyond the robot's limits: clamped",
                 answer.raw
             );
         }
@@ -80,11 +80,11 @@ pub fn run(a: IkArgs) -> anyhow::Result<()> {
     };
     let s = solve_csv(&ik, input, output)?;
     eprintln!(
-        "wrote {} ({} {}, {} clamped, {} extrapolated)",
+        "wrote {} ({} {}, {} beyond the limits and clamped, {} extrapolated)",
         output.display(),
         s.rows,
         if s.rows == 1 { "row" } else { "rows" },
-        s.clamped,
+        s.beyond_limits,
         s.extrapolated
     );
     Ok(())

@@ -71,8 +71,8 @@ pub enum StreamError {
     Sink(#[source] std::io::Error),
 }
 
-/// Samples drawn, ordered and solved at a time: bounds memory (≈ 20 MB of
-/// solutions) whatever the count. A count up to one block draws and orders
+/// Samples drawn, ordered and solved at a time: bounds memory (≈ 10 MB)
+/// whatever the count. A count up to one block draws and orders
 /// exactly as an unblocked run would, so the default 20,000-sample dataset is
 /// the one it always was.
 pub const BLOCK: usize = 32_768;
@@ -123,16 +123,19 @@ where
         done += len;
         let tensions = opts.sampler.draw(len, &max, block_seed(opts.seed, b));
         let order = snake_order(&tensions, &max, SNAKE_CELLS);
-        let outcomes =
-            solve_batch(statics, &tensions, &order, &bar, stop).ok_or(StreamError::Interrupted)?;
+        let outcomes = solve_batch_with(statics, &tensions, &order, &bar, stop, |o| match o {
+            Outcome::Solved(s) => Ok((s.pose(), false)),
+            Outcome::ResolvedCold(s) => Ok((s.pose(), true)),
+            Outcome::Failed(e) => Err(e),
+        })
+        .ok_or(StreamError::Interrupted)?;
         for (t, outcome) in tensions.into_iter().zip(outcomes) {
-            let sol = match outcome {
-                Outcome::Solved(s) => s,
-                Outcome::ResolvedCold(s) => {
-                    tally.resolved_cold += 1;
-                    s
+            let pose = match outcome {
+                Ok((pose, resolved_cold)) => {
+                    tally.resolved_cold += usize::from(resolved_cold);
+                    pose
                 }
-                Outcome::Failed(e) => {
+                Err(e) => {
                     tally.dropped += 1;
                     if tally.failures.len() < FAILURES_KEPT {
                         tally.failures.push((t, e));
@@ -140,7 +143,6 @@ where
                     continue;
                 }
             };
-            let pose = sol.pose();
             for (k, &x) in t.iter().chain(&pose).enumerate() {
                 tally.lo[k] = tally.lo[k].min(x);
                 tally.hi[k] = tally.hi[k].max(x);
@@ -187,9 +189,26 @@ pub fn solve_batch(
     bar: &ProgressBar,
     stop: &AtomicBool,
 ) -> Option<Vec<Outcome>> {
+    solve_batch_with(statics, tensions, order, bar, stop, |o| o)
+}
+
+/// [`solve_batch`], keeping only `keep(outcome)` of each sample (a solution
+/// carries its warm start, ~0.5 kB, that a caller may not need).
+pub fn solve_batch_with<T, K>(
+    statics: &Statics,
+    tensions: &[Vec<f64>],
+    order: &[usize],
+    bar: &ProgressBar,
+    stop: &AtomicBool,
+    keep: K,
+) -> Option<Vec<T>>
+where
+    T: Send,
+    K: Fn(Outcome) -> T + Sync,
+{
     assert_eq!(order.len(), tensions.len(), "order must be a permutation");
     let chunks: Vec<&[usize]> = order.chunks(CHUNK).collect();
-    let solved: Vec<Option<Vec<(usize, Outcome)>>> = chunks
+    let solved: Vec<Option<Vec<(usize, T)>>> = chunks
         .par_iter()
         .map(|chunk| {
             if stop.load(Ordering::Relaxed) {
@@ -210,7 +229,7 @@ pub fn solve_batch(
                 if let Some(sol) = outcome.solution() {
                     warm = Some(sol.warm.clone());
                 }
-                out.push((i, outcome));
+                out.push((i, keep(outcome)));
             }
             bar.inc(chunk.len() as u64);
             Some(out)
@@ -219,11 +238,11 @@ pub fn solve_batch(
     if stop.load(Ordering::Relaxed) || solved.iter().any(Option::is_none) {
         return None;
     }
-    let mut slots: Vec<Option<Outcome>> = (0..tensions.len()).map(|_| None).collect();
+    let mut slots: Vec<Option<T>> = (0..tensions.len()).map(|_| None).collect();
     for (i, outcome) in solved.into_iter().flatten().flatten() {
         slots[i] = Some(outcome);
     }
-    let outcomes: Vec<Outcome> = slots.into_iter().flatten().collect();
+    let outcomes: Vec<T> = slots.into_iter().flatten().collect();
     assert_eq!(
         outcomes.len(),
         tensions.len(),
