@@ -858,7 +858,6 @@ impl Controller {
             count: out.count as u32,
             status: status.bits() | extra,
             tensions,
-            ..TensionCommand::default()
         };
         self.row[0] = tick.deadline_ns as f64;
         self.row[1] = tick.lateness_ns as f64;

@@ -77,7 +77,7 @@ pub const LOG_HEADER: &str = "t_ns,seq,flags,px,py,pz,qw,qx,qy,qz";
 /// Run the planner process until stopped or done.
 pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
     super::die_with_parent(cfg.supervised)?;
-    if !(cfg.rate_hz > 0.0 && cfg.rate_hz <= 20_000.0) || !(cfg.settle_s >= 0.0) {
+    if !(cfg.rate_hz > 0.0 && cfg.rate_hz <= 20_000.0 && cfg.settle_s >= 0.0) {
         return Err(IpcError::Config(format!(
             "planner rate {} Hz / settle {} s: rate must be in (0, 20000], settle ≥ 0",
             cfg.rate_hz, cfg.settle_s
