@@ -13,6 +13,7 @@ pub mod fsutil;
 pub mod ik_net;
 pub mod interrupt;
 pub mod ipc;
+pub mod kinematics;
 pub mod learn;
 pub mod pipeline;
 pub mod plot;

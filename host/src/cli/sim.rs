@@ -142,11 +142,10 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
         ));
     }
     let label = format!(
-        "trajectory {:?}, correction {:?} ({:?}, ki {}/s), lead {} ms, motor τ {} ms, noise {} mm, \
+        "trajectory {:?}, correction {:?} (ki {}/s), lead {} ms, motor τ {} ms, noise {} mm, \
          {} s, real-time {}, pinned {:?}",
         args.traj.trajectory,
         args.tuning.correction,
-        args.tuning.correction_mode,
         args.tuning.ki,
         args.tuning.lead_ms,
         args.plant.motor_tau_ms,
