@@ -184,7 +184,7 @@ fn latency(samples: usize, mode: Mode) -> (Summary, Summary) {
 
     // A reachable pose in the quick net's box (tip 15 mm off axis).
     let statics = Statics::new(&robot(), SolverSettings::default());
-    let pose = tendril::ipc::trajectory::Lifter::new(&statics)
+    let pose = tendril::kinematics::Lifter::new(&statics)
         .lift([0.015, 0.0])
         .unwrap();
     let pose = pose.map(|v| v as f32);

@@ -10,7 +10,7 @@ use std::path::Path;
 use criterion::{criterion_group, criterion_main, Criterion};
 use nalgebra::Vector2;
 use tendril::ipc::plant::{PlantModel, PlantParams};
-use tendril::ipc::trajectory::bend_tensions;
+use tendril::kinematics::bend_tensions;
 use tendril::robot::Robot;
 use tendril::statics::{SolverSettings, Statics};
 

@@ -11,6 +11,7 @@ pub mod evaluate;
 pub mod firmware_parity;
 pub mod fsutil;
 pub mod ipc;
+pub mod kinematics;
 pub mod learn;
 pub mod pipeline;
 pub mod plot;

@@ -10,7 +10,8 @@
 //! (`--quick-model`) instead, so that path stays covered too.
 
 use std::path::Path;
-use std::process::Command;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
 
 use serde_json::Value;
 use tendril_tests::{tendril_bin, workspace_root};
@@ -335,4 +336,242 @@ fn bad_setpoints_and_a_corrupted_weight_update_are_rejected_without_breaking_the
     assert!(rms <= 1.0, "RMS {rms} mm with rejected inputs");
     assert_eq!(f(&r["plant"]["out_of_range_commands"]), 0.0);
     assert_plant_saw_only_valid_tensions(dir.path());
+}
+
+/// The controller's own statistics file in a sim's output directory.
+fn controller_stats(dir: &Path) -> Value {
+    let text = std::fs::read_to_string(dir.join("controller.json")).expect("controller.json");
+    serde_json::from_str(&text).expect("controller.json is JSON")
+}
+
+#[test]
+fn one_control_law_the_firmware_integral_reaches_the_loop_accuracy() {
+    // The firmware's `control_step` is the only correction law: with it on,
+    // the controller says the firmware correction ran (its CORRECTION status
+    // bit, counted in `correction_cycles` and seen in every logged row) and
+    // the circle tracks to a fifth of a millimetre; with it off, no period
+    // is corrected and the error is larger (IK alone).
+    let common = [
+        "--trajectory",
+        "circle",
+        "--settle",
+        "1.5",
+        "--duration",
+        "6",
+    ];
+    let on = std::thread::spawn(move || sim(&common));
+    let mut off_args = common.to_vec();
+    off_args.extend(["--correction", "off"]);
+    let (off, d_off, _) = sim(&off_args);
+    let (on, d_on, _) = on.join().unwrap();
+    let (rms_on, rms_off) = (
+        f(&on["rms_tracking_error_mm"]),
+        f(&off["rms_tracking_error_mm"]),
+    );
+    assert!(
+        rms_on <= 0.2,
+        "circle RMS {rms_on} mm with the firmware law"
+    );
+    assert!(
+        rms_on < rms_off,
+        "correction did not help: {rms_on} vs {rms_off} mm"
+    );
+    let (c_on, c_off) = (
+        controller_stats(d_on.path()),
+        controller_stats(d_off.path()),
+    );
+    let cycles = f(&c_on["cycles"]);
+    assert!(
+        f(&c_on["correction_cycles"]) > 0.5 * cycles,
+        "firmware correction ran in {} of {cycles} periods",
+        c_on["correction_cycles"]
+    );
+    assert_eq!(f(&c_off["correction_cycles"]), 0.0);
+    // Independently, from the per-period log: the wire status bit.
+    let (h, rows) = csv(&d_on.path().join("controller.csv"));
+    let ist = col(&h, "status");
+    let corrected = rows
+        .iter()
+        .filter(|r| (r[ist] as u32) & tendril_shared::messages::command_status::CORRECTION != 0)
+        .count();
+    assert!(
+        corrected as f64 > 0.5 * rows.len() as f64,
+        "{corrected} of {} rows",
+        rows.len()
+    );
+}
+
+#[test]
+fn a_stuck_loaded_motor_is_detected_and_the_tensions_are_held() {
+    // Tendon 0 pulls toward +x, where the circle starts: it carries load
+    // from the first second of the circle.
+    let (_r, dir, _) = sim(&[
+        "--trajectory",
+        "circle",
+        "--settle",
+        "1",
+        "--duration",
+        "5",
+        "--stuck",
+        "0@3",
+    ]);
+    let c = controller_stats(dir.path());
+    let faults = c["faults_detected"].as_array().expect("faults_detected");
+    let stuck: Vec<&Value> = faults
+        .iter()
+        .filter(|x| x["kind"] == "stuck_motor")
+        .collect();
+    assert_eq!(stuck.len(), 1, "{faults:?}");
+    assert_eq!(stuck[0]["tendon"], 0);
+    let found_ns = f(&stuck[0]["t_ns"]);
+    // When it stuck, from the plant's own log (its MOTOR_STUCK status bit).
+    let (h, rows) = csv(&dir.path().join("plant-0.csv"));
+    let (it, ist) = (col(&h, "t_ns"), col(&h, "status"));
+    let stuck_at = rows
+        .iter()
+        .find(|r| (r[ist] as u32) & tendril_shared::messages::plant_status::MOTOR_STUCK != 0)
+        .expect("the plant never stuck")[it];
+    let latency = (found_ns - stuck_at) * 1e-9;
+    assert!(
+        (0.0..1.0).contains(&latency),
+        "stuck motor detected {latency} s after it stuck"
+    );
+    // Safe hold: from 10 ms after the detection, every command equals the
+    // one before it (the controller's log).
+    let (h, rows) = csv(&dir.path().join("controller.csv"));
+    let (it, i0) = (col(&h, "t_ns"), col(&h, "cmd0"));
+    let after: Vec<&Vec<f64>> = rows.iter().filter(|r| r[it] > found_ns + 10e6).collect();
+    assert!(
+        after.len() > 500,
+        "{} rows after the detection",
+        after.len()
+    );
+    for w in after.windows(2) {
+        assert_eq!(w[0][i0..i0 + 4], w[1][i0..i0 + 4], "tensions moved in hold");
+    }
+}
+
+/// Whether process `pid` is gone (or a zombie nobody reaped yet).
+fn gone(pid: u32) -> bool {
+    match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
+        Err(_) => true,
+        Ok(stat) => stat
+            .rsplit_once(')')
+            .is_some_and(|(_, rest)| rest.trim_start().starts_with('Z')),
+    }
+}
+
+fn wait_gone(pid: u32, within: Duration) -> bool {
+    let deadline = Instant::now() + within;
+    while Instant::now() < deadline {
+        if gone(pid) {
+            return true;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    gone(pid)
+}
+
+fn unique(tag: &str) -> String {
+    format!(
+        "tendril-test-{tag}-{}-{}",
+        std::process::id(),
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.subsec_nanos())
+    )
+}
+
+#[test]
+fn supervised_children_die_with_their_parent() {
+    // A shell starts a plant (`--supervised`) and a controller (the
+    // TENDRIL_SUPERVISED variable) in the background, prints their pids and
+    // exits a second later: both must be gone within a second of that.
+    let prefix = unique("pdeathsig");
+    let script = r#""$0" plant --supervised --prefix "$1" --peer-timeout 0 & echo $!
+TENDRIL_SUPERVISED=1 "$0" controller --prefix "$1" --model firmware/vectors/default.tnet --peer-timeout 0 & echo $!
+sleep 1.5
+exit 0"#;
+    let out = Command::new("sh")
+        .args(["-c", script])
+        .arg(tendril_bin())
+        .arg(&prefix)
+        .current_dir(workspace_root())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .output()
+        .expect("run sh");
+    assert!(out.status.success());
+    let pids: Vec<u32> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| l.trim().parse().expect("a pid"))
+        .collect();
+    assert_eq!(pids.len(), 2);
+    for pid in pids {
+        if !wait_gone(pid, Duration::from_secs(1)) {
+            let _ = Command::new("kill").args(["-9", &pid.to_string()]).status();
+            panic!("child {pid} outlived its parent by more than a second");
+        }
+    }
+}
+
+fn spawn(role: &str, prefix: &str, extra: &[&str]) -> Child {
+    Command::new(tendril_bin())
+        .arg(role)
+        .args(["--prefix", prefix, "--peer-timeout", "0.5"])
+        .args(extra)
+        .current_dir(workspace_root())
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn tendril")
+}
+
+/// Wait up to `within` for `child` to exit; its status and stderr.
+fn exit_of(mut child: Child, within: Duration) -> Option<(std::process::ExitStatus, String)> {
+    let deadline = Instant::now() + within;
+    loop {
+        if let Ok(Some(status)) = child.try_wait() {
+            let mut err = String::new();
+            if let Some(mut e) = child.stderr.take() {
+                use std::io::Read;
+                let _ = e.read_to_string(&mut err);
+            }
+            return Some((status, err));
+        }
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            return None;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn a_process_whose_peers_fall_silent_stops_with_a_clear_error() {
+    let model = ["--model", "firmware/vectors/default.tnet"];
+    // The controller dies: the plant, hearing no commands, stops.
+    let prefix = unique("peers-a");
+    let plant = spawn("plant", &prefix, &[]);
+    let mut controller = spawn("controller", &prefix, &model);
+    std::thread::sleep(Duration::from_secs(3));
+    controller.kill().unwrap();
+    controller.wait().unwrap();
+    let (status, err) = exit_of(plant, Duration::from_secs(3)).expect("plant kept running");
+    assert!(!status.success(), "plant exited 0: {err}");
+    assert!(err.contains("peers lost"), "plant said: {err}");
+
+    // The plant dies and no planner ever came: the controller stops.
+    let prefix = unique("peers-b");
+    let mut plant = spawn("plant", &prefix, &[]);
+    let controller = spawn("controller", &prefix, &model);
+    std::thread::sleep(Duration::from_secs(3));
+    plant.kill().unwrap();
+    plant.wait().unwrap();
+    let (status, err) =
+        exit_of(controller, Duration::from_secs(3)).expect("controller kept running");
+    assert!(!status.success(), "controller exited 0: {err}");
+    assert!(err.contains("peers lost"), "controller said: {err}");
 }

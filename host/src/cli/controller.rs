@@ -1,5 +1,5 @@
 //! `tendril controller`: the firmware control step in a 1 kHz
-//! absolute-deadline loop (DESIGN §5, §6).
+//! absolute-deadline loop (`docs/design.md` §5, §6).
 
 use std::path::PathBuf;
 
@@ -16,15 +16,13 @@ pub enum OnOff {
     Off,
 }
 
-/// Where the integral correction runs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum CorrectionMode {
-    /// Host side: the lateral integral moves the setpoint along the
-    /// robot's reachable poses (default).
-    #[value(name = "host", alias = "arc")]
-    Host,
-    /// The firmware's position-only integral.
-    Fw,
+impl OnOff {
+    fn word(self) -> &'static str {
+        match self {
+            OnOff::On => "on",
+            OnOff::Off => "off",
+        }
+    }
 }
 
 /// Loop and tuning options (shared with `tendril sim`).
@@ -43,16 +41,12 @@ pub struct LoopOpts {
     /// Setpoint silence, in periods, that trips the safe hold.
     #[arg(long, default_value_t = 2.5)]
     pub watchdog_periods: f64,
-    /// Integral correction of the measured tip error.
+    /// Integral correction of the measured tip error: the firmware control
+    /// step's own integral loop (along the planner's statics tangent when the
+    /// setpoint carries one, so the net sees poses like its training data;
+    /// position only otherwise). `off` = IK alone.
     #[arg(long, value_enum, default_value_t = OnOff::On)]
     pub correction: OnOff,
-    /// Where the correction runs: `host` = host side, the lateral integral
-    /// moves the setpoint along the reachable poses (the planner's statics
-    /// tangent; a constant-curvature bend when there is none), so
-    /// the net sees poses like its training data; `fw` = the firmware's
-    /// position-only integral (off the reachable poses: for comparison).
-    #[arg(long, value_enum, default_value_t = CorrectionMode::Host)]
-    pub correction_mode: CorrectionMode,
     /// Integral gain of the correction, 1/s.
     #[arg(long, default_value_t = 10.0)]
     pub ki: f64,
@@ -81,59 +75,44 @@ impl LoopOpts {
             format!("--rate={}", self.rate),
             format!("--spin-us={}", self.spin_us),
             format!("--watchdog-periods={}", self.watchdog_periods),
-            format!(
-                "--correction={}",
-                if self.correction == OnOff::On {
-                    "on"
-                } else {
-                    "off"
-                }
-            ),
+            format!("--correction={}", self.correction.word()),
             format!("--ki={}", self.ki),
-            format!(
-                "--correction-mode={}",
-                if self.correction_mode == CorrectionMode::Host {
-                    "host"
-                } else {
-                    "fw"
-                }
-            ),
             format!("--correction-limit-mm={}", self.correction_limit_mm),
             format!("--correction-window-mm={}", self.correction_window_mm),
             format!("--lead-ms={}", self.lead_ms),
             format!("--slew={}", self.slew),
         ];
         if let Some(rt) = self.realtime {
-            a.push(format!(
-                "--realtime={}",
-                if rt == OnOff::On { "on" } else { "off" }
-            ));
+            a.push(format!("--realtime={}", rt.word()));
         }
         a
     }
 
     /// Fill the loop fields of a controller config.
     pub fn apply(&self, cfg: &mut ControllerConfig) {
-        cfg.rate = self.rate;
+        cfg.rate_hz = self.rate;
         cfg.spin_us = self.spin_us;
         cfg.realtime = self.realtime == Some(OnOff::On);
         cfg.watchdog_periods = self.watchdog_periods;
-        cfg.ki = if self.correction == OnOff::On {
+        cfg.ki_per_s = if self.correction == OnOff::On {
             self.ki
         } else {
             0.0
         };
-        cfg.correction_limit = self.correction_limit_mm * 1e-3;
-        cfg.correction_window = self.correction_window_mm * 1e-3;
-        cfg.firmware_integral = self.correction_mode == CorrectionMode::Fw;
-        cfg.lead = self.lead_ms * 1e-3;
-        cfg.slew_rate = self.slew;
+        cfg.correction_limit_m = self.correction_limit_mm * 1e-3;
+        cfg.correction_window_m = self.correction_window_mm * 1e-3;
+        cfg.lead_s = self.lead_ms * 1e-3;
+        cfg.slew_n_per_s = self.slew;
     }
 }
 
 /// Run the firmware control step at a fixed rate between planner and plant.
 #[derive(Args, Debug)]
 pub struct ControllerArgs {
+    /// The whole configuration as JSON (a `ControllerConfig`, as a launcher
+    /// writes it); the other options are then ignored.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
     /// Robot description file (tension limits).
     #[arg(long, default_value = "robots/seed-4t.toml")]
     pub robot: PathBuf,
@@ -148,6 +127,14 @@ pub struct ControllerArgs {
     /// Stop after this many seconds (default: until SIGTERM or a stop message).
     #[arg(long)]
     pub duration: Option<f64>,
+    /// Stop (non-zero exit) after this many seconds with neither a setpoint
+    /// nor a plant state; 0 = never.
+    #[arg(long, default_value_t = 2.0)]
+    pub peer_timeout: f64,
+    /// Die with the parent process (as `tendril sim` starts it; also when
+    /// the TENDRIL_SUPERVISED environment variable is set).
+    #[arg(long)]
+    pub supervised: bool,
     /// Per-period CSV log.
     #[arg(long)]
     pub log: Option<PathBuf>,
@@ -159,16 +146,28 @@ pub struct ControllerArgs {
     pub cpu: Option<usize>,
 }
 
+impl ControllerArgs {
+    /// The configuration: the `--config` file, or the flags.
+    pub fn config(self) -> anyhow::Result<ControllerConfig> {
+        if let Some(path) = &self.config {
+            return Ok(crate::ipc::read_config(path)?);
+        }
+        let mut cfg = ControllerConfig::new(self.robot, self.model);
+        cfg.prefix = self.prefix;
+        self.tuning.apply(&mut cfg);
+        cfg.duration_s = self.duration;
+        cfg.peer_timeout_s = (self.peer_timeout > 0.0).then_some(self.peer_timeout);
+        cfg.supervised = self.supervised;
+        cfg.log = self.log;
+        cfg.stats = self.stats;
+        cfg.cpu = self.cpu;
+        Ok(cfg)
+    }
+}
+
 /// Run `tendril controller`.
 pub fn run(args: ControllerArgs) -> anyhow::Result<()> {
-    let mut cfg = ControllerConfig::new(args.robot, args.model);
-    cfg.prefix = args.prefix;
-    args.tuning.apply(&mut cfg);
-    cfg.duration = args.duration;
-    cfg.log = args.log;
-    cfg.stats = args.stats;
-    cfg.cpu = args.cpu;
-    let stats = crate::ipc::controller::run(&cfg)?;
+    let stats = crate::ipc::controller::run(&args.config()?)?;
     log::info!(
         "controller: {} cycles, {} overruns, lateness p50 {:.1} µs p99 {:.1} µs",
         stats.cycles,

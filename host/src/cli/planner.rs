@@ -1,4 +1,4 @@
-//! `tendril planner`: stream setpoints along a trajectory (DESIGN §6).
+//! `tendril planner`: stream setpoints along a trajectory (`docs/design.md` §6).
 
 use std::path::PathBuf;
 
@@ -78,30 +78,32 @@ impl TrajectoryOpts {
         let center = [c[0] * 1e-3, c[1] * 1e-3];
         let radius = self.radius_mm * 1e-3;
         Ok(match self.trajectory {
-            Kind::Hold => Shape::Hold(center),
+            Kind::Hold => Shape::Hold { center_m: center },
             Kind::Steps => Shape::Steps {
-                targets: self
+                targets_m: self
                     .targets_mm
                     .split(';')
                     .map(|p| pair(p, "--targets-mm").map(|v| [v[0] * 1e-3, v[1] * 1e-3]))
                     .collect::<anyhow::Result<_>>()?,
-                dwell: self.dwell,
+                dwell_s: self.dwell,
             },
             Kind::Circle => Shape::Circle {
-                center,
-                radius,
-                freq: self.freq,
+                center_m: center,
+                radius_m: radius,
+                freq_hz: self.freq,
             },
             Kind::Figure8 => Shape::FigureEight {
-                center,
-                radius,
-                freq: self.freq,
+                center_m: center,
+                radius_m: radius,
+                freq_hz: self.freq,
             },
             Kind::Csv => {
                 let Some(path) = &self.poses else {
                     bail!("--trajectory csv needs --poses FILE");
                 };
-                Shape::Table(read_pose_csv(path)?)
+                Shape::Table {
+                    rows: read_pose_csv(path)?,
+                }
             }
         })
     }
@@ -134,6 +136,10 @@ impl TrajectoryOpts {
 /// Stream setpoints along a trajectory inside the robot's workspace.
 #[derive(Args, Debug)]
 pub struct PlannerArgs {
+    /// The whole configuration as JSON (a `PlannerConfig`, as a launcher
+    /// writes it); the other options are then ignored.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
     /// Robot description file.
     #[arg(long, default_value = "robots/seed-4t.toml")]
     pub robot: PathBuf,
@@ -154,6 +160,14 @@ pub struct PlannerArgs {
     /// Length of each out-of-workspace burst, s.
     #[arg(long, default_value_t = 0.05)]
     pub outside_for: f64,
+    /// Stop (non-zero exit) after this many seconds without a tension
+    /// command from a controller; 0 = never.
+    #[arg(long, default_value_t = 2.0)]
+    pub peer_timeout: f64,
+    /// Die with the parent process (as `tendril sim` starts it; also when
+    /// the TENDRIL_SUPERVISED environment variable is set).
+    #[arg(long)]
+    pub supervised: bool,
     /// Per-setpoint CSV log.
     #[arg(long)]
     pub log: Option<PathBuf>,
@@ -165,25 +179,36 @@ pub struct PlannerArgs {
     pub cpu: Option<usize>,
 }
 
+impl PlannerArgs {
+    /// The configuration: the `--config` file, or the flags.
+    pub fn config(self) -> anyhow::Result<PlannerConfig> {
+        if let Some(path) = &self.config {
+            return Ok(crate::ipc::read_config(path)?);
+        }
+        Ok(PlannerConfig {
+            robot: self.robot,
+            prefix: self.prefix,
+            shape: self.traj.shape()?,
+            rate_hz: self.traj.planner_rate,
+            settle_s: self.traj.settle,
+            duration_s: self.duration,
+            inject: Injections {
+                nan_at_s: self.inject_nan_at,
+                outside_at_s: self.inject_outside_at,
+                outside_for_s: self.outside_for,
+            },
+            peer_timeout_s: (self.peer_timeout > 0.0).then_some(self.peer_timeout),
+            supervised: self.supervised,
+            log: self.log,
+            realtime: self.realtime,
+            cpu: self.cpu,
+        })
+    }
+}
+
 /// Run `tendril planner`.
 pub fn run(args: PlannerArgs) -> anyhow::Result<()> {
-    let cfg = PlannerConfig {
-        robot: args.robot,
-        prefix: args.prefix,
-        shape: args.traj.shape()?,
-        rate: args.traj.planner_rate,
-        settle: args.traj.settle,
-        duration: args.duration,
-        inject: Injections {
-            nan_at: args.inject_nan_at,
-            outside_at: args.inject_outside_at,
-            outside_for: args.outside_for,
-        },
-        log: args.log,
-        realtime: args.realtime,
-        cpu: args.cpu,
-    };
-    let sent = crate::ipc::planner::run(&cfg)?;
+    let sent = crate::ipc::planner::run(&args.config()?)?;
     log::info!("planner: sent {sent} setpoints");
     Ok(())
 }

@@ -1,11 +1,11 @@
-//! `tendril plant`: the simulated tendon motors and robot (DESIGN §6).
+//! `tendril plant`: the simulated tendon motors and robot (`docs/design.md` §6).
 
 use std::path::PathBuf;
 
 use anyhow::{bail, Context};
 use clap::Args;
 
-use crate::ipc::plant::{PlantConfig, PlantFaults, PlantParams};
+use crate::ipc::plant::{DelayFault, DropFault, PlantConfig, PlantFaults, PlantParams, StuckFault};
 
 /// Plant model and fault options (shared with `tendril sim`).
 #[derive(Args, Clone, Debug)]
@@ -60,29 +60,41 @@ impl PlantOpts {
             Some(s) => {
                 let err = || format!("--stuck {s:?}: expected TENDON@SECONDS");
                 let (k, t) = s.split_once('@').with_context(err)?;
-                Some((
-                    k.trim().parse().with_context(err)?,
-                    t.trim().parse().with_context(err)?,
-                ))
+                Some(StuckFault {
+                    tendon: k.trim().parse().with_context(err)?,
+                    at_s: t.trim().parse().with_context(err)?,
+                })
             }
         };
         let drop = self
             .drop
             .as_deref()
-            .map(|s| window(s, "--drop"))
+            .map(|s| {
+                window(s, "--drop").map(|(fraction, from_s, to_s)| DropFault {
+                    fraction,
+                    from_s,
+                    to_s,
+                })
+            })
             .transpose()?;
-        if drop.is_some_and(|d| !(0.0..=1.0).contains(&d.0)) {
+        if drop.is_some_and(|d| !(0.0..=1.0).contains(&d.fraction)) {
             bail!("--drop: the fraction must be in [0, 1]");
         }
         let delay = self
             .delay
             .as_deref()
-            .map(|s| window(s, "--delay").map(|(ms, a, b)| (ms * 1e-3, a, b)))
+            .map(|s| {
+                window(s, "--delay").map(|(ms, from_s, to_s)| DelayFault {
+                    delay_s: ms * 1e-3,
+                    from_s,
+                    to_s,
+                })
+            })
             .transpose()?;
         Ok(PlantParams {
-            motor_tau: self.motor_tau_ms * 1e-3,
-            compliance_tau: self.compliance_tau_ms * 1e-3,
-            noise: self.noise_mm * 1e-3,
+            motor_tau_s: self.motor_tau_ms * 1e-3,
+            compliance_tau_s: self.compliance_tau_ms * 1e-3,
+            noise_m: self.noise_mm * 1e-3,
             seed: self.seed,
             statics_steps: self.statics_steps,
             faults: PlantFaults { stuck, drop, delay },
@@ -118,6 +130,10 @@ impl PlantOpts {
 /// Simulate the tendon motors and the robot, driven by tension commands.
 #[derive(Args, Debug)]
 pub struct PlantArgs {
+    /// The whole configuration as JSON (a `PlantConfig`, as a launcher
+    /// writes it); the other options are then ignored.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
     /// Robot description file.
     #[arg(long, default_value = "robots/seed-4t.toml")]
     pub robot: PathBuf,
@@ -129,6 +145,14 @@ pub struct PlantArgs {
     /// Stop after this many seconds (default: until SIGTERM or a stop message).
     #[arg(long)]
     pub duration: Option<f64>,
+    /// Stop (non-zero exit) after this many seconds without a tension
+    /// command; 0 = never.
+    #[arg(long, default_value_t = 2.0)]
+    pub peer_timeout: f64,
+    /// Die with the parent process (as `tendril sim` starts it; also when
+    /// the TENDRIL_SUPERVISED environment variable is set).
+    #[arg(long)]
+    pub supervised: bool,
     /// Per-step CSV log.
     #[arg(long)]
     pub log: Option<PathBuf>,
@@ -143,22 +167,32 @@ pub struct PlantArgs {
     pub cpu: Option<usize>,
 }
 
+impl PlantArgs {
+    /// The configuration: the `--config` file, or the flags.
+    pub fn config(self) -> anyhow::Result<PlantConfig> {
+        if let Some(path) = &self.config {
+            return Ok(crate::ipc::read_config(path)?);
+        }
+        Ok(PlantConfig {
+            robot: self.robot,
+            prefix: self.prefix,
+            params: self.model.params()?,
+            spin: self.model.spin,
+            duration_s: self.duration,
+            peer_timeout_s: (self.peer_timeout > 0.0).then_some(self.peer_timeout),
+            supervised: self.supervised,
+            log: self.log,
+            stats: self.stats,
+            realtime: self.realtime,
+            cpu: self.cpu,
+            ..PlantConfig::default()
+        })
+    }
+}
+
 /// Run `tendril plant`.
 pub fn run(args: PlantArgs) -> anyhow::Result<()> {
-    let cfg = PlantConfig {
-        robot: args.robot,
-        prefix: args.prefix,
-        params: args.model.params()?,
-        spin: args.model.spin,
-        idle_period: 0.001,
-        command_timeout: 0.05,
-        duration: args.duration,
-        log: args.log,
-        stats: args.stats,
-        realtime: args.realtime,
-        cpu: args.cpu,
-    };
-    let stats = crate::ipc::plant::run(&cfg)?;
+    let stats = crate::ipc::plant::run(&args.config()?)?;
     log::info!(
         "plant: {} steps, step median {:.1} µs, command latency p50 {:.1} µs",
         stats.steps,

@@ -12,8 +12,8 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tendril_shared::{encode_to_vec, Activation, Shape, TnetView};
 
-use super::trajectory::bend_tensions;
 use super::IpcError;
+use crate::kinematics::bend_tensions;
 use crate::statics::Statics;
 
 /// Jittered copies of each training pose (see [`quick_net`]).

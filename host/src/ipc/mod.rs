@@ -1,14 +1,19 @@
 //! The closed loop as separate OS processes over iceoryx2 shared memory
-//! (`DESIGN.md` §6): planner → `setpoint` → controller → `tension_cmd` →
+//! (`docs/design.md` §6): planner → `setpoint` → controller → `tension_cmd` →
 //! plant → `plant_state` → controller and planner, plus `weights` (hot swap)
 //! and `control` (stop). `sim` launches the three and writes a report.
 //!
 //! Each process is a library function taking a config struct, so the CLI
-//! files stay thin and tests can reason about the same code.
+//! files stay thin and tests can reason about the same code. The config
+//! structs are serde types: a launcher writes one as JSON and starts the
+//! process with `--config FILE` ([`read_config`]).
+//!
+//! Nothing holds the robot forever: a supervised process dies with its
+//! launcher ([`die_with_parent`]), and every process stops with
+//! [`IpcError::PeersLost`] when its peers fall silent ([`PeerWatch`]).
 
 pub mod clock;
 pub mod controller;
-pub mod correction;
 pub mod fixture;
 pub mod planner;
 pub mod plant;
@@ -51,9 +56,116 @@ pub enum IpcError {
         /// The cause.
         source: std::io::Error,
     },
+    /// A trajectory point the robot cannot take.
+    #[error(transparent)]
+    Kinematics(#[from] crate::kinematics::KinematicsError),
     /// Anything from the layers below (robot file, statics, model file).
     #[error("{0}")]
     Other(String),
+    /// The process's peers fell silent (or its launcher is gone): it stops
+    /// rather than hold the robot with nobody listening.
+    #[error("peers lost: {0}")]
+    PeersLost(String),
+}
+
+/// Environment variable a launcher sets on the processes it starts: they
+/// then die with it ([`die_with_parent`]). Its value may be the launcher's
+/// pid, which the child then checks against its parent.
+pub const SUPERVISED_ENV: &str = "TENDRIL_SUPERVISED";
+
+/// If `supervised` (a config flag) or [`SUPERVISED_ENV`] says so, ask the
+/// kernel to SIGKILL this process when its parent exits
+/// (`PR_SET_PDEATHSIG`), so a killed `tendril sim` leaves no child holding
+/// the robot at real-time priority. Returns whether it did. A parent that
+/// died before the request (the child was re-parented already) is an error.
+pub fn die_with_parent(supervised: bool) -> Result<bool, IpcError> {
+    let env = std::env::var(SUPERVISED_ENV).ok();
+    if !supervised && env.is_none() {
+        return Ok(false);
+    }
+    // SAFETY: PR_SET_PDEATHSIG takes a signal number and touches no memory.
+    let rc = unsafe {
+        libc::prctl(
+            libc::PR_SET_PDEATHSIG,
+            libc::SIGKILL as libc::c_ulong,
+            0,
+            0,
+            0,
+        )
+    };
+    if rc != 0 {
+        return Err(IpcError::Config(format!(
+            "PR_SET_PDEATHSIG: {}",
+            std::io::Error::last_os_error()
+        )));
+    }
+    // SAFETY: getppid has no preconditions.
+    let parent = unsafe { libc::getppid() };
+    let expected = env.and_then(|v| v.trim().parse::<libc::pid_t>().ok());
+    if parent == 1 || expected.is_some_and(|p| p != parent) {
+        return Err(IpcError::PeersLost(
+            "the launching process exited before this one started".into(),
+        ));
+    }
+    Ok(true)
+}
+
+/// Read a process configuration written as JSON (`--config FILE`).
+pub fn read_config<T: serde::de::DeserializeOwned>(path: &std::path::Path) -> Result<T, IpcError> {
+    let text = std::fs::read_to_string(path).map_err(|source| IpcError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    serde_json::from_str(&text).map_err(|e| IpcError::Config(format!("{}: {e}", path.display())))
+}
+
+/// How long a peer that has never been heard from may take to appear:
+/// start-up (loading a robot, lifting a trajectory) is slower than any
+/// silence in a running loop.
+pub const PEER_START_GRACE_S: f64 = 10.0;
+
+/// The "peers lost" rule: silence longer than a timeout (or, before the
+/// first message, longer than [`PEER_START_GRACE_S`] or the timeout,
+/// whichever is longer) means the peers are gone.
+#[derive(Clone, Copy, Debug)]
+pub struct PeerWatch {
+    timeout_ns: Option<u64>,
+    grace_ns: u64,
+    last_ns: u64,
+    heard: bool,
+}
+
+impl PeerWatch {
+    /// Start watching at `now_ns`; `timeout_s` `None` never declares the peers lost.
+    pub fn new(timeout_s: Option<f64>, now_ns: u64) -> PeerWatch {
+        let timeout_ns = timeout_s.map(|t| (t.max(0.0) * 1e9) as u64);
+        PeerWatch {
+            timeout_ns,
+            grace_ns: timeout_ns.map_or(0, |t| t.max((PEER_START_GRACE_S * 1e9) as u64)),
+            last_ns: now_ns,
+            heard: false,
+        }
+    }
+
+    /// A peer spoke at `now_ns`.
+    pub fn heard(&mut self, now_ns: u64) {
+        self.last_ns = now_ns;
+        self.heard = true;
+    }
+
+    /// Silence so far at `now_ns`, s.
+    pub fn silence_s(&self, now_ns: u64) -> f64 {
+        now_ns.saturating_sub(self.last_ns) as f64 * 1e-9
+    }
+
+    /// Whether the peers count as lost at `now_ns`.
+    pub fn lost(&self, now_ns: u64) -> bool {
+        let Some(timeout) = self.timeout_ns else {
+            return false;
+        };
+        let limit = if self.heard { timeout } else { self.grace_ns };
+        now_ns.saturating_sub(self.last_ns) > limit
+    }
 }
 
 /// Why a process should stop: a `STOP` on the control service (the
@@ -90,4 +202,21 @@ impl StopWatch {
 pub(crate) fn write_file(path: &std::path::Path, bytes: &[u8]) -> Result<(), IpcError> {
     crate::fsutil::write_atomic(path, bytes)
         .map_err(|e| IpcError::Other(format!("{}: {e}", path.display())))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn peers_count_as_lost_after_the_timeout_and_a_longer_start_grace() {
+        let s = 1_000_000_000u64;
+        let mut w = PeerWatch::new(Some(2.0), 0);
+        assert!(!w.lost(9 * s), "start grace is 10 s");
+        assert!(w.lost(11 * s));
+        w.heard(11 * s);
+        assert!(!w.lost(13 * s));
+        assert!(w.lost(13 * s + 1));
+        assert!(!PeerWatch::new(None, 0).lost(u64::MAX));
+    }
 }

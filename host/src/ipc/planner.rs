@@ -6,7 +6,7 @@
 use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
-use tendril_shared::messages::{setpoint_flags, Header, Setpoint};
+use tendril_shared::messages::{setpoint_flags, Header, Setpoint, TensionCommand};
 
 use super::clock::{now_ns, tighten_timer_slack, Ticker};
 use super::stats::CsvLog;
@@ -18,18 +18,21 @@ use crate::statics::{SolverSettings, Statics};
 
 /// Bad setpoints to send instead of the trajectory's, each for one message.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct Injections {
     /// Times (s from start) at which to send a pose with a NaN.
-    pub nan_at: Vec<f64>,
+    pub nan_at_s: Vec<f64>,
     /// Times (s) at which to send a pose far outside the workspace, for
-    /// `outside_for` seconds each.
-    pub outside_at: Vec<f64>,
-    /// Duration of each out-of-workspace burst (s).
-    pub outside_for: f64,
+    /// `outside_for_s` seconds each.
+    pub outside_at_s: Vec<f64>,
+    /// Duration of each out-of-workspace burst, s.
+    pub outside_for_s: f64,
 }
 
-/// Everything the planner process needs.
-#[derive(Clone, Debug)]
+/// Everything the planner process needs: written by a launcher as JSON
+/// (`tendril planner --config FILE`) or built from the flags.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct PlannerConfig {
     /// Robot file (to lift lateral targets to reachable poses).
     pub robot: PathBuf,
@@ -37,19 +40,30 @@ pub struct PlannerConfig {
     pub prefix: String,
     /// What to follow.
     pub shape: Shape,
-    /// Setpoint rate (Hz).
-    pub rate: f64,
-    /// Initial hold at the first pose (s).
-    pub settle: f64,
+    /// Setpoint rate, Hz.
+    pub rate_hz: f64,
+    /// Initial hold at the first pose, s.
+    pub settle_s: f64,
     /// Stop after this many seconds (None: until told).
-    pub duration: Option<f64>,
+    pub duration_s: Option<f64>,
     /// Bad setpoints to inject.
+    #[serde(default)]
     pub inject: Injections,
+    /// Stop with [`IpcError::PeersLost`] after this long without a tension
+    /// command from a controller, s (None: never).
+    #[serde(default)]
+    pub peer_timeout_s: Option<f64>,
+    /// Die with the launching process ([`super::die_with_parent`]).
+    #[serde(default)]
+    pub supervised: bool,
     /// Per-setpoint CSV log.
+    #[serde(default)]
     pub log: Option<PathBuf>,
     /// Switch to SCHED_FIFO after the (CPU-heavy) trajectory set-up.
+    #[serde(default)]
     pub realtime: bool,
     /// Pin to this CPU.
+    #[serde(default)]
     pub cpu: Option<usize>,
 }
 
@@ -62,10 +76,11 @@ pub const LOG_HEADER: &str = "t_ns,seq,flags,px,py,pz,qw,qx,qy,qz";
 
 /// Run the planner process until stopped or done.
 pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
-    if !(cfg.rate > 0.0 && cfg.rate <= 20_000.0) || cfg.settle < 0.0 {
+    super::die_with_parent(cfg.supervised)?;
+    if !(cfg.rate_hz > 0.0 && cfg.rate_hz <= 20_000.0 && cfg.settle_s >= 0.0) {
         return Err(IpcError::Config(format!(
             "planner rate {} Hz / settle {} s: rate must be in (0, 20000], settle ≥ 0",
-            cfg.rate, cfg.settle
+            cfg.rate_hz, cfg.settle_s
         )));
     }
     let robot = Robot::load(&cfg.robot).map_err(|e| IpcError::Other(e.to_string()))?;
@@ -75,6 +90,8 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
     let node = transport::node("tendril-planner")?;
     let services = Services::open_or_create(&node, &cfg.prefix)?;
     let publisher = transport::publisher(&services.setpoint)?;
+    // The controller's commands say it is alive (the peers-lost rule).
+    let commands = transport::subscriber(&services.tension_cmd)?;
     let stop = StopWatch::new(&services)?;
     let mut log = CsvLog::create(cfg.log.as_deref(), LOG_HEADER)?;
     tighten_timer_slack();
@@ -85,18 +102,19 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
         super::clock::PLANNER_PRIORITY,
     );
 
-    let period_ns = (1e9 / cfg.rate).round() as u64;
+    let period_ns = (1e9 / cfg.rate_hz).round() as u64;
     let start = now_ns();
+    let mut peers = super::PeerWatch::new(cfg.peer_timeout_s, start);
     let mut ticker = Ticker::new(start, period_ns);
     let mut seq = 0u64;
     let mut last_flush = start;
     loop {
         let tick = ticker.wait(0);
         let t = (tick.deadline_ns - start) as f64 * 1e-9;
-        let (point, mut flags) = if t < cfg.settle {
+        let (point, mut flags) = if t < cfg.settle_s {
             (traj.sample(0.0), setpoint_flags::HOLD)
         } else {
-            (traj.sample(t - cfg.settle), setpoint_flags::HAS_VELOCITY)
+            (traj.sample(t - cfg.settle_s), setpoint_flags::HAS_VELOCITY)
         };
         let mut pose = point.pose.map(|v| v as f32);
         let mut velocity = point.velocity.map(|v| v as f32);
@@ -111,9 +129,9 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
         let mut injected = false;
         if cfg
             .inject
-            .nan_at
+            .nan_at_s
             .iter()
-            .any(|&a| t >= a && t < a + 1.0 / cfg.rate)
+            .any(|&a| t >= a && t < a + 1.0 / cfg.rate_hz)
         {
             pose[0] = f32::NAN;
             injected = true;
@@ -121,9 +139,9 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
         }
         if cfg
             .inject
-            .outside_at
+            .outside_at_s
             .iter()
-            .any(|&a| t >= a && t < a + cfg.inject.outside_for)
+            .any(|&a| t >= a && t < a + cfg.inject.outside_for_s)
         {
             // 1 m sideways: far outside any 0.4 m robot's reach.
             pose[0] += 1.0;
@@ -155,8 +173,18 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
             log.flush()?;
             last_flush = stamp;
         }
-        if stop.requested() || cfg.duration.is_some_and(|d| t >= d) {
+        if stop.requested() || cfg.duration_s.is_some_and(|d| t >= d) {
             break;
+        }
+        let (command, _): (Option<TensionCommand>, usize) = transport::latest(&commands)?;
+        if command.is_some() {
+            peers.heard(stamp);
+        } else if peers.lost(stamp) {
+            log.flush()?;
+            return Err(IpcError::PeersLost(format!(
+                "planner: no tension command from a controller for {:.1} s",
+                peers.silence_s(stamp)
+            )));
         }
     }
     log.flush()?;

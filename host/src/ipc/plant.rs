@@ -25,26 +25,62 @@ use super::{IpcError, StopWatch};
 use crate::robot::Robot;
 use crate::statics::{SolverSettings, Statics, WarmStart};
 
-/// Injected faults, each active from `*_at` seconds after start.
+/// Injected faults.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct PlantFaults {
-    /// Tendon whose motor freezes, and when (s).
-    pub stuck: Option<(usize, f64)>,
-    /// Fraction of commands dropped, and the window (s from start, s to end).
-    pub drop: Option<(f64, f64, f64)>,
-    /// Extra delay (s) applied to commands in a window (from, to).
-    pub delay: Option<(f64, f64, f64)>,
+    /// A motor that freezes where it is.
+    pub stuck: Option<StuckFault>,
+    /// Commands dropped at random in a window.
+    pub drop: Option<DropFault>,
+    /// Commands delayed in a window.
+    pub delay: Option<DelayFault>,
 }
 
-/// Plant model parameters.
+/// Motor `tendon` freezes at `at_s` seconds after the plant's start.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StuckFault {
+    /// Tendon index.
+    pub tendon: usize,
+    /// When, s.
+    pub at_s: f64,
+}
+
+/// A fraction of the commands is dropped between `from_s` and `to_s`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DropFault {
+    /// Fraction of commands dropped, in [0, 1].
+    pub fraction: f64,
+    /// Window start, s.
+    pub from_s: f64,
+    /// Window end, s.
+    pub to_s: f64,
+}
+
+/// Commands are delayed by `delay_s` between `from_s` and `to_s`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DelayFault {
+    /// Extra delay, s.
+    pub delay_s: f64,
+    /// Window start, s.
+    pub from_s: f64,
+    /// Window end, s.
+    pub to_s: f64,
+}
+
+/// Plant model parameters (units in the field names).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct PlantParams {
-    /// Motor time constant (s): tension error decays as exp(−t/τ).
-    pub motor_tau: f64,
-    /// Series tendon compliance as a second lag (s); 0 = rigid tendons.
-    pub compliance_tau: f64,
-    /// Tip position sensor noise, standard deviation (m).
-    pub noise: f64,
+    /// Motor time constant, s: tension error decays as exp(−t/τ).
+    pub motor_tau_s: f64,
+    /// Series tendon compliance as a second lag, s; 0 = rigid tendons.
+    pub compliance_tau_s: f64,
+    /// Tip position sensor noise, standard deviation, m.
+    pub noise_m: f64,
     /// Tip orientation sensor noise, standard deviation per quaternion component.
     pub noise_quat: f64,
     /// Seed of the noise and drop generator.
@@ -58,9 +94,9 @@ pub struct PlantParams {
 impl Default for PlantParams {
     fn default() -> Self {
         PlantParams {
-            motor_tau: 0.02,
-            compliance_tau: 0.0,
-            noise: 20e-6,
+            motor_tau_s: 0.02,
+            compliance_tau_s: 0.0,
+            noise_m: 20e-6,
             noise_quat: 1e-5,
             seed: 1,
             statics_steps: 16,
@@ -91,16 +127,12 @@ pub struct PlantModel {
 impl PlantModel {
     /// A plant at rest with all tensions zero.
     pub fn new(robot: &Robot, params: PlantParams) -> Result<PlantModel, IpcError> {
-        if params.motor_tau.is_nan()
-            || params.motor_tau <= 0.0
-            || params.compliance_tau < 0.0
-            || params.noise < 0.0
-        {
+        if !(params.motor_tau_s > 0.0 && params.compliance_tau_s >= 0.0 && params.noise_m >= 0.0) {
             return Err(IpcError::Config(
                 "plant: motor time constant must be > 0, compliance and noise ≥ 0".into(),
             ));
         }
-        if let Some((k, _)) = params.faults.stuck {
+        if let Some(StuckFault { tendon: k, .. }) = params.faults.stuck {
             if k >= robot.n_tendons() {
                 return Err(IpcError::Config(format!(
                     "plant: stuck motor {k} but the robot has {} tendons",
@@ -166,9 +198,9 @@ impl PlantModel {
     /// statics converged (otherwise the previous pose is kept).
     pub fn step(&mut self, dt: f64) -> bool {
         let dt = dt.clamp(0.0, 0.1);
-        let a_m = 1.0 - (-dt / self.params.motor_tau).exp();
+        let a_m = 1.0 - (-dt / self.params.motor_tau_s).exp();
         let stuck = if self.stuck {
-            self.params.faults.stuck.map(|s| s.0)
+            self.params.faults.stuck.map(|s| s.tendon)
         } else {
             None
         };
@@ -176,8 +208,8 @@ impl PlantModel {
             if stuck != Some(i) {
                 self.motor[i] += (self.target[i] - self.motor[i]) * a_m;
             }
-            self.tendon[i] = if self.params.compliance_tau > 0.0 {
-                let a_c = 1.0 - (-dt / self.params.compliance_tau).exp();
+            self.tendon[i] = if self.params.compliance_tau_s > 0.0 {
+                let a_c = 1.0 - (-dt / self.params.compliance_tau_s).exp();
                 self.tendon[i] + (self.motor[i] - self.tendon[i]) * a_c
             } else {
                 self.motor[i]
@@ -230,7 +262,7 @@ impl PlantModel {
         let mut m = self.pose;
         for (k, v) in m.iter_mut().enumerate() {
             let sd = if k < 3 {
-                self.params.noise
+                self.params.noise_m
             } else {
                 self.params.noise_quat
             };
@@ -263,8 +295,10 @@ fn gaussian(rng: &mut ChaCha8Rng) -> f64 {
     (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
-/// Everything the plant process needs.
-#[derive(Clone, Debug)]
+/// Everything the plant process needs: written by a launcher as JSON
+/// (`tendril plant --config FILE`) or built from the flags.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct PlantConfig {
     /// Robot file.
     pub robot: PathBuf,
@@ -274,12 +308,17 @@ pub struct PlantConfig {
     pub params: PlantParams,
     /// Busy-poll for commands instead of sleeping on the event.
     pub spin: bool,
-    /// Step and publish at least this often without commands (s).
-    pub idle_period: f64,
-    /// Commands older than this mark the state `COMMAND_STALE` (s).
-    pub command_timeout: f64,
+    /// Step and publish at least this often without commands, s.
+    pub idle_period_s: f64,
+    /// Commands older than this mark the state `COMMAND_STALE`, s.
+    pub command_timeout_s: f64,
     /// Stop after this many seconds (None: until told).
-    pub duration: Option<f64>,
+    pub duration_s: Option<f64>,
+    /// Stop with [`IpcError::PeersLost`] after this long without a tension
+    /// command, s (None: never).
+    pub peer_timeout_s: Option<f64>,
+    /// Die with the launching process ([`super::die_with_parent`]).
+    pub supervised: bool,
     /// Per-step CSV log.
     pub log: Option<PathBuf>,
     /// Statistics JSON written at exit.
@@ -288,6 +327,26 @@ pub struct PlantConfig {
     pub realtime: bool,
     /// Pin to this CPU.
     pub cpu: Option<usize>,
+}
+
+impl Default for PlantConfig {
+    fn default() -> Self {
+        PlantConfig {
+            robot: "robots/seed-4t.toml".into(),
+            prefix: super::DEFAULT_PREFIX.into(),
+            params: PlantParams::default(),
+            spin: false,
+            idle_period_s: 0.001,
+            command_timeout_s: 0.05,
+            duration_s: None,
+            peer_timeout_s: Some(2.0),
+            supervised: false,
+            log: None,
+            stats: None,
+            realtime: false,
+            cpu: None,
+        }
+    }
 }
 
 /// What the plant reports at exit.
@@ -324,6 +383,7 @@ pub fn log_header(n: usize) -> String {
 
 /// Run the plant process until stopped.
 pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
+    super::die_with_parent(cfg.supervised)?;
     let robot = Robot::load(&cfg.robot).map_err(|e| IpcError::Other(e.to_string()))?;
     let mut model = PlantModel::new(&robot, cfg.params.clone())?;
     let n = model.n();
@@ -349,7 +409,8 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
     let mut seq = 0u64;
     let mut status_sticky = 0u32;
     let mut pending = Vec::with_capacity(16);
-    let idle = Duration::from_secs_f64(cfg.idle_period.max(1e-4));
+    let idle = Duration::from_secs_f64(cfg.idle_period_s.clamp(1e-4, 1.0));
+    let mut peers = super::PeerWatch::new(cfg.peer_timeout_s, start);
     let faults = cfg.params.faults.clone();
     let mut last_flush = start;
 
@@ -367,6 +428,7 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
         }
         pending.clear();
         transport::drain(&commands, &mut pending)?;
+        let received = pending.len();
         let now = now_ns();
         let t = secs(now);
         for cmd in pending.drain(..) {
@@ -377,18 +439,23 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
                     stats.sequence_gaps += cmd.header.seq - prev.header.seq - 1;
                 }
             }
-            if let Some((p, from, to)) = faults.drop {
-                if t >= from && t < to && model.uniform() < p {
+            if let Some(DropFault {
+                fraction,
+                from_s,
+                to_s,
+            }) = faults.drop
+            {
+                if t >= from_s && t < to_s && model.uniform() < fraction {
                     stats.dropped += 1;
                     status_sticky |= plant_status::DROPPING;
                     continue;
                 }
             }
             match faults.delay {
-                Some((d, from, to)) if t >= from && t < to => {
+                Some(d) if t >= d.from_s && t < d.to_s => {
                     stats.delayed += 1;
                     status_sticky |= plant_status::DELAYING;
-                    delayed.push_back((now + (d * 1e9) as u64, cmd));
+                    delayed.push_back((now + (d.delay_s * 1e9) as u64, cmd));
                 }
                 _ => delayed.push_back((now, cmd)),
             }
@@ -406,8 +473,8 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
             last_cmd = Some(cmd);
             last_cmd_time = now;
         }
-        if let Some((_, at)) = faults.stuck {
-            if t >= at {
+        if let Some(StuckFault { at_s, .. }) = faults.stuck {
+            if t >= at_s {
                 model.set_stuck();
                 status_sticky |= plant_status::MOTOR_STUCK;
             }
@@ -424,7 +491,7 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
         if !ok {
             status |= plant_status::SOLVE_FAILED;
         }
-        if secs(t1) - secs(last_cmd_time) > cfg.command_timeout {
+        if secs(t1) - secs(last_cmd_time) > cfg.command_timeout_s {
             status |= plant_status::COMMAND_STALE;
         }
         let measured = model.measure();
@@ -463,8 +530,17 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
             last_flush = t1;
         }
 
-        if stop.requested() || cfg.duration.is_some_and(|d| secs(t1) >= d) {
+        if stop.requested() || cfg.duration_s.is_some_and(|d| secs(t1) >= d) {
             break;
+        }
+        if received > 0 {
+            peers.heard(t1);
+        } else if peers.lost(t1) {
+            log.flush()?;
+            return Err(IpcError::PeersLost(format!(
+                "plant: no tension command for {:.1} s",
+                peers.silence_s(t1)
+            )));
         }
     }
     log.flush()?;
@@ -490,7 +566,7 @@ mod tests {
     #[test]
     fn motor_follows_first_order_step_response() {
         let params = PlantParams {
-            noise: 0.0,
+            noise_m: 0.0,
             noise_quat: 0.0,
             ..PlantParams::default()
         };
@@ -520,7 +596,10 @@ mod tests {
     fn stuck_motor_keeps_its_tension() {
         let params = PlantParams {
             faults: PlantFaults {
-                stuck: Some((1, 0.0)),
+                stuck: Some(StuckFault {
+                    tendon: 1,
+                    at_s: 0.0,
+                }),
                 ..PlantFaults::default()
             },
             ..PlantParams::default()
@@ -541,7 +620,7 @@ mod tests {
     #[test]
     fn sensor_noise_has_the_configured_spread() {
         let params = PlantParams {
-            noise: 1e-4,
+            noise_m: 1e-4,
             ..PlantParams::default()
         };
         let mut m = PlantModel::new(&robot(), params).unwrap();

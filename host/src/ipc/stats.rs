@@ -1,5 +1,10 @@
 //! Sample statistics the processes report (lateness, latency, step times),
 //! and the streaming CSV logs the launcher joins into its report.
+//!
+//! The controller's loop must not allocate (`docs/design.md` §6), so its
+//! durations go into a fixed-size [`Histogram`] instead of a growing
+//! sample vector, and [`CsvLog::row`] formats straight into the log's
+//! fixed buffer.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -49,6 +54,106 @@ impl Summary {
     }
 }
 
+/// Sub-buckets per power of two in a [`Histogram`]: relative resolution 1/32.
+const SUB_BITS: u32 = 5;
+const SUB: usize = 1 << SUB_BITS;
+/// Buckets: values below `SUB` exactly, then `SUB` per octave up to 2⁶⁴.
+const BUCKETS: usize = SUB + (64 - SUB_BITS as usize) * SUB;
+
+/// Durations (ns) in log-linear buckets: a fixed 15 KiB, no allocation per
+/// sample, percentiles within 1/32 (3 %) of the exact nearest-rank value;
+/// count, mean and max exact.
+#[derive(Clone, Debug)]
+pub struct Histogram {
+    buckets: Box<[u64; BUCKETS]>,
+    count: u64,
+    sum: u128,
+    max: u64,
+}
+
+impl Default for Histogram {
+    fn default() -> Self {
+        Histogram {
+            buckets: Box::new([0; BUCKETS]),
+            count: 0,
+            sum: 0,
+            max: 0,
+        }
+    }
+}
+
+impl Histogram {
+    fn index(v: u64) -> usize {
+        if v < SUB as u64 {
+            return v as usize;
+        }
+        let octave = 63 - v.leading_zeros(); // ≥ SUB_BITS
+        let shift = octave - SUB_BITS;
+        let sub = ((v >> shift) as usize) & (SUB - 1);
+        SUB + shift as usize * SUB + sub
+    }
+
+    /// The middle of bucket `i`.
+    fn value(i: usize) -> u64 {
+        if i < SUB {
+            return i as u64;
+        }
+        let shift = ((i - SUB) / SUB) as u32;
+        let sub = ((i - SUB) % SUB) as u64;
+        let low = (SUB as u64 + sub) << shift;
+        low + ((1u64 << shift) >> 1)
+    }
+
+    /// Add one sample (ns).
+    pub fn record(&mut self, ns: u64) {
+        if let Some(b) = self.buckets.get_mut(Histogram::index(ns)) {
+            *b += 1;
+        }
+        self.count += 1;
+        self.sum += ns as u128;
+        self.max = self.max.max(ns);
+    }
+
+    /// Number of samples.
+    pub fn count(&self) -> u64 {
+        self.count
+    }
+
+    /// Nearest-rank percentile (0–100), ns, to bucket resolution (never
+    /// above the exact maximum); `None` if empty.
+    pub fn percentile(&self, p: f64) -> Option<u64> {
+        if self.count == 0 {
+            return None;
+        }
+        let rank = ((p / 100.0) * self.count as f64).ceil().max(1.0) as u64;
+        let mut seen = 0;
+        for (i, &n) in self.buckets.iter().enumerate() {
+            seen += n;
+            if seen >= rank {
+                return Some(Histogram::value(i).min(self.max));
+            }
+        }
+        Some(self.max)
+    }
+
+    /// The percentiles in microseconds.
+    pub fn summary(&self) -> Summary {
+        if self.count == 0 {
+            return Summary::default();
+        }
+        let us = |p: f64| self.percentile(p).unwrap_or(0) as f64 / 1e3;
+        Summary {
+            count: self.count as usize,
+            p50: us(50.0),
+            p90: us(90.0),
+            p99: us(99.0),
+            p999: us(99.9),
+            max: self.max as f64 / 1e3,
+            mean: self.sum as f64 / self.count as f64 / 1e3,
+        }
+    }
+}
+
 /// A CSV log written as the process runs (buffered, flushed on `flush` and
 /// on drop), so a process killed mid-run still leaves all but its last few
 /// rows for the launcher. Not atomic by design: it is a log, not an output.
@@ -79,24 +184,25 @@ impl CsvLog {
         })
     }
 
-    /// Append one row of numbers.
+    /// Append one row of numbers, formatted straight into the buffer (no
+    /// allocation: the controller calls this every period).
     pub fn row(&mut self, values: &[f64]) -> Result<(), IpcError> {
         let Some(out) = self.out.as_mut() else {
             return Ok(());
         };
-        let mut line = String::with_capacity(values.len() * 12);
-        for (i, v) in values.iter().enumerate() {
-            if i > 0 {
-                line.push(',');
+        let mut write = || -> std::io::Result<()> {
+            for (i, v) in values.iter().enumerate() {
+                if i > 0 {
+                    out.write_all(b",")?;
+                }
+                write!(out, "{v}")?;
             }
-            line.push_str(&format!("{v}"));
-        }
-        line.push('\n');
-        out.write_all(line.as_bytes())
-            .map_err(|source| IpcError::Io {
-                path: self.path.clone(),
-                source,
-            })
+            out.write_all(b"\n")
+        };
+        write().map_err(|source| IpcError::Io {
+            path: self.path.clone(),
+            source,
+        })
     }
 
     /// Push buffered rows to the file.
@@ -157,6 +263,43 @@ mod tests {
         assert_eq!(s.p99, 990.0);
         assert_eq!(s.max, 1000.0);
         assert!((s.mean - 500.5).abs() < 1e-9);
+    }
+
+    #[test]
+    fn histogram_percentiles_are_within_its_resolution_of_the_exact_ones() {
+        let mut rng = 0x2545_f491_4f6c_dd1du64;
+        let mut ns = Vec::new();
+        let mut h = Histogram::default();
+        for _ in 0..20_000 {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            // Spread over five decades, like lateness (µs) with rare ms spikes.
+            let v = 10f64.powf(1.0 + 5.0 * (rng % 10_000) as f64 / 10_000.0) as u64;
+            ns.push(v);
+            h.record(v);
+        }
+        let exact = Summary::of_ns(&mut ns);
+        let approx = h.summary();
+        assert_eq!(approx.count, exact.count);
+        assert_eq!(approx.max, exact.max);
+        assert!((approx.mean - exact.mean).abs() < 1e-9 * exact.mean);
+        for (a, e) in [
+            (approx.p50, exact.p50),
+            (approx.p90, exact.p90),
+            (approx.p99, exact.p99),
+            (approx.p999, exact.p999),
+        ] {
+            assert!((a - e).abs() <= e / 32.0, "{a} vs {e}");
+        }
+        // Small values are exact.
+        let mut small = Histogram::default();
+        for v in [3, 7, 7, 9] {
+            small.record(v);
+        }
+        assert_eq!(small.percentile(50.0), Some(7));
+        assert_eq!(small.percentile(100.0), Some(9));
+        assert_eq!(Histogram::default().percentile(50.0), None);
     }
 
     #[test]
