@@ -19,6 +19,8 @@ use crate::dataset::{Dataset, Sidecar};
 use crate::evaluate::job::evaluate_net;
 use crate::fsutil::write_atomic;
 use crate::interrupt::stop_flag;
+use crate::ipc::sim::{ModelSource, SimConfig, SimError};
+use crate::ipc::trajectory::Shape as TrajectoryShape;
 use crate::learn::cascor::export::read_tnet;
 use crate::learn::cascor::job::{self as train_job, SplitSpec, TrainJob, TrainOutputs};
 use crate::learn::cascor::{Cascor, CascorOptions};
@@ -204,30 +206,40 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
 
     // 5. Closed loop: planner, controller and plant as real processes over
     // iceoryx2, with the IK net alone and with the integral correction, on
-    // the 30 mm circle and on step targets (steady state).
+    // the 30 mm circle and on step targets (steady state). In-process calls
+    // of the typed sim API; the sim starts the three processes itself.
     let exe = std::env::current_exe().context("locating the tendril executable")?;
+    let circle = TrajectoryShape::Circle {
+        center_m: [0.0, 0.0],
+        radius_m: 0.015,
+        freq_hz: 0.2,
+    };
+    let steps = TrajectoryShape::Steps {
+        targets_m: vec![[0.01, 0.0], [0.0, 0.01], [-0.01, 0.0], [0.0, -0.01]],
+        dwell_s: 2.0,
+    };
     let runs = [
         (
-            "circle",
-            "off",
+            &circle,
+            false,
             "sim-ik-only",
             "30 mm circle at 0.2 Hz, IK net alone",
         ),
         (
-            "circle",
-            "on",
+            &circle,
+            true,
             "sim",
             "30 mm circle at 0.2 Hz, with the integral correction",
         ),
         (
-            "steps",
-            "off",
+            &steps,
+            false,
             "sim-steps-ik-only",
             "10 mm steps, IK net alone",
         ),
         (
-            "steps",
-            "on",
+            &steps,
+            true,
             "sim-steps",
             "10 mm steps, with the integral correction",
         ),
@@ -240,45 +252,49 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
          | run | correction | RMS (mm) | max (mm) | steady state, worst target (mm) |\n|---|---|---|---|---|\n",
     );
     let mut sections = Vec::new();
-    for (k, (trajectory, correction, dir, what)) in runs.into_iter().enumerate() {
-        let sim_dir = out.join(dir);
-        let status = std::process::Command::new(&exe)
-            .args(["sim", "--duration", "10", "--trajectory", trajectory])
-            .args(["--correction", correction])
-            .arg("--robot")
-            .arg(robot_file)
-            .arg("--model")
-            .arg(&model)
-            .arg("--out")
-            .arg(&sim_dir)
-            .status()
-            .context("starting tendril sim")?;
+    for (k, (shape, correction, dir, what)) in runs.into_iter().enumerate() {
+        let mut sim = SimConfig::new(
+            exe.clone(),
+            robot_file.to_path_buf(),
+            ModelSource::File(model.clone()),
+            out.join(dir),
+        );
+        sim.duration_s = 10.0;
+        sim.planner.shape = shape.clone();
+        sim.set_correction(correction);
+        sim.label = what.to_string();
         let title = format!("### 5{}. {what}", ['a', 'b', 'c', 'd'][k]);
-        let json: Option<serde_json::Value> = std::fs::read(sim_dir.join("report.json"))
-            .ok()
-            .and_then(|b| serde_json::from_slice(&b).ok());
-        if let (true, Some(r)) = (status.success(), json) {
-            let num = |key: &str| r[key].as_f64().map_or("–".into(), |v| format!("{v:.3}"));
-            let _ = writeln!(
-                summary,
-                "| {trajectory} ({dir}) | {correction} | {} | {} | {} |",
-                num("rms_tracking_error_mm"),
-                num("max_tracking_error_mm"),
-                num("max_steady_state_error_mm")
-            );
-            let sim_md = std::fs::read_to_string(sim_dir.join("report.md")).unwrap_or_default();
-            sections.push(format!(
-                "{title}\n\n{}\n\n![sim]({dir}/sim.png)\n",
-                sim_md.trim()
-            ));
-        } else {
-            let _ = writeln!(
-                summary,
-                "| {trajectory} ({dir}) | {correction} | failed | | |"
-            );
-            sections.push(format!(
-                "{title}\n\n`tendril sim` failed ({status}); see its log above.\n"
-            ));
+        let on_off = if correction { "on" } else { "off" };
+        let kind = match shape {
+            TrajectoryShape::Steps { .. } => "steps",
+            _ => "circle",
+        };
+        match crate::ipc::sim::run(&sim) {
+            Ok(r) => {
+                let num = |v: Option<f64>| v.map_or("–".into(), |v| format!("{v:.3}"));
+                let verdict = if r.verdict.clean {
+                    String::new()
+                } else {
+                    format!(" (failed: {})", r.verdict.problems.join("; "))
+                };
+                let _ = writeln!(
+                    summary,
+                    "| {kind} ({dir}) | {on_off} | {} | {} | {}{verdict} |",
+                    num(r.rms_tracking_error_mm),
+                    num(r.max_tracking_error_mm),
+                    num(r.max_steady_state_error_mm)
+                );
+                sections.push(format!(
+                    "{title}\n\n{}\n\n![sim]({dir}/sim.png)\n",
+                    r.markdown().trim()
+                ));
+            }
+            Err(e @ SimError::Interrupted) => return Err(e.into()),
+            Err(e) => {
+                log::error!("closed loop {dir}: {e}");
+                let _ = writeln!(summary, "| {kind} ({dir}) | {on_off} | failed | | |");
+                sections.push(format!("{title}\n\nThe sim failed: {e}.\n"));
+            }
         }
     }
     summary.push('\n');

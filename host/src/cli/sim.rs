@@ -1,15 +1,20 @@
 //! `tendril sim`: planner, controller and plant as three processes over
-//! iceoryx2, with fault injection and a report (DESIGN §6, §7).
+//! iceoryx2, with fault injection and a report (docs/design.md §6, §7).
 
-use std::path::PathBuf;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Args;
 
-use super::controller::LoopOpts;
+use super::controller::{LoopOpts, OnOff};
 use super::planner::TrajectoryOpts;
 use super::plant::PlantOpts;
-use crate::ipc::sim::{unique_prefix, SimConfig, SimFaults};
+use crate::ipc::planner::Injections;
+use crate::ipc::sim::{ModelSource, SimConfig, SimFaults};
+
+/// The model `tendril train` writes by default.
+const TRAINED_MODEL: &str = "out/model.tnet";
 
 /// Run planner, controller and plant as separate processes and report.
 #[derive(Args, Debug)]
@@ -17,18 +22,19 @@ pub struct SimArgs {
     /// Robot description file.
     #[arg(long, default_value = "robots/seed-4t.toml")]
     pub robot: PathBuf,
-    /// Trained IK net (`tendril train` output).
-    #[arg(long, default_value = "out/model.tnet")]
-    pub model: PathBuf,
+    /// Trained IK net [default: out/model.tnet if it exists, else the
+    /// firmware's built-in net firmware/vectors/default.tnet].
+    #[arg(long)]
+    pub model: Option<PathBuf>,
     /// Fit a quick random-feature IK net (written to OUT/quick.tnet) instead
     /// of loading --model: for tests and demos without a trained model.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "model")]
     pub quick_model: bool,
     /// Output directory for report.json, report.md, sim.png and the logs.
     #[arg(long, default_value = "out/sim")]
     pub out: PathBuf,
     /// Seconds of trajectory after the settle hold.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, allow_hyphen_values = true)]
     pub duration: f64,
     /// iceoryx2 service-name prefix (default: unique per run).
     #[arg(long)]
@@ -43,151 +49,112 @@ pub struct SimArgs {
     /// and the planner to another: with the plant's real-time priority
     /// above the controller's, the command's event wakes the plant at once
     /// (one-way latency p50 ≈ 7 µs here, against ≈ 25 µs unpinned).
-    #[arg(long, value_enum, default_value_t = super::controller::OnOff::On)]
-    pub pin: super::controller::OnOff,
+    #[arg(long, value_enum, default_value_t = OnOff::On)]
+    pub pin: OnOff,
     /// Fault: SIGKILL the planner at this time (s after the first setpoint).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub kill_planner_at: Option<f64>,
     /// Fault: start a new planner this long after the kill (s).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub restart_planner_after: Option<f64>,
     /// Fault: SIGKILL the plant at this time (s).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub kill_plant_at: Option<f64>,
     /// Fault: start a new plant this long after the kill (s).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub restart_plant_after: Option<f64>,
     /// Fault: publish a weight update with a flipped bit at these times (s).
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     pub corrupt_weights_at: Vec<f64>,
     /// Publish the model again as a valid hot swap at these times (s).
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     pub swap_weights_at: Vec<f64>,
     /// Planner fault: NaN setpoints at these times (s).
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     pub inject_nan_at: Vec<f64>,
     /// Planner fault: out-of-workspace setpoints from these times (s), 50 ms each.
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     pub inject_outside_at: Vec<f64>,
+}
+
+impl SimArgs {
+    /// The typed configuration these arguments describe.
+    fn config(self) -> anyhow::Result<SimConfig> {
+        let exe = std::env::current_exe().context("locating the tendril executable")?;
+        let model = if self.quick_model {
+            ModelSource::Quick
+        } else {
+            ModelSource::resolve(self.model, Path::new(TRAINED_MODEL))
+        };
+        let mut cfg = SimConfig::new(exe, self.robot, model, self.out);
+        cfg.prefix = self.prefix;
+        cfg.duration_s = self.duration;
+        cfg.planner.shape = self.traj.shape()?;
+        cfg.planner.rate_hz = self.traj.planner_rate;
+        cfg.planner.settle_s = self.traj.settle;
+        cfg.planner.inject = Injections {
+            nan_at_s: self.inject_nan_at,
+            outside_at_s: self.inject_outside_at,
+            ..cfg.planner.inject
+        };
+        self.tuning.apply(&mut cfg.controller);
+        // Real-time scheduling is on by default under `sim` (`--realtime
+        // off` to disable): it keeps the 1 kHz loop on time on a busy machine.
+        cfg.realtime = self.tuning.realtime != Some(OnOff::Off);
+        cfg.plant.params = self.plant.params()?;
+        cfg.plant.spin = self.plant.spin;
+        cfg.pin = self.pin == OnOff::On;
+        cfg.faults = SimFaults {
+            kill_planner_at: self.kill_planner_at,
+            restart_planner_after: self.restart_planner_after,
+            kill_plant_at: self.kill_plant_at,
+            restart_plant_after: self.restart_plant_after,
+            corrupt_weights_at: self.corrupt_weights_at,
+            swap_weights_at: self.swap_weights_at,
+        };
+        cfg.label = format!(
+            "trajectory {:?}, correction {:?} (ki {}/s), lead {} ms, motor τ {} ms, noise {} mm, \
+             {} s, real-time {}, pinned {:?}",
+            self.traj.trajectory,
+            self.tuning.correction,
+            self.tuning.ki,
+            self.tuning.lead_ms,
+            self.plant.motor_tau_ms,
+            self.plant.noise_mm,
+            self.duration,
+            if cfg.realtime { "on" } else { "off" },
+            self.pin
+        );
+        Ok(cfg)
+    }
 }
 
 /// Run `tendril sim`.
 pub fn run(args: SimArgs) -> anyhow::Result<()> {
-    args.traj.shape()?; // fail early on a bad trajectory
-    args.plant.params()?;
-    if args.duration.is_nan() || args.duration <= 0.0 {
-        anyhow::bail!("--duration must be positive");
-    }
-    let model = if args.quick_model {
-        let robot = crate::robot::Robot::load(&args.robot)?;
-        let statics =
-            crate::statics::Statics::new(&robot, crate::statics::SolverSettings::default());
-        let blob = crate::ipc::fixture::quick_net(&statics, 2000, 48, 6.0, 7)?;
-        std::fs::create_dir_all(&args.out)
-            .with_context(|| format!("creating {}", args.out.display()))?;
-        let path = args.out.join("quick.tnet");
-        crate::fsutil::write_atomic(&path, &blob)
-            .with_context(|| format!("writing {}", path.display()))?;
-        path
-    } else {
-        args.model.clone()
-    };
-    if !model.exists() {
+    let out = args.out.clone();
+    let r = crate::ipc::sim::run(&args.config()?)?;
+    let mm = |v: Option<f64>| v.map_or("–".into(), |v| format!("{v:.3}"));
+    let (cycles, overruns) = r
+        .controller
+        .as_ref()
+        .map_or((0, 0), |c| (c.cycles, c.overruns));
+    // A closed stdout (`| head`) is not an error of the run.
+    let _ = writeln!(
+        std::io::stdout(),
+        "tracking RMS {} mm, max {} mm over {} samples; controller {cycles} cycles, \
+         {overruns} overruns; IPC latency p50 {} µs",
+        mm(r.rms_tracking_error_mm),
+        mm(r.max_tracking_error_mm),
+        r.tracking_samples,
+        r.ipc_latency_us
+            .map_or("–".into(), |s| format!("{:.1}", s.p50)),
+    );
+    if !r.verdict.clean {
         anyhow::bail!(
-            "model {} not found: train one with `tendril train` or pass --model",
-            args.model.display()
+            "the run did not finish cleanly: {} (report in {})",
+            r.verdict.problems.join("; "),
+            out.display()
         );
     }
-    let exe = std::env::current_exe().context("locating the tendril executable")?;
-    // Real-time scheduling is on by default under `sim` (`--realtime off`
-    // to disable): it keeps the 1 kHz loop on time on a busy machine.
-    let mut tuning = args.tuning.clone();
-    let realtime =
-        tuning.realtime.unwrap_or(super::controller::OnOff::On) == super::controller::OnOff::On;
-    tuning.realtime = Some(if realtime {
-        super::controller::OnOff::On
-    } else {
-        super::controller::OnOff::Off
-    });
-    let mut planner_args = args.traj.to_args();
-    let mut plant_args = args.plant.to_args();
-    if realtime {
-        planner_args.push("--realtime".into());
-        plant_args.push("--realtime".into());
-    }
-    let mut controller_args = tuning.to_args();
-    if args.pin == super::controller::OnOff::On {
-        let cpus = crate::ipc::clock::allowed_cpus();
-        if let (Some(&first), Some(&last)) = (cpus.first(), cpus.last()) {
-            controller_args.push(format!("--cpu={last}"));
-            plant_args.push(format!("--cpu={last}"));
-            if first != last {
-                planner_args.push(format!("--cpu={first}"));
-            }
-        }
-    }
-    let join = |v: &[f64]| {
-        v.iter()
-            .map(|x| x.to_string())
-            .collect::<Vec<_>>()
-            .join(",")
-    };
-    if !args.inject_nan_at.is_empty() {
-        planner_args.push(format!("--inject-nan-at={}", join(&args.inject_nan_at)));
-    }
-    if !args.inject_outside_at.is_empty() {
-        planner_args.push(format!(
-            "--inject-outside-at={}",
-            join(&args.inject_outside_at)
-        ));
-    }
-    let label = format!(
-        "trajectory {:?}, correction {:?} (ki {}/s), lead {} ms, motor τ {} ms, noise {} mm, \
-         {} s, real-time {}, pinned {:?}",
-        args.traj.trajectory,
-        args.tuning.correction,
-        args.tuning.ki,
-        args.tuning.lead_ms,
-        args.plant.motor_tau_ms,
-        args.plant.noise_mm,
-        args.duration,
-        if realtime { "on" } else { "off" },
-        args.pin
-    );
-    let cfg = SimConfig {
-        exe,
-        robot: args.robot,
-        model,
-        out: args.out.clone(),
-        prefix: args.prefix.unwrap_or_else(unique_prefix),
-        duration: args.duration,
-        settle: args.traj.settle,
-        rate: args.tuning.rate,
-        planner_args,
-        controller_args,
-        plant_args,
-        faults: SimFaults {
-            kill_planner_at: args.kill_planner_at,
-            restart_planner_after: args.restart_planner_after,
-            kill_plant_at: args.kill_plant_at,
-            restart_plant_after: args.restart_plant_after,
-            corrupt_weights_at: args.corrupt_weights_at,
-            swap_weights_at: args.swap_weights_at,
-        },
-        label,
-    };
-    let r = crate::ipc::sim::run(&cfg)?;
-    println!(
-        "tracking RMS {:.3} mm, max {:.3} mm; controller {} cycles, {} overruns, lateness p50 {:.1} µs p99 {:.1} µs; IPC p50 {:.1} µs p99 {:.1} µs; report in {}",
-        r["rms_tracking_error_mm"].as_f64().unwrap_or(f64::NAN),
-        r["max_tracking_error_mm"].as_f64().unwrap_or(f64::NAN),
-        r["controller"]["cycles"],
-        r["controller"]["overruns"],
-        r["controller"]["lateness_us"]["p50"].as_f64().unwrap_or(f64::NAN),
-        r["controller"]["lateness_us"]["p99"].as_f64().unwrap_or(f64::NAN),
-        r["ipc_latency_us"]["p50"].as_f64().unwrap_or(f64::NAN),
-        r["ipc_latency_us"]["p99"].as_f64().unwrap_or(f64::NAN),
-        args.out.display()
-    );
     Ok(())
 }

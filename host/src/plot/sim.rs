@@ -4,23 +4,28 @@
 use std::path::Path;
 
 use plotters::prelude::*;
-use serde_json::Value;
 
-/// Draw `report["series"]` (as written by `ipc::sim`) into a PNG at `path`.
-pub fn draw(path: &Path, report: &Value) -> Result<(), Box<dyn std::error::Error>> {
+use crate::ipc::sim::report::SimReport;
+
+/// Draw the report's series into a PNG at `path`.
+pub fn draw(path: &Path, report: &SimReport) -> Result<(), Box<dyn std::error::Error>> {
     super::init_fonts();
-    let empty = Vec::new();
-    let path_pts = report["series"]["path_mm"].as_array().unwrap_or(&empty);
-    let tensions = report["series"]["tensions"].as_array().unwrap_or(&empty);
-    let num = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
+    let path_pts = &report.series.path;
+    let tensions = &report.series.tensions;
 
     let root = BitMapBackend::new(path, (1400, 600)).into_drawing_area();
     root.fill(&WHITE)?;
     let (left, right) = root.split_horizontally(600);
 
     // Top view of the tip path.
-    let des: Vec<(f64, f64)> = path_pts.iter().map(|p| (num(&p[1]), num(&p[2]))).collect();
-    let act: Vec<(f64, f64)> = path_pts.iter().map(|p| (num(&p[3]), num(&p[4]))).collect();
+    let des: Vec<(f64, f64)> = path_pts
+        .iter()
+        .map(|p| (p.desired_mm[0], p.desired_mm[1]))
+        .collect();
+    let act: Vec<(f64, f64)> = path_pts
+        .iter()
+        .map(|p| (p.actual_mm[0], p.actual_mm[1]))
+        .collect();
     let pts = des
         .iter()
         .chain(&act)
@@ -64,23 +69,26 @@ pub fn draw(path: &Path, report: &Value) -> Result<(), Box<dyn std::error::Error
         .draw()?;
 
     // Tensions over time: commanded (thin) and actual (thick) per tendon.
-    let n = report["tendons"].as_u64().unwrap_or(0) as usize;
+    let n = report.tendons;
     let t_max = tensions
         .last()
-        .map(|r| num(&r[0]))
+        .map(|r| r.t_s)
         .filter(|t| t.is_finite())
         .unwrap_or(1.0);
     let t_min = tensions
         .first()
-        .map(|r| num(&r[0]))
+        .map(|r| r.t_s)
         .filter(|t| t.is_finite())
         .unwrap_or(0.0);
     let mut f_max: f64 = 1.0;
     for r in tensions {
-        for k in 0..n {
-            f_max = f_max.max(num(&r[1][k])).max(num(&r[2][k]));
+        for v in r.commanded.iter().chain(&r.actual) {
+            if v.is_finite() {
+                f_max = f_max.max(*v);
+            }
         }
     }
+    let at = |v: &[f64], k: usize| v.get(k).copied().unwrap_or(f64::NAN);
     let mut chart = ChartBuilder::on(&right)
         .caption(
             "tendon tensions (thin: commanded, thick: actual)",
@@ -98,12 +106,12 @@ pub fn draw(path: &Path, report: &Value) -> Result<(), Box<dyn std::error::Error
     for k in 0..n {
         let color = Palette99::pick(k).to_rgba();
         chart.draw_series(LineSeries::new(
-            tensions.iter().map(|r| (num(&r[0]), num(&r[1][k]))),
+            tensions.iter().map(|r| (r.t_s, at(&r.commanded, k))),
             color.stroke_width(1),
         ))?;
         chart
             .draw_series(LineSeries::new(
-                tensions.iter().map(|r| (num(&r[0]), num(&r[2][k]))),
+                tensions.iter().map(|r| (r.t_s, at(&r.actual, k))),
                 color.stroke_width(3),
             ))?
             .label(format!("tendon {k}"))

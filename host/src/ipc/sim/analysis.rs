@@ -1,0 +1,375 @@
+//! From the processes' logs to the report's numbers.
+//!
+//! The tracking error is computed from two independent records: the
+//! planner's log of what it asked for and the plant's log of where the
+//! simulated tip really was (no sensor noise), joined by the shared
+//! monotonic clock. What the controller noticed comes from its per-period
+//! log (status bits) and its statistics.
+
+use std::path::Path;
+
+use tendril_shared::messages::{command_status, plant_status, setpoint_flags};
+
+use super::report::SteadyState;
+use super::SimError;
+use crate::ipc::planner::LOG_INJECTED;
+use crate::ipc::stats::{column, read_log};
+
+/// A setpoint the planner logged.
+#[derive(Clone, Copy, Debug)]
+pub struct SetpointRow {
+    /// Send time (monotonic ns).
+    pub t_ns: f64,
+    /// Wire flags plus the log-only [`LOG_INJECTED`] bit.
+    pub flags: u32,
+    /// The trajectory's position (m), also for injected messages.
+    pub position: [f64; 3],
+    /// Planner generation that sent it.
+    pub generation: usize,
+}
+
+/// One plant step.
+#[derive(Clone, Debug)]
+pub struct PlantRow {
+    /// Step time (monotonic ns).
+    pub t_ns: f64,
+    /// True tip position (m).
+    pub position: [f64; 3],
+    /// Commanded tensions (N).
+    pub commanded: Vec<f64>,
+    /// Actual tensions (N).
+    pub actual: Vec<f64>,
+    /// [`plant_status`] bits.
+    pub status: u32,
+}
+
+/// One controller period.
+#[derive(Clone, Copy, Debug)]
+pub struct ControllerRow {
+    /// Wake-up time (monotonic ns).
+    pub t_ns: f64,
+    /// [`command_status`] bits.
+    pub status: u32,
+    /// Sequence number of the setpoint in use.
+    pub setpoint_seq: f64,
+    /// Sequence number of the plant state in use.
+    pub state_seq: f64,
+}
+
+/// All logs of one run, each sorted by time.
+#[derive(Debug, Default)]
+pub struct Logs {
+    /// Planner logs, all generations.
+    pub setpoints: Vec<SetpointRow>,
+    /// Plant logs, all generations.
+    pub plant: Vec<PlantRow>,
+    /// Tendons (from the plant log's columns; 0 without one).
+    pub tendons: usize,
+    /// The controller's per-period log.
+    pub controller: Vec<ControllerRow>,
+}
+
+fn logs_of(dir: &Path, stem: &str, generations: usize) -> Result<Vec<LogFile>, SimError> {
+    let mut all = Vec::new();
+    for g in 0..generations {
+        let path = dir.join(format!("{stem}-{g}.csv"));
+        if path.exists() {
+            let (header, rows) = read_log(&path)?;
+            all.push(LogFile {
+                path,
+                generation: g,
+                header,
+                rows,
+            });
+        }
+    }
+    Ok(all)
+}
+
+struct LogFile {
+    path: std::path::PathBuf,
+    generation: usize,
+    header: Vec<String>,
+    rows: Vec<Vec<f64>>,
+}
+
+impl Logs {
+    /// Read every log in `dir`: `planner-G.csv`, `plant-G.csv` for the
+    /// generations started, and `controller.csv`.
+    pub fn read(dir: &Path, planners: usize, plants: usize) -> Result<Logs, SimError> {
+        let mut logs = Logs::default();
+        for f in logs_of(dir, "planner", planners)? {
+            let (it, ifl, ix) = (
+                column(&f.header, "t_ns", &f.path)?,
+                column(&f.header, "flags", &f.path)?,
+                column(&f.header, "px", &f.path)?,
+            );
+            logs.setpoints.extend(f.rows.iter().map(|r| SetpointRow {
+                t_ns: r[it],
+                flags: r[ifl] as u32,
+                position: [r[ix], r[ix + 1], r[ix + 2]],
+                generation: f.generation,
+            }));
+        }
+        logs.setpoints.sort_by(|a, b| a.t_ns.total_cmp(&b.t_ns));
+        for f in logs_of(dir, "plant", plants)? {
+            let it = column(&f.header, "t_ns", &f.path)?;
+            let ix = column(&f.header, "px", &f.path)?;
+            let ic = column(&f.header, "cmd0", &f.path)?;
+            let ia = column(&f.header, "tau0", &f.path)?;
+            let ist = column(&f.header, "status", &f.path)?;
+            let n = ia - ic;
+            logs.tendons = n;
+            logs.plant.extend(f.rows.iter().map(|r| PlantRow {
+                t_ns: r[it],
+                position: [r[ix], r[ix + 1], r[ix + 2]],
+                commanded: r[ic..ic + n].to_vec(),
+                actual: r[ia..ia + n].to_vec(),
+                status: r[ist] as u32,
+            }));
+        }
+        logs.plant.sort_by(|a, b| a.t_ns.total_cmp(&b.t_ns));
+        let controller = dir.join("controller.csv");
+        let controller_log = if controller.exists() {
+            let (header, rows) = read_log(&controller)?;
+            vec![LogFile {
+                path: controller,
+                generation: 0,
+                header,
+                rows,
+            }]
+        } else {
+            Vec::new()
+        };
+        for f in controller_log {
+            let (it, ist, isp, ips) = (
+                column(&f.header, "t_ns", &f.path)?,
+                column(&f.header, "status", &f.path)?,
+                column(&f.header, "sp_seq", &f.path)?,
+                column(&f.header, "state_seq", &f.path)?,
+            );
+            logs.controller.extend(f.rows.iter().map(|r| ControllerRow {
+                t_ns: r[it],
+                status: r[ist] as u32,
+                setpoint_seq: r[isp],
+                state_seq: r[ips],
+            }));
+        }
+        Ok(logs)
+    }
+
+    /// First controller period at or after `t_ns` with any of `bits` set.
+    pub fn controller_flag_after(&self, t_ns: f64, bits: u32) -> Option<f64> {
+        self.controller
+            .iter()
+            .find(|r| r.t_ns >= t_ns && r.status & bits != 0)
+            .map(|r| r.t_ns)
+    }
+
+    /// First plant step with any of `bits` set.
+    pub fn plant_flag(&self, bits: u32) -> Option<f64> {
+        self.plant
+            .iter()
+            .find(|r| r.status & bits != 0)
+            .map(|r| r.t_ns)
+    }
+
+    /// Injected planner messages: (first stamp, messages) of each burst of
+    /// consecutive injected setpoints.
+    pub fn injection_bursts(&self) -> Vec<(f64, usize)> {
+        let mut bursts: Vec<(f64, usize)> = Vec::new();
+        let mut previous_injected = false;
+        for s in &self.setpoints {
+            let injected = s.flags & LOG_INJECTED != 0;
+            match (injected, previous_injected, bursts.last_mut()) {
+                (true, true, Some(last)) => last.1 += 1,
+                (true, _, _) => bursts.push((s.t_ns, 1)),
+                _ => {}
+            }
+            previous_injected = injected;
+        }
+        bursts
+    }
+}
+
+/// One plant step joined with the setpoint in force.
+#[derive(Clone, Copy, Debug)]
+pub struct Sample {
+    /// Seconds since the run's start.
+    pub t: f64,
+    /// Desired tip position (m).
+    pub desired: [f64; 3],
+    /// True tip position (m).
+    pub actual: [f64; 3],
+    /// Whether the planner was in a hold (settle, restart) or injecting.
+    pub hold: bool,
+}
+
+impl Sample {
+    /// Distance between desired and true tip, mm.
+    pub fn error_mm(&self) -> f64 {
+        let d: f64 = (0..3)
+            .map(|k| (self.desired[k] - self.actual[k]).powi(2))
+            .sum();
+        d.sqrt() * 1e3
+    }
+}
+
+/// Join each plant step with the setpoint in force (none if the planner
+/// has been silent for over 50 ms); times in s since `t0_ns`.
+pub fn join(logs: &Logs, t0_ns: u64) -> Vec<Sample> {
+    let sp = &logs.setpoints;
+    let mut samples = Vec::new();
+    let mut j = 0;
+    for row in &logs.plant {
+        while j + 1 < sp.len() && sp[j + 1].t_ns <= row.t_ns {
+            j += 1;
+        }
+        let Some(s) = sp.get(j) else { continue };
+        if s.t_ns > row.t_ns || row.t_ns - s.t_ns > 50e6 {
+            continue;
+        }
+        samples.push(Sample {
+            t: (row.t_ns - t0_ns as f64) * 1e-9,
+            desired: s.position,
+            actual: row.position,
+            hold: s.flags & (setpoint_flags::HOLD | LOG_INJECTED) != 0,
+        });
+    }
+    samples
+}
+
+/// Tracking statistics over the samples outside holds.
+#[derive(Clone, Debug, Default)]
+pub struct Tracking {
+    /// RMS error (mm).
+    pub rms: Option<f64>,
+    /// Largest error (mm).
+    pub max: Option<f64>,
+    /// 95th percentile (mm).
+    pub p95: Option<f64>,
+    /// Samples behind them.
+    pub samples: usize,
+    /// First and last sample (s).
+    pub window: Option<[f64; 2]>,
+}
+
+/// RMS of the tracking samples with `from ≤ t < to`, mm.
+pub fn rms_between(samples: &[Sample], from: f64, to: f64) -> Option<f64> {
+    let e: Vec<f64> = samples
+        .iter()
+        .filter(|s| !s.hold && s.t >= from && s.t < to)
+        .map(Sample::error_mm)
+        .collect();
+    rms(&e)
+}
+
+fn rms(e: &[f64]) -> Option<f64> {
+    (!e.is_empty()).then(|| (e.iter().map(|x| x * x).sum::<f64>() / e.len() as f64).sqrt())
+}
+
+/// Nearest-rank percentile of a non-empty slice.
+fn percentile(v: &[f64], p: f64) -> Option<f64> {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    let rank = ((p / 100.0) * s.len() as f64).ceil() as usize;
+    s.get(rank.clamp(1, s.len().max(1)) - 1).copied()
+}
+
+/// RMS, max and p95 of the error outside holds.
+pub fn tracking(samples: &[Sample]) -> Tracking {
+    let tracked: Vec<&Sample> = samples.iter().filter(|s| !s.hold).collect();
+    let e: Vec<f64> = tracked.iter().map(|s| s.error_mm()).collect();
+    Tracking {
+        rms: rms(&e),
+        max: e.iter().copied().reduce(f64::max),
+        p95: percentile(&e, 95.0),
+        samples: e.len(),
+        window: tracked.first().zip(tracked.last()).map(|(a, b)| [a.t, b.t]),
+    }
+}
+
+/// Every stretch of ≥ 1 s with a constant desired position: the mean true
+/// error over its last 0.5 s.
+pub fn steady_states(samples: &[Sample]) -> Vec<SteadyState> {
+    let mut steady = Vec::new();
+    let mut k = 0;
+    while k < samples.len() {
+        let mut e = k;
+        while e + 1 < samples.len() && samples[e + 1].desired == samples[k].desired {
+            e += 1;
+        }
+        if samples[e].t - samples[k].t >= 1.0 {
+            let tail: Vec<f64> = samples[k..=e]
+                .iter()
+                .filter(|s| s.t >= samples[e].t - 0.5)
+                .map(Sample::error_mm)
+                .collect();
+            if !tail.is_empty() {
+                steady.push(SteadyState {
+                    t_s: samples[k].t,
+                    target_mm: [samples[k].desired[0] * 1e3, samples[k].desired[1] * 1e3],
+                    error_mm: tail.iter().sum::<f64>() / tail.len() as f64,
+                    samples: tail.len(),
+                });
+            }
+        }
+        k = e + 1;
+    }
+    steady
+}
+
+/// Bits that mark a setpoint the controller would not use.
+pub const REJECTED: u32 = command_status::SETPOINT_REJECTED;
+/// Bits that mark the plant injecting a fault on itself.
+pub const PLANT_FAULT_BITS: [u32; 3] = [
+    plant_status::MOTOR_STUCK,
+    plant_status::DROPPING,
+    plant_status::DELAYING,
+];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample(t: f64, desired: f64, actual: f64, hold: bool) -> Sample {
+        Sample {
+            t,
+            desired: [desired, 0.0, 0.2],
+            actual: [actual, 0.0, 0.2],
+            hold,
+        }
+    }
+
+    #[test]
+    fn tracking_covers_only_samples_outside_holds_and_says_how_many() {
+        let s = [
+            sample(0.0, 0.0, 0.5, true),
+            sample(1.0, 0.0, 0.003, false),
+            sample(2.0, 0.0, 0.004, false),
+        ];
+        let t = tracking(&s);
+        assert_eq!(t.samples, 2);
+        assert_eq!(t.window, Some([1.0, 2.0]));
+        // errors 3 mm and 4 mm: RMS √((9 + 16) / 2)
+        assert!((t.rms.unwrap() - (12.5f64).sqrt()).abs() < 1e-9);
+        assert!((t.max.unwrap() - 4.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn no_samples_give_no_statistics_rather_than_zeros() {
+        let t = tracking(&[sample(0.0, 0.0, 0.5, true)]);
+        assert_eq!((t.rms, t.max, t.p95, t.samples), (None, None, None, 0));
+    }
+
+    #[test]
+    fn a_one_second_stretch_at_one_target_is_a_steady_state() {
+        let s: Vec<Sample> = (0..=150)
+            .map(|i| sample(i as f64 * 0.01, 0.01, 0.011, false))
+            .collect();
+        let st = steady_states(&s);
+        assert_eq!(st.len(), 1);
+        assert!((st[0].error_mm - 1.0).abs() < 1e-9);
+        assert_eq!(st[0].samples, 51);
+    }
+}

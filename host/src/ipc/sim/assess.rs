@@ -1,0 +1,360 @@
+//! From the logs and the launcher's events to the typed report: the
+//! statistics with what they cover, each process's end, and every
+//! injected fault with its detection.
+
+use std::path::Path;
+
+use tendril_shared::messages::{command_status, plant_status};
+
+use super::analysis::{self, join, rms_between, steady_states, tracking, Logs, Sample};
+use super::faults::Action;
+use super::report::{
+    FaultKind, FaultRecord, ModelUsed, PathPoint, PlantSummary, Series, SimReport, TensionPoint,
+    Verdict,
+};
+use super::supervisor::{Children, Role};
+use super::workdir::RunDir;
+use super::{Event, SimConfig, SimError};
+use crate::ipc::controller::ControllerStats;
+use crate::ipc::plant::PlantStats;
+use crate::ipc::stats::Summary;
+
+fn read_json<T: for<'de> serde::Deserialize<'de>>(path: &Path) -> Option<T> {
+    let text = std::fs::read(path).ok()?;
+    serde_json::from_slice(&text).ok()
+}
+
+/// The report of a finished run.
+#[allow(clippy::too_many_arguments)]
+pub fn build_report(
+    cfg: &SimConfig,
+    dir: &RunDir,
+    t0: u64,
+    children: &Children,
+    events: &[Event],
+    prefix: &str,
+    model: ModelUsed,
+) -> Result<SimReport, SimError> {
+    let planners = children.started(Role::Planner);
+    let plants = children.started(Role::Plant);
+    let logs = Logs::read(&dir.work, planners, plants)?;
+    let samples = join(&logs, t0);
+    let track = tracking(&samples);
+    let steady = steady_states(&samples);
+    let controller: Option<ControllerStats> = read_json(&dir.file("controller.json"));
+    let mut plant = PlantSummary::default();
+    let mut latencies: Vec<Summary> = Vec::new();
+    for g in 0..plants {
+        match read_json::<PlantStats>(&dir.file(&format!("plant-{g}.json"))) {
+            Some(s) => {
+                plant.commands_checked += s.commands - s.dropped;
+                plant.out_of_range_commands += s.out_of_range_commands;
+                latencies.push(s.latency_us);
+                plant.generations.push(s);
+            }
+            None => plant.generations_without_stats.push(g),
+        }
+    }
+    plant.step_us = plant
+        .generations
+        .first()
+        .map(|s| s.step_us)
+        .filter(|s| s.count > 0);
+    let ipc_latency_us = latencies.into_iter().find(|s| s.count > 0);
+    let processes = children.records(t0);
+    let faults = analyse_faults(cfg, t0, events, &logs, &samples, controller.as_ref());
+
+    let mut problems: Vec<String> = processes
+        .iter()
+        .filter(|p| !p.end.acceptable())
+        .map(|p| {
+            format!(
+                "{} {} (pid {}) {} at {}",
+                p.role.name(),
+                p.generation,
+                p.pid,
+                p.end.describe(),
+                p.ended_s.map_or("?".into(), |t| format!("{t:.3} s"))
+            )
+        })
+        .collect();
+    if track.samples == 0 {
+        problems.push("no tracking samples: the tracking statistics measured nothing".into());
+    }
+    if controller.is_none() {
+        problems.push("the controller wrote no statistics".into());
+    }
+    if plant.commands_checked == 0 {
+        problems.push("the plant range-checked no command".into());
+    }
+    problems.extend(
+        faults
+            .iter()
+            .filter(|f| f.detected == Some(false))
+            .map(|f| {
+                format!(
+                    "{:?} injected at {:.3} s was not detected",
+                    f.kind,
+                    f.t_s.unwrap_or(f64::NAN)
+                )
+            }),
+    );
+
+    let secs = |t_ns: f64| (t_ns - t0 as f64) * 1e-9;
+    let series = Series {
+        path: samples
+            .iter()
+            .step_by(10)
+            .map(|s| PathPoint {
+                t_s: s.t,
+                desired_mm: [s.desired[0] * 1e3, s.desired[1] * 1e3],
+                actual_mm: [s.actual[0] * 1e3, s.actual[1] * 1e3],
+                hold: s.hold,
+            })
+            .collect(),
+        tensions: logs
+            .plant
+            .iter()
+            .step_by(10)
+            .map(|r| TensionPoint {
+                t_s: secs(r.t_ns),
+                commanded: r.commanded.clone(),
+                actual: r.actual.clone(),
+            })
+            .collect(),
+    };
+    Ok(SimReport {
+        label: cfg.label.clone(),
+        prefix: prefix.to_string(),
+        model,
+        duration_s: cfg.duration_s,
+        settle_s: cfg.planner.settle_s,
+        tendons: logs.tendons,
+        verdict: Verdict {
+            clean: problems.is_empty(),
+            problems,
+        },
+        processes,
+        rms_tracking_error_mm: track.rms,
+        max_tracking_error_mm: track.max,
+        p95_tracking_error_mm: track.p95,
+        tracking_samples: track.samples,
+        tracking_window_s: track.window,
+        max_steady_state_error_mm: steady.iter().map(|s| s.error_mm).reduce(f64::max),
+        steady_state: steady,
+        controller,
+        ipc_latency_us,
+        plant,
+        faults,
+        series,
+    })
+}
+
+/// Every injected fault with what the loop did about it.
+fn analyse_faults(
+    cfg: &SimConfig,
+    t0: u64,
+    events: &[Event],
+    logs: &Logs,
+    samples: &[Sample],
+    _controller: Option<&ControllerStats>,
+) -> Vec<FaultRecord> {
+    let period_ns = 1e9 / cfg.controller.rate_hz;
+    let secs = |t: f64| (t - t0 as f64) * 1e-9;
+    let end = cfg.planner.settle_s + cfg.duration_s;
+    let mut out = Vec::new();
+    for ev in events {
+        let te = ev.t_ns as f64;
+        let t_s = secs(te);
+        let pid = ev.pid.map_or(String::new(), |p| format!("pid {p}"));
+        let mut f = match ev.action {
+            Action::Kill(Role::Planner) => {
+                let mut f = FaultRecord::new(FaultKind::PlannerKilled, Some(t_s), pid);
+                let hold = logs.controller_flag_after(te, command_status::SAFE_HOLD);
+                f.detect(
+                    hold.map(|h| (h - te) * 1e-9),
+                    "controller safe hold (watchdog)",
+                );
+                // Last period that saw a new setpoint before the kill.
+                let before: Vec<_> = logs.controller.iter().filter(|r| r.t_ns <= te).collect();
+                let last_new = before
+                    .windows(2)
+                    .rev()
+                    .find(|w| w[1].setpoint_seq != w[0].setpoint_seq)
+                    .map(|w| w[1].t_ns);
+                if let (Some(a), Some(b)) = (last_new, hold) {
+                    f.hold_periods_after_last_setpoint = Some(((b - a) / period_ns).round() as u64);
+                }
+                f
+            }
+            Action::Restart(Role::Planner) => {
+                let mut f = FaultRecord::new(FaultKind::PlannerRestarted, Some(t_s), String::new());
+                f.resumed_after_s = logs
+                    .controller
+                    .iter()
+                    .find(|r| r.t_ns > te && r.status & command_status::SAFE_HOLD == 0)
+                    .map(|r| (r.t_ns - te) * 1e-9);
+                f.rms_after_recovery_mm = rms_between(samples, t_s + 1.5, end);
+                f
+            }
+            Action::Kill(_) => {
+                let restart = cfg.faults.restart_plant_after.is_some();
+                let detail = if restart {
+                    pid
+                } else {
+                    format!(
+                        "{pid}; not restarted: no plant from here on, the tracking statistics \
+                         end at the kill"
+                    )
+                };
+                let mut f = FaultRecord::new(FaultKind::PlantKilled, Some(t_s), detail);
+                f.restart_configured = Some(restart);
+                let stale = logs.controller_flag_after(te, command_status::PLANT_STALE);
+                f.controller_flagged_stale = Some(stale.is_some());
+                f.detect(
+                    stale.map(|s| (s - te) * 1e-9),
+                    "controller plant-stale flag",
+                );
+                let last_state = logs
+                    .controller
+                    .iter()
+                    .rev()
+                    .find(|r| r.t_ns <= te)
+                    .map(|r| r.state_seq);
+                f.state_resumed_at_s = logs
+                    .controller
+                    .iter()
+                    .filter(|r| r.t_ns > te)
+                    .find(|r| Some(r.state_seq) != last_state)
+                    .map(|r| secs(r.t_ns));
+                f
+            }
+            Action::Restart(_) => {
+                let mut f = FaultRecord::new(FaultKind::PlantRestarted, Some(t_s), String::new());
+                f.rms_after_recovery_mm = rms_between(samples, t_s + 1.5, end);
+                f
+            }
+            Action::Weights { corrupt } => {
+                let (kind, bit, how) = if corrupt {
+                    (
+                        FaultKind::WeightsCorrupted,
+                        command_status::WEIGHTS_REJECTED,
+                        "controller weights-rejected flag",
+                    )
+                } else {
+                    (
+                        FaultKind::WeightsSwapped,
+                        command_status::WEIGHTS_SWAPPED,
+                        "controller weights-swapped flag",
+                    )
+                };
+                let mut f = FaultRecord::new(kind, Some(t_s), String::new());
+                let seen = logs.controller_flag_after(te - period_ns, bit);
+                f.detect(seen.map(|s| ((s - te) * 1e-9).max(0.0)), how);
+                f
+            }
+        };
+        if matches!(ev.action, Action::Restart(_)) {
+            f.detected = None;
+        }
+        out.push(f);
+    }
+    out.extend(planner_injections(cfg, t0, logs));
+    out.extend(plant_faults(cfg, t0, logs));
+    out.sort_by(|a, b| {
+        let key = |f: &FaultRecord| f.t_s.unwrap_or(f64::INFINITY);
+        key(a).total_cmp(&key(b))
+    });
+    out
+}
+
+/// NaN and out-of-workspace setpoints, from the planner's log (injected
+/// messages are flagged there), detected by the controller's
+/// setpoint-rejected flag.
+fn planner_injections(cfg: &SimConfig, t0: u64, logs: &Logs) -> Vec<FaultRecord> {
+    let inject = &cfg.planner.inject;
+    let Some(first) = logs.setpoints.iter().find(|s| s.generation == 0) else {
+        return Vec::new();
+    };
+    let planner_start = first.t_ns;
+    let mut out = Vec::new();
+    for (start, count) in logs.injection_bursts() {
+        let since = (start - planner_start) * 1e-9;
+        let nearest = |times: &[f64]| {
+            times
+                .iter()
+                .map(|a| (since - a).abs())
+                .fold(f64::INFINITY, f64::min)
+        };
+        let kind = if nearest(&inject.nan_at_s) <= nearest(&inject.outside_at_s) {
+            FaultKind::NanSetpoint
+        } else {
+            FaultKind::OutsideSetpoint
+        };
+        let mut f = FaultRecord::new(
+            kind,
+            Some((start - t0 as f64) * 1e-9),
+            format!("{count} message{}", if count == 1 { "" } else { "s" }),
+        );
+        let seen = logs.controller_flag_after(start, analysis::REJECTED);
+        f.detect(
+            seen.map(|s| (s - start) * 1e-9),
+            "controller setpoint-rejected flag",
+        );
+        out.push(f);
+    }
+    out
+}
+
+/// Plant-side faults, from the plant's log (it flags its own faults), detected by the controller.
+fn plant_faults(cfg: &SimConfig, t0: u64, logs: &Logs) -> Vec<FaultRecord> {
+    let faults = &cfg.plant.params.faults;
+    let secs = |t: f64| (t - t0 as f64) * 1e-9;
+    let mut out = Vec::new();
+    if let Some(stuck) = faults.stuck {
+        let at = logs.plant_flag(plant_status::MOTOR_STUCK);
+        let mut f = FaultRecord::new(
+            FaultKind::StuckMotor,
+            at.map(secs),
+            format!(
+                "tendon {} at {} s after the plant's start",
+                stuck.tendon, stuck.at_s
+            ),
+        );
+        if at.is_some() {
+            f.detected = Some(false);
+        }
+        out.push(f);
+    }
+    if let Some(drop) = faults.drop {
+        let at = logs.plant_flag(plant_status::DROPPING);
+        let mut f = FaultRecord::new(
+            FaultKind::DroppedCommands,
+            at.map(secs),
+            format!(
+                "{:.0} % of commands from {} to {} s after the plant's start",
+                drop.fraction * 100.0,
+                drop.from_s,
+                drop.to_s
+            ),
+        );
+        f.detect(at.map(|_| 0.0), "plant log: first dropped command");
+        out.push(f);
+    }
+    if let Some(delay) = faults.delay {
+        let at = logs.plant_flag(plant_status::DELAYING);
+        let mut f = FaultRecord::new(
+            FaultKind::DelayedCommands,
+            at.map(secs),
+            format!(
+                "{:.1} ms from {} to {} s after the plant's start",
+                delay.delay_s * 1e3,
+                delay.from_s,
+                delay.to_s
+            ),
+        );
+        f.detect(at.map(|_| 0.0), "plant log: first delayed command");
+        out.push(f);
+    }
+    out
+}

@@ -1,0 +1,506 @@
+//! `tendril sim`: the closed loop as three processes (docs/design.md §6).
+//!
+//! [`run`] takes a typed [`SimConfig`], creates the services under a unique
+//! prefix, writes each child's typed configuration as JSON and starts
+//! `tendril plant|controller|planner --config FILE`
+//! ([`supervisor`]: children that die with the launcher), plays the fault
+//! script ([`faults`]), stops everything, turns the logs into numbers
+//! ([`analysis`]) and returns a typed [`SimReport`] ([`report`]), also
+//! written as `report.json`, `report.md` and `sim.png`.
+//!
+//! The run works in `OUT/.sim-run/` and moves its files into `OUT` only
+//! when it completes, so an interrupted run leaves the previous outputs as
+//! they were.
+
+pub mod analysis;
+pub mod assess;
+pub mod faults;
+pub mod report;
+pub mod supervisor;
+pub mod workdir;
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use serde::Serialize;
+use tendril_shared::messages::{control_command, Control, Header};
+
+pub use self::faults::SimFaults;
+use self::faults::{weight_update, Action};
+use self::report::{ModelUsed, SimReport};
+use self::supervisor::{install_interrupt_latch, interrupted, Children, ProcessEnd, Role};
+use self::workdir::{write_json, Configs, RunDir};
+use super::clock::now_ns;
+use super::controller::ControllerConfig;
+use super::planner::{Injections, PlannerConfig};
+use super::plant::PlantConfig;
+use super::trajectory::Shape;
+use super::transport::{self, Services};
+use super::IpcError;
+
+/// The firmware's built-in net: what `tendril sim` runs when no model is
+/// given and none has been trained (the very file the MCU build embeds).
+pub const BUILT_IN_NET: &[u8] = include_bytes!("../../../../firmware/vectors/default.tnet");
+
+/// Integral gain of the correction when it is on, 1/s.
+pub const DEFAULT_KI_PER_S: f64 = 10.0;
+
+/// Name of the working directory inside the output directory.
+pub const RUN_DIR: &str = ".sim-run";
+
+/// How long a planner may take to send its first setpoint (it lifts the
+/// whole trajectory through the statics first).
+const FIRST_SETPOINT_TIMEOUT_S: f64 = 60.0;
+
+/// What can stop a sim before it has a report.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    /// A configuration value is out of range.
+    #[error("{0}")]
+    Config(String),
+    /// A file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The transport or a log failed.
+    #[error(transparent)]
+    Ipc(#[from] IpcError),
+    /// A child process ended before the loop ran.
+    #[error("{role} exited before the loop started ({end}); its error is above")]
+    ChildFailedAtStart {
+        /// Which process.
+        role: &'static str,
+        /// How it ended.
+        end: String,
+    },
+    /// The planner never sent a setpoint.
+    #[error("no setpoint from the planner within {0} s")]
+    NoSetpoint(f64),
+    /// SIGINT or SIGTERM: the processes were stopped, the outputs left as they were.
+    #[error("interrupted: stopped planner, controller and plant; previous outputs left intact")]
+    Interrupted,
+}
+
+/// Which net the controller starts with.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub enum ModelSource {
+    /// A `.tnet` file.
+    File(PathBuf),
+    /// The firmware's built-in net ([`BUILT_IN_NET`]), written into the output directory.
+    BuiltIn,
+    /// A quick random-feature net fitted at start (for tests and demos),
+    /// written into the output directory as `quick.tnet`.
+    Quick,
+}
+
+impl ModelSource {
+    /// `explicit` if given, else `fallback` if it exists, else the built-in
+    /// net (with one log line saying so).
+    pub fn resolve(explicit: Option<PathBuf>, fallback: &Path) -> ModelSource {
+        match explicit {
+            Some(p) => ModelSource::File(p),
+            None if fallback.exists() => ModelSource::File(fallback.to_path_buf()),
+            None => {
+                log::info!(
+                    "sim: no --model and no {}: using the firmware's built-in net \
+                     (firmware/vectors/default.tnet)",
+                    fallback.display()
+                );
+                ModelSource::BuiltIn
+            }
+        }
+    }
+}
+
+/// Everything one run needs, typed. The child configurations are
+/// templates: the launcher fills in robot, model, prefix, log and stats
+/// paths, CPU, scheduling and supervision for each process it starts.
+#[derive(Clone, Debug, Serialize)]
+pub struct SimConfig {
+    /// The `tendril` executable to start the children from.
+    pub exe: PathBuf,
+    /// Robot file.
+    pub robot: PathBuf,
+    /// The net.
+    pub model: ModelSource,
+    /// Output directory.
+    pub out: PathBuf,
+    /// Service-name prefix (`None`: unique per run).
+    pub prefix: Option<String>,
+    /// Seconds of trajectory after the settle hold.
+    pub duration_s: f64,
+    /// Planner: trajectory, rate, settle, injected bad setpoints.
+    pub planner: PlannerConfig,
+    /// Controller: loop and correction tuning.
+    pub controller: ControllerConfig,
+    /// Plant: model and plant-side faults.
+    pub plant: PlantConfig,
+    /// Process-level faults the launcher injects.
+    pub faults: SimFaults,
+    /// Run the three processes under SCHED_FIFO.
+    pub realtime: bool,
+    /// Pin controller and plant to one CPU and the planner to another.
+    pub pin: bool,
+    /// Free-form description for the report.
+    pub label: String,
+}
+
+/// A unique service prefix for one run: parallel sims and tests never share services.
+pub fn unique_prefix() -> String {
+    format!(
+        "tendril-sim-{}-{}",
+        std::process::id(),
+        now_ns() % 1_000_000_000_000
+    )
+}
+
+impl SimConfig {
+    /// The defaults of `tendril sim`: the 30 mm circle at 0.2 Hz after a
+    /// 2 s settle, 10 s, the firmware's integral correction on (ki 10/s),
+    /// 20.5 ms motor-lag lead, the default plant, real-time and pinned.
+    pub fn new(exe: PathBuf, robot: PathBuf, model: ModelSource, out: PathBuf) -> SimConfig {
+        let mut controller = ControllerConfig::new(robot.clone(), PathBuf::new());
+        controller.ki_per_s = DEFAULT_KI_PER_S;
+        controller.lead_s = 0.0205;
+        SimConfig {
+            exe,
+            robot: robot.clone(),
+            model,
+            out,
+            prefix: None,
+            duration_s: 10.0,
+            planner: PlannerConfig {
+                robot: robot.clone(),
+                prefix: String::new(),
+                shape: Shape::Circle {
+                    center_m: [0.0, 0.0],
+                    radius_m: 0.015,
+                    freq_hz: 0.2,
+                },
+                rate_hz: 1000.0,
+                settle_s: 2.0,
+                duration_s: None,
+                inject: Injections {
+                    outside_for_s: 0.05,
+                    ..Injections::default()
+                },
+                peer_timeout_s: controller.peer_timeout_s,
+                supervised: true,
+                log: None,
+                realtime: true,
+                cpu: None,
+            },
+            controller,
+            plant: PlantConfig {
+                robot,
+                ..PlantConfig::default()
+            },
+            faults: SimFaults::default(),
+            realtime: true,
+            pin: true,
+            label: String::new(),
+        }
+    }
+
+    /// Switch the firmware's integral correction on (default gain) or off (IK alone).
+    pub fn set_correction(&mut self, on: bool) {
+        self.controller.ki_per_s = if on { DEFAULT_KI_PER_S } else { 0.0 };
+    }
+
+    /// Reject what cannot be a run, before anything starts.
+    pub fn validate(&self) -> Result<(), SimError> {
+        if !(self.duration_s.is_finite() && self.duration_s > 0.0) {
+            return Err(SimError::Config(format!(
+                "--duration {}: must be a finite number of seconds > 0",
+                self.duration_s
+            )));
+        }
+        let settle = self.planner.settle_s;
+        if !(settle.is_finite() && settle >= 0.0) {
+            return Err(SimError::Config(format!(
+                "--settle {settle}: must be a finite number of seconds ≥ 0"
+            )));
+        }
+        let inject = &self.planner.inject;
+        if let Some(t) = inject
+            .nan_at_s
+            .iter()
+            .chain(&inject.outside_at_s)
+            .find(|t| !(t.is_finite() && **t >= 0.0))
+        {
+            return Err(SimError::Config(format!(
+                "injection time {t}: must be a finite number of seconds ≥ 0"
+            )));
+        }
+        self.faults.validate()
+    }
+}
+
+/// How the timed part of a run ended.
+enum Ending {
+    /// At the configured end.
+    Completed,
+    /// A process died on its own: stopped at once.
+    ProcessDied,
+    /// SIGINT/SIGTERM.
+    Interrupted,
+}
+
+/// Sleep until `t_ns` in short slices, watching the children and the
+/// interrupt latch.
+fn wait_until(t_ns: u64, children: &mut Children, deaths: &mut Vec<String>) -> Option<Ending> {
+    loop {
+        if interrupted() {
+            return Some(Ending::Interrupted);
+        }
+        let gone = children.poll(false);
+        if !gone.is_empty() {
+            deaths.extend(
+                gone.iter()
+                    .map(|(role, end)| format!("{} {}", role.name(), end.describe())),
+            );
+            return Some(Ending::ProcessDied);
+        }
+        let now = now_ns();
+        if now >= t_ns {
+            return None;
+        }
+        super::clock::sleep_until(now + (t_ns - now).min(10_000_000), 0);
+    }
+}
+
+/// An event the launcher caused, for the fault analysis.
+pub struct Event {
+    /// When (monotonic ns).
+    pub t_ns: u64,
+    /// What.
+    pub action: Action,
+    /// The pid killed, for a kill.
+    pub pid: Option<u32>,
+}
+
+/// Run the loop and return its report (also written to `out/report.json`,
+/// `report.md`, `sim.png`). A run whose processes did not all finish
+/// cleanly (an injected kill excepted) still returns its report, with
+/// `verdict.clean == false` and the reasons.
+pub fn run(cfg: &SimConfig) -> Result<SimReport, SimError> {
+    cfg.validate()?;
+    install_interrupt_latch();
+    let dir = RunDir::create(&cfg.out)?;
+    let result = run_in(cfg, &dir);
+    match result {
+        Ok(report) => {
+            dir.publish()?;
+            Ok(report)
+        }
+        Err(e) => {
+            dir.discard();
+            Err(e)
+        }
+    }
+}
+
+fn model_file(cfg: &SimConfig, dir: &RunDir) -> Result<(PathBuf, Vec<u8>, ModelUsed), SimError> {
+    let write = |name: &str, bytes: &[u8]| -> Result<PathBuf, SimError> {
+        let path = dir.file(name);
+        crate::fsutil::write_atomic(&path, bytes).map_err(|source| SimError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        Ok(path)
+    };
+    Ok(match &cfg.model {
+        ModelSource::File(path) => {
+            let bytes = std::fs::read(path).map_err(|source| SimError::Io {
+                path: path.clone(),
+                source,
+            })?;
+            let used = ModelUsed {
+                path: path.clone(),
+                built_in: false,
+            };
+            (path.clone(), bytes, used)
+        }
+        ModelSource::BuiltIn => {
+            let path = write("default.tnet", BUILT_IN_NET)?;
+            let used = ModelUsed {
+                path: cfg.out.join("default.tnet"),
+                built_in: true,
+            };
+            (path, BUILT_IN_NET.to_vec(), used)
+        }
+        ModelSource::Quick => {
+            let robot = crate::robot::Robot::load(&cfg.robot)
+                .map_err(|e| SimError::Config(e.to_string()))?;
+            let statics =
+                crate::statics::Statics::new(&robot, crate::statics::SolverSettings::default());
+            let blob = super::fixture::quick_net(&statics, 2000, 48, 6.0, 7)?;
+            let path = write("quick.tnet", &blob)?;
+            let used = ModelUsed {
+                path: cfg.out.join("quick.tnet"),
+                built_in: false,
+            };
+            (path, blob, used)
+        }
+    })
+}
+
+fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
+    let (model_path, model_bytes, model_used) = model_file(cfg, dir)?;
+    let prefix = cfg.prefix.clone().unwrap_or_else(unique_prefix);
+    let cpus = if cfg.pin {
+        let cpus = super::clock::allowed_cpus();
+        match (cpus.first(), cpus.last()) {
+            (Some(&first), Some(&last)) => (Some(last), (first != last).then_some(first)),
+            _ => (None, None),
+        }
+    } else {
+        (None, None)
+    };
+    let configs = Configs {
+        cfg,
+        dir,
+        prefix: prefix.clone(),
+        model: model_path,
+        cpus,
+    };
+
+    // Services first, then the peers (see the module docs of `transport`).
+    let node = transport::node("tendril-sim")?;
+    let services = Services::open_or_create(&node, &prefix)?;
+    let control = transport::publisher(&services.control)?;
+    let weights = transport::publisher(&services.weights)?;
+    let watch = transport::subscriber(&services.setpoint)?;
+
+    let mut children = Children::new(&cfg.exe, &dir.file("pids"));
+    let started = now_ns();
+    let stop_now = |children: &mut Children| {
+        children.stop_all(Duration::from_millis(500));
+        node.try_cleanup_dead_nodes();
+    };
+    for role in [Role::Plant, Role::Controller, Role::Planner] {
+        let spawned = configs
+            .write(role, 0)
+            .and_then(|path| children.spawn(role, &path));
+        if let Err(e) = spawned {
+            stop_now(&mut children);
+            return Err(e);
+        }
+    }
+
+    // The run's clock starts with the planner's first setpoint (lifting the
+    // trajectory takes the planner a moment).
+    let t0 = loop {
+        if let (Some(_), _) = transport::latest(&watch)? {
+            break now_ns();
+        }
+        if interrupted() {
+            stop_now(&mut children);
+            return Err(SimError::Interrupted);
+        }
+        if let Some((role, end)) = children.poll(false).into_iter().next() {
+            stop_now(&mut children);
+            return Err(SimError::ChildFailedAtStart {
+                role: role.name(),
+                end: end.describe(),
+            });
+        }
+        if (now_ns() - started) as f64 * 1e-9 > FIRST_SETPOINT_TIMEOUT_S {
+            stop_now(&mut children);
+            return Err(SimError::NoSetpoint(FIRST_SETPOINT_TIMEOUT_S));
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    drop(watch);
+
+    let end_s = cfg.planner.settle_s + cfg.duration_s;
+    let at = |t: f64| t0 + (t * 1e9) as u64;
+    let mut events: Vec<Event> = Vec::new();
+    let mut deaths: Vec<String> = Vec::new();
+    let mut weight_seq = 0;
+    let mut ending = Ending::Completed;
+    for (t, action) in cfg.faults.script(end_s) {
+        if let Some(e) = wait_until(at(t), &mut children, &mut deaths) {
+            ending = e;
+            break;
+        }
+        let pid = match action {
+            Action::Kill(role) => children.kill_as_fault(role),
+            Action::Restart(role) => {
+                let generation = children.started(role);
+                let path = configs.write(role, generation)?;
+                children.spawn(role, &path)?;
+                None
+            }
+            Action::Weights { corrupt } => {
+                weight_seq += 1;
+                let header = Header {
+                    seq: weight_seq,
+                    stamp_ns: now_ns(),
+                };
+                transport::send(&weights, weight_update(&model_bytes, header, corrupt)?)?;
+                None
+            }
+        };
+        log::info!("sim: {action:?} at {t:.3} s");
+        events.push(Event {
+            t_ns: now_ns(),
+            action,
+            pid,
+        });
+    }
+    if matches!(ending, Ending::Completed) {
+        if let Some(e) = wait_until(at(end_s), &mut children, &mut deaths) {
+            ending = e;
+        }
+    }
+    let stopped_ns = now_ns();
+    match ending {
+        Ending::Interrupted => {
+            stop_now(&mut children);
+            return Err(SimError::Interrupted);
+        }
+        Ending::ProcessDied => {
+            log::error!(
+                "sim: {} at {:.3} s: stopping the run",
+                deaths.join(", "),
+                (stopped_ns - t0) as f64 * 1e-9
+            );
+            children.stop_all(Duration::from_secs(2));
+        }
+        Ending::Completed => {
+            transport::send(
+                &control,
+                Control {
+                    header: Header {
+                        seq: 1,
+                        stamp_ns: now_ns(),
+                    },
+                    command: control_command::STOP,
+                    reserved: 0,
+                },
+            )?;
+            children.reap(Duration::from_secs(10), ProcessEnd::KilledAtShutdown);
+        }
+    }
+    node.try_cleanup_dead_nodes();
+    if interrupted() {
+        return Err(SimError::Interrupted);
+    }
+
+    let report = assess::build_report(cfg, dir, t0, &children, &events, &prefix, model_used)?;
+    write_json(&dir.file("report.json"), &report)?;
+    crate::fsutil::write_atomic(&dir.file("report.md"), report.markdown().as_bytes()).map_err(
+        |source| SimError::Io {
+            path: dir.file("report.md"),
+            source,
+        },
+    )?;
+    crate::plot::sim::draw(&dir.file("sim.png"), &report)
+        .map_err(|e| SimError::Config(format!("sim figure: {e}")))?;
+    Ok(report)
+}

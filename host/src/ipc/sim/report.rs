@@ -1,0 +1,363 @@
+//! The typed result of one `tendril sim` run: what `report.json` is the
+//! serialisation of, and its markdown rendering (`report.md`).
+//!
+//! Every statistic carries what it covers: a count of the samples behind
+//! it, or `null` when there were none (never a 0.0 that measured nothing).
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+use super::supervisor::ProcessRecord;
+use crate::ipc::controller::ControllerStats;
+use crate::ipc::plant::PlantStats;
+use crate::ipc::stats::Summary;
+
+/// The report of one run (`report.json`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct SimReport {
+    /// Free-form description of the run.
+    pub label: String,
+    /// iceoryx2 service-name prefix of the run.
+    pub prefix: String,
+    /// The net the controller started with.
+    pub model: ModelUsed,
+    /// Seconds of trajectory after the settle hold, as configured.
+    pub duration_s: f64,
+    /// Initial hold, s.
+    pub settle_s: f64,
+    /// Tendons of the robot (from the plant log).
+    pub tendons: usize,
+    /// Whether every process finished cleanly (or died by an injected fault)
+    /// and the statistics below measured something.
+    pub verdict: Verdict,
+    /// Every process the run started: role, pid, start, end and how it ended.
+    pub processes: Vec<ProcessRecord>,
+    /// RMS of the true tip error against the planner's path over the
+    /// tracking samples (outside holds), mm; `null` with no samples.
+    pub rms_tracking_error_mm: Option<f64>,
+    /// Largest tracking error, mm.
+    pub max_tracking_error_mm: Option<f64>,
+    /// 95th percentile of the tracking error, mm.
+    pub p95_tracking_error_mm: Option<f64>,
+    /// Plant steps joined with a setpoint in force outside holds: what the
+    /// three tracking statistics above cover.
+    pub tracking_samples: usize,
+    /// First and last tracking sample, s since the first setpoint.
+    pub tracking_window_s: Option<[f64; 2]>,
+    /// Every stretch of ≥ 1 s with one target: mean true error over its last 0.5 s.
+    pub steady_state: Vec<SteadyState>,
+    /// Worst of `steady_state`, mm; `null` when there was no such stretch.
+    pub max_steady_state_error_mm: Option<f64>,
+    /// The controller's own statistics (`null` when it wrote none: it died).
+    pub controller: Option<ControllerStats>,
+    /// One-way command latency controller → plant over all plant
+    /// generations' commands (µs); `null` when no command arrived.
+    pub ipc_latency_us: Option<Summary>,
+    /// The plant's statistics.
+    pub plant: PlantSummary,
+    /// Every injected fault: when, and when and how the loop detected it.
+    pub faults: Vec<FaultRecord>,
+    /// Decimated time series for the figure.
+    pub series: Series,
+}
+
+/// Which net the controller ran.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ModelUsed {
+    /// The file given (or the built-in net written into the output directory).
+    pub path: PathBuf,
+    /// Whether it is the firmware's built-in net (`firmware/vectors/default.tnet`).
+    pub built_in: bool,
+}
+
+/// The run's overall outcome.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct Verdict {
+    /// No problem below.
+    pub clean: bool,
+    /// One line per problem: a process that died uninjected or had to be
+    /// killed at shutdown, a statistic with no data behind it.
+    pub problems: Vec<String>,
+}
+
+/// Steady-state error at one target.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct SteadyState {
+    /// Start of the stretch, s.
+    pub t_s: f64,
+    /// Lateral target x, y (mm).
+    pub target_mm: [f64; 2],
+    /// Mean true error over the stretch's last 0.5 s (mm).
+    pub error_mm: f64,
+    /// Plant steps averaged.
+    pub samples: usize,
+}
+
+/// The plant side of the report.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct PlantSummary {
+    /// Step time of the first plant generation (µs); `null` with no steps.
+    pub step_us: Option<Summary>,
+    /// Commands the plants received and range-checked (all generations).
+    pub commands_checked: u64,
+    /// Of those, commands with a tension out of range or not finite.
+    pub out_of_range_commands: u64,
+    /// Plant generations that wrote no statistics (killed, or died).
+    pub generations_without_stats: Vec<usize>,
+    /// Each generation's own statistics, generation 0 first.
+    pub generations: Vec<PlantStats>,
+}
+
+/// Kinds of injected fault.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FaultKind {
+    /// SIGKILL of the planner.
+    PlannerKilled,
+    /// A new planner after a kill.
+    PlannerRestarted,
+    /// SIGKILL of the plant.
+    PlantKilled,
+    /// A new plant after a kill.
+    PlantRestarted,
+    /// A weight update with a flipped bit.
+    WeightsCorrupted,
+    /// A valid weight update (hot swap).
+    WeightsSwapped,
+    /// A NaN setpoint from the planner.
+    NanSetpoint,
+    /// A burst of out-of-workspace setpoints from the planner.
+    OutsideSetpoint,
+    /// A plant motor that stops following its command.
+    StuckMotor,
+    /// The plant drops a fraction of the commands.
+    DroppedCommands,
+    /// The plant delays the commands.
+    DelayedCommands,
+}
+
+/// One injected fault and what the loop made of it.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct FaultRecord {
+    /// What was injected.
+    pub kind: FaultKind,
+    /// When, s since the first setpoint (`null`: it never took effect,
+    /// e.g. scheduled after the run's end).
+    pub t_s: Option<f64>,
+    /// Whether the loop noticed it (`null`: nothing to notice, e.g. a restart).
+    pub detected: Option<bool>,
+    /// Detection latency: injection → first sign in the controller's log or
+    /// fault list, s.
+    pub detection_latency_s: Option<f64>,
+    /// How it was detected (the status bit or fault entry).
+    pub detected_by: Option<String>,
+    /// Details: the pid killed, the tendon stuck, the drop fraction …
+    pub detail: String,
+    /// Planner kill: periods from the last new setpoint to the safe hold.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub hold_periods_after_last_setpoint: Option<u64>,
+    /// Planner restart: s from the new planner's start to the end of the hold.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub resumed_after_s: Option<f64>,
+    /// Restarts: RMS tracking error from 1.5 s after the restart to the end, mm.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub rms_after_recovery_mm: Option<f64>,
+    /// Plant kill: whether a restart was configured.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub restart_configured: Option<bool>,
+    /// Plant kill: the controller flagged the plant state stale.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub controller_flagged_stale: Option<bool>,
+    /// Plant kill: when fresh plant states came again, s.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub state_resumed_at_s: Option<f64>,
+}
+
+impl FaultRecord {
+    /// A fault with no analysis yet.
+    pub fn new(kind: FaultKind, t_s: Option<f64>, detail: String) -> FaultRecord {
+        FaultRecord {
+            kind,
+            t_s,
+            detected: None,
+            detection_latency_s: None,
+            detected_by: None,
+            detail,
+            hold_periods_after_last_setpoint: None,
+            resumed_after_s: None,
+            rms_after_recovery_mm: None,
+            restart_configured: None,
+            controller_flagged_stale: None,
+            state_resumed_at_s: None,
+        }
+    }
+
+    /// Record a detection `latency_s` after the injection by `how`.
+    pub fn detect(&mut self, latency_s: Option<f64>, how: &str) {
+        self.detected = Some(latency_s.is_some());
+        self.detection_latency_s = latency_s;
+        self.detected_by = latency_s.map(|_| how.to_string());
+    }
+}
+
+/// Decimated series for the figure.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct Series {
+    /// Every 10th joined sample.
+    pub path: Vec<PathPoint>,
+    /// Every 10th plant step.
+    pub tensions: Vec<TensionPoint>,
+}
+
+/// Desired and true lateral tip position at one time.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
+pub struct PathPoint {
+    /// s since the first setpoint.
+    pub t_s: f64,
+    /// Desired x, y (mm).
+    pub desired_mm: [f64; 2],
+    /// True x, y (mm).
+    pub actual_mm: [f64; 2],
+    /// In a hold (settle or an injected setpoint).
+    pub hold: bool,
+}
+
+/// Commanded and actual tensions at one plant step.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct TensionPoint {
+    /// s since the first setpoint.
+    pub t_s: f64,
+    /// Commanded (N).
+    pub commanded: Vec<f64>,
+    /// Actual (N).
+    pub actual: Vec<f64>,
+}
+
+fn mm(v: Option<f64>) -> String {
+    v.map_or_else(|| "– (no data)".into(), |x| format!("{x:.3}"))
+}
+
+fn us(v: &Option<Summary>, pick: fn(&Summary) -> f64) -> String {
+    match v {
+        Some(s) if s.count > 0 => format!("{:.1} ({} samples)", pick(s), s.count),
+        _ => "– (no data)".into(),
+    }
+}
+
+impl SimReport {
+    /// `report.md`: the headline numbers, each with what it covers.
+    pub fn markdown(&self) -> String {
+        let mut s = String::new();
+        let _ = writeln!(s, "# tendril sim report\n\n{}\n", self.label);
+        if self.model.built_in {
+            let _ = writeln!(
+                s,
+                "Net: the firmware's built-in net (`{}`).\n",
+                self.model.path.display()
+            );
+        }
+        if self.verdict.clean {
+            s.push_str("Outcome: **clean**.\n\n");
+        } else {
+            s.push_str("Outcome: **failed**:\n\n");
+            for p in &self.verdict.problems {
+                let _ = writeln!(s, "- {p}");
+            }
+            s.push('\n');
+        }
+        s.push_str("| quantity | value |\n|---|---|\n");
+        let mut row = |name: &str, value: String| {
+            let _ = writeln!(s, "| {name} | {value} |");
+        };
+        row(
+            "tracking samples (plant steps outside holds)",
+            self.tracking_samples.to_string(),
+        );
+        if let Some([a, b]) = self.tracking_window_s {
+            row("tracking window (s)", format!("{a:.2} – {b:.2}"));
+        }
+        row("RMS tracking error (mm)", mm(self.rms_tracking_error_mm));
+        row("max tracking error (mm)", mm(self.max_tracking_error_mm));
+        row("p95 tracking error (mm)", mm(self.p95_tracking_error_mm));
+        row(
+            "max steady-state error (mm)",
+            mm(self.max_steady_state_error_mm),
+        );
+        match &self.controller {
+            Some(c) => {
+                row("controller cycles", c.cycles.to_string());
+                row("controller overruns", c.overruns.to_string());
+                row("controller skipped periods", c.skipped.to_string());
+                row("watchdog trips", c.watchdog_trips.to_string());
+                let lateness = Some(c.lateness_us);
+                row("lateness p50 (µs)", us(&lateness, |s| s.p50));
+                row("lateness p99 (µs)", us(&lateness, |s| s.p99));
+            }
+            None => row("controller statistics", "– (none written)".into()),
+        }
+        row("IPC latency p50 (µs)", us(&self.ipc_latency_us, |s| s.p50));
+        row("IPC latency p99 (µs)", us(&self.ipc_latency_us, |s| s.p99));
+        row("plant step median (µs)", us(&self.plant.step_us, |s| s.p50));
+        row(
+            "out-of-range commands at the plant",
+            format!(
+                "{} of {} checked",
+                self.plant.out_of_range_commands, self.plant.commands_checked
+            ),
+        );
+        if !self.steady_state.is_empty() {
+            s.push_str(
+                "\n## Steady state\n\n| from (s) | target x, y (mm) | error (mm) | samples |\n|---|---|---|---|\n",
+            );
+            for st in &self.steady_state {
+                let _ = writeln!(
+                    s,
+                    "| {:.3} | {:.3}, {:.3} | {:.3} | {} |",
+                    st.t_s, st.target_mm[0], st.target_mm[1], st.error_mm, st.samples
+                );
+            }
+        }
+        s.push_str("\n## Processes\n\n| process | pid | started (s) | ended (s) | end |\n|---|---|---|---|---|\n");
+        for p in &self.processes {
+            let _ = writeln!(
+                s,
+                "| {} {} | {} | {:.3} | {} | {} |",
+                p.role.name(),
+                p.generation,
+                p.pid,
+                p.started_s,
+                p.ended_s.map_or("–".into(), |t| format!("{t:.3}")),
+                p.end.describe()
+            );
+        }
+        if !self.faults.is_empty() {
+            s.push_str(
+                "\n## Injected faults\n\n| fault | at (s) | detected | latency (ms) | by | detail |\n|---|---|---|---|---|---|\n",
+            );
+            for f in &self.faults {
+                let _ = writeln!(
+                    s,
+                    "| {} | {} | {} | {} | {} | {} |",
+                    serde_json::to_value(f.kind)
+                        .ok()
+                        .and_then(|v| v.as_str().map(str::to_string))
+                        .unwrap_or_default(),
+                    f.t_s.map_or("never".into(), |t| format!("{t:.3}")),
+                    match f.detected {
+                        Some(true) => "yes",
+                        Some(false) => "**no**",
+                        None => "n/a",
+                    },
+                    f.detection_latency_s
+                        .map_or("–".into(), |t| format!("{:.1}", t * 1e3)),
+                    f.detected_by.as_deref().unwrap_or("–"),
+                    f.detail
+                );
+            }
+        }
+        s.push_str("\nFigure: `sim.png` (desired vs actual tip path, tensions over time).\n");
+        s
+    }
+}

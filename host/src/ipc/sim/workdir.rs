@@ -1,0 +1,210 @@
+//! The files of one run: a work directory inside the output directory
+//! (moved into place only when the run completes) and each child's typed
+//! configuration written there as JSON.
+
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+use super::supervisor::Role;
+use super::{SimConfig, SimError, RUN_DIR};
+
+/// Paths of one run.
+pub struct RunDir {
+    out: PathBuf,
+    /// The work directory.
+    pub work: PathBuf,
+}
+
+impl RunDir {
+    /// Create `out` and a fresh work directory in it.
+    pub fn create(out: &Path) -> Result<RunDir, SimError> {
+        let io = |path: &Path| {
+            let path = path.to_path_buf();
+            move |source| SimError::Io { path, source }
+        };
+        std::fs::create_dir_all(out).map_err(io(out))?;
+        let work = out.join(RUN_DIR);
+        // A launcher killed with SIGKILL leaves its work directory behind.
+        if work.exists() {
+            std::fs::remove_dir_all(&work).map_err(io(&work))?;
+        }
+        std::fs::create_dir(&work).map_err(io(&work))?;
+        Ok(RunDir {
+            out: out.to_path_buf(),
+            work,
+        })
+    }
+
+    /// A file in the work directory.
+    pub fn file(&self, name: &str) -> PathBuf {
+        self.work.join(name)
+    }
+
+    /// Move every file of the run into the output directory, after
+    /// removing the process logs of a previous run (a previous run may
+    /// have had more generations).
+    pub fn publish(self) -> Result<(), SimError> {
+        let io = |path: PathBuf| move |source| SimError::Io { path, source };
+        for entry in std::fs::read_dir(&self.out).map_err(io(self.out.clone()))? {
+            let entry = entry.map_err(io(self.out.clone()))?;
+            let name = entry.file_name().to_string_lossy().into_owned();
+            let process_file = ["planner-", "plant-", "controller."]
+                .iter()
+                .any(|p| name.starts_with(p))
+                && (name.ends_with(".csv") || name.ends_with(".json"));
+            if process_file && entry.path().is_file() {
+                std::fs::remove_file(entry.path()).map_err(io(entry.path()))?;
+            }
+        }
+        for entry in std::fs::read_dir(&self.work).map_err(io(self.work.clone()))? {
+            let entry = entry.map_err(io(self.work.clone()))?;
+            let name = entry.file_name();
+            if name == "pids" {
+                continue;
+            }
+            let to = self.out.join(&name);
+            std::fs::rename(entry.path(), &to).map_err(io(to))?;
+        }
+        std::fs::remove_dir_all(&self.work).map_err(io(self.work.clone()))
+    }
+
+    /// Drop the run's files (interrupted or failed before the loop ran).
+    pub fn discard(self) {
+        let _ = std::fs::remove_dir_all(&self.work);
+    }
+}
+
+/// Write `value` as pretty JSON, atomically.
+pub fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), SimError> {
+    let bytes = serde_json::to_vec_pretty(value)
+        .map_err(|e| SimError::Config(format!("{}: {e}", path.display())))?;
+    crate::fsutil::write_atomic(path, &bytes).map_err(|source| SimError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// The per-process configurations of one run.
+pub struct Configs<'a> {
+    /// The run's configuration.
+    pub cfg: &'a SimConfig,
+    /// Where the files go.
+    pub dir: &'a RunDir,
+    /// Service-name prefix.
+    pub prefix: String,
+    /// The net file the controller loads.
+    pub model: PathBuf,
+    /// CPUs for controller and plant, and for the planner.
+    pub cpus: (Option<usize>, Option<usize>),
+}
+
+/// File stem of a process's config, log and statistics: `plant-1`,
+/// `planner-0`, and `controller` (there is only ever one).
+pub fn stem(role: Role, generation: usize) -> String {
+    match role {
+        Role::Controller => "controller".into(),
+        _ => format!("{}-{generation}", role.name()),
+    }
+}
+
+impl Configs<'_> {
+    /// Write the configuration of `role`'s `generation` and return its path.
+    pub fn write(&self, role: Role, generation: usize) -> Result<PathBuf, SimError> {
+        let stem = stem(role, generation);
+        let path = self.dir.file(&format!("{stem}.config.json"));
+        let log = Some(self.dir.file(&format!("{stem}.csv")));
+        let stats = Some(self.dir.file(&format!("{stem}.json")));
+        let (loop_cpu, planner_cpu) = self.cpus;
+        match role {
+            Role::Plant => {
+                let mut c = self.cfg.plant.clone();
+                c.robot = self.cfg.robot.clone();
+                c.prefix = self.prefix.clone();
+                c.log = log;
+                c.stats = stats;
+                c.cpu = loop_cpu;
+                c.realtime = self.cfg.realtime;
+                c.supervised = true;
+                c.duration_s = None;
+                write_json(&path, &c)?;
+            }
+            Role::Controller => {
+                let mut c = self.cfg.controller.clone();
+                c.robot = self.cfg.robot.clone();
+                c.model = self.model.clone();
+                c.prefix = self.prefix.clone();
+                c.log = log;
+                c.stats = stats;
+                c.cpu = loop_cpu;
+                c.realtime = self.cfg.realtime;
+                c.supervised = true;
+                c.duration_s = None;
+                write_json(&path, &c)?;
+            }
+            Role::Planner => {
+                let mut c = self.cfg.planner.clone();
+                c.robot = self.cfg.robot.clone();
+                c.prefix = self.prefix.clone();
+                c.log = log;
+                c.cpu = planner_cpu;
+                c.realtime = self.cfg.realtime;
+                c.supervised = true;
+                c.duration_s = None;
+                if generation > 0 {
+                    // A restarted planner holds briefly where the robot is going.
+                    c.settle_s = 0.5;
+                }
+                write_json(&path, &c)?;
+            }
+        }
+        Ok(path)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn publish_replaces_the_previous_run_and_discard_leaves_it_alone() {
+        let tmp = tempfile::tempdir().unwrap();
+        let out = tmp.path().join("out");
+        std::fs::create_dir_all(&out).unwrap();
+        std::fs::write(out.join("report.json"), "old").unwrap();
+        std::fs::write(out.join("plant-1.csv"), "old generation").unwrap();
+        std::fs::write(out.join("notes.txt"), "the user's").unwrap();
+
+        let dir = RunDir::create(&out).unwrap();
+        std::fs::write(dir.file("report.json"), "new").unwrap();
+        std::fs::write(dir.file("pids"), "plant 0 1").unwrap();
+        dir.discard();
+        assert_eq!(
+            std::fs::read_to_string(out.join("report.json")).unwrap(),
+            "old"
+        );
+        assert!(out.join("plant-1.csv").exists());
+        assert!(!out.join(RUN_DIR).exists());
+
+        let dir = RunDir::create(&out).unwrap();
+        std::fs::write(dir.file("report.json"), "new").unwrap();
+        std::fs::write(dir.file("plant-0.csv"), "new").unwrap();
+        std::fs::write(dir.file("pids"), "plant 0 1").unwrap();
+        dir.publish().unwrap();
+        assert_eq!(
+            std::fs::read_to_string(out.join("report.json")).unwrap(),
+            "new"
+        );
+        assert_eq!(
+            std::fs::read_to_string(out.join("plant-0.csv")).unwrap(),
+            "new"
+        );
+        assert!(!out.join("plant-1.csv").exists(), "a stale log survived");
+        assert!(!out.join("pids").exists());
+        assert_eq!(
+            std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+            "the user's"
+        );
+        assert!(!out.join(RUN_DIR).exists());
+    }
+}
