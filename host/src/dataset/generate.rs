@@ -171,7 +171,10 @@ pub fn generate(
     }
     let start = Instant::now();
     let max = statics.robot().max_tensions();
-    let tensions = opts.sampler.draw(opts.samples, &max, opts.seed);
+    let min = statics.robot().min_tensions();
+    let tensions = opts
+        .sampler
+        .draw_between(opts.samples, &min, &max, opts.seed);
     let order = snake_order(&tensions, &max, SNAKE_CELLS);
     let bar = solve_bar(opts.samples, opts.progress);
     let outcomes =
