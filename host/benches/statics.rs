@@ -1,45 +1,95 @@
-//! Statics solve times on the default robot (issue: Cosserat-rod statics).
+//! Statics solve times (`docs/design.md` §2, §2.1; BENCHMARKS.md "Statics").
 //!
 //! cold: no caller-supplied guess (the solver seeds itself from its analytic
-//! straight-rod estimate and builds a finite-difference Jacobian);
-//! warm: the previous solution's warm start, one tension changed by +0.1 N.
+//! straight-rod estimate); warm: the previous solution's warm start, one
+//! tension changed by 0.1 N; multi: the two-segment tdcr-2seg robot and the
+//! same robot with every tendon anchored at the tip (equal steps per metre);
+//! batch: 600 uniformly random rows through `tendril fk --input`'s library
+//! call on one thread, per row.
 //! Run: `cargo bench -p tendril --bench statics`.
 
 use std::hint::black_box;
 use std::path::Path;
+use std::sync::atomic::AtomicBool;
 
-use criterion::{criterion_group, criterion_main, Criterion};
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use tendril::dataset::Sampler;
 use tendril::robot::Robot;
+use tendril::statics::batch::{solve_all, Load};
 use tendril::statics::{SolverSettings, Statics};
 
-fn robot() -> Robot {
-    Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml")).unwrap()
+fn robot(name: &str) -> Robot {
+    Robot::load(
+        &Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../robots")
+            .join(name),
+    )
+    .unwrap()
+}
+
+fn cold_and_warm(c: &mut Criterion, group: &str, statics: &Statics, tau: &[f64]) {
+    c.bench_function(&format!("statics/{group}/cold"), |b| {
+        b.iter(|| statics.solve(black_box(tau), None).unwrap())
+    });
+    let prev = statics.solve(tau, None).unwrap();
+    let mut next = tau.to_vec();
+    let max = statics.robot().tendons[0].max_tension;
+    next[0] += if tau[0] + 0.1 <= max { 0.1 } else { -0.1 };
+    c.bench_function(&format!("statics/{group}/warm"), |b| {
+        b.iter(|| statics.solve(black_box(&next), Some(&prev.warm)).unwrap())
+    });
 }
 
 fn solves(c: &mut Criterion) {
-    let robot = robot();
-    let statics = Statics::new(&robot, SolverSettings::default());
-    let cases: [(&str, [f64; 4]); 2] = [
-        ("mid", [4.0, 3.0, 0.0, 0.0]),
-        ("max", [10.0, 10.0, 0.0, 0.0]),
-    ];
-    for (name, tau) in cases {
-        c.bench_function(&format!("statics/cold/{name}"), |b| {
-            b.iter(|| statics.solve(black_box(&tau), None).unwrap())
-        });
-        let prev = statics.solve(&tau, None).unwrap();
-        // One tension moved by 0.1 N (down at the limit, where up is not allowed).
-        let mut next = tau;
-        next[0] += if tau[0] + 0.1 <= 10.0 { 0.1 } else { -0.1 };
-        c.bench_function(&format!("statics/warm/{name}"), |b| {
-            b.iter(|| statics.solve(black_box(&next), Some(&prev.warm)).unwrap())
-        });
+    let seed = robot("seed-4t.toml");
+    let statics = Statics::new(&seed, SolverSettings::default());
+    cold_and_warm(c, "mid", &statics, &[4.0, 3.0, 0.0, 0.0]);
+    cold_and_warm(c, "max", &statics, &[10.0, 10.0, 0.0, 0.0]);
+
+    // Multi-segment against the same rod with every tendon at the tip.
+    let two = robot("tdcr-2seg.toml");
+    let mut one = two.clone();
+    for t in &mut one.tendons {
+        t.end = one.length;
     }
+    let tau = [3.0, 0.0, 1.0, 0.0, 2.0, 0.5];
+    cold_and_warm(
+        c,
+        "tdcr-2seg",
+        &Statics::new(&two, SolverSettings::default()),
+        &tau,
+    );
+    cold_and_warm(
+        c,
+        "tdcr-tip-anchored",
+        &Statics::new(&one, SolverSettings::default()),
+        &tau,
+    );
+
     // One RK4 pass alone: the unit of cost of everything above.
     let sol = statics.solve(&[4.0, 3.0, 0.0, 0.0], None).unwrap();
     c.bench_function("statics/one_integration_16_steps", |b| {
         b.iter(|| statics.tip_state(black_box(&[4.0, 3.0, 0.0, 0.0]), &sol.warm.x, 16))
     });
+
+    // Batch fk on rows in random order, one thread, time per row.
+    let loads: Vec<Load> = Sampler::Uniform
+        .draw(600, &seed.max_tensions(), 5)
+        .into_iter()
+        .map(Load::tensions)
+        .collect();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let stop = AtomicBool::new(false);
+    let mut group = c.benchmark_group("statics/batch");
+    group.throughput(Throughput::Elements(loads.len() as u64));
+    group.sample_size(10);
+    group.bench_function("600_uniform_rows_1_thread", |b| {
+        b.iter(|| pool.install(|| solve_all(&statics, black_box(&loads), &stop, &|_| {})))
+    });
+    group.finish();
 }
 
 criterion_group!(benches, solves);

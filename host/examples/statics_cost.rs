@@ -1,18 +1,50 @@
 //! A fixed workload of cold and warm statics solves, for instruction counts
 //! under `valgrind --tool=callgrind` (deterministic, unlike wall time on a
 //! shared machine): `cargo build --release -p tendril --example statics_cost`
-//! then `valgrind --tool=callgrind target/release/examples/statics_cost cold|warm`.
+//! then `valgrind --tool=callgrind target/release/examples/statics_cost cold|warm|multi|batch`
+//! (multi: cold solves of the two-segment tdcr-2seg robot; batch: 600 uniform
+//! rows through the batch fk call, one thread).
 
 use std::path::Path;
+use std::sync::atomic::AtomicBool;
 
 use tendril::dataset::Sampler;
 use tendril::robot::Robot;
+use tendril::statics::batch::{solve_all, Load};
 use tendril::statics::{SolverSettings, Statics};
 
 fn main() -> anyhow::Result<()> {
     let mode = std::env::args().nth(1).unwrap_or_else(|| "cold".into());
-    let robot = Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml"))?;
+    let file = if mode == "multi" {
+        "tdcr-2seg.toml"
+    } else {
+        "seed-4t.toml"
+    };
+    let robot = Robot::load(
+        &Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../robots")
+            .join(file),
+    )?;
     let statics = Statics::new(&robot, SolverSettings::default());
+    if mode == "batch" {
+        let loads: Vec<Load> = Sampler::Uniform
+            .draw(600, &robot.max_tensions(), 5)
+            .into_iter()
+            .map(Load::tensions)
+            .collect();
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+        let stop = AtomicBool::new(false);
+        let results = pool
+            .install(|| solve_all(&statics, &loads, &stop, &|_| {}))
+            .unwrap_or_default();
+        let passes: usize = results.iter().flatten().map(|s| s.integrations).sum();
+        println!(
+            "batch: {} rows, {:.2} integrations per row",
+            results.len(),
+            passes as f64 / 600.0
+        );
+        return Ok(());
+    }
     let cases = Sampler::Adjacent.draw(100, &robot.max_tensions(), 3);
     let (mut solves, mut integrations) = (0usize, 0usize);
     for t in &cases {

@@ -22,6 +22,17 @@ pub const BUILTIN_DEFAULT_TOML: &str = include_str!("../../robots/seed-4t.toml")
 /// Largest tendon count a robot file may declare (the firmware's fixed capacity).
 pub const MAX_TENDONS: usize = 8;
 
+/// Largest bend (rad) a robot may reach under its own weight or one tendon's
+/// largest pull: one full turn. Beyond it the rod coils through itself, which
+/// the model (no contact) cannot describe.
+const MAX_BEND_RAD: f64 = 2.0 * PI;
+/// Largest axial compression a tendon's largest pull may cause (a fraction
+/// of the length).
+const MAX_AXIAL_STRAIN: f64 = 0.1;
+/// Largest tan of a helical tendon's angle to the backbone (≈ 84°): wound
+/// flatter, the tendon pulls around the rod rather than along it.
+const MAX_HELIX_WINDING: f64 = 10.0;
+
 /// A robot file that could not be loaded: which file, which field, what is wrong.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{}: {field}: {problem}", file.display())]
@@ -56,6 +67,11 @@ pub struct Tendon {
     pub angle: f64,
     /// Largest tension the motor may apply, N.
     pub max_tension: f64,
+    /// Smallest tension the motor keeps (pretension), N; 0 by default.
+    pub min_tension: f64,
+    /// Arc length where the tendon is anchored, m; the backbone length by
+    /// default (`docs/design.md` §2.1).
+    pub end: f64,
     /// Routing along the backbone.
     pub routing: Routing,
 }
@@ -115,6 +131,8 @@ struct TendonFile {
     offset: f64,
     angle_deg: f64,
     max_tension: f64,
+    min_tension: Option<f64>,
+    end: Option<f64>,
     routing: RoutingName,
     helix_turns: Option<f64>,
 }
@@ -205,6 +223,35 @@ impl Robot {
             }
             let angle_deg = v.finite(&f("angle_deg"), t.angle_deg)?;
             let max_tension = v.positive(&f("max_tension"), t.max_tension)?;
+            let min_tension = match t.min_tension {
+                None => 0.0,
+                Some(x) => {
+                    let x = v.non_negative(&f("min_tension"), x)?;
+                    if x > max_tension {
+                        return Err(v.err(
+                            &f("min_tension"),
+                            format!("{x} N is above max_tension {max_tension} N"),
+                        ));
+                    }
+                    x
+                }
+            };
+            let end = match t.end {
+                None => robot.length,
+                Some(x) => {
+                    let x = v.positive(&f("end"), x)?;
+                    if x > robot.length {
+                        return Err(v.err(
+                            &f("end"),
+                            format!(
+                                "{x} m is beyond the backbone length {} m (the anchor must lie on the rod, in (0, L])",
+                                robot.length
+                            ),
+                        ));
+                    }
+                    x
+                }
+            };
             let routing = match (t.routing, t.helix_turns) {
                 (RoutingName::Straight, None) => Routing::Straight,
                 (RoutingName::Straight, Some(_)) => {
@@ -227,10 +274,80 @@ impl Robot {
                 offset,
                 angle: angle_deg.to_radians(),
                 max_tension,
+                min_tension,
+                end,
                 routing,
             });
         }
-        Ok(Robot { tendons, ..robot })
+        let robot = Robot { tendons, ..robot };
+        robot.check_physical_ranges(&v)?;
+        Ok(robot)
+    }
+
+    /// Reject robots whose numbers are each finite and positive but together
+    /// describe a rod the statics cannot mean: one that coils into more than
+    /// a turn under its own weight or a single tendon's largest pull, that a
+    /// tendon compresses to a fraction of its length, or a helix wound almost
+    /// flat around the backbone. The error names the quantity out of range,
+    /// rather than letting the solver report a NaN residual.
+    fn check_physical_ranges(&self, v: &Validator<'_>) -> Result<(), RobotError> {
+        let ei = self.kbt().x;
+        let ea = self.kse().z;
+        let weight = self.weight_per_length().norm();
+        // Tip slope of a cantilever under its own weight, w L³ / (6 E I).
+        let sag = weight * self.length.powi(3) / (6.0 * ei);
+        if sag > MAX_BEND_RAD {
+            return Err(v.err(
+                "environment.gravity",
+                format!(
+                    "the backbone's weight ({weight:.3e} N/m) would bend it by {sag:.3e} rad, more than a full turn: its bending stiffness E I = {ei:.3e} N m^2 is too small (check backbone.radius, youngs_modulus, density)"
+                ),
+            ));
+        }
+        for (i, t) in self.tendons.iter().enumerate() {
+            // Constant-curvature bend of the tendon's span at full tension, κ ℓ = τ d ℓ / (E I).
+            let bend = t.max_tension * t.offset * t.end / ei;
+            if bend > MAX_BEND_RAD {
+                return Err(v.err(
+                    &format!("tendon[{i}].max_tension"),
+                    format!(
+                        "{} N would bend the backbone by {bend:.3e} rad, more than a full turn: its bending stiffness E I = {ei:.3e} N m^2 is too small for this tension (check backbone.radius, youngs_modulus)",
+                        t.max_tension
+                    ),
+                ));
+            }
+            let strain = t.max_tension / ea;
+            if strain > MAX_AXIAL_STRAIN {
+                return Err(v.err(
+                    &format!("tendon[{i}].max_tension"),
+                    format!(
+                        "{} N would compress the backbone by {:.3e} % (axial stiffness E A = {ea:.3e} N); at most {} % is modelled",
+                        t.max_tension,
+                        strain * 100.0,
+                        MAX_AXIAL_STRAIN * 100.0
+                    ),
+                ));
+            }
+            // Helix angle to the backbone axis: tan α = d φ'.
+            let winding = t.offset * t.angle_rate(self.length).abs();
+            if winding > MAX_HELIX_WINDING {
+                let turns = match t.routing {
+                    Routing::Helical { turns } => turns,
+                    Routing::Straight => 0.0,
+                };
+                return Err(v.err(
+                    &format!("tendon[{i}].helix_turns"),
+                    format!(
+                        "{turns} turns over {} m wind the tendon at {:.2} degrees to the backbone (pitch {:.3e} m); at most {:.1} degrees (tan = {MAX_HELIX_WINDING}) is modelled",
+                        self.length,
+                        winding.atan().to_degrees(),
+                        self.length / turns.abs(),
+                        MAX_HELIX_WINDING.atan().to_degrees()
+                    ),
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Number of tendons.
@@ -276,6 +393,11 @@ impl Robot {
     /// Upper tension limits, N, tendon 0 first.
     pub fn max_tensions(&self) -> Vec<f64> {
         self.tendons.iter().map(|t| t.max_tension).collect()
+    }
+
+    /// Lower tension limits (pretension floors), N, tendon 0 first.
+    pub fn min_tensions(&self) -> Vec<f64> {
+        self.tendons.iter().map(|t| t.min_tension).collect()
     }
 
     /// The same robot with gravity switched off (for closed-form checks).
@@ -353,6 +475,15 @@ pub struct TendonOffset {
     pub dr: Vector3<f64>,
     /// r''(s), 1/m.
     pub ddr: Vector3<f64>,
+}
+
+/// "1 tendon", "4 tendons": a count with its noun in the right number.
+pub fn count(n: usize, noun: &str) -> String {
+    if n == 1 {
+        format!("1 {noun}")
+    } else {
+        format!("{n} {noun}s")
+    }
 }
 
 /// Skew-symmetric matrix x̂ with x̂ y = x × y.
@@ -438,7 +569,8 @@ impl Validator<'_> {
 }
 
 /// Best-effort dotted name of the field a TOML error points at: the table
-/// header above the error's line plus the key on that line.
+/// header governing the error's line (`tendon[2]` for the third
+/// `[[tendon]]`) plus the key on that line, or the missing field's name.
 fn toml_error_field(text: &str, e: &toml::de::Error) -> String {
     let missing = e
         .message()
@@ -448,35 +580,38 @@ fn toml_error_field(text: &str, e: &toml::de::Error) -> String {
     let Some(span) = e.span() else {
         return missing.unwrap_or("file").into();
     };
+    let start = span.start.min(text.len());
+    let line_start = text[..start].rfind('\n').map_or(0, |i| i + 1);
+    let line = text[line_start..].lines().next().unwrap_or("");
+    // The error's own line counts when it is a header: serde points a missing
+    // field, and toml an unknown table, at the table's header.
+    let mut table = String::new();
+    let mut tendon_index = 0usize;
+    for l in text[..line_start].lines().chain(std::iter::once(line)) {
+        let l = l.trim();
+        if l.starts_with("[[tendon]]") {
+            table = format!("tendon[{tendon_index}]");
+            tendon_index += 1;
+        } else if l.starts_with('[') {
+            table = l
+                .split('#')
+                .next()
+                .unwrap_or("")
+                .trim()
+                .trim_matches(|c| c == '[' || c == ']')
+                .trim()
+                .to_string();
+        }
+    }
     if let Some(name) = missing {
-        // serde points a missing field at its table's header (or the file start).
-        let header = text[span.start.min(text.len())..]
-            .lines()
-            .next()
-            .unwrap_or("")
-            .trim();
-        let table = header.trim_matches(|c| c == '[' || c == ']').trim();
-        return if span.start == 0 || !header.starts_with('[') {
+        // A field missing at the top level is reported at the file start.
+        return if span.start == 0 || table.is_empty() {
             name.into()
         } else {
             format!("{table}.{name}")
         };
     }
-    let before = &text[..span.start.min(text.len())];
-    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
-    let line = text[line_start..].lines().next().unwrap_or("");
     let key = line.split('=').next().unwrap_or("").trim();
-    let mut table = String::new();
-    let mut tendon_index: i64 = -1;
-    for l in text[..line_start].lines() {
-        let l = l.trim();
-        if l.starts_with("[[tendon]]") {
-            tendon_index += 1;
-            table = format!("tendon[{tendon_index}]");
-        } else if l.starts_with('[') {
-            table = l.trim_matches(|c| c == '[' || c == ']').trim().to_string();
-        }
-    }
     let key = if key.starts_with('[') { "" } else { key };
     match (table.is_empty(), key.is_empty()) {
         (true, true) => "file".into(),
@@ -490,12 +625,12 @@ impl fmt::Display for Robot {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
             f,
-            "{}: L = {} m, r = {} m, E = {:.3e} Pa, {} tendon(s)",
+            "{}: L = {} m, r = {} m, E = {:.3e} Pa, {}",
             self.name,
             self.length,
             self.radius,
             self.youngs_modulus,
-            self.n_tendons()
+            count(self.n_tendons(), "tendon")
         )
     }
 }
@@ -623,6 +758,106 @@ routing = "straight"
             r.check_tensions(&[11.0]),
             Err(TensionError::AboveMax { .. })
         ));
+    }
+
+    #[test]
+    fn end_and_min_tension_default_to_tip_and_zero() {
+        let r = parse(GOOD).unwrap();
+        assert_eq!(r.tendons[0].end, r.length);
+        assert_eq!(r.tendons[0].min_tension, 0.0);
+        let r = parse(&GOOD.replace(
+            "max_tension = 10.0",
+            "max_tension = 10.0\nmin_tension = 2.5\nend = 0.25",
+        ))
+        .unwrap();
+        assert_eq!(r.tendons[0].end, 0.25);
+        assert_eq!(r.tendons[0].min_tension, 2.5);
+        assert_eq!(r.min_tensions(), vec![2.5]);
+    }
+
+    #[test]
+    fn bad_end_and_min_tension_are_named() {
+        let with = |extra: &str| {
+            parse(&GOOD.replace(
+                "max_tension = 10.0",
+                &format!("max_tension = 10.0\n{extra}"),
+            ))
+            .unwrap_err()
+        };
+        for (extra, field, words) in [
+            ("end = 0.0", "tendon[0].end", "positive"),
+            ("end = -0.1", "tendon[0].end", "positive"),
+            ("end = 0.41", "tendon[0].end", "beyond the backbone length"),
+            ("end = nan", "tendon[0].end", "finite"),
+            ("min_tension = -1.0", "tendon[0].min_tension", "negative"),
+            (
+                "min_tension = 11.0",
+                "tendon[0].min_tension",
+                "above max_tension",
+            ),
+            ("min_tension = inf", "tendon[0].min_tension", "finite"),
+        ] {
+            let e = with(extra);
+            assert_eq!(e.field, field, "{extra}: {e}");
+            assert!(e.problem.contains(words), "{extra}: {e}");
+            assert!(e.to_string().starts_with("bad.toml: "), "{e}");
+        }
+    }
+
+    #[test]
+    fn missing_max_tension_names_the_tendon() {
+        let two = format!("{GOOD}{}", &GOOD[GOOD.find("[[tendon]]").unwrap()..]);
+        let text = two.replacen("max_tension = 10.0\n", "", 2);
+        let text = format!(
+            "{}max_tension = 10.0\n{}",
+            &text[..text.find("routing").unwrap()],
+            &text[text.find("routing").unwrap()..]
+        );
+        // Tendon 0 keeps its max_tension, tendon 1 has none.
+        let e = parse(&text).unwrap_err();
+        assert_eq!(e.field, "tendon[1].max_tension", "{e}");
+        assert!(e.problem.contains("missing field"), "{e}");
+    }
+
+    #[test]
+    fn unknown_table_after_the_tendons_is_named_itself() {
+        let e = parse(&format!("{GOOD}\n[extra]\nfoo = 1\n")).unwrap_err();
+        assert_eq!(e.field, "extra", "{e}");
+        assert!(e.problem.contains("unknown field"), "{e}");
+    }
+
+    #[test]
+    fn absurd_robots_name_the_physical_quantity() {
+        let e = parse(&GOOD.replace("radius = 0.0009", "radius = 1e-6")).unwrap_err();
+        assert_eq!(e.field, "environment.gravity", "{e}");
+        assert!(e.problem.contains("bending stiffness"), "{e}");
+        let weightless = GOOD.replace("[9.81, 0.0, 0.0]", "[0.0, 0.0, 0.0]");
+        let e = parse(&weightless.replace("radius = 0.0009", "radius = 1e-6")).unwrap_err();
+        assert_eq!(e.field, "tendon[0].max_tension", "{e}");
+        assert!(e.problem.contains("bend the backbone"), "{e}");
+        let e = parse(&GOOD.replace("max_tension = 10.0", "max_tension = 1e6")).unwrap_err();
+        assert_eq!(e.field, "tendon[0].max_tension", "{e}");
+        assert!(e.problem.contains("full turn"), "{e}");
+        let e = parse(&GOOD.replace("\"straight\"", "\"helical\"\nhelix_turns = 1e6")).unwrap_err();
+        assert_eq!(e.field, "tendon[0].helix_turns", "{e}");
+        assert!(e.problem.contains("degrees to the backbone"), "{e}");
+        // A thick rod pulled close to its axis: hardly bent, but squashed by 15 %.
+        let e = parse(
+            &weightless
+                .replace("radius = 0.0009", "radius = 0.01")
+                .replace("offset = 0.019", "offset = 0.001")
+                .replace("max_tension = 10.0", "max_tension = 1e7"),
+        )
+        .unwrap_err();
+        assert_eq!(e.field, "tendon[0].max_tension", "{e}");
+        assert!(e.problem.contains("compress"), "{e}");
+    }
+
+    #[test]
+    fn robot_summary_counts_tendons_in_the_right_number() {
+        let r = parse(GOOD).unwrap();
+        assert!(r.to_string().ends_with("1 tendon"), "{r}");
+        assert_eq!(count(4, "tendon"), "4 tendons");
     }
 
     #[test]

@@ -155,3 +155,214 @@ fn malformed_robot_file_error_names_file_and_field() {
         "{err}"
     );
 }
+
+fn json_position(out: &std::process::Output) -> [f64; 3] {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    let p = v["position"].as_array().unwrap();
+    [0, 1, 2].map(|k| p[k].as_f64().unwrap())
+}
+
+fn assert_one_line_error(args: &[&str], words: &str) {
+    let out = tendril(args);
+    assert!(!out.status.success(), "{args:?} succeeded");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+    assert!(err.contains(words), "{args:?}: {err}");
+    assert!(out.stdout.is_empty(), "{args:?}");
+}
+
+#[test]
+fn two_segment_robot_tip_matches_the_tdcr_modeling_benchmark() {
+    // docs/design.md §2.1: the public benchmark's Cosserat model, 6 digits.
+    let p = json_position(&tendril(&[
+        "fk",
+        "--robot",
+        "robots/tdcr-2seg.toml",
+        "--tensions",
+        "4,0,0,0,2,0",
+        "--json",
+    ]));
+    let expected = [0.127608, 0.143467, 0.336407];
+    for k in 0..3 {
+        assert!((p[k] - expected[k]).abs() < 1e-6, "{p:?} vs {expected:?}");
+    }
+}
+
+#[test]
+fn tip_force_deflects_the_weightless_rod_as_a_cantilever() {
+    // δ = F L³ / (3 E I) for a small force; tdcr-2seg has no gravity.
+    let (e, r, l) = (54e9_f64, 0.0007_f64, 0.4_f64);
+    let ei = e * std::f64::consts::PI * r.powi(4) / 4.0;
+    let f = 1e-4;
+    let p = json_position(&tendril(&[
+        "fk",
+        "--robot",
+        "robots/tdcr-2seg.toml",
+        "--tensions",
+        "0,0,0,0,0,0",
+        "--tip-force",
+        "0,-1e-4,0",
+        "--json",
+    ]));
+    let beam = f * l.powi(3) / (3.0 * ei);
+    assert!((p[1] + beam).abs() / beam < 2e-3, "{p:?} vs -{beam}");
+    // A tip moment about −x turns the tip toward +y: δ = M L² / (2 E I).
+    let m = 1e-5;
+    let p = json_position(&tendril(&[
+        "fk",
+        "--robot",
+        "robots/tdcr-2seg.toml",
+        "--tensions",
+        "0,0,0,0,0,0",
+        "--tip-moment",
+        "-1e-5,0,0",
+        "--json",
+    ]));
+    let beam = m * l.powi(2) / (2.0 * ei);
+    assert!((p[1] - beam).abs() / beam < 2e-3, "{p:?} vs {beam}");
+}
+
+#[test]
+fn bad_tip_loads_steps_and_tensions_give_one_line_errors() {
+    assert_one_line_error(
+        &["fk", "--tensions", "1,0,0,0", "--tip-force", "1,2"],
+        "--tip-force: expected 3 numbers",
+    );
+    assert_one_line_error(
+        &["fk", "--tensions", "1,0,0,0", "--tip-moment", "0,nan,0"],
+        "--tip-moment: NaN is not a finite number",
+    );
+    assert_one_line_error(
+        &["fk", "--tensions", "1,0,0,0", "--tip-force", "0,x,0"],
+        "--tip-force: \"x\" is not a number",
+    );
+    // A leading minus is a value, rejected as a negative tension.
+    assert_one_line_error(&["fk", "--tensions", "-1,0,0,0"], "negative");
+    assert_one_line_error(&["fk", "--tensions", "1,0,0,0", "--steps", "0"], "--steps");
+    assert_one_line_error(
+        &["fk", "--tensions", "1,0,0,0", "--steps", "100000000"],
+        "--steps",
+    );
+}
+
+#[test]
+fn tip_force_reaches_the_solution() {
+    let plain = json_position(&tendril(&["fk", "--tensions", "2,0,0,0", "--json"]));
+    let pushed = json_position(&tendril(&[
+        "fk",
+        "--tensions",
+        "2,0,0,0",
+        "--tip-force",
+        "-0.5,0,0",
+        "--json",
+    ]));
+    assert!(pushed[0] < plain[0] - 1e-3, "{pushed:?} vs {plain:?}");
+}
+
+fn run_batch(dir: &Path, input_text: &str, threads: &str) -> (bool, String, String) {
+    let input = dir.join(format!("in-{threads}.csv"));
+    let output = dir.join(format!("out-{threads}.csv"));
+    std::fs::write(&input, input_text).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_tendril"))
+        .args([
+            "fk",
+            "--input",
+            input.to_str().unwrap(),
+            "--output",
+            output.to_str().unwrap(),
+        ])
+        .env("RAYON_NUM_THREADS", threads)
+        .current_dir(root())
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        std::fs::read_to_string(&output).unwrap_or_default(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn batch_results_do_not_depend_on_row_order_or_threads() {
+    let dir = tempfile::tempdir().unwrap();
+    // 150 rows on a scrambled lattice (deterministic, no RNG needed).
+    let rows: Vec<String> = (0..150)
+        .map(|k: u64| {
+            let t = |m: u64| ((k * m + 7) % 101) as f64 / 10.1;
+            format!("{},{},{},{}", t(37), t(53), t(71) * 0.3, t(89) * 0.2)
+        })
+        .collect();
+    let forward = format!("t0,t1,t2,t3\n{}\n", rows.join("\n"));
+    let mut reversed_rows = rows.clone();
+    reversed_rows.reverse();
+    let reversed = format!("t0,t1,t2,t3\n{}\n", reversed_rows.join("\n"));
+    let (ok1, a, e1) = run_batch(dir.path(), &forward, "1");
+    let (ok2, b, e2) = run_batch(dir.path(), &reversed, "2");
+    assert!(ok1 && ok2, "{e1}{e2}");
+    let mut a_lines: Vec<&str> = a.lines().collect();
+    let mut b_lines: Vec<&str> = b.lines().collect();
+    assert_eq!(a_lines.len(), 151);
+    a_lines.sort_unstable();
+    b_lines.sort_unstable();
+    assert_eq!(
+        a_lines, b_lines,
+        "same rows, other order or threads, other bits"
+    );
+}
+
+#[test]
+fn batch_overwrites_pose_columns_and_reads_tip_loads() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = "t0,t1,t2,t3,fx,fy,fz,mx,my,mz,px,py,pz,qw,qx,qy,qz,converged\n\
+                 2,0,0,0,-0.5,0,0,0,0,0,9,9,9,9,9,9,9,false\n";
+    let (ok, text, err) = run_batch(dir.path(), input, "1");
+    assert!(ok, "{err}");
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "t0,t1,t2,t3,fx,fy,fz,mx,my,mz,px,py,pz,qw,qx,qy,qz,converged"
+    );
+    let fields: Vec<&str> = lines.next().unwrap().split(',').collect();
+    assert_eq!(fields.len(), 18);
+    assert_eq!(fields[17], "true");
+    let single = json_position(&tendril(&[
+        "fk",
+        "--tensions",
+        "2,0,0,0",
+        "--tip-force",
+        "-0.5,0,0",
+        "--json",
+    ]));
+    for k in 0..3 {
+        let batch: f64 = fields[10 + k].parse().unwrap();
+        assert!((batch - single[k]).abs() < 1e-9, "{batch} vs {single:?}");
+    }
+}
+
+#[test]
+fn batch_rejects_ambiguous_columns_and_single_pose_flags() {
+    let dir = tempfile::tempdir().unwrap();
+    let (ok, _, err) = run_batch(dir.path(), "t0,t1,t0,t2,t3\n1,0,2,0,0\n", "1");
+    assert!(!ok && err.contains("column t0 appears twice"), "{err}");
+    let input = dir.path().join("in-1.csv");
+    let output = dir.path().join("o.csv");
+    for flag in ["--json", "--shape=5", "--tip-force=1,0,0"] {
+        let out = tendril(&[
+            "fk",
+            "--input",
+            input.to_str().unwrap(),
+            "--output",
+            output.to_str().unwrap(),
+            flag,
+        ]);
+        assert!(!out.status.success(), "{flag} accepted with --input");
+        assert!(!output.exists());
+    }
+    let (ok, _, err) = run_batch(dir.path(), "t0,t1,t2\n1,0,2\n", "1");
+    assert!(!ok && err.contains("(the robot has 4 tendons)"), "{err}");
+}

@@ -104,6 +104,7 @@ where
     F: FnMut(&[f64], &[f64; 7]) -> std::io::Result<()>,
 {
     let max = statics.robot().max_tensions();
+    let min = statics.robot().min_tensions();
     let width = max.len() + 7;
     let mut tally = Tally {
         lo: vec![f64::INFINITY; width],
@@ -121,7 +122,9 @@ where
         }
         let len = BLOCK.min(opts.samples - done);
         done += len;
-        let tensions = opts.sampler.draw(len, &max, block_seed(opts.seed, b));
+        let tensions = opts
+            .sampler
+            .draw_between(len, &min, &max, block_seed(opts.seed, b));
         let order = snake_order(&tensions, &max, SNAKE_CELLS);
         let outcomes = solve_batch_with(statics, &tensions, &order, &bar, stop, |o| match o {
             Outcome::Solved(s) => Ok((s.pose(), false)),

@@ -37,23 +37,36 @@ impl Sampler {
         }
     }
 
-    /// Draw `count` tension vectors for tendons with limits `max` (N),
-    /// deterministically from `seed`.
+    /// Draw `count` tension vectors for tendons with limits `max` (N) and no
+    /// pretension, deterministically from `seed`.
     pub fn draw(&self, count: usize, max: &[f64], seed: u64) -> Vec<Vec<f64>> {
+        self.draw_between(count, &vec![0.0; max.len()], max, seed)
+    }
+
+    /// Draw `count` tension vectors for tendons kept in [`min`, `max`] (N),
+    /// deterministically from `seed`: the floors are the tendons' pretension
+    /// (`min_tension`), which a slack tendon of the adjacent sampler keeps.
+    /// With zero floors this draws exactly what [`Sampler::draw`] always did.
+    pub fn draw_between(&self, count: usize, min: &[f64], max: &[f64], seed: u64) -> Vec<Vec<f64>> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let n = max.len();
+        let within = |i: usize, rng: &mut ChaCha8Rng| {
+            let lo = min.get(i).copied().unwrap_or(0.0);
+            lo + rng.random::<f64>() * (max[i] - lo)
+        };
         (0..count)
             .map(|_| match self {
-                Sampler::Uniform => max.iter().map(|&m| rng.random::<f64>() * m).collect(),
+                Sampler::Uniform => (0..n).map(|i| within(i, &mut rng)).collect(),
                 Sampler::Adjacent => {
-                    let mut t = vec![0.0; n];
+                    let mut t: Vec<f64> =
+                        (0..n).map(|i| min.get(i).copied().unwrap_or(0.0)).collect();
                     if n == 1 {
-                        t[0] = rng.random::<f64>() * max[0];
+                        t[0] = within(0, &mut rng);
                     } else {
                         let i = rng.random_range(0..n);
                         let j = (i + 1) % n;
-                        t[i] = rng.random::<f64>() * max[i];
-                        t[j] = rng.random::<f64>() * max[j];
+                        t[i] = within(i, &mut rng);
+                        t[j] = within(j, &mut rng);
                     }
                     t
                 }
@@ -97,6 +110,32 @@ mod tests {
             assert_eq!(nz.len(), 2, "{t:?}");
             assert!(nz[1] == nz[0] + 1 || (nz[0] == 0 && nz[1] == 3), "{t:?}");
             assert!(t.iter().zip(&max).all(|(x, m)| (0.0..=*m).contains(x)));
+        }
+    }
+
+    #[test]
+    fn samplers_keep_every_tension_within_its_floor_and_limit() {
+        let min = [5.0, 0.0, 2.0, 5.0];
+        let max = [15.0, 8.0, 10.0, 15.0];
+        for sampler in [Sampler::Uniform, Sampler::Adjacent] {
+            let draws = sampler.draw_between(3000, &min, &max, 7);
+            for t in &draws {
+                for i in 0..4 {
+                    assert!((min[i]..=max[i]).contains(&t[i]), "{sampler:?}: {t:?}");
+                }
+            }
+            // The floor is reached only by slack tendons, and the range is used.
+            let lowest = draws.iter().map(|t| t[0]).fold(f64::INFINITY, f64::min);
+            let highest = draws.iter().map(|t| t[0]).fold(0.0, f64::max);
+            assert!(
+                lowest < 5.1 && highest > 14.9,
+                "{sampler:?}: {lowest}..{highest}"
+            );
+        }
+        // Adjacent: the two pulled neighbours vary, the others sit at their floor.
+        for t in Sampler::Adjacent.draw_between(500, &min, &max, 8) {
+            let at_floor = (0..4).filter(|&i| t[i] == min[i]).count();
+            assert!(at_floor >= 2, "{t:?}");
         }
     }
 

@@ -1,44 +1,144 @@
 //! Fixed-step classical Runge–Kutta (RK4) integration of the rod from base to
-//! tip. Fixed steps keep the shooting residual a smooth function of the
-//! unknowns (an adaptive integrator's step changes would make it jump), and
-//! 16–24 steps already put the tip within 1e-7 m of the converged answer.
+//! tip, piecewise between the tendon anchors (`docs/design.md` §2.1). Fixed
+//! steps keep the shooting residual a smooth function of the unknowns (an
+//! adaptive integrator's step changes would make it jump), and 16–24 steps
+//! already put the tip within 1e-7 m of the converged answer. An anchor is a
+//! knot: no step straddles the jump of the internal wrench there.
 
-use super::rod::{Rod, RodRates, RodState};
+use nalgebra::Vector3;
 
-/// Integrate from s = 0 to s = L in `steps` equal RK4 steps; `observe` sees
-/// the state at every node (s_k, state_k), base and tip included.
-pub fn integrate_observed<F>(rod: &Rod, base: RodState, steps: usize, mut observe: F) -> RodState
+use super::rod::{Rod, RodRates, RodState, SingularSystem, TendonSet};
+
+/// Fewest RK4 steps on a piece between anchors, however short it is.
+pub const MIN_STEPS_PER_PIECE: usize = 2;
+
+/// RK4 steps on the piece [a, b] of a rod of `length` with `steps` steps over
+/// the whole length: the same steps per metre everywhere, at least
+/// [`MIN_STEPS_PER_PIECE`] when the rod has anchors inside it. Without
+/// inner anchors the one piece gets exactly `steps`.
+pub fn piece_steps(steps: usize, a: f64, b: f64, length: f64, has_knots: bool) -> usize {
+    let n = ((b - a) / length * steps as f64).round() as usize;
+    if has_knots {
+        n.max(MIN_STEPS_PER_PIECE)
+    } else {
+        n.max(1)
+    }
+}
+
+/// Integrate from s = 0 to s = L with `steps` RK4 steps over the length,
+/// piece by piece between the anchors, applying each anchor's point load at
+/// its knot; `observe` sees the state at every node (s_k, state_k), base and
+/// tip included (at a knot, the state just before the anchor).
+pub fn integrate_observed<F>(
+    rod: &Rod,
+    base: RodState,
+    steps: usize,
+    mut observe: F,
+) -> Result<RodState, SingularSystem>
 where
     F: FnMut(f64, &RodState),
 {
     let steps = steps.max(1);
-    let h = rod.length / steps as f64;
+    let has_knots = !rod.knots().is_empty();
     let mut y = base;
     observe(0.0, &y);
-    for k in 0..steps {
-        let s = k as f64 * h;
-        y = rk4_step(rod, s, &y, h);
-        observe(s + h, &y);
+    let mut a = 0.0;
+    for b in rod
+        .knots()
+        .iter()
+        .copied()
+        .chain(std::iter::once(rod.length))
+    {
+        let n = piece_steps(steps, a, b, rod.length, has_knots);
+        let h = (b - a) / n as f64;
+        let running = rod.running_to(b);
+        for k in 0..n {
+            let s = a + k as f64 * h;
+            y = rk4_step(rod, s, &y, h, running)?;
+            observe(s + h, &y);
+        }
+        if b < rod.length {
+            y = rod.across_anchor(b, &y);
+        }
+        a = b;
     }
-    y
+    Ok(y)
 }
 
 /// Integrate from base to tip; returns the tip state.
-pub fn integrate(rod: &Rod, base: RodState, steps: usize) -> RodState {
+pub fn integrate(rod: &Rod, base: RodState, steps: usize) -> Result<RodState, SingularSystem> {
     integrate_observed(rod, base, steps, |_, _| {})
 }
 
-/// One classical RK4 step of size `h` from arc length `s`.
-pub fn rk4_step(rod: &Rod, s: f64, y: &RodState, h: f64) -> RodState {
-    let k1 = rod.rates(s, y);
-    let k2 = rod.rates(s + 0.5 * h, &y.advanced(&k1, 0.5 * h));
-    let k3 = rod.rates(s + 0.5 * h, &y.advanced(&k2, 0.5 * h));
-    let k4 = rod.rates(s + h, &y.advanced(&k3, h));
+/// Backbone positions at `points` ≥ 2 evenly spaced arc lengths, base to tip,
+/// integrating with at least `steps` steps per length between every pair of
+/// neighbouring sample points and anchors.
+pub fn integrate_sampled(
+    rod: &Rod,
+    base: RodState,
+    steps: usize,
+    points: usize,
+) -> Result<Vec<Vector3<f64>>, SingularSystem> {
+    let points = points.max(2);
+    let intervals = points - 1;
+    let sample = |k: usize| {
+        if k == intervals {
+            rod.length
+        } else {
+            rod.length * k as f64 / intervals as f64
+        }
+    };
+    let mut out = Vec::with_capacity(points);
+    let mut y = base;
+    out.push(y.p);
+    let mut a = 0.0;
+    let mut knots = rod.knots().iter().copied().peekable();
+    for k in 1..=intervals {
+        let next_sample = sample(k);
+        // Anchors before this sample point are knots of their own.
+        loop {
+            let b = match knots.peek() {
+                Some(&knot) if knot <= next_sample => knot,
+                _ => next_sample,
+            };
+            let n = ((b - a) / rod.length * steps.max(1) as f64).ceil().max(1.0) as usize;
+            let h = (b - a) / n as f64;
+            let running = rod.running_to(b);
+            for j in 0..n {
+                y = rk4_step(rod, a + j as f64 * h, &y, h, running)?;
+            }
+            a = b;
+            if knots.peek() == Some(&b) {
+                knots.next();
+                y = rod.across_anchor(b, &y);
+            }
+            if b == next_sample {
+                break;
+            }
+        }
+        out.push(y.p);
+    }
+    Ok(out)
+}
+
+/// One classical RK4 step of size `h` from arc length `s`, the tendons
+/// `running` loading the rod.
+pub fn rk4_step(
+    rod: &Rod,
+    s: f64,
+    y: &RodState,
+    h: f64,
+    running: TendonSet,
+) -> Result<RodState, SingularSystem> {
+    let k1 = rod.rates(s, y, running)?;
+    let k2 = rod.rates(s + 0.5 * h, &y.advanced(&k1, 0.5 * h), running)?;
+    let k3 = rod.rates(s + 0.5 * h, &y.advanced(&k2, 0.5 * h), running)?;
+    let k4 = rod.rates(s + h, &y.advanced(&k3, h), running)?;
     let avg = RodRates {
         dp: (k1.dp + (k2.dp + k3.dp) * 2.0 + k4.dp) / 6.0,
         dr: (k1.dr + (k2.dr + k3.dr) * 2.0 + k4.dr) / 6.0,
         dw: (k1.dw + (k2.dw + k3.dw) * 2.0 + k4.dw) / 6.0,
         du: (k1.du + (k2.du + k3.du) * 2.0 + k4.du) / 6.0,
     };
-    y.advanced(&avg, h)
+    Ok(y.advanced(&avg, h))
 }

@@ -1,18 +1,25 @@
 //! Forward statics of a tendon-driven continuum robot: a Cosserat rod
 //! (backbone) loaded by Cosserat strings (tendons), after Rucker & Webster,
 //! "Statics and Dynamics of Continuum Robots With General Tendon Routing and
-//! External Loading", IEEE T-RO 27(6), 2011. `DESIGN.md` §2 fixes the equations.
+//! External Loading", IEEE T-RO 27(6), 2011. `docs/design.md` §2 and §2.1 fix
+//! the equations.
 //!
-//! `rod` holds the constitutive law and strain-rate system, `integrate` the
-//! RK4 pass from base to tip, `shoot` the boundary-value solve, `pose` the
-//! quaternion conventions.
+//! `rod` holds the constitutive law, strain-rate system and anchor loads,
+//! `integrate` the piecewise RK4 pass from base to tip, `shoot` the
+//! boundary-value solve, `pose` the quaternion conventions, `batch` many
+//! solves in a canonical order.
 
+pub mod batch;
 pub mod integrate;
 pub mod pose;
 pub mod rod;
 pub mod shoot;
+pub mod tangent;
 
-pub use shoot::{Solution, SolveError, SolverSettings, Statics, WarmStart};
+pub use rod::SingularSystem;
+pub use shoot::{Solution, SolveError, SolverSettings, Statics, WarmStart, MAX_STEPS};
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_general;

@@ -1,6 +1,6 @@
-//! The Cosserat rod loaded by Cosserat strings: state, constitutive law and
-//! the coupled strain-rate system (`DESIGN.md` §2; Rucker & Webster 2011,
-//! eqs. 13–17).
+//! The Cosserat rod loaded by Cosserat strings: state, constitutive law,
+//! the coupled strain-rate system, and the point loads where tendons are
+//! anchored (`docs/design.md` §2 and §2.1; Rucker & Webster 2011, eqs. 13–17).
 //!
 //! The shear/extension strain is carried as its deviation from the reference,
 //! `w = v − e3`, not as `v` itself. The axial stiffness EA ≈ 5·10⁵ N makes
@@ -8,7 +8,7 @@
 //! storing `w` keeps the internal force exact to roundoff, which is what lets
 //! the shooting residual reach 1e-10 N.
 
-use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
+use nalgebra::{Cholesky, Matrix3, Matrix6, Vector3, Vector6, LU, U6};
 
 use crate::robot::{hat, Robot, MAX_TENDONS};
 
@@ -18,7 +18,7 @@ pub struct RodState {
     /// Position p(s), base frame, m.
     pub p: Vector3<f64>,
     /// Orientation R(s): columns are the body axes in the base frame.
-    pub r: Matrix3<f64>,
+    pub rot: Matrix3<f64>,
     /// Shear/extension strain deviation w = v − e3 (body frame, dimensionless).
     pub w: Vector3<f64>,
     /// Curvature/torsion u (body frame), 1/m.
@@ -44,7 +44,7 @@ impl RodState {
     pub fn at_base(n0: &Vector3<f64>, u0: &Vector3<f64>, kse: &Vector3<f64>) -> RodState {
         RodState {
             p: Vector3::zeros(),
-            r: Matrix3::identity(),
+            rot: Matrix3::identity(),
             w: n0.component_div(kse),
             u: *u0,
         }
@@ -59,19 +59,93 @@ impl RodState {
     pub fn advanced(&self, rates: &RodRates, h: f64) -> RodState {
         RodState {
             p: self.p + rates.dp * h,
-            r: self.r + rates.dr * h,
+            rot: self.rot + rates.dr * h,
             w: self.w + rates.dw * h,
             u: self.u + rates.du * h,
         }
     }
 }
 
+/// The strain-rate system could not be solved: its 6×6 matrix is singular
+/// or not finite (a tendon tangent of zero length, or non-finite state).
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+#[error("the rod's strain-rate system is singular or not finite at s = {s:.6} m")]
+pub struct SingularSystem {
+    /// Arc length where it happened, m.
+    pub s: f64,
+}
+
+/// Newton steps on the running tendons' tangents across an anchor
+/// ([`Rod::across_anchor`]); the first iterate is already within the ratio
+/// of tendon to shear or torsion stiffness, so two reach roundoff.
+const ANCHOR_NEWTON_STEPS: usize = 2;
+
+/// A set of tendons as bits (bit i = tendon i).
+pub type TendonSet = u16;
+
 /// Geometry of one tendon at one arc length: body-frame offset and derivatives.
 #[derive(Clone, Copy, Debug, Default)]
-struct Routing {
-    r: Vector3<f64>,
-    dr: Vector3<f64>,
-    ddr: Vector3<f64>,
+pub(super) struct Routing {
+    pub r: Vector3<f64>,
+    pub dr: Vector3<f64>,
+    pub ddr: Vector3<f64>,
+}
+
+/// One running tendon's terms at one point of the rod, kept from the
+/// strain-rate system for its linearisation (`tangent`).
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct TendonTerms {
+    /// Offset r_i, m.
+    pub r: Vector3<f64>,
+    /// r_i'.
+    pub dr: Vector3<f64>,
+    /// Tangent q_i = û r_i + r_i' + v.
+    pub q: Vector3<f64>,
+    /// |q_i|².
+    pub q2: f64,
+    /// τ_i / |q_i|³, N.
+    pub c: f64,
+    /// û q_i + û r_i' + r_i'' (a_i = A_i alpha).
+    pub alpha: Vector3<f64>,
+}
+
+/// The factored 6×6 strain-rate matrix.
+#[derive(Clone, Debug)]
+pub(super) enum Factor {
+    Cholesky(Cholesky<f64, U6>),
+    Lu(LU<f64, U6, U6>),
+}
+
+/// The strain-rate system at one point: its factor, solution and parts.
+#[derive(Clone, Debug)]
+pub(super) struct System {
+    /// The factored matrix K.
+    pub factor: Factor,
+    /// v' (= w').
+    pub dw: Vector3<f64>,
+    /// u'.
+    pub du: Vector3<f64>,
+    /// Internal force n, body frame, N.
+    pub n: Vector3<f64>,
+    /// Internal moment m, body frame, N m.
+    pub m: Vector3<f64>,
+    /// The running, pulled tendons' terms.
+    pub terms: [TendonTerms; MAX_TENDONS],
+    /// Valid entries of `terms`.
+    pub n_terms: usize,
+}
+
+impl System {
+    /// Solve K X = B in place; false when the factor cannot.
+    pub fn solve_mut(&self, b: &mut Matrix6<f64>) -> bool {
+        match &self.factor {
+            Factor::Cholesky(c) => {
+                c.solve_mut(b);
+                true
+            }
+            Factor::Lu(lu) => lu.solve_mut(b),
+        }
+    }
 }
 
 /// The rod model of one robot under one set of tendon tensions: everything
@@ -88,14 +162,21 @@ pub struct Rod {
     /// Reference length L, m.
     pub length: f64,
     /// Number of tendons in use.
-    n_tendons: usize,
+    pub(super) n_tendons: usize,
     /// Per tendon: offset d (m), angle at s = 0 (rad), helix rate (rad/m).
     geometry: [(f64, f64, f64); MAX_TENDONS],
     /// Per tendon: r(0) when the routing is straight (constant r, r' = r'' = 0),
     /// so the hot loop needs no trigonometry for the common case.
     straight: [Option<Vector3<f64>>; MAX_TENDONS],
     /// Tendon tensions τ_i, N.
-    tension: [f64; MAX_TENDONS],
+    pub(super) tension: [f64; MAX_TENDONS],
+    /// Per tendon: arc length of its anchor, m.
+    pub(super) end: [f64; MAX_TENDONS],
+    /// Anchor positions strictly inside (0, L), ascending, distinct: the
+    /// knots of the piecewise integration.
+    knots: [f64; MAX_TENDONS],
+    /// Number of valid entries in `knots`.
+    n_knots: usize,
 }
 
 impl Rod {
@@ -117,6 +198,17 @@ impl Rod {
             };
             *g = (t.offset, t.angle, rate);
         }
+        let mut end = [robot.length; MAX_TENDONS];
+        let mut knots = [robot.length; MAX_TENDONS];
+        let mut n_knots = 0;
+        for (k, t) in robot.tendons.iter().enumerate() {
+            end[k] = t.end;
+            if t.end < robot.length && !knots[..n_knots].contains(&t.end) {
+                knots[n_knots] = t.end;
+                n_knots += 1;
+            }
+        }
+        knots[..n_knots].sort_by(f64::total_cmp);
         Rod {
             kse: robot.kse(),
             kbt: robot.kbt(),
@@ -126,7 +218,30 @@ impl Rod {
             geometry,
             straight,
             tension: [0.0; MAX_TENDONS],
+            end,
+            knots,
+            n_knots,
         }
+    }
+
+    /// Anchor positions inside the rod, ascending (the integration knots), m.
+    pub fn knots(&self) -> &[f64] {
+        &self.knots[..self.n_knots]
+    }
+
+    /// The tendons that run over the piece of rod ending at arc length `b`
+    /// (those anchored at `b` or beyond): only they load that piece.
+    pub fn running_to(&self, b: f64) -> TendonSet {
+        (0..self.n_tendons)
+            .filter(|&i| self.end[i] >= b)
+            .fold(0, |set, i| set | (1 << i))
+    }
+
+    /// The tendons anchored exactly at arc length `s`.
+    pub(super) fn anchored_at(&self, s: f64) -> TendonSet {
+        (0..self.n_tendons)
+            .filter(|&i| self.end[i] == s)
+            .fold(0, |set, i| set | (1 << i))
     }
 
     /// Set the tendon tensions (N). `tau` must have one entry per tendon;
@@ -144,7 +259,7 @@ impl Rod {
     }
 
     /// Tendon `i`'s offset r_i(s) with r_i'(s), r_i''(s).
-    fn routing(&self, i: usize, s: f64) -> Routing {
+    pub(super) fn routing(&self, i: usize, s: f64) -> Routing {
         if let Some(r) = self.straight[i] {
             return Routing {
                 r,
@@ -169,7 +284,7 @@ impl Rod {
     }
 
     /// Tendon tangent in the body frame, q_i = û r_i + r_i' + v.
-    fn tendon_tangent(state: &RodState, g: &Routing) -> Vector3<f64> {
+    pub(super) fn tendon_tangent(state: &RodState, g: &Routing) -> Vector3<f64> {
         state.u.cross(&g.r) + g.dr + state.v()
     }
 
@@ -182,17 +297,36 @@ impl Rod {
     ///
     /// with, per tendon, A_i = −τ_i q̂_i² / |q_i|³, G_i = −A_i r̂_i,
     /// a_i = A_i (û q_i + û r_i' + r_i''), b_i = r̂_i a_i, H_i = r̂_i G_i.
-    /// The matrix is symmetric positive definite; solved by Cholesky.
-    pub fn strain_rates(&self, s: f64, state: &RodState) -> (Vector3<f64>, Vector3<f64>) {
+    /// The matrix is symmetric positive definite; solved by Cholesky. Only
+    /// the tendons in `running` load the rod here (`docs/design.md` §2.1).
+    pub fn strain_rates(
+        &self,
+        s: f64,
+        state: &RodState,
+        running: TendonSet,
+    ) -> Result<(Vector3<f64>, Vector3<f64>), SingularSystem> {
+        self.system(s, state, running).map(|sys| (sys.dw, sys.du))
+    }
+
+    /// The strain-rate system at one point, assembled, factored and solved;
+    /// the factor and each tendon's terms stay for the tangent pass.
+    pub(super) fn system(
+        &self,
+        s: f64,
+        state: &RodState,
+        running: TendonSet,
+    ) -> Result<System, SingularSystem> {
         let (n, m) = self.internal_wrench(state);
         let mut a_mat = Matrix3::zeros();
         let mut g_mat = Matrix3::zeros();
         let mut h_mat = Matrix3::zeros();
         let mut a_vec = Vector3::zeros();
         let mut b_vec = Vector3::zeros();
+        let mut terms = [TendonTerms::default(); MAX_TENDONS];
+        let mut n_terms = 0;
         for i in 0..self.n_tendons {
             let tau = self.tension[i];
-            if tau == 0.0 {
+            if tau == 0.0 || running & (1 << i) == 0 {
                 continue;
             }
             let g = self.routing(i, s);
@@ -212,12 +346,22 @@ impl Rod {
                     - k * k.transpose())
                     * c;
             // a_i = A_i (û q + û r' + r''), b_i = r̂ a_i.
-            let a_vec_i = a_i * (state.u.cross(&q) + state.u.cross(&g.dr) + g.ddr);
+            let alpha = state.u.cross(&q) + state.u.cross(&g.dr) + g.ddr;
+            let a_vec_i = a_i * alpha;
             a_mat += a_i;
             g_mat += g_i;
             h_mat += h_i;
             a_vec += a_vec_i;
             b_vec += g.r.cross(&a_vec_i);
+            terms[n_terms] = TendonTerms {
+                r: g.r,
+                dr: g.dr,
+                q,
+                q2,
+                c,
+                alpha,
+            };
+            n_terms += 1;
         }
 
         let mut k = Matrix6::zeros();
@@ -229,36 +373,163 @@ impl Rod {
             .copy_from(&(Matrix3::from_diagonal(&self.kbt) + h_mat));
 
         let v = state.v();
-        let top = -state.u.cross(&n) - state.r.tr_mul(&self.f_e) - a_vec;
+        let top = -state.u.cross(&n) - state.rot.tr_mul(&self.f_e) - a_vec;
         let bottom = -state.u.cross(&m) - v.cross(&n) - b_vec;
         let rhs = Vector6::new(top.x, top.y, top.z, bottom.x, bottom.y, bottom.z);
-        // SPD by construction (Kse, Kbt > 0; A_i, H_i ⪰ 0 in the Schur sense);
-        // fall back to LU if roundoff ever breaks the Cholesky.
-        let x = match k.cholesky() {
-            Some(c) => c.solve(&rhs),
-            None => k.lu().solve(&rhs).unwrap_or_else(Vector6::zeros),
+        // SPD by construction: K = diag(Kse, Kbt) + Σ Bᵢᵀ Aᵢ Bᵢ with
+        // Bᵢ = [I, −r̂ᵢ] and Aᵢ ⪰ 0. Fall back to LU if roundoff ever breaks
+        // the Cholesky; a matrix neither can solve is an error, never a guess.
+        let (factor, x) = match k.cholesky() {
+            Some(c) => {
+                let x = c.solve(&rhs);
+                (Factor::Cholesky(c), x)
+            }
+            None => {
+                let lu = k.lu();
+                let x = lu.solve(&rhs).ok_or(SingularSystem { s })?;
+                (Factor::Lu(lu), x)
+            }
         };
-        (
-            Vector3::new(x[0], x[1], x[2]),
-            Vector3::new(x[3], x[4], x[5]),
-        )
+        if !x.iter().all(|v| v.is_finite()) {
+            return Err(SingularSystem { s });
+        }
+        Ok(System {
+            factor,
+            dw: Vector3::new(x[0], x[1], x[2]),
+            du: Vector3::new(x[3], x[4], x[5]),
+            n,
+            m,
+            terms,
+            n_terms,
+        })
     }
 
-    /// All state rates at arc length s: p' = R v, R' = R û, and the strain rates.
-    pub fn rates(&self, s: f64, state: &RodState) -> RodRates {
-        let (dw, du) = self.strain_rates(s, state);
-        RodRates {
-            dp: state.r * state.v(),
-            dr: state.r * hat(&state.u),
+    /// All state rates at arc length s with the tendons `running`:
+    /// p' = R v, R' = R û, and the strain rates.
+    pub fn rates(
+        &self,
+        s: f64,
+        state: &RodState,
+        running: TendonSet,
+    ) -> Result<RodRates, SingularSystem> {
+        let (dw, du) = self.strain_rates(s, state, running)?;
+        Ok(RodRates {
+            dp: state.rot * state.v(),
+            dr: state.rot * hat(&state.u),
             dw,
             du,
+        })
+    }
+
+    /// Point force of tendon `i` on the rod where it is anchored (body frame):
+    /// it pulls back along its own tangent, F_i = −τ_i q_i/|q_i|.
+    fn anchor_force(&self, i: usize, s: f64, state: &RodState) -> (Vector3<f64>, Vector3<f64>) {
+        let g = self.routing(i, s);
+        let q = Self::tendon_tangent(state, &g);
+        let f_i = q * (-self.tension[i] / q.norm());
+        (f_i, g.r)
+    }
+
+    /// The pull of the tendons in `set` on the section at `s` (body frame):
+    /// force Σ τ_i t_i and its moment Σ r_i × τ_i t_i, with t_i = q_i/|q_i|.
+    fn tendon_pull(
+        &self,
+        s: f64,
+        state: &RodState,
+        set: TendonSet,
+    ) -> (Vector3<f64>, Vector3<f64>) {
+        let mut force = Vector3::zeros();
+        let mut moment = Vector3::zeros();
+        for i in 0..self.n_tendons {
+            if set & (1 << i) == 0 || self.tension[i] == 0.0 {
+                continue;
+            }
+            let (f_i, r_i) = self.anchor_force(i, s, state);
+            force -= f_i;
+            moment -= r_i.cross(&f_i);
         }
+        (force, moment)
+    }
+
+    /// The state just past an anchor at `s` < L (`docs/design.md` §2.1).
+    /// Every tendon anchored there applies its point load F_j = −τ_j q_j/|q_j|
+    /// (strains just before s), so n(s⁺) = n(s⁻) − F_j, m(s⁺) = m(s⁻) − r̂_j F_j.
+    /// Where the shear or torsion strain jumps, the tendons running on change
+    /// direction too and pull on the section as well; the state past the anchor
+    /// is the one that keeps the combined wrench of backbone and tendons,
+    /// N = n + Σ τ_i t_i and M = m + Σ r_i × τ_i t_i, continuous. The rule
+    /// above is its first iterate; Newton steps refine the running tendons'
+    /// tangents from there, the Jacobian being the stiffness K of the tendons
+    /// running on (see [`Rod::stiffness`]).
+    pub fn across_anchor(&self, s: f64, before: &RodState) -> RodState {
+        let crossing = self.running_to(s);
+        let passing = crossing & !self.anchored_at(s);
+        let (n, m) = self.internal_wrench(before);
+        let (pull_f, pull_m) = self.tendon_pull(s, before, crossing);
+        let (big_n, big_m) = (n + pull_f, m + pull_m);
+        let (pass_f, pass_m) = self.tendon_pull(s, before, passing);
+        let mut after = RodState {
+            w: (big_n - pass_f).component_div(&self.kse),
+            u: (big_m - pass_m).component_div(&self.kbt),
+            ..*before
+        };
+        if passing == 0 {
+            return after;
+        }
+        for _ in 0..ANCHOR_NEWTON_STEPS {
+            let (n, m) = self.internal_wrench(&after);
+            let (pass_f, pass_m) = self.tendon_pull(s, &after, passing);
+            let gap_f = n + pass_f - big_n;
+            let gap_m = m + pass_m - big_m;
+            let gap = Vector6::new(gap_f.x, gap_f.y, gap_f.z, gap_m.x, gap_m.y, gap_m.z);
+            let Some(step) = self
+                .stiffness(s, &after, passing)
+                .cholesky()
+                .map(|c| c.solve(&gap))
+            else {
+                break;
+            };
+            after.w -= Vector3::new(step[0], step[1], step[2]);
+            after.u -= Vector3::new(step[3], step[4], step[5]);
+        }
+        after
+    }
+
+    /// K = diag(Kse, Kbt) + Σ Bᵢᵀ Aᵢ Bᵢ over the tendons in `set` at `state`,
+    /// with Aᵢ = (τᵢ/|qᵢ|)(I − tᵢ tᵢᵀ) and Bᵢ = [I, −r̂ᵢ]: the strain-rate
+    /// matrix, and also the derivative of the combined wrench [N; M] (body
+    /// frame) with respect to the strains (w, u).
+    pub(super) fn stiffness(&self, s: f64, state: &RodState, set: TendonSet) -> Matrix6<f64> {
+        let mut k = Matrix6::from_diagonal(&Vector6::new(
+            self.kse.x, self.kse.y, self.kse.z, self.kbt.x, self.kbt.y, self.kbt.z,
+        ));
+        for i in 0..self.n_tendons {
+            if set & (1 << i) == 0 || self.tension[i] == 0.0 {
+                continue;
+            }
+            let g = self.routing(i, s);
+            let q = Self::tendon_tangent(state, &g);
+            let norm = q.norm();
+            let t = q / norm;
+            let a = (Matrix3::identity() - t * t.transpose()) * (self.tension[i] / norm);
+            let r_hat = hat(&g.r);
+            let a_r = a * r_hat;
+            let mut block = Matrix6::zeros();
+            block.fixed_view_mut::<3, 3>(0, 0).copy_from(&a);
+            block.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-a_r));
+            block.fixed_view_mut::<3, 3>(3, 0).copy_from(&(r_hat * a));
+            block
+                .fixed_view_mut::<3, 3>(3, 3)
+                .copy_from(&(-(r_hat * a_r)));
+            k += block;
+        }
+        k
     }
 
     /// Tip boundary residual (body frame):
     /// [−n(L) + Σ F_i + Rᵀ F_ext ; −m(L) + Σ r̂_i F_i + Rᵀ M_ext] with
-    /// F_i = −τ_i q_i(L)/|q_i(L)|, each tendon pulling back along its own tangent.
-    /// External loads are given in the base frame (N, N·m).
+    /// F_i = −τ_i q_i(L)/|q_i(L)|, each tendon anchored at the tip pulling back
+    /// along its own tangent. External loads are given in the base frame (N, N·m).
     pub fn tip_residual(
         &self,
         tip: &RodState,
@@ -266,25 +537,24 @@ impl Rod {
         m_ext: &Vector3<f64>,
     ) -> Vector6<f64> {
         let (n, m) = self.internal_wrench(tip);
-        let mut force = -n + tip.r.tr_mul(f_ext);
-        let mut moment = -m + tip.r.tr_mul(m_ext);
+        let mut force = -n + tip.rot.tr_mul(f_ext);
+        let mut moment = -m + tip.rot.tr_mul(m_ext);
         for i in 0..self.n_tendons {
-            let tau = self.tension[i];
-            if tau == 0.0 {
+            if self.tension[i] == 0.0 || self.end[i] < self.length {
                 continue;
             }
-            let g = self.routing(i, self.length);
-            let q = Self::tendon_tangent(tip, &g);
-            let f_i = q * (-tau / q.norm());
+            let (f_i, r_i) = self.anchor_force(i, self.length, tip);
             force += f_i;
-            moment += g.r.cross(&f_i);
+            moment += r_i.cross(&f_i);
         }
         Vector6::new(force.x, force.y, force.z, moment.x, moment.y, moment.z)
     }
 
     /// Rough base wrench (n(0), u(0)) for a cold start: the tendons' tip loads
     /// and the weight of a straight rod carried to the base. Exact for
-    /// straight tendons without gravity; a good Newton start otherwise.
+    /// straight tip-anchored tendons without gravity; a good Newton start
+    /// otherwise (wherever a tendon is anchored, its net load on the rod is
+    /// its pull where it leaves the base).
     pub fn initial_guess(&self, f_ext: &Vector3<f64>, m_ext: &Vector3<f64>) -> Vector6<f64> {
         let mut n0 = self.f_e * self.length + f_ext;
         let mut m0 = (Vector3::z() * (0.5 * self.length * self.length)).cross(&self.f_e)
@@ -322,11 +592,11 @@ mod tests {
         let d = robot.tendons[0].offset;
         let state = RodState {
             p: Vector3::zeros(),
-            r: Matrix3::identity(),
+            rot: Matrix3::identity(),
             w: Vector3::new(0.0, 0.0, -tau / ea),
             u: Vector3::new(0.0, tau * d / ei, 0.0),
         };
-        let (dv, du) = rod.strain_rates(0.1, &state);
+        let (dv, du) = rod.strain_rates(0.1, &state, rod.running_to(0.4)).unwrap();
         assert!(dv.norm() < 1e-9, "v' = {dv}");
         assert!(du.norm() < 1e-9, "u' = {du}");
     }
@@ -340,13 +610,39 @@ mod tests {
         let rod = Rod::new(&robot);
         let state = RodState {
             p: Vector3::zeros(),
-            r: Matrix3::identity(),
+            rot: Matrix3::identity(),
             w: Vector3::zeros(),
             u: Vector3::zeros(),
         };
-        let (dv, du) = rod.strain_rates(0.0, &state);
+        let (dv, du) = rod.strain_rates(0.0, &state, rod.running_to(0.4)).unwrap();
         let expected = -robot.weight_per_length().x / robot.kse().x;
         assert!((dv.x - expected).abs() < 1e-15);
         assert!(du.norm() < 1e-15);
+    }
+
+    #[test]
+    fn singular_system_is_an_error_not_a_zero_rate() {
+        // No shear/extension stiffness and no tendons: the 6×6 matrix has a
+        // zero 3×3 block, which neither Cholesky nor LU can solve.
+        let mut rod = Rod::new(&seed());
+        rod.kse = Vector3::zeros();
+        let state = RodState {
+            p: Vector3::zeros(),
+            rot: Matrix3::identity(),
+            w: Vector3::zeros(),
+            u: Vector3::new(0.0, 1.0, 0.0),
+        };
+        let running = rod.running_to(0.4);
+        assert_eq!(
+            rod.strain_rates(0.25, &state, running),
+            Err(SingularSystem { s: 0.25 })
+        );
+        // A non-finite state is reported the same way, not passed on as NaN rates.
+        let rod = Rod::new(&seed());
+        let nan = RodState {
+            u: Vector3::new(f64::NAN, 0.0, 0.0),
+            ..state
+        };
+        assert!(rod.strain_rates(0.1, &nan, running).is_err());
     }
 }

@@ -11,10 +11,15 @@
 
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
-use super::integrate::{integrate, integrate_observed};
+use super::integrate::{integrate, integrate_sampled};
 use super::pose::{orthonormalise, quaternion_wxyz};
-use super::rod::{Rod, RodState};
+use super::rod::{Rod, RodState, SingularSystem};
 use crate::robot::{Robot, TensionError};
+
+/// Most RK4 steps over the length a solve accepts (`tendril fk --steps`):
+/// 6000 times the default, far past where the discretisation error meets
+/// roundoff, and a solve there still takes well under a second.
+pub const MAX_STEPS: usize = 100_000;
 
 /// Discretisation and convergence settings of the statics solve.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -99,6 +104,11 @@ pub enum SolveError {
         /// Iterations spent.
         iterations: usize,
     },
+    /// The strain-rate system of the rod could not be solved at the start
+    /// of the solve (`docs/design.md` §2: it is positive definite for any
+    /// physical robot, so this means non-physical numbers).
+    #[error(transparent)]
+    Singular(#[from] SingularSystem),
 }
 
 /// Forward statics of one robot: tensions (and optional tip load) → tip pose.
@@ -183,16 +193,19 @@ impl Statics {
                 match problem.newton(guess, None, &self.settings) {
                     Ok((x, j, r, it, int)) => (x, j, r, it + it0, int + int0),
                     Err((residual, it, _)) => {
+                        // A singular system at the start point is the cause
+                        // worth naming, not the NaN residual it leads to.
+                        problem.tip(&guess)?;
                         return Err(SolveError::NotConverged {
                             residual,
                             iterations: it + it0,
-                        })
+                        });
                     }
                 }
             }
         };
-        let tip = problem.tip(&x);
-        let rotation = orthonormalise(&tip.r);
+        let tip = problem.tip(&x)?;
+        let rotation = orthonormalise(&tip.rot);
         Ok(Solution {
             position: tip.p,
             quaternion: quaternion_wxyz(&rotation),
@@ -209,27 +222,23 @@ impl Statics {
     /// lengths, for a converged `sol` of this robot. Integrated on a grid at
     /// least as fine as the solver's.
     pub fn shape(&self, sol: &Solution, points: usize) -> Vec<Vector3<f64>> {
-        let points = points.max(2);
-        let intervals = points - 1;
-        let per = self.settings.steps.div_ceil(intervals).max(1);
         let mut rod = self.rod.clone();
         rod.set_tensions(&sol.tensions);
         let base = base_state(&rod, &sol.warm.x);
-        let mut out = Vec::with_capacity(points);
-        let mut k = 0usize;
-        integrate_observed(&rod, base, intervals * per, |_, y| {
-            if k.is_multiple_of(per) {
-                out.push(y.p);
-            }
-            k += 1;
-        });
-        out
+        // The solve integrated this rod from this base without a singular
+        // system; the finer grid can only differ by roundoff near one.
+        integrate_sampled(&rod, base, self.settings.steps, points).unwrap_or_default()
     }
 
     /// Tip state for `tensions` integrated from the base unknowns `x`
     /// ([n(0); u(0)]) with `steps` RK4 steps — for convergence studies and
     /// independent checks of a solution.
-    pub fn tip_state(&self, tensions: &[f64], x: &Vector6<f64>, steps: usize) -> RodState {
+    pub fn tip_state(
+        &self,
+        tensions: &[f64],
+        x: &Vector6<f64>,
+        steps: usize,
+    ) -> Result<RodState, SingularSystem> {
         let mut rod = self.rod.clone();
         rod.set_tensions(tensions);
         integrate(&rod, base_state(&rod, x), steps)
@@ -259,13 +268,17 @@ type NewtonOk = (Vector6<f64>, Matrix6<f64>, f64, usize, usize);
 type NewtonErr = (f64, usize, usize);
 
 impl Shooting<'_> {
-    fn tip(&self, x: &Vector6<f64>) -> RodState {
+    fn tip(&self, x: &Vector6<f64>) -> Result<RodState, SingularSystem> {
         integrate(self.rod, base_state(self.rod, x), self.steps)
     }
 
+    /// The tip residual at `x`; a singular system on the way makes it
+    /// infinite, which the Newton iteration treats as a failed step.
     fn residual(&self, x: &Vector6<f64>) -> Vector6<f64> {
-        let tip = self.tip(x);
-        self.rod.tip_residual(&tip, &self.f_ext, &self.m_ext)
+        match self.tip(x) {
+            Ok(tip) => self.rod.tip_residual(&tip, &self.f_ext, &self.m_ext),
+            Err(_) => Vector6::from_element(f64::INFINITY),
+        }
     }
 
     /// Forward-difference Jacobian of the residual at `x`. It is built on

@@ -195,7 +195,12 @@ fn simpson(h: f64, f: &[Vector3<f64>]) -> Vector3<f64> {
 /// Global equilibrium of the whole rod, computed from the converged shape and
 /// not from the tip condition the solver drives to zero: the base internal
 /// wrench must balance the weight, the tendons' pull at the base and the tip load.
-fn assert_global_equilibrium(robot: &Robot, tau: &[f64], f_ext: Vector3<f64>, m_ext: Vector3<f64>) {
+pub(super) fn assert_global_equilibrium(
+    robot: &Robot,
+    tau: &[f64],
+    f_ext: Vector3<f64>,
+    m_ext: Vector3<f64>,
+) {
     let statics = Statics::new(robot, fine());
     let sol = statics.solve_loaded(tau, f_ext, m_ext, None).unwrap();
     assert!(sol.residual < 1e-9, "tip residual {}", sol.residual);
@@ -356,4 +361,237 @@ fn shape_starts_at_the_base_and_ends_at_the_tip() {
     // Arc length between points ≈ L/10 (inextensible to 1e-4).
     let len: f64 = shape.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
     assert!((len - 0.4).abs() < 1e-3, "chord length {len}");
+}
+
+/// The tension batch whose poses main computed before tendon anchors existed.
+fn regression_cases() -> Vec<(&'static str, Vec<f64>)> {
+    vec![
+        ("seed-4t.toml", vec![0.0, 0.0, 0.0, 0.0]),
+        ("seed-4t.toml", vec![2.0, 0.0, 0.0, 0.0]),
+        ("seed-4t.toml", vec![4.0, 3.0, 0.0, 0.0]),
+        ("seed-4t.toml", vec![10.0, 10.0, 0.0, 0.0]),
+        ("seed-4t.toml", vec![0.0, 0.0, 8.0, 9.0]),
+        ("seed-4t.toml", vec![1.0, 2.0, 3.0, 4.0]),
+        ("seed-4t.toml", vec![7.0, 0.0, 0.0, 6.5]),
+        ("seed-1t.toml", vec![5.0]),
+        ("seed-1t.toml", vec![9.5]),
+    ]
+}
+
+/// Poses of [`regression_cases`]: cold solves, then the same batch as one
+/// warm-started chain, then the helical variant of tendon 0 and a tip load.
+fn regression_poses() -> Vec<[f64; 7]> {
+    let load = |name: &str| {
+        Robot::load(
+            &Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../robots")
+                .join(name),
+        )
+        .unwrap()
+    };
+    let mut out = Vec::new();
+    for (name, tau) in regression_cases() {
+        let s = Statics::new(&load(name), SolverSettings::default());
+        out.push(s.solve(&tau, None).unwrap().pose());
+    }
+    let s = Statics::new(&load("seed-4t.toml"), SolverSettings::default());
+    let mut warm = None;
+    for (name, tau) in regression_cases() {
+        if name == "seed-4t.toml" {
+            let sol = s.solve(&tau, warm.as_ref()).unwrap();
+            out.push(sol.pose());
+            warm = Some(sol.warm);
+        }
+    }
+    let mut helical = load("seed-4t.toml");
+    helical.tendons[0].routing = crate::robot::Routing::Helical { turns: 0.5 };
+    let h = Statics::new(&helical, SolverSettings::default());
+    out.push(h.solve(&[4.0, 0.0, 1.0, 0.0], None).unwrap().pose());
+    out.push(
+        s.solve_loaded(
+            &[3.0, 0.0, 0.0, 1.0],
+            Vector3::new(0.1, -0.2, 0.05),
+            Vector3::new(0.0, 0.01, 0.0),
+            None,
+        )
+        .unwrap()
+        .pose(),
+    );
+    out
+}
+
+/// [`regression_poses`] as main computed them before tendon anchors,
+/// pretension and the tip-wrench CLI existed (f64 bit patterns).
+const POSES_BEFORE_ANCHORS: [[u64; 7]; 18] = [
+    [
+        4584107621311902306,
+        0,
+        4600855222042213164,
+        4607171645846556689,
+        4328974696922317208,
+        4587207222130058440,
+        4348516441879422151,
+    ],
+    [
+        4588417497296831905,
+        0,
+        4600786635777913765,
+        4607117948886256303,
+        4340744736183092525,
+        4593270391980185709,
+        4354579611729549420,
+    ],
+    [
+        4590742410663526192,
+        4586158529378192873,
+        4600618527189115567,
+        4606969301856470323,
+        13815631564610544101,
+        4595970821264557832,
+        13782577259189996642,
+    ],
+    [
+        4594721178127275432,
+        4593731261991934090,
+        4599530422342432876,
+        4605931004197304883,
+        13823083473509407033,
+        4600558543244188026,
+        13787652464116431092,
+    ],
+    [
+        13813818591645737000,
+        13816918315022726097,
+        4600162473781996788,
+        4606468390814093034,
+        4599346062157109095,
+        13820837451899820480,
+        4564929738821606138,
+    ],
+    [
+        4562102417307560284,
+        13807243128051899332,
+        4600851451796550495,
+        4607157278198264170,
+        4589802643943354643,
+        13805407214191394753,
+        4556549371194535048,
+    ],
+    [
+        4593447062508281593,
+        13814298517878438361,
+        4600176417237755196,
+        4606558560578846895,
+        4597240226588092817,
+        4598877995643957432,
+        4563069113785963748,
+    ],
+    [
+        4591719848843009655,
+        0,
+        4600597616034534749,
+        4606954589889269556,
+        4348855162257598232,
+        4597220145254911439,
+        4358529365004275150,
+    ],
+    [
+        4594723951036618060,
+        0,
+        4600135089734131406,
+        4606530490138861604,
+        4355896138971200114,
+        4600400391491552127,
+        4361709611240915839,
+    ],
+    [
+        4584107621311902306,
+        0,
+        4600855222042213164,
+        4607171645846556689,
+        4328974696922317208,
+        4587207222130058440,
+        4348516441879422151,
+    ],
+    [
+        4588417497296770243,
+        0,
+        4600786635777915902,
+        4607117948886260654,
+        4340744736182531582,
+        4593270391979896357,
+        4354579611729260068,
+    ],
+    [
+        4590742410664798977,
+        4586158529377588400,
+        4600618527189045204,
+        4606969301856442211,
+        13815631564610594016,
+        4595970821265125236,
+        13782577259197212367,
+    ],
+    [
+        4594721178127275432,
+        4593731261991934090,
+        4599530422342432876,
+        4605931004197304883,
+        13823083473509407033,
+        4600558543244188026,
+        13787652464116431092,
+    ],
+    [
+        13813818591644406117,
+        13816918315022108649,
+        4600162473782142345,
+        4606468390814145428,
+        4599346062157265758,
+        13820837451898553940,
+        4564929738823605615,
+    ],
+    [
+        4562102417472371920,
+        13807243128060937630,
+        4600851451796498492,
+        4607157278198224648,
+        4589802643948351092,
+        13805407214183908039,
+        4556549371448576576,
+    ],
+    [
+        4593447062508046948,
+        13814298517878084498,
+        4600176417237787058,
+        4606558560578810005,
+        4597240226588022602,
+        4598877995644222331,
+        4563069113781694429,
+    ],
+    [
+        4585695018505535804,
+        4585321491378443260,
+        4600794458674184449,
+        4607141360831328971,
+        13814665897419840928,
+        4578738918181526499,
+        13805200471324575160,
+    ],
+    [
+        4591316903450818314,
+        13810784748002747950,
+        4600561348182785210,
+        4606950914840914305,
+        4592097132887463111,
+        4596378303797868386,
+        13798456768261920097,
+    ],
+];
+
+#[test]
+fn existing_robots_give_the_poses_they_gave_before_anchors() {
+    let now = regression_poses();
+    assert_eq!(now.len(), POSES_BEFORE_ANCHORS.len());
+    for (k, (pose, before)) in now.iter().zip(&POSES_BEFORE_ANCHORS).enumerate() {
+        assert_eq!(pose.map(f64::to_bits), *before, "case {k}: {pose:?}");
+    }
 }
