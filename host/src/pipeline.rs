@@ -15,6 +15,7 @@ use anyhow::Context;
 
 use crate::compare::{all_learners, compare, CompareOptions};
 use crate::dataset::split::prepare;
+use crate::dataset::job::{generate as generate_dataset, is_up_to_date, GenerateRequest};
 use crate::dataset::{Dataset, Sidecar};
 use crate::evaluate::job::evaluate_net;
 use crate::fsutil::write_atomic;
@@ -306,32 +307,19 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
 }
 
 /// Stage 1's dataset at `data_path` for the robot in `robot_file`: reused when
-/// its sidecar says it was made the same way, else generated. The pipeline's
-/// one seam to dataset generation (20 000 samples, seed 1, the default
-/// sampler and solver).
+/// its sidecar says it was made the same way, else generated (the defaults of
+/// `tendril generate`: 20 000 samples, seed 1, the robot's default sampler).
 fn dataset(robot_file: &Path, data_path: &Path) -> anyhow::Result<Sidecar> {
-    let request = crate::cli::generate::GenerateArgs {
-        robot: crate::cli::common::RobotArg {
-            robot: robot_file.to_path_buf(),
-        },
-        samples: 20_000,
-        seed: 1,
-        sampler: None,
-        out: data_path.to_path_buf(),
-        max_failure_fraction: 0.001,
-        test_fraction: crate::dataset::split::TEST_FRACTION,
-        steps: SolverSettings::default().steps,
-        quiet: false,
-    };
-    if crate::cli::generate::is_up_to_date(&request, data_path) {
+    let request = GenerateRequest::new(robot_file, data_path);
+    if is_up_to_date(&request) {
         log::info!(
             "dataset: reusing {} (same robot, sampler, seed, count)",
             data_path.display()
         );
-        return Ok(Sidecar::read(&Sidecar::path_for(data_path))?);
+        return Ok(Sidecar::read(&request.sidecar_path())?);
     }
     log::info!("dataset: generating {} samples", request.samples);
-    crate::cli::generate::generate_dataset(&request)
+    Ok(generate_dataset(&request, true, stop_flag())?)
 }
 
 /// The report section of the firmware-parity stage; a missing QEMU or

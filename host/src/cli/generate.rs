@@ -1,11 +1,11 @@
 //! `tendril generate`: the tension ↔ pose dataset (docs/design.md §3).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use super::common::{stop_flag, RobotArg};
 use crate::dataset::job::{self, GenerateRequest, DEFAULT_MAX_FAILURE_FRACTION, DEFAULT_SAMPLES};
 use crate::dataset::split::TEST_FRACTION;
-use crate::dataset::{Sampler, Sidecar};
+use crate::dataset::Sampler;
 use crate::statics::SolverSettings;
 
 /// Sample tensions, solve the statics for each, write CSV + JSON sidecar.
@@ -57,7 +57,7 @@ impl GenerateArgs {
 
 /// Run `tendril generate`.
 pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
-    let sidecar = generate_dataset(&args)?;
+    let sidecar = job::generate(&args.request(), !args.quiet, stop_flag())?;
     log::info!(
         "wrote {} to {} in {:.2} s ({} re-solved cold, {} dropped)",
         rows(sidecar.count),
@@ -75,18 +75,4 @@ fn rows(n: usize) -> String {
     } else {
         format!("{n} rows")
     }
-}
-
-/// Generate and write the dataset and its sidecar; returns the sidecar.
-/// (The pipeline's entry point until it calls [`job::generate`] itself.)
-pub fn generate_dataset(args: &GenerateArgs) -> anyhow::Result<Sidecar> {
-    Ok(job::generate(&args.request(), !args.quiet, stop_flag())?)
-}
-
-/// Whether `path` holds the dataset `args` asks for (see [`job::is_up_to_date`]).
-pub fn is_up_to_date(args: &GenerateArgs, path: &Path) -> bool {
-    job::is_up_to_date(&GenerateRequest {
-        out: path.to_path_buf(),
-        ..args.request()
-    })
 }
