@@ -109,6 +109,7 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
     );
     draw_workspace(&data.poses, &shapes, &title, &fig)
         .map_err(|e| anyhow::anyhow!("drawing {}: {e}", fig.display()))?;
+    log::info!("workspace figure: {}", fig.display());
     report.add(format!(
         "## 2. Workspace\n\n![workspace]({})\n\nTip positions of every sample in three \
          projections, and backbone shapes for a few tensions.\n",
@@ -145,10 +146,10 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
     let net = read_tnet(&model)?;
     let test = prepare(&data, split.test_fraction, split.valid_fraction, split.seed).test;
     let metrics = evaluate_net(&statics, &net, &test)?;
+    let (hidden_units, test_tip_mean_mm) = (net.shape().hidden, metrics.position_mm.mean);
     log::info!(
-        "trained {} hidden units in {train_seconds:.1} s; test tip error mean {:.3} mm",
-        net.shape().hidden,
-        metrics.position_mm.mean
+        "trained {hidden_units} hidden units in {train_seconds:.1} s; \
+         test tip error mean {test_tip_mean_mm:.3} mm"
     );
     write_atomic(
         &out.join("evaluation.json"),
@@ -302,7 +303,13 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
     summary.push_str(&sections.join("\n"));
     report.add(summary)?;
 
-    log::info!("report: {}", report.path.display());
+    log::info!(
+        "done in {:.0} s: {} hidden units, test tip error mean {:.3} mm; report {}",
+        report.started.elapsed().as_secs_f64(),
+        hidden_units,
+        test_tip_mean_mm,
+        report.path.display()
+    );
     Ok(())
 }
 
