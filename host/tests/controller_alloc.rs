@@ -164,7 +164,8 @@ fn two_hundred_seconds_of_controller_periods_allocate_nothing() {
             tip[0] = point.pose[0] as f32 + 3e-4;
             let mut tensions = motor;
             if k >= stuck_from {
-                tensions[0] = *stuck_value.get_or_insert(motor[0]);
+                // Tendon 2 carries 1–3 N on this circle.
+                tensions[2] = *stuck_value.get_or_insert(motor[2]);
             }
             PlantState {
                 header: Header {
@@ -243,5 +244,5 @@ fn two_hundred_seconds_of_controller_periods_allocate_nothing() {
         (190.0..195.0).contains(&at),
         "stuck motor found at {at} s (stuck from 190 s)"
     );
-    assert_eq!(stuck[0].tendon, Some(0));
+    assert_eq!(stuck[0].tendon, Some(2));
 }

@@ -403,8 +403,7 @@ fn one_control_law_the_firmware_integral_reaches_the_loop_accuracy() {
 
 #[test]
 fn a_stuck_loaded_motor_is_detected_and_the_tensions_are_held() {
-    // Tendon 0 pulls toward +x, where the circle starts: it carries load
-    // from the first second of the circle.
+    // Tendon 2 carries 1–3 N on the default circle (the issue's `--stuck 2@2`).
     let (_r, dir, _) = sim(&[
         "--trajectory",
         "circle",
@@ -413,7 +412,7 @@ fn a_stuck_loaded_motor_is_detected_and_the_tensions_are_held() {
         "--duration",
         "5",
         "--stuck",
-        "0@3",
+        "2@3",
     ]);
     let c = controller_stats(dir.path());
     let faults = c["faults_detected"].as_array().expect("faults_detected");
@@ -422,7 +421,7 @@ fn a_stuck_loaded_motor_is_detected_and_the_tensions_are_held() {
         .filter(|x| x["kind"] == "stuck_motor")
         .collect();
     assert_eq!(stuck.len(), 1, "{faults:?}");
-    assert_eq!(stuck[0]["tendon"], 0);
+    assert_eq!(stuck[0]["tendon"], 2);
     let found_ns = f(&stuck[0]["t_ns"]);
     // When it stuck, from the plant's own log (its MOTOR_STUCK status bit).
     let (h, rows) = csv(&dir.path().join("plant-0.csv"));
