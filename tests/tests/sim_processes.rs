@@ -13,6 +13,10 @@ use tendril_tests::{robot, tendril_bin, workspace_root};
 /// The default exported net, relative to the workspace root.
 const DEFAULT_NET: &str = "firmware/vectors/default.tnet";
 
+/// Held by the tests that leave dead iceoryx2 nodes on purpose (SIGKILL)
+/// and by the one that counts node entries, so they never overlap.
+static NODE_ENTRIES: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// Short runs: these tests are about processes, not accuracy.
 const SHORT: [&str; 4] = ["--settle", "0.5", "--duration", "1.5"];
 
@@ -136,6 +140,7 @@ fn kill_sim_and_check_children(sig: &str) -> (Output, tempfile::TempDir, Vec<u32
 
 #[test]
 fn sigkill_of_the_sim_takes_its_children_down_within_a_second() {
+    let _entries = NODE_ENTRIES.lock().unwrap_or_else(|e| e.into_inner());
     let (output, _dir, _) = kill_sim_and_check_children("KILL");
     assert!(!output.status.success());
 }
@@ -209,6 +214,7 @@ fn iceoryx2_nodes() -> Vec<PathBuf> {
 
 #[test]
 fn a_child_that_fails_at_start_fails_the_run_and_leaves_no_iceoryx2_nodes() {
+    let _entries = NODE_ENTRIES.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
     let bad = dir.path().join("bad.tnet");
     std::fs::write(&bad, b"not a weight file at all").unwrap();
@@ -254,8 +260,15 @@ fn a_child_killed_from_outside_fails_the_run_and_the_report_names_it() {
     .spawn()
     .expect("spawn tendril sim");
     let children = wait_for_children(&out, &mut sim);
-    // Let the loop run a moment, then kill the plant (listed first).
-    std::thread::sleep(Duration::from_secs(2));
+    // Let the loop run (the planner logs its setpoints), then kill the
+    // plant (listed first).
+    let planner_log = out.join(".sim-run").join("planner-0.csv");
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while std::fs::read_to_string(&planner_log).map_or(0, |t| t.lines().count()) < 100 {
+        assert!(Instant::now() < deadline, "the loop never ran");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::thread::sleep(Duration::from_secs(1));
     let plant = children[0];
     signal(plant, "INT");
     let started = Instant::now();
@@ -425,4 +438,53 @@ fn injected_nan_setpoints_and_dropped_commands_appear_in_faults_with_detection()
     );
     let drop = find("dropped_commands");
     assert_eq!(drop["detected"], true, "{drop}");
+}
+
+#[test]
+fn a_stuck_motor_is_in_faults_and_an_undetected_one_fails_the_run() {
+    // Tendon 0 pulls toward +x, where the circle starts: it carries load
+    // (the stuck time is plant time: the plant starts before the loop).
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let o = run_sim(
+        &out,
+        &[
+            "--model",
+            DEFAULT_NET,
+            "--settle",
+            "1",
+            "--duration",
+            "5",
+            "--stuck",
+            "0@3",
+        ],
+    );
+    let r = report(&out);
+    let stuck = r["faults"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|f| f["kind"] == "stuck_motor")
+        .unwrap_or_else(|| panic!("no stuck_motor in {}", r["faults"]))
+        .clone();
+    assert!(stuck["t_s"].as_f64().is_some(), "{stuck}");
+    match stuck["detected"].as_bool() {
+        Some(true) => {
+            let latency = stuck["detection_latency_s"].as_f64().unwrap();
+            assert!(
+                (0.0..1.0).contains(&latency),
+                "stuck motor detected after {latency} s"
+            );
+            assert!(o.status.success(), "{}", stderr(&o));
+        }
+        Some(false) => {
+            assert!(!o.status.success(), "an undetected stuck motor exited 0");
+            assert!(
+                r["verdict"]["problems"].to_string().contains("StuckMotor"),
+                "{}",
+                r["verdict"]
+            );
+        }
+        None => panic!("stuck motor without a detection verdict: {stuck}"),
+    }
 }

@@ -16,15 +16,6 @@ pub enum OnOff {
     Off,
 }
 
-impl OnOff {
-    fn word(self) -> &'static str {
-        match self {
-            OnOff::On => "on",
-            OnOff::Off => "off",
-        }
-    }
-}
-
 /// Loop and tuning options (shared with `tendril sim`).
 #[derive(Args, Clone, Debug)]
 pub struct LoopOpts {
@@ -69,25 +60,6 @@ pub struct LoopOpts {
 }
 
 impl LoopOpts {
-    /// Same options as arguments (for spawning a controller).
-    pub fn to_args(&self) -> Vec<String> {
-        let mut a = vec![
-            format!("--rate={}", self.rate),
-            format!("--spin-us={}", self.spin_us),
-            format!("--watchdog-periods={}", self.watchdog_periods),
-            format!("--correction={}", self.correction.word()),
-            format!("--ki={}", self.ki),
-            format!("--correction-limit-mm={}", self.correction_limit_mm),
-            format!("--correction-window-mm={}", self.correction_window_mm),
-            format!("--lead-ms={}", self.lead_ms),
-            format!("--slew={}", self.slew),
-        ];
-        if let Some(rt) = self.realtime {
-            a.push(format!("--realtime={}", rt.word()));
-        }
-        a
-    }
-
     /// Fill the loop fields of a controller config.
     pub fn apply(&self, cfg: &mut ControllerConfig) {
         cfg.rate_hz = self.rate;

@@ -107,30 +107,6 @@ impl TrajectoryOpts {
             }
         })
     }
-
-    /// The same options as command-line arguments (for spawning a planner).
-    pub fn to_args(&self) -> Vec<String> {
-        let kind = self
-            .trajectory
-            .to_possible_value()
-            .map(|v| v.get_name().to_string())
-            .unwrap_or_default();
-        let mut a = vec![
-            "--trajectory".into(),
-            kind,
-            format!("--center-mm={}", self.center_mm),
-            format!("--radius-mm={}", self.radius_mm),
-            format!("--freq={}", self.freq),
-            format!("--targets-mm={}", self.targets_mm),
-            format!("--dwell={}", self.dwell),
-            format!("--planner-rate={}", self.planner_rate),
-        ];
-        if let Some(p) = &self.poses {
-            a.push("--poses".into());
-            a.push(p.display().to_string());
-        }
-        a
-    }
 }
 
 /// Stream setpoints along a trajectory inside the robot's workspace.

@@ -101,30 +101,6 @@ impl PlantOpts {
             ..PlantParams::default()
         })
     }
-
-    /// Same options as arguments (for spawning a plant).
-    pub fn to_args(&self) -> Vec<String> {
-        let mut a = vec![
-            format!("--motor-tau-ms={}", self.motor_tau_ms),
-            format!("--compliance-tau-ms={}", self.compliance_tau_ms),
-            format!("--noise-mm={}", self.noise_mm),
-            format!("--seed={}", self.seed),
-            format!("--statics-steps={}", self.statics_steps),
-        ];
-        if self.spin {
-            a.push("--spin".into());
-        }
-        for (flag, v) in [
-            ("--stuck", &self.stuck),
-            ("--drop", &self.drop),
-            ("--delay", &self.delay),
-        ] {
-            if let Some(v) = v {
-                a.push(format!("{flag}={v}"));
-            }
-        }
-        a
-    }
 }
 
 /// Simulate the tendon motors and the robot, driven by tension commands.

@@ -41,6 +41,10 @@ pub struct PlantRow {
     pub actual: Vec<f64>,
     /// [`plant_status`] bits.
     pub status: u32,
+    /// Sequence number of the command applied (0 = none yet).
+    pub command_seq: f64,
+    /// Plant generation that logged it.
+    pub generation: usize,
 }
 
 /// One controller period.
@@ -118,6 +122,7 @@ impl Logs {
             let ic = column(&f.header, "cmd0", &f.path)?;
             let ia = column(&f.header, "tau0", &f.path)?;
             let ist = column(&f.header, "status", &f.path)?;
+            let iseq = column(&f.header, "cmd_seq", &f.path)?;
             let n = ia - ic;
             logs.tendons = n;
             logs.plant.extend(f.rows.iter().map(|r| PlantRow {
@@ -126,6 +131,8 @@ impl Logs {
                 commanded: r[ic..ic + n].to_vec(),
                 actual: r[ia..ia + n].to_vec(),
                 status: r[ist] as u32,
+                command_seq: r[iseq],
+                generation: f.generation,
             }));
         }
         logs.plant.sort_by(|a, b| a.t_ns.total_cmp(&b.t_ns));
@@ -172,6 +179,27 @@ impl Logs {
             .iter()
             .find(|r| r.status & bits != 0)
             .map(|r| r.t_ns)
+    }
+
+    /// For a plant generation that wrote no statistics (killed): the
+    /// commands its log shows applied, and how many of those had a tension
+    /// outside `[0, max]` or not finite.
+    pub fn commands_logged(&self, generation: usize, max: &[f64]) -> (u64, u64) {
+        let mut last = 0.0;
+        let (mut seen, mut bad) = (0, 0);
+        for r in self.plant.iter().filter(|r| r.generation == generation) {
+            if r.command_seq > 0.0 && r.command_seq != last {
+                last = r.command_seq;
+                seen += 1;
+                let out = r
+                    .commanded
+                    .iter()
+                    .zip(max)
+                    .any(|(t, m)| !(t.is_finite() && *t >= 0.0 && t <= m));
+                bad += u64::from(out);
+            }
+        }
+        (seen, bad)
     }
 
     /// Injected planner messages: (first stamp, messages) of each burst of

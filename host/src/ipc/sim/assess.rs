@@ -15,7 +15,7 @@ use super::report::{
 use super::supervisor::{Children, Role};
 use super::workdir::RunDir;
 use super::{Event, SimConfig, SimError};
-use crate::ipc::controller::ControllerStats;
+use crate::ipc::controller::{ControllerStats, DetectedFault, FaultKind as Detected};
 use crate::ipc::plant::PlantStats;
 use crate::ipc::stats::Summary;
 
@@ -52,7 +52,19 @@ pub fn build_report(
                 latencies.push(s.latency_us);
                 plant.generations.push(s);
             }
-            None => plant.generations_without_stats.push(g),
+            None => {
+                // A killed plant writes no statistics: its log still shows
+                // the commands it applied; range-check those.
+                let max = crate::robot::Robot::load(&cfg.robot)
+                    .map(|r| r.max_tensions())
+                    .unwrap_or_default();
+                if !max.is_empty() {
+                    let (seen, bad) = logs.commands_logged(g, &max);
+                    plant.commands_checked += seen;
+                    plant.out_of_range_commands += bad;
+                }
+                plant.generations_without_stats.push(g);
+            }
         }
     }
     plant.step_us = plant
@@ -157,7 +169,7 @@ fn analyse_faults(
     events: &[Event],
     logs: &Logs,
     samples: &[Sample],
-    _controller: Option<&ControllerStats>,
+    controller: Option<&ControllerStats>,
 ) -> Vec<FaultRecord> {
     let period_ns = 1e9 / cfg.controller.rate_hz;
     let secs = |t: f64| (t - t0 as f64) * 1e-9;
@@ -259,8 +271,9 @@ fn analyse_faults(
         }
         out.push(f);
     }
-    out.extend(planner_injections(cfg, t0, logs));
-    out.extend(plant_faults(cfg, t0, logs));
+    let detections = controller.map_or(&[][..], |c| &c.faults_detected[..]);
+    out.extend(planner_injections(cfg, t0, logs, detections));
+    out.extend(plant_faults(cfg, t0, logs, detections));
     out.sort_by(|a, b| {
         let key = |f: &FaultRecord| f.t_s.unwrap_or(f64::INFINITY);
         key(a).total_cmp(&key(b))
@@ -271,7 +284,12 @@ fn analyse_faults(
 /// NaN and out-of-workspace setpoints, from the planner's log (injected
 /// messages are flagged there), detected by the controller's
 /// setpoint-rejected flag.
-fn planner_injections(cfg: &SimConfig, t0: u64, logs: &Logs) -> Vec<FaultRecord> {
+fn planner_injections(
+    cfg: &SimConfig,
+    t0: u64,
+    logs: &Logs,
+    detections: &[DetectedFault],
+) -> Vec<FaultRecord> {
     let inject = &cfg.planner.inject;
     let Some(first) = logs.setpoints.iter().find(|s| s.generation == 0) else {
         return Vec::new();
@@ -286,28 +304,51 @@ fn planner_injections(cfg: &SimConfig, t0: u64, logs: &Logs) -> Vec<FaultRecord>
                 .map(|a| (since - a).abs())
                 .fold(f64::INFINITY, f64::min)
         };
-        let kind = if nearest(&inject.nan_at_s) <= nearest(&inject.outside_at_s) {
-            FaultKind::NanSetpoint
+        let (kind, listed, name) = if nearest(&inject.nan_at_s) <= nearest(&inject.outside_at_s) {
+            (
+                FaultKind::NanSetpoint,
+                Detected::NonfiniteSetpoint,
+                "nonfinite_setpoint",
+            )
         } else {
-            FaultKind::OutsideSetpoint
+            (
+                FaultKind::OutsideSetpoint,
+                Detected::OutsideWorkspace,
+                "outside_workspace",
+            )
         };
         let mut f = FaultRecord::new(
             kind,
             Some((start - t0 as f64) * 1e-9),
             format!("{count} message{}", if count == 1 { "" } else { "s" }),
         );
-        let seen = logs.controller_flag_after(start, analysis::REJECTED);
-        f.detect(
-            seen.map(|s| (s - start) * 1e-9),
-            "controller setpoint-rejected flag",
-        );
+        // The fault list lists a burst once per FAULT_REPEAT_S; the
+        // per-period status bit shows every rejection.
+        match first_detection(detections, start, |d| d.kind == listed) {
+            Some(t) => f.detect(
+                Some((t - start) * 1e-9),
+                &format!("controller fault list: {name}"),
+            ),
+            None => {
+                let seen = logs.controller_flag_after(start, analysis::REJECTED);
+                f.detect(
+                    seen.map(|s| (s - start) * 1e-9),
+                    "controller setpoint-rejected flag",
+                );
+            }
+        }
         out.push(f);
     }
     out
 }
 
 /// Plant-side faults, from the plant's log (it flags its own faults), detected by the controller.
-fn plant_faults(cfg: &SimConfig, t0: u64, logs: &Logs) -> Vec<FaultRecord> {
+fn plant_faults(
+    cfg: &SimConfig,
+    t0: u64,
+    logs: &Logs,
+    detections: &[DetectedFault],
+) -> Vec<FaultRecord> {
     let faults = &cfg.plant.params.faults;
     let secs = |t: f64| (t - t0 as f64) * 1e-9;
     let mut out = Vec::new();
@@ -321,8 +362,14 @@ fn plant_faults(cfg: &SimConfig, t0: u64, logs: &Logs) -> Vec<FaultRecord> {
                 stuck.tendon, stuck.at_s
             ),
         );
-        if at.is_some() {
-            f.detected = Some(false);
+        if let Some(at) = at {
+            let found = first_detection(detections, at, |d| {
+                d.kind == Detected::StuckMotor && d.tendon.is_none_or(|k| k == stuck.tendon)
+            });
+            f.detect(
+                found.map(|t| (t - at) * 1e-9),
+                "controller fault list: stuck_motor",
+            );
         }
         out.push(f);
     }
@@ -338,7 +385,16 @@ fn plant_faults(cfg: &SimConfig, t0: u64, logs: &Logs) -> Vec<FaultRecord> {
                 drop.to_s
             ),
         );
-        f.detect(at.map(|_| 0.0), "plant log: first dropped command");
+        match at.and_then(|at| {
+            first_detection(detections, at, |d| d.kind == Detected::CommandsNotApplied)
+                .map(|t| (at, t))
+        }) {
+            Some((at, t)) => f.detect(
+                Some((t - at) * 1e-9),
+                "controller fault list: commands_not_applied",
+            ),
+            None => f.detect(at.map(|_| 0.0), "plant log only: first dropped command"),
+        }
         out.push(f);
     }
     if let Some(delay) = faults.delay {
@@ -353,8 +409,31 @@ fn plant_faults(cfg: &SimConfig, t0: u64, logs: &Logs) -> Vec<FaultRecord> {
                 delay.to_s
             ),
         );
-        f.detect(at.map(|_| 0.0), "plant log: first delayed command");
+        match at.and_then(|at| {
+            first_detection(detections, at, |d| d.kind == Detected::CommandsNotApplied)
+                .map(|t| (at, t))
+        }) {
+            Some((at, t)) => f.detect(
+                Some((t - at) * 1e-9),
+                "controller fault list: commands_not_applied",
+            ),
+            None => f.detect(at.map(|_| 0.0), "plant log only: first delayed command"),
+        }
         out.push(f);
     }
     out
+}
+
+/// Time (monotonic ns) of the first controller detection at or after
+/// `from_ns` that `matches`.
+fn first_detection(
+    detections: &[DetectedFault],
+    from_ns: f64,
+    matches: impl Fn(&DetectedFault) -> bool,
+) -> Option<f64> {
+    detections
+        .iter()
+        .filter(|d| d.t_ns as f64 >= from_ns && matches(d))
+        .map(|d| d.t_ns as f64)
+        .reduce(f64::min)
 }

@@ -100,7 +100,9 @@ pub struct SteadyState {
 pub struct PlantSummary {
     /// Step time of the first plant generation (µs); `null` with no steps.
     pub step_us: Option<Summary>,
-    /// Commands the plants received and range-checked (all generations).
+    /// Commands the plants received and range-checked (all generations; for
+    /// a generation killed before writing statistics, the commands its log
+    /// shows applied, checked by the launcher against the robot's limits).
     pub commands_checked: u64,
     /// Of those, commands with a tension out of range or not finite.
     pub out_of_range_commands: u64,
