@@ -4,7 +4,7 @@
 //! (`firmware/vectors/`), so this times exactly the code the QEMU parity
 //! test checks.
 //!
-//! `cargo bench -p tendril-firmware --bench inference`
+//! `cargo bench -p tendril-firmware --features harness --bench inference`
 
 use std::hint::black_box;
 

@@ -12,9 +12,9 @@
 //!
 //! ```text
 //! cargo run --release                                                        # writes out/model.tnet
-//! cargo run -p tendril-firmware --example gen_vectors -- --tnet out/model.tnet
-//! cargo run -p tendril-firmware --example gen_vectors                        # re-derive from default.tnet
-//! cargo run -p tendril-firmware --example gen_vectors -- --synthetic        # synthetic default net
+//! cargo run -p tendril-firmware --features harness --example gen_vectors -- --tnet out/model.tnet
+//! cargo run -p tendril-firmware --features harness --example gen_vectors                        # re-derive from default.tnet
+//! cargo run -p tendril-firmware --features harness --example gen_vectors -- --synthetic        # synthetic default net
 //! ```
 //! Options: `--tnet FILE` (default: the current `default.tnet`),
 //! `--synthetic`, `--out-dir DIR` (default `firmware/vectors`).

@@ -4,7 +4,7 @@
 //! CPU time (criterion's wall times are inflated on a loaded machine).
 //!
 //! ```text
-//! cargo build -p tendril-firmware --release --example infer_cost
+//! cargo build -p tendril-firmware --features harness --release --example infer_cost
 //! valgrind --tool=callgrind target/release/examples/infer_cost 20000   # instructions
 //! /usr/bin/time -f %U target/release/examples/infer_cost 1000000      # user seconds
 //! ```

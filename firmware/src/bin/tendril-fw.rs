@@ -17,7 +17,7 @@
 //!
 //! Embedded files, refreshed from the net the main job exports
 //! (`cargo run --release` writes `out/model.tnet`) with
-//! `cargo run -p tendril-firmware --example gen_vectors -- --tnet out/model.tnet`:
+//! `cargo run -p tendril-firmware --features harness --example gen_vectors -- --tnet out/model.tnet`:
 //! `default.tnet` (that net), `inputs.bin` (control-loop inputs inside its
 //! input box), `swap.tnet` and `swap_nan.tnet` (a small update and a
 //! corrupted copy, for the hot-swap steps), all in `firmware/vectors/`.
