@@ -14,8 +14,8 @@ use std::time::Instant;
 use anyhow::Context;
 
 use crate::compare::{all_learners, compare, CompareOptions};
-use crate::dataset::split::prepare;
 use crate::dataset::job::{generate as generate_dataset, is_up_to_date, GenerateRequest};
+use crate::dataset::split::prepare;
 use crate::dataset::{Dataset, Sidecar};
 use crate::evaluate::job::evaluate_net;
 use crate::fsutil::write_atomic;

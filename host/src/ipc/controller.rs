@@ -18,14 +18,14 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 use tendril_firmware::control::{
     control_step, ControlConfig, ControlState, Feedback, IntegralConfig, SafeHold,
-    Setpoint as FwSetpoint, Status, StepInput, POSE_DIM,
+    Setpoint as FwSetpoint, Status, StepInput,
 };
 use tendril_firmware::swap::NetSlots;
 use tendril_shared::messages::{
     command_status, setpoint_flags, Header, PlantState, Setpoint, TensionCommand, WeightUpdate,
     MAX_TENDONS,
 };
-use tendril_shared::TendonLimits;
+use tendril_shared::{TendonLimits, POSE_DIM};
 
 use super::clock::{now_ns, tighten_timer_slack, Tick, Ticker};
 use super::stats::{CsvLog, Histogram, Summary};
@@ -33,16 +33,12 @@ use super::transport::{self, Services};
 use super::{IpcError, StopWatch};
 use crate::robot::Robot;
 
-/// Hidden-unit capacity of the controller's net buffers.
-pub const NET_CAPACITY: usize = 64;
+/// Hidden-unit capacity of the controller's net buffers (the one capacity in
+/// `tendril_shared`).
+pub const NET_CAPACITY: usize = tendril_shared::MAX_HIDDEN;
 
 /// The double-buffered net the controller runs.
-pub type Slots = NetSlots<
-    POSE_DIM,
-    NET_CAPACITY,
-    MAX_TENDONS,
-    { tendril_shared::weight_capacity(POSE_DIM, NET_CAPACITY, MAX_TENDONS) },
->;
+pub type Slots = NetSlots<POSE_DIM, NET_CAPACITY, MAX_TENDONS, { tendril_shared::MAX_WEIGHTS }>;
 
 /// Everything the controller process needs: written by a launcher as JSON
 /// (`tendril controller --config FILE`) or built from the flags. Units are

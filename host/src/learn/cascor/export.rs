@@ -1,4 +1,4 @@
-//! The trained net as a `.tnet` weight file (`DESIGN.md` §5), written and read
+//! The trained net as a `.tnet` weight file (`docs/design.md` §5.1), written and read
 //! through the `tendril-shared` encoder/decoder the firmware uses, and host
 //! inference through the firmware's own f32 `infer`, so `tendril ik` and the
 //! MCU compute bit-identical tensions from the same file.
@@ -6,22 +6,17 @@
 use std::path::Path;
 
 use nalgebra::DMatrix;
-use tendril_firmware::POSE_DIM;
-use tendril_shared::{Activation, Shape, TnetError, TnetView, MAX_TENDONS};
+use tendril_shared::{Activation, IkNet, Shape, TnetError, TnetView, MAX_HIDDEN, POSE_DIM};
 
 use super::net::{CascadeNet, OutputKind};
 
-/// Hidden-unit capacity of the host's decoded nets (the trainer's cap).
-pub const HOST_MAX_HIDDEN: usize = 64;
+/// Hidden-unit capacity of the host's decoded nets (the trainer's cap): the
+/// one capacity in `tendril_shared`, so every exported net fits the controllers.
+pub const HOST_MAX_HIDDEN: usize = MAX_HIDDEN;
 
-/// The host's fixed-capacity decoded net: 7 pose inputs, up to
-/// [`HOST_MAX_HIDDEN`] hidden units, up to 8 tendons.
-pub type HostNet = tendril_shared::CascadeNet<
-    POSE_DIM,
-    HOST_MAX_HIDDEN,
-    MAX_TENDONS,
-    { tendril_shared::weight_capacity(POSE_DIM, HOST_MAX_HIDDEN, MAX_TENDONS) },
->;
+/// The host's decoded net: the same fixed-capacity type as the controllers'
+/// ([`tendril_shared::IkNet`]).
+pub type HostNet = IkNet;
 
 /// Why a net could not be exported or a `.tnet` file not loaded.
 #[derive(Debug, thiserror::Error)]
