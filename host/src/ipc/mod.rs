@@ -219,4 +219,56 @@ mod tests {
         assert!(w.lost(13 * s + 1));
         assert!(!PeerWatch::new(None, 0).lost(u64::MAX));
     }
+
+    #[test]
+    fn process_configs_round_trip_through_json_with_named_units() {
+        let ctl = controller::ControllerConfig::new("r.toml".into(), "m.tnet".into());
+        let text = serde_json::to_string(&ctl).unwrap();
+        assert!(text.contains("\"lead_s\":0.021") && text.contains("\"ki_per_s\""));
+        assert_eq!(
+            serde_json::from_str::<controller::ControllerConfig>(&text).unwrap(),
+            ctl
+        );
+        let planner = planner::PlannerConfig {
+            robot: "r.toml".into(),
+            prefix: "p".into(),
+            shape: trajectory::Shape::Circle {
+                center_m: [0.0, 0.01],
+                radius_m: 0.015,
+                freq_hz: 0.2,
+            },
+            rate_hz: 1000.0,
+            settle_s: 2.0,
+            duration_s: None,
+            inject: planner::Injections::default(),
+            peer_timeout_s: Some(2.0),
+            supervised: true,
+            log: None,
+            realtime: false,
+            cpu: None,
+        };
+        let text = serde_json::to_string(&planner).unwrap();
+        assert!(text.contains("\"kind\":\"circle\""), "{text}");
+        assert_eq!(
+            serde_json::from_str::<planner::PlannerConfig>(&text).unwrap(),
+            planner
+        );
+        let mut plant = plant::PlantConfig::default();
+        plant.params.faults.stuck = Some(plant::StuckFault {
+            tendon: 2,
+            at_s: 2.0,
+        });
+        let text = serde_json::to_string(&plant).unwrap();
+        assert!(
+            text.contains("\"stuck\":{\"tendon\":2,\"at_s\":2.0}"),
+            "{text}"
+        );
+        assert_eq!(
+            serde_json::from_str::<plant::PlantConfig>(&text).unwrap(),
+            plant
+        );
+        // A misspelt field is an error, not a silent default.
+        let err = serde_json::from_str::<plant::PlantConfig>("{\"robott\": \"x\"}").unwrap_err();
+        assert!(err.to_string().contains("robott"), "{err}");
+    }
 }
