@@ -254,7 +254,7 @@ pub fn solve_csv(ik: &IkNet, input: &Path, output: &Path) -> Result<BatchSummary
         path: path.to_path_buf(),
         why,
     };
-    if crate::dataset::job::same_file(input, output) {
+    if crate::dataset::disk::same_file(input, output) {
         return Err(file_error(
             output,
             "the output would overwrite the input; choose another --output".into(),

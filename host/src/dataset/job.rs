@@ -15,6 +15,7 @@ use std::time::Instant;
 
 use sha2::{Digest, Sha256};
 
+use super::disk::{free_bytes, parent_dir, same_file};
 use super::generate::{column_ranges, generate_rows, GenerateOptions, StreamError};
 use super::io::{RowWriter, MAX_VALUE_BYTES};
 use super::split::{test_mask, MinMax, Ranges, SPLIT_SEED, TEST_FRACTION};
@@ -118,12 +119,20 @@ impl GenerateRequest {
         Ok(())
     }
 
-    /// Refuse an output that is an input or the other output, before
-    /// anything is written.
+    /// Refuse an output that is a directory, an input or the other output,
+    /// before anything is written.
     fn check_paths(&self) -> Result<(), GenerateError> {
         let sidecar = self.sidecar_path();
+        for out in [&self.out, &sidecar] {
+            if out.is_dir() {
+                return Err(GenerateError::BadOutput {
+                    path: out.clone(),
+                    why: "is a directory; give a file name".into(),
+                });
+            }
+        }
         if same_file(&self.out, &sidecar) {
-            return Err(GenerateError::PathCollision {
+            return Err(GenerateError::BadOutput {
                 path: self.out.clone(),
                 why: "the dataset and its sidecar would be the same file; name the CSV \
                       something other than *.json"
@@ -132,7 +141,7 @@ impl GenerateRequest {
         }
         for (out, what) in [(&self.out, "dataset"), (&sidecar, "sidecar")] {
             if same_file(out, &self.robot_path) {
-                return Err(GenerateError::PathCollision {
+                return Err(GenerateError::BadOutput {
                     path: out.clone(),
                     why: format!("the {what} would overwrite the robot file"),
                 });
@@ -151,9 +160,9 @@ pub enum GenerateError {
     /// A request field is out of range.
     #[error("{0}")]
     Invalid(String),
-    /// An output path equals an input or the other output.
+    /// An output path is an input, the other output, or a directory.
     #[error("{}: {why}", path.display())]
-    PathCollision {
+    BadOutput {
         /// The output path.
         path: PathBuf,
         /// Which paths collide.
@@ -423,31 +432,6 @@ fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
-fn parent_dir(path: &Path) -> PathBuf {
-    match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => PathBuf::from("."),
-    }
-}
-
-/// `path` with its directory resolved (symlinks, `..`), for comparing paths
-/// of files that may not exist yet.
-fn resolved(path: &Path) -> PathBuf {
-    if let Ok(p) = path.canonicalize() {
-        return p;
-    }
-    let dir = parent_dir(path);
-    match (dir.canonicalize(), path.file_name()) {
-        (Ok(d), Some(name)) => d.join(name),
-        _ => path.to_path_buf(),
-    }
-}
-
-/// Whether `a` and `b` name the same file once their directories are resolved.
-pub(crate) fn same_file(a: &Path, b: &Path) -> bool {
-    resolved(a) == resolved(b)
-}
-
 /// Refuse a run whose output bound exceeds the free space of `dir`.
 fn check_space(dir: &Path, samples: usize, need: u64) -> Result<(), GenerateError> {
     match free_bytes(dir) {
@@ -458,30 +442,6 @@ fn check_space(dir: &Path, samples: usize, need: u64) -> Result<(), GenerateErro
             free,
         }),
         _ => Ok(()),
-    }
-}
-
-/// Bytes an unprivileged user may still write in the file system holding
-/// `dir`, or `None` where that cannot be asked.
-pub fn free_bytes(dir: &Path) -> Option<u64> {
-    #[cfg(unix)]
-    {
-        use std::os::unix::ffi::OsStrExt;
-        let c_path = std::ffi::CString::new(dir.as_os_str().as_bytes()).ok()?;
-        // SAFETY: `c_path` is a NUL-terminated string and `stat` a plain C
-        // struct the call fills; both outlive the call.
-        let mut stat: libc::statvfs = unsafe { std::mem::zeroed() };
-        let rc = unsafe { libc::statvfs(c_path.as_ptr(), &mut stat) };
-        if rc != 0 {
-            return None;
-        }
-        #[allow(clippy::unnecessary_cast)] // the field types differ between platforms
-        Some((stat.f_bavail as u64).saturating_mul(stat.f_frsize as u64))
-    }
-    #[cfg(not(unix))]
-    {
-        let _ = dir;
-        None
     }
 }
 
@@ -539,7 +499,7 @@ mod tests {
         let mut req = request(dir.path(), 10);
         req.out = dir.path().join("x.json");
         let err = generate(&req, false, &AtomicBool::new(false)).unwrap_err();
-        assert!(matches!(err, GenerateError::PathCollision { .. }), "{err}");
+        assert!(matches!(err, GenerateError::BadOutput { .. }), "{err}");
         assert!(err.to_string().contains("same file"), "{err}");
         // The robot file named through a different spelling of its directory.
         let robot_copy = dir.path().join("bot.csv");
@@ -552,6 +512,14 @@ mod tests {
         assert!(std::fs::read_to_string(&robot_copy)
             .unwrap()
             .contains("[backbone]"));
+        // A directory where the sidecar would go.
+        std::fs::create_dir(dir.path().join("side.json")).unwrap();
+        let req = GenerateRequest {
+            out: dir.path().join("side.csv"),
+            ..request(dir.path(), 10)
+        };
+        let err = generate(&req, false, &AtomicBool::new(false)).unwrap_err();
+        assert!(err.to_string().contains("is a directory"), "{err}");
     }
 
     #[test]

@@ -8,6 +8,7 @@
 //! tip), so no learner's tension-space error means much on such data; the
 //! `adjacent` sampler (two neighbouring tendons pulling) keeps it a function.
 
+pub mod disk;
 pub mod generate;
 pub mod io;
 pub mod job;
