@@ -4,9 +4,12 @@
 //! The rows are put in a canonical order that depends only on their values
 //! (a snake walk over a grid in tension space, ties broken by the values
 //! themselves), cut into fixed-length chains, and each chain is solved
-//! sequentially, a row warm-started from its predecessor when that one is
-//! close in tension space and cold otherwise. A row's result is therefore a
-//! function of the set of rows alone.
+//! sequentially, a row warm-started from its predecessor only when that one
+//! has the same values, and cold otherwise. A row's result is therefore a
+//! function of the set of rows alone. (Warm starts from merely close rows
+//! were measured: on 600 uniform rows of the default robot they cost more
+//! instructions per row than cold solves, because a start that wanders is
+//! re-solved cold; see BENCHMARKS.md.)
 
 use std::cmp::Ordering as CmpOrdering;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -22,9 +25,8 @@ pub const CHAIN: usize = 32;
 
 /// Largest distance, in the ∞-norm of tensions scaled by each tendon's
 /// max_tension (and tip loads by 1 N or 1 N m), from which a row is
-/// warm-started; farther rows start cold, which costs less than a warm
-/// start that wanders.
-pub const WARM_RADIUS: f64 = 0.25;
+/// warm-started: only repeated rows are.
+pub const WARM_RADIUS: f64 = 0.0;
 
 /// The result of one row's solve.
 pub type RowResult = Result<Solution, SolveError>;

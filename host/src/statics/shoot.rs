@@ -1,19 +1,21 @@
 //! Shooting on the base wrench: find n(0), u(0) such that the rod integrated
 //! from the base meets the tip boundary condition.
 //!
-//! Root finder: damped Newton with Broyden rank-one Jacobian updates. The
-//! Jacobian is built by forward differences only when needed: at a cold start,
-//! or when a Broyden-updated Jacobian stops giving descent. A warm start
-//! carries the previous solution's Jacobian, so a nearby solve usually costs
-//! two or three integrations instead of the seven a finite-difference Newton
-//! step needs. (The `levenberg-marquardt` crate was not used: it recomputes a
-//! full Jacobian every iteration, which is exactly the cost this avoids.)
+//! Root finder: Newton's method with the exact Jacobian of the shooting map,
+//! integrated alongside the rod from the variational equations (`tangent`):
+//! one pass gives residual and Jacobian, and Newton converges quadratically.
+//! A Jacobian that keeps contracting the residual fast is reused (chord
+//! steps, one plain pass each), and a warm start carries the previous
+//! solution's, so a nearby solve usually costs two or three plain passes.
+//! (The `levenberg-marquardt` crate was not used: it recomputes a full
+//! finite-difference Jacobian every iteration, the cost this avoids.)
 
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
 use super::integrate::{integrate, integrate_sampled};
 use super::pose::{orthonormalise, quaternion_wxyz};
 use super::rod::{Rod, RodState, SingularSystem};
+use super::tangent::integrate_with_tangent;
 use crate::robot::{Robot, TensionError};
 
 /// Most RK4 steps over the length a solve accepts (`tendril fk --steps`):
@@ -48,7 +50,7 @@ impl Default for SolverSettings {
 pub struct WarmStart {
     /// Unknowns [n(0) (N); u(0) (1/m)].
     pub x: Vector6<f64>,
-    /// Residual Jacobian at `x` (possibly Broyden-updated).
+    /// Residual Jacobian at or near `x` (the last one Newton used).
     pub jacobian: Matrix6<f64>,
 }
 
@@ -65,8 +67,9 @@ pub struct Solution {
     pub residual: f64,
     /// Newton iterations used.
     pub iterations: usize,
-    /// Rod passes used (a finite-difference Jacobian adds seven passes on a
-    /// half-resolution grid).
+    /// Rod passes used, in plain-pass equivalents: a pass with
+    /// sensitivities, which gives the Jacobian, counts as
+    /// [`SENSITIVITY_PASS_COST`].
     pub integrations: usize,
     /// Warm start for a neighbouring solve.
     pub warm: WarmStart,
@@ -119,13 +122,6 @@ pub struct Statics {
     rod: Rod,
 }
 
-/// Finite-difference step for unknown j: relative, with a floor at the
-/// scale of each unknown (1 N for force, 1e-2 /m for curvature).
-fn fd_step(x: &Vector6<f64>, j: usize) -> f64 {
-    let floor = if j < 3 { 1.0 } else { 1e-2 };
-    1e-7 * x[j].abs().max(floor)
-}
-
 impl Statics {
     /// The statics of `robot` with `settings`.
     pub fn new(robot: &Robot, settings: SolverSettings) -> Statics {
@@ -176,6 +172,9 @@ impl Statics {
             steps: self.settings.steps,
             f_ext: tip_force,
             m_ext: tip_moment,
+            track_rotation: rod.f_e != Vector3::zeros()
+                || tip_force != Vector3::zeros()
+                || tip_moment != Vector3::zeros(),
         };
         let warm_ok = warm.filter(|w| {
             w.x.iter().all(|v| v.is_finite()) && w.jacobian.iter().all(|v| v.is_finite())
@@ -260,7 +259,20 @@ struct Shooting<'a> {
     steps: usize,
     f_ext: Vector3<f64>,
     m_ext: Vector3<f64>,
+    /// Whether the residual depends on the rotation (gravity or a tip load).
+    track_rotation: bool,
 }
+
+/// What a rod pass with sensitivities costs in plain passes (callgrind
+/// instruction counts on the default robot; see BENCHMARKS.md).
+pub const SENSITIVITY_PASS_COST: usize = 3;
+
+/// Halvings of a step along a fresh Newton direction before giving up.
+const MAX_HALVINGS: usize = 8;
+/// A step that cuts the residual to less than this fraction keeps its
+/// Jacobian for the next step (a chord step, one plain pass); otherwise the
+/// next step gets a fresh Jacobian (one pass with sensitivities).
+const CHORD_CONTRACTION: f64 = 0.1;
 
 /// (unknowns, Jacobian, residual norm, iterations, integrations)
 type NewtonOk = (Vector6<f64>, Matrix6<f64>, f64, usize, usize);
@@ -281,27 +293,30 @@ impl Shooting<'_> {
         }
     }
 
-    /// Forward-difference Jacobian of the residual at `x`. It is built on
-    /// half the RK4 steps: Newton only needs a good approximation of the
-    /// Jacobian (the residual itself stays on the full grid, so the answer
-    /// does not change), and this halves the cost of every refresh.
-    fn jacobian(&self, x: &Vector6<f64>) -> Matrix6<f64> {
-        let coarse = Shooting {
-            steps: self.steps.div_ceil(2),
-            ..*self
-        };
-        let r = coarse.residual(x);
-        let mut j = Matrix6::zeros();
-        for c in 0..6 {
-            let h = fd_step(x, c);
-            let mut xp = *x;
-            xp[c] += h;
-            j.set_column(c, &((coarse.residual(&xp) - r) / h));
-        }
-        j
+    /// The residual and its exact Jacobian at `x`, from one pass of the rod
+    /// with its sensitivities (`tangent`). The residual is bit-identical to
+    /// [`Shooting::residual`]'s.
+    fn residual_and_jacobian(&self, x: &Vector6<f64>) -> Option<(Vector6<f64>, Matrix6<f64>)> {
+        let (tip, t) = integrate_with_tangent(
+            self.rod,
+            base_state(self.rod, x),
+            self.steps,
+            self.track_rotation,
+        )
+        .ok()?;
+        let r = self.rod.tip_residual(&tip, &self.f_ext, &self.m_ext);
+        let j = self
+            .rod
+            .tip_residual_jacobian(&tip, &t, &self.f_ext, &self.m_ext);
+        Some((r, j))
     }
 
-    /// Damped Newton with Broyden updates from `x0`.
+    /// Newton's method from `x0` with the exact Jacobian, kept while it keeps
+    /// contracting the residual fast (a chord step costs one plain rod pass,
+    /// a fresh Jacobian one pass with sensitivities) and refreshed when it
+    /// does not; backtracking when a step does not reduce the residual.
+    /// `j0`: a Jacobian from a nearby solution (warm start), used until it
+    /// stops contracting.
     fn newton(
         &self,
         x0: Vector6<f64>,
@@ -309,14 +324,17 @@ impl Shooting<'_> {
         settings: &SolverSettings,
     ) -> Result<NewtonOk, NewtonErr> {
         let mut x = x0;
-        let mut r = self.residual(&x);
-        let mut integrations = 1;
-        let (mut jac, mut fresh) = match j0 {
-            Some(j) => (j, false),
-            None => {
-                integrations += 7;
-                (self.jacobian(&x), true)
-            }
+        let mut integrations = if j0.is_some() {
+            1
+        } else {
+            SENSITIVITY_PASS_COST
+        };
+        let (mut r, mut jac, mut fresh) = match j0 {
+            Some(j) => (self.residual(&x), j, false),
+            None => match self.residual_and_jacobian(&x) {
+                Some((r, j)) => (r, j, true),
+                None => return Err((f64::INFINITY, 0, integrations)),
+            },
         };
         let mut norm = r.norm();
         for iter in 0..settings.max_iter {
@@ -326,27 +344,49 @@ impl Shooting<'_> {
             if norm < settings.tol {
                 return Ok((x, jac, norm, iter, integrations));
             }
-            let step = jac.lu().solve(&(-r));
+            let step = jac
+                .lu()
+                .solve(&(-r))
+                .filter(|d| d.iter().all(|v| v.is_finite()));
             let mut accepted = false;
-            if let Some(dx) = step.filter(|d| d.iter().all(|v| v.is_finite())) {
-                // Backtracking on the residual norm; a full Newton step is
-                // almost always taken near the solution.
+            if let Some(dx) = step {
+                // Backtracking on the residual norm; near the solution the
+                // full step is taken. A stale Jacobian gets one try only.
+                let tries = if fresh { MAX_HALVINGS } else { 1 };
                 let mut alpha = 1.0;
-                for _ in 0..6 {
-                    let s = dx * alpha;
-                    let x_try = x + s;
+                for _ in 0..tries {
+                    let x_try = x + dx * alpha;
                     let r_try = self.residual(&x_try);
                     integrations += 1;
                     let n_try = r_try.norm();
                     if n_try.is_finite() && n_try < (1.0 - 1e-4 * alpha) * norm {
-                        // Broyden's "good" rank-one update.
-                        let y = r_try - r;
-                        jac += (y - jac * s) * s.transpose() / s.norm_squared();
+                        let contraction = n_try / norm;
+                        // Broyden's rank-one update keeps a reused Jacobian
+                        // consistent with the step just taken (superlinear
+                        // chord steps for the price of plain passes).
+                        let s = dx * alpha;
+                        jac += (r_try - r - jac * s) * s.transpose() / s.norm_squared();
                         x = x_try;
                         r = r_try;
                         norm = n_try;
-                        fresh = false;
                         accepted = true;
+                        // A full step that cut the residual well keeps its
+                        // Jacobian for the next (chord) step; otherwise the
+                        // next step gets a fresh one.
+                        if (alpha < 1.0 || contraction > CHORD_CONTRACTION) && norm >= settings.tol
+                        {
+                            match self.residual_and_jacobian(&x) {
+                                Some((r_new, j_new)) => {
+                                    r = r_new;
+                                    jac = j_new;
+                                    fresh = true;
+                                    integrations += SENSITIVITY_PASS_COST;
+                                }
+                                None => return Err((f64::INFINITY, iter + 1, integrations)),
+                            }
+                        } else {
+                            fresh = false;
+                        }
                         break;
                     }
                     alpha *= 0.5;
@@ -356,9 +396,15 @@ impl Shooting<'_> {
                 if fresh {
                     return Err((norm, iter + 1, integrations));
                 }
-                jac = self.jacobian(&x);
-                integrations += 7;
-                fresh = true;
+                match self.residual_and_jacobian(&x) {
+                    Some((r_new, j_new)) => {
+                        r = r_new;
+                        jac = j_new;
+                        fresh = true;
+                        integrations += SENSITIVITY_PASS_COST;
+                    }
+                    None => return Err((f64::INFINITY, iter + 1, integrations)),
+                }
             }
         }
         if norm < settings.tol {

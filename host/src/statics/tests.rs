@@ -421,7 +421,10 @@ fn regression_poses() -> Vec<[f64; 7]> {
 }
 
 /// [`regression_poses`] as main computed them before tendon anchors,
-/// pretension and the tip-wrench CLI existed (f64 bit patterns).
+/// pretension and the tip-wrench CLI existed (f64 bit patterns). The schema
+/// and piecewise integration reproduced them bit for bit; the exact-Jacobian
+/// Newton solver stops at another point inside the same tolerance, so they
+/// now agree to the accuracy the tolerance implies.
 const POSES_BEFORE_ANCHORS: [[u64; 7]; 18] = [
     [
         4584107621311902306,
@@ -592,6 +595,13 @@ fn existing_robots_give_the_poses_they_gave_before_anchors() {
     let now = regression_poses();
     assert_eq!(now.len(), POSES_BEFORE_ANCHORS.len());
     for (k, (pose, before)) in now.iter().zip(&POSES_BEFORE_ANCHORS).enumerate() {
-        assert_eq!(pose.map(f64::to_bits), *before, "case {k}: {pose:?}");
+        let before = before.map(f64::from_bits);
+        let worst = pose
+            .iter()
+            .zip(&before)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        // A residual of 5e-10 N moves the tip by at most ~1e-10 m here.
+        assert!(worst < 1e-9, "case {k}: {pose:?} vs {before:?} ({worst:e})");
     }
 }
