@@ -69,8 +69,8 @@ pub struct TrainArgs {
     /// Validation fraction carved from the training rows (stopping, choices), in [0, 0.5].
     #[arg(long, default_value_t = 0.1)]
     pub valid_fraction: f64,
-    /// Hidden-unit cap (≤ 64, the host decoder's capacity; the MCU build holds 16).
-    #[arg(long, default_value_t = 64)]
+    /// Hidden-unit cap (at most the controllers' capacity, tendril_shared::MAX_HIDDEN = 64).
+    #[arg(long, default_value_t = tendril_shared::MAX_HIDDEN)]
     pub max_hidden: usize,
     /// Candidates trained per installed unit (in parallel).
     #[arg(long, default_value_t = 8)]

@@ -157,12 +157,7 @@ mod tests {
                 .unwrap();
         let s = Statics::new(&robot, SolverSettings::default());
         let blob = quick_net(&s, 1500, 48, 6.0, 3).unwrap();
-        let net: tendril_shared::CascadeNet<
-            7,
-            64,
-            8,
-            { tendril_shared::weight_capacity(7, 64, 8) },
-        > = tendril_shared::CascadeNet::decode(&blob).unwrap();
+        let net = tendril_shared::IkNet::decode(&blob).unwrap();
         // Held-out bends (not on the training spiral): predicted tensions,
         // run forward through the statics, must land near the pose's tip.
         let mut worst: f64 = 0.0;

@@ -77,7 +77,7 @@ pub struct CascorOptions {
 impl Default for CascorOptions {
     fn default() -> Self {
         CascorOptions {
-            max_hidden: 64,
+            max_hidden: tendril_shared::MAX_HIDDEN,
             pool: 8,
             objective: ObjectiveChoice::Cascade2,
             output_kinds: vec![OutputKind::Linear, OutputKind::Sigmoid],
