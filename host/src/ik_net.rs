@@ -31,7 +31,7 @@ pub enum IkError {
     #[error("{0}")]
     Model(String),
     /// The net and the robot disagree on the tendon count.
-    #[error("the net drives {net} tendons but {robot} has {robot_tendons}")]
+    #[error("the net's tendon count ({net}) differs from robot {robot}'s ({robot_tendons}): give the robot it was trained for with --robot")]
     TendonCount {
         /// Outputs of the net.
         net: usize,

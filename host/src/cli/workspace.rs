@@ -28,9 +28,10 @@ pub fn run(args: WorkspaceArgs) -> anyhow::Result<()> {
     let statics = Statics::new(&robot, SolverSettings::default());
     let shapes = example_shapes(&statics)?;
     let title = format!(
-        "{}: reachable tip positions ({} samples)",
+        "{}: reachable tip positions ({} sample{})",
         robot.name,
-        data.len()
+        data.len(),
+        if data.len() == 1 { "" } else { "s" }
     );
     draw_workspace(&data.poses, &shapes, &title, &args.out)
         .map_err(|e| anyhow::anyhow!("drawing {}: {e}", args.out.display()))?;

@@ -170,7 +170,7 @@ pub enum GenerateError {
     },
     /// The output would not fit in the free space of its directory.
     #[error(
-        "{}: {} samples need up to {} MB but only {} MB are free there; ask for fewer samples or write elsewhere",
+        "{}: --samples {} needs up to {} MB but only {} MB are free there; ask for fewer samples or write elsewhere",
         dir.display(), samples, need / 1_000_000, free / 1_000_000
     )]
     NoSpace {
