@@ -1,5 +1,5 @@
-//! Host speed of the firmware core (issue 6 target: ≤ 100 ns per inference
-//! of the default exported net). The net is the MCU binary's built-in
+//! Host speed of the firmware core on the default exported net (the figure
+//! and its history are in BENCHMARKS.md, "Firmware"). The net is the MCU binary's built-in
 //! [`tendril_firmware::DEFAULT_NET`] and the poses are its vectors
 //! (`firmware/vectors/`), so this times exactly the code the QEMU parity
 //! test checks.

@@ -1,7 +1,8 @@
 //! Plant step time: motor update + warm-started Cosserat statics, with the
 //! commanded tensions moving along the tension path of a 30 mm circle at
 //! 0.2 Hz sampled at 1 kHz (the load the plant sees in `tendril sim`).
-//! Target (issue 7): median ≤ 200 µs so the plant keeps up with 1 kHz.
+//! The plant must step well inside one 1 kHz period (docs/design.md §6):
+//! median ≤ 200 µs leaves the controller its share of the shared CPU.
 //!
 //! `cargo bench -p tendril --bench plant`
 

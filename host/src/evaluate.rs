@@ -1,4 +1,4 @@
-//! Metrics of `DESIGN.md` §4, shared by every learner: tension RMSE (normalised
+//! Metrics of `docs/design.md` §4, shared by every learner: tension RMSE (normalised
 //! ×100 and in newtons) and the **task-space error** — predicted tensions,
 //! clamped to the robot's limits, go through the Cosserat statics and the
 //! resulting tip is compared with the pose that was asked for. Tension RMSE
@@ -131,7 +131,7 @@ pub fn tension_rmse_normalised(
 /// from the converged row nearest in tension space; rows that still fail are
 /// counted in `failed` and carry NaN errors. Cold first because a warm start
 /// from an unrelated pose can converge to a wrong branch without complaint
-/// (`DESIGN.md` §3).
+/// (`docs/design.md` §3).
 pub fn task_space_errors(
     statics: &Statics,
     predicted_tensions: &DMatrix<f64>,

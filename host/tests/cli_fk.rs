@@ -1,4 +1,4 @@
-//! The `tendril fk` command-line contract of DESIGN §7, driven through the
+//! The `tendril fk` command-line contract of docs/design.md §7, driven through the
 //! real binary.
 
 use std::path::{Path, PathBuf};

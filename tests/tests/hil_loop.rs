@@ -403,7 +403,7 @@ fn one_control_law_the_firmware_integral_reaches_the_loop_accuracy() {
 
 #[test]
 fn a_stuck_loaded_motor_is_detected_and_the_tensions_are_held() {
-    // Tendon 2 carries 1–3 N on the default circle (the issue's `--stuck 2@2`).
+    // Tendon 2 carries 1–3 N on the default circle (so `--stuck 2@2` sticks a tendon that carries load).
     let (_r, dir, _) = sim(&[
         "--trajectory",
         "circle",

@@ -9,7 +9,7 @@ use crate::robot::{Robot, DEFAULT_ROBOT};
 /// `--robot FILE`, defaulting to the seed robot.
 #[derive(clap::Args, Debug, Clone)]
 pub struct RobotArg {
-    /// Robot description (TOML, DESIGN §2 schema).
+    /// Robot description (TOML, docs/design.md §2 schema).
     #[arg(long, value_name = "FILE", default_value = DEFAULT_ROBOT)]
     pub robot: PathBuf,
 }

@@ -1,7 +1,7 @@
 //! Multi-output regression tree (CART, Breiman et al. 1984): greedy binary
 //! splits minimising the summed squared error over all outputs, leaves
 //! predicting the mean target. Written here because neither `smartcore` nor
-//! `linfa` fits one tree to several targets (`DESIGN.md` §4).
+//! `linfa` fits one tree to several targets (`docs/design.md` §4).
 //!
 //! Tuning: one tree is grown per candidate minimum leaf size, to the largest
 //! candidate depth; every node stores its mean, so the tree truncated at a

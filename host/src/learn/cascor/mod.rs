@@ -1,6 +1,6 @@
 //! Cascade-Correlation (Fahlman & Lebiere 1990) with Quickprop (Fahlman 1988),
 //! plus the Cascade 2 error-minimising candidate objective (Prechelt 1997) and
-//! an exact ridge solve for linear outputs (`DESIGN.md` §4).
+//! an exact ridge solve for linear outputs (`docs/design.md` §4).
 //!
 //! - [`net`]: the trained network (f64) and its activations;
 //! - [`quickprop`]: the optimiser and Fahlman's patience test;
@@ -11,7 +11,7 @@
 //! - [`train`]: the grow-and-freeze loop, the choice of output configuration,
 //!   stopping and progress;
 //! - [`job`]: a whole `tendril train` run — split, train, write every output;
-//! - [`export`]: the `.tnet` weight file (`DESIGN.md` §5).
+//! - [`export`]: the `.tnet` weight file (`docs/design.md` §5.1).
 
 pub mod candidates;
 pub mod export;

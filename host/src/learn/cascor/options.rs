@@ -1,4 +1,4 @@
-//! Hyper-parameters of cascade-correlation training (`DESIGN.md` §4): which
+//! Hyper-parameters of cascade-correlation training (`docs/design.md` §4): which
 //! output configurations are tried, the two Quickprop phases, stopping.
 
 use serde::{Deserialize, Serialize};
