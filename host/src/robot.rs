@@ -1,4 +1,4 @@
-//! Robot descriptions: the TOML schema of `DESIGN.md` §2, its validation, and
+//! Robot descriptions: the TOML schema of `docs/design.md` §2, its validation, and
 //! the quantities the statics derive from it (section properties, stiffness
 //! matrices, tendon routing).
 //!
@@ -19,8 +19,8 @@ pub const DEFAULT_ROBOT: &str = "robots/seed-4t.toml";
 /// from any directory.
 pub const BUILTIN_DEFAULT_TOML: &str = include_str!("../../robots/seed-4t.toml");
 
-/// Largest tendon count a robot file may declare (the firmware's fixed capacity).
-pub const MAX_TENDONS: usize = 8;
+/// Largest tendon count a robot file may declare (the one capacity in `tendril_shared`).
+pub use tendril_shared::MAX_TENDONS;
 
 /// Largest bend (rad) a robot may reach under its own weight or one tendon's
 /// largest pull: one full turn. Beyond it the rod coils through itself, which
@@ -671,7 +671,7 @@ routing = "straight"
         let r4 = Robot::load(&workspace_robot("seed-4t.toml")).unwrap();
         assert_eq!(r4.n_tendons(), 4);
         assert!((r4.tendons[1].angle - PI / 2.0).abs() < 1e-15);
-        // Effective linear density 0.1 kg/m (DESIGN §2).
+        // Effective linear density 0.1 kg/m (docs/design.md §2).
         assert!((r4.density * r4.area() - 0.1).abs() < 1e-4);
         let r1 = Robot::load(&workspace_robot("seed-1t.toml")).unwrap();
         assert_eq!(r1.n_tendons(), 1);

@@ -90,19 +90,28 @@ fn rows_respect_the_sampler_and_re_solve_to_the_same_pose() {
 
 #[test]
 fn failing_solves_are_counted_and_fail_the_command_past_the_threshold() {
-    // Absurd tension limits coil the rod: many solves cannot converge.
+    // Large bends (80 N, inside what robot validation accepts) on a
+    // one-step RK4 grid: the discretised shooting problem has no root for
+    // about half the samples, so solves fail for real.
     let dir = tempfile::tempdir().unwrap();
-    let bot = dir.path().join("absurd.toml");
+    let bot = dir.path().join("coarse.toml");
     let text = std::fs::read_to_string(robot("seed-4t.toml")).unwrap();
     std::fs::write(
         &bot,
-        text.replace("max_tension = 10.0", "max_tension = 400.0"),
+        text.replace("max_tension = 10.0", "max_tension = 80.0"),
     )
     .unwrap();
     let path = dir.path().join("d.csv");
     let out = generate(
         &path,
-        &["--samples", "100", "--robot", bot.to_str().unwrap()],
+        &[
+            "--samples",
+            "100",
+            "--steps",
+            "1",
+            "--robot",
+            bot.to_str().unwrap(),
+        ],
         2,
     );
     assert!(
@@ -120,6 +129,8 @@ fn failing_solves_are_counted_and_fail_the_command_past_the_threshold() {
         &[
             "--samples",
             "100",
+            "--steps",
+            "1",
             "--robot",
             bot.to_str().unwrap(),
             "--max-failure-fraction",

@@ -1,4 +1,4 @@
-//! Tension samplers (`DESIGN.md` §3).
+//! Tension samplers (`docs/design.md` §3).
 
 use rand::Rng;
 use rand::SeedableRng;

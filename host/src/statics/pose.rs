@@ -1,4 +1,4 @@
-//! Tip pose conventions (`DESIGN.md` §2): Hamilton quaternion, scalar first
+//! Tip pose conventions (`docs/design.md` §2): Hamilton quaternion, scalar first
 //! (w, x, y, z), sign chosen so that w ≥ 0; R orthonormalised first because
 //! RK4 does not keep it exactly orthogonal.
 

@@ -288,7 +288,7 @@ impl Rod {
         state.u.cross(&g.r) + g.dr + state.v()
     }
 
-    /// The coupled strain-rate system of `DESIGN.md` §2:
+    /// The coupled strain-rate system of `docs/design.md` §2:
     ///
     /// ```text
     /// [Kse + A   G      ] [v']   [ −û n − Rᵀ f_e − a ]

@@ -19,7 +19,7 @@ fn fine() -> SolverSettings {
     }
 }
 
-/// The exact constant-curvature solution of DESIGN §2 for one straight
+/// The exact constant-curvature solution of docs/design.md §2 for one straight
 /// tendon without gravity: (px or py, pz, θ).
 fn arc(robot: &Robot, tau: f64) -> (f64, f64, f64) {
     let kappa = tau * robot.tendons[0].offset / robot.kbt().x;
@@ -38,7 +38,7 @@ fn tip_matches_constant_curvature_arc_at_2n() {
     let sol = Statics::new(&robot, fine())
         .solve(&[2.0, 0.0, 0.0, 0.0], None)
         .unwrap();
-    // DESIGN §2 fact.
+    // docs/design.md §2 fact.
     assert!(
         (sol.position.x - 0.02845159664930).abs() < 1e-9,
         "{}",
@@ -110,7 +110,7 @@ fn default_discretisation_is_within_1e7_m_of_the_arc() {
 fn gravity_sag_matches_the_design_fact_and_beam_theory() {
     let robot = seed();
     let sol = Statics::new(&robot, fine()).solve(&[0.0; 4], None).unwrap();
-    // DESIGN §2 fact: 29.32 mm (large-deflection); linear theory says 29.44 mm.
+    // docs/design.md §2 fact: 29.32 mm (large-deflection); linear theory says 29.44 mm.
     assert!(
         (sol.position.x * 1e3 - 29.32).abs() < 0.01,
         "sag {} mm",
