@@ -1,0 +1,279 @@
+//! The controller process: the firmware's `no_std` control step (the very
+//! function the MCU runs, integral correction included: one control law,
+//! `docs/design.md` §5) inside an absolute-deadline loop at 1 kHz.
+//!
+//! Each period: sleep until `t0 + k·T`, take the newest setpoint, plant state
+//! and weight update, run [`tendril_firmware::control::control_step`],
+//! publish the tension command and raise the plant's event. The host side
+//! adds only what the MCU gets from its hardware and board code: the clock,
+//! the transport, and the *motor-lag lead*: the plant's motors trail their
+//! command by a time constant, so the setpoint handed to the step is the
+//! planner's pose advanced by `velocity · lead`; the measured tip handed to
+//! the step's integral loop is advanced by the same amount, so the loop still
+//! integrates `p_desired(t) − p_measured(t)` and does not fight the lead.
+
+use std::borrow::Cow;
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+use tendril_firmware::control::{
+    control_step, ControlConfig, ControlState, Feedback, IntegralConfig, SafeHold,
+    Setpoint as FwSetpoint, Status, StepInput,
+};
+use tendril_firmware::swap::NetSlots;
+use tendril_shared::messages::{
+    command_status, setpoint_flags, Header, PlantState, Setpoint, TensionCommand, WeightUpdate,
+    MAX_TENDONS,
+};
+use tendril_shared::{TendonLimits, POSE_DIM};
+
+use super::clock::{now_ns, tighten_timer_slack, Tick, Ticker};
+use super::stats::{CsvLog, Histogram, Summary};
+use super::transport::{self, Services};
+use super::{IpcError, StopWatch};
+use crate::robot::Robot;
+
+mod report;
+mod stuck;
+mod task;
+
+use report::FAULT_KINDS;
+pub use report::{ControllerStats, DetectedFault, FaultKind, FAULT_CAPACITY, FAULT_REPEAT_S};
+use stuck::StuckDetector;
+pub use task::{Controller, Inbox};
+
+/// Hidden-unit capacity of the controller's net buffers (the one capacity in
+/// `tendril_shared`).
+pub const NET_CAPACITY: usize = tendril_shared::MAX_HIDDEN;
+
+/// The double-buffered net the controller runs.
+pub type Slots = NetSlots<POSE_DIM, NET_CAPACITY, MAX_TENDONS, { tendril_shared::MAX_WEIGHTS }>;
+
+/// Everything the controller process needs: written by a launcher as JSON
+/// (`tendril controller --config FILE`) or built from the flags. Units are
+/// in the field names.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ControllerConfig {
+    /// Robot file (tension limits, tendon count).
+    pub robot: PathBuf,
+    /// The `.tnet` to start with.
+    pub model: PathBuf,
+    /// Service-name prefix.
+    pub prefix: String,
+    /// Loop rate, Hz.
+    pub rate_hz: f64,
+    /// Spin this long before each deadline instead of sleeping, µs.
+    pub spin_us: f64,
+    /// Try `SCHED_FIFO`.
+    pub realtime: bool,
+    /// Pin to this CPU (see [`super::clock::PLANT_PRIORITY`] for why `sim`
+    /// puts controller and plant on one CPU).
+    pub cpu: Option<usize>,
+    /// Setpoint silence, in periods, that trips the watchdog.
+    pub watchdog_periods: f64,
+    /// Integral gain of the firmware's correction loop, 1/s; 0 = IK alone.
+    pub ki_per_s: f64,
+    /// Bound on the integral correction per axis, m.
+    pub correction_limit_m: f64,
+    /// The correction integrates only while the lateral tip error is at
+    /// most this, m (integral separation; see
+    /// [`tendril_firmware::control::IntegralConfig`]).
+    pub correction_window_m: f64,
+    /// Motor-lag lead: advance the setpoint by velocity · lead, s.
+    pub lead_s: f64,
+    /// Slew-rate limit per tendon, N/s.
+    pub slew_n_per_s: f64,
+    /// Fraction of the net's input box a setpoint may lie outside.
+    pub box_margin: f64,
+    /// Stuck-motor detection.
+    pub stuck_motor: StuckMotorDetection,
+    /// Stop after this many seconds (None: until told).
+    pub duration_s: Option<f64>,
+    /// Stop with [`IpcError::PeersLost`] after this long with neither a
+    /// setpoint nor a plant state, s (None: never).
+    pub peer_timeout_s: Option<f64>,
+    /// Die with the launching process ([`super::die_with_parent`]).
+    pub supervised: bool,
+    /// Per-period CSV log.
+    pub log: Option<PathBuf>,
+    /// Statistics JSON written at exit.
+    pub stats: Option<PathBuf>,
+}
+
+/// When a motor counts as stuck: its measured tension leaves the tension a
+/// healthy motor would have (the command through a first-order lag of the
+/// motor's time constant) by more than `tension_error_n` for `persist_s`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct StuckMotorDetection {
+    /// Detect at all.
+    pub enabled: bool,
+    /// Time constant of a healthy motor, s.
+    pub motor_tau_s: f64,
+    /// Measured − expected tension that counts as a fault, N.
+    pub tension_error_n: f64,
+    /// How long the error must last, s.
+    pub persist_s: f64,
+}
+
+impl Default for StuckMotorDetection {
+    fn default() -> Self {
+        StuckMotorDetection {
+            enabled: true,
+            motor_tau_s: 0.02,
+            tension_error_n: 0.5,
+            persist_s: 0.1,
+        }
+    }
+}
+
+impl Default for ControllerConfig {
+    fn default() -> Self {
+        ControllerConfig::new("robots/seed-4t.toml".into(), "out/model.tnet".into())
+    }
+}
+
+impl ControllerConfig {
+    /// Defaults for `robot` and `model`: 1 kHz, watchdog 2.5 periods, IK
+    /// alone (no correction), 21 ms lead for the default 20 ms motors,
+    /// peers lost after 2 s of silence.
+    pub fn new(robot: PathBuf, model: PathBuf) -> ControllerConfig {
+        ControllerConfig {
+            robot,
+            model,
+            prefix: super::DEFAULT_PREFIX.into(),
+            rate_hz: 1000.0,
+            spin_us: 50.0,
+            realtime: false,
+            cpu: None,
+            watchdog_periods: 2.5,
+            ki_per_s: 0.0,
+            correction_limit_m: 0.003,
+            correction_window_m: 0.002,
+            lead_s: 0.021,
+            slew_n_per_s: 200.0,
+            box_margin: 0.05,
+            stuck_motor: StuckMotorDetection::default(),
+            duration_s: None,
+            peer_timeout_s: Some(2.0),
+            supervised: false,
+            log: None,
+            stats: None,
+        }
+    }
+}
+
+/// Column names of the controller log.
+pub fn log_header(n: usize) -> String {
+    let mut cols = vec![
+        "t_ns".to_string(),
+        "lateness_ns".into(),
+        "work_ns".into(),
+        "status".into(),
+        "sp_seq".into(),
+        "state_seq".into(),
+    ];
+    cols.extend((0..n).map(|i| format!("cmd{i}")));
+    cols.join(",")
+}
+
+/// Columns of the controller log before the tensions.
+const LOG_FIXED: usize = 6;
+
+/// Load a `.tnet` file into the controller's net buffers.
+pub fn load_net(slots: &mut Slots, bytes: &[u8], tendons: usize) -> Result<(), IpcError> {
+    slots
+        .load(bytes, (POSE_DIM, tendons))
+        .map_err(|e| IpcError::Other(e.to_string()))
+}
+
+/// Run the controller process until stopped (or its peers are lost).
+pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
+    super::die_with_parent(cfg.supervised)?;
+    let robot = Robot::load(&cfg.robot).map_err(|e| IpcError::Other(e.to_string()))?;
+    let bytes = std::fs::read(&cfg.model).map_err(|source| IpcError::Io {
+        path: cfg.model.clone(),
+        source,
+    })?;
+    // Validate everything before touching shared memory.
+    Controller::new(cfg, &robot, &bytes, 0)?;
+
+    let node = transport::node("tendril-controller")?;
+    let services = Services::open_or_create(&node, &cfg.prefix)?;
+    let setpoints = transport::subscriber(&services.setpoint)?;
+    let states = transport::subscriber(&services.plant_state)?;
+    let weights = transport::subscriber(&services.weights)?;
+    let commands = transport::publisher(&services.tension_cmd)?;
+    let notifier = transport::notifier(&services.tension_cmd_event)?;
+    let stop = StopWatch::new(&services)?;
+    let n = robot.n_tendons();
+    let mut log = CsvLog::create(cfg.log.as_deref(), &log_header(n))?;
+
+    tighten_timer_slack();
+    super::clock::apply_scheduling(
+        "controller",
+        cfg.cpu,
+        cfg.realtime,
+        super::clock::CONTROLLER_PRIORITY,
+    );
+
+    let period_ns = (1e9 / cfg.rate_hz).round() as u64;
+    let start = now_ns() + period_ns;
+    let mut ctl = Controller::new(cfg, &robot, &bytes, start)?;
+    let mut ticker = Ticker::new(start, period_ns);
+    let spin_ns = (cfg.spin_us * 1e3) as u64;
+    let mut overran = false;
+    let mut last_flush = start;
+    let mut peers = super::PeerWatch::new(cfg.peer_timeout_s, start);
+    let outcome = loop {
+        let tick = ticker.wait(spin_ns);
+        let t_wake = now_ns();
+        // Newest messages since the last period.
+        let (setpoint, n_sp) = transport::latest(&setpoints)?;
+        let (state, n_st) = transport::latest(&states)?;
+        let (update, _): (Option<WeightUpdate>, usize) = transport::latest(&weights)?;
+        let inbox = Inbox {
+            setpoint,
+            setpoints: n_sp,
+            state,
+            states: n_st,
+            weights: update.as_ref(),
+        };
+        let mut cmd = ctl.period(&tick, t_wake, overran, &inbox);
+        cmd.header.stamp_ns = now_ns();
+        transport::send(&commands, cmd)?;
+        notifier
+            .notify()
+            .map_err(|e| IpcError::Send(format!("tension_cmd event: {e:?}")))?;
+        let t_done = now_ns();
+        overran = ticker.finish(t_done);
+        log.row(ctl.finish(t_done - t_wake))?;
+        if t_done - last_flush > 100_000_000 {
+            log.flush()?;
+            last_flush = t_done;
+        }
+        if stop.requested()
+            || cfg
+                .duration_s
+                .is_some_and(|d| (t_done - start) as f64 * 1e-9 >= d)
+        {
+            break Ok(());
+        }
+        if setpoint.is_some() || state.is_some() {
+            peers.heard(t_done);
+        } else if peers.lost(t_done) {
+            break Err(IpcError::PeersLost(format!(
+                "controller: no setpoint and no plant state for {:.1} s",
+                peers.silence_s(t_done)
+            )));
+        }
+    };
+    log.flush()?;
+    let stats = ctl.stats(&ticker);
+    if let Some(path) = &cfg.stats {
+        let json = serde_json::to_vec_pretty(&stats).map_err(|e| IpcError::Other(e.to_string()))?;
+        super::write_file(path, &json)?;
+    }
+    outcome.map(|()| stats)
+}
