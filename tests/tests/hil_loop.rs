@@ -30,11 +30,15 @@ fn sim(args: &[&str]) -> (Value, tempfile::TempDir, String) {
 /// periods) measure the loop, not how many other loops share the machine.
 static ONE_LOOP_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
+fn one_loop_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    ONE_LOOP_AT_A_TIME
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
 /// [`sim`] with explicit model arguments.
 fn sim_with(model: &[&str], args: &[&str]) -> (Value, tempfile::TempDir, String) {
-    let _one = ONE_LOOP_AT_A_TIME
-        .lock()
-        .unwrap_or_else(|poisoned| poisoned.into_inner());
+    let _one = one_loop_at_a_time();
     let dir = tempfile::tempdir().expect("temp dir");
     let out = Command::new(tendril_bin())
         .arg("sim")
@@ -491,6 +495,7 @@ fn unique(tag: &str) -> String {
 
 #[test]
 fn supervised_children_die_with_their_parent() {
+    let _one = one_loop_at_a_time();
     // A shell starts a plant (`--supervised`) and a controller (the
     // TENDRIL_SUPERVISED variable) in the background, prints their pids and
     // exits a second later: both must be gone within a second of that.
@@ -558,6 +563,7 @@ fn exit_of(mut child: Child, within: Duration) -> Option<(std::process::ExitStat
 
 #[test]
 fn a_process_whose_peers_fall_silent_stops_with_a_clear_error() {
+    let _one = one_loop_at_a_time();
     let model = ["--model", "firmware/vectors/default.tnet"];
     // The controller dies: the plant, hearing no commands, stops.
     let prefix = unique("peers-a");
