@@ -1,0 +1,289 @@
+//! The simulated plant: one motor per tendon tracking its commanded tension
+//! with first-order dynamics and saturation, optional series tendon
+//! compliance, and the robot's tip from the Cosserat statics, warm-started
+//! from the previous step (quasi-static: the rod is stiff and light next to
+//! the motors, so it settles far faster than they move). A tip "sensor" adds
+//! Gaussian noise. Faults: a stuck motor, dropped and delayed commands.
+//!
+//! The process is event-driven: it sleeps on the `tension_cmd` event and
+//! steps when a command arrives (or after a timeout), so the command's
+//! one-way latency is the event wake-up, not a polling period.
+
+use std::collections::VecDeque;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use tendril_shared::messages::{plant_status, Header, PlantState, TensionCommand, MAX_TENDONS};
+
+use super::clock::now_ns;
+use super::stats::{CsvLog, Summary};
+use super::transport::{self, Services};
+use super::{IpcError, StopWatch};
+use crate::robot::Robot;
+use crate::statics::{SolverSettings, Statics, WarmStart};
+
+mod model;
+
+pub use model::{DelayFault, DropFault, PlantFaults, PlantModel, PlantParams, StuckFault};
+
+/// Everything the plant process needs: written by a launcher as JSON
+/// (`tendril plant --config FILE`) or built from the flags.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PlantConfig {
+    /// Robot file.
+    pub robot: PathBuf,
+    /// Service-name prefix.
+    pub prefix: String,
+    /// Model parameters.
+    pub params: PlantParams,
+    /// Busy-poll for commands instead of sleeping on the event.
+    pub spin: bool,
+    /// Step and publish at least this often without commands, s.
+    pub idle_period_s: f64,
+    /// Commands older than this mark the state `COMMAND_STALE`, s.
+    pub command_timeout_s: f64,
+    /// Stop after this many seconds (None: until told).
+    pub duration_s: Option<f64>,
+    /// Stop with [`IpcError::PeersLost`] after this long without a tension
+    /// command, s (None: never).
+    pub peer_timeout_s: Option<f64>,
+    /// Die with the launching process ([`super::die_with_parent`]).
+    pub supervised: bool,
+    /// Per-step CSV log.
+    pub log: Option<PathBuf>,
+    /// Statistics JSON written at exit.
+    pub stats: Option<PathBuf>,
+    /// Switch to SCHED_FIFO after set-up.
+    pub realtime: bool,
+    /// Pin to this CPU.
+    pub cpu: Option<usize>,
+}
+
+impl Default for PlantConfig {
+    fn default() -> Self {
+        PlantConfig {
+            robot: "robots/seed-4t.toml".into(),
+            prefix: super::DEFAULT_PREFIX.into(),
+            params: PlantParams::default(),
+            spin: false,
+            idle_period_s: 0.001,
+            command_timeout_s: 0.05,
+            duration_s: None,
+            peer_timeout_s: Some(2.0),
+            supervised: false,
+            log: None,
+            stats: None,
+            realtime: false,
+            cpu: None,
+        }
+    }
+}
+
+/// What the plant reports at exit.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct PlantStats {
+    /// Steps taken.
+    pub steps: u64,
+    /// Commands received.
+    pub commands: u64,
+    /// Commands with a tension out of range or not finite (saturated before use).
+    pub out_of_range_commands: u64,
+    /// Commands dropped by fault injection.
+    pub dropped: u64,
+    /// Commands delayed by fault injection.
+    pub delayed: u64,
+    /// Gaps in the command sequence numbers (lost messages).
+    pub sequence_gaps: u64,
+    /// Statics failures.
+    pub solve_failures: u64,
+    /// One-way command latency: controller's stamp → plant receive (µs).
+    pub latency_us: Summary,
+    /// Time of one step: motor update + statics (µs).
+    pub step_us: Summary,
+}
+
+/// Column names of the plant log (for `n` tendons).
+pub fn log_header(n: usize) -> String {
+    let mut cols = vec!["t_ns".to_string(), "cmd_seq".into(), "cmd_status".into()];
+    cols.extend((0..n).map(|i| format!("cmd{i}")));
+    cols.extend((0..n).map(|i| format!("tau{i}")));
+    cols.extend(["px", "py", "pz", "mx", "my", "mz", "status", "step_ns"].map(String::from));
+    cols.join(",")
+}
+
+/// Run the plant process until stopped.
+pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
+    super::die_with_parent(cfg.supervised)?;
+    let robot = Robot::load(&cfg.robot).map_err(|e| IpcError::Other(e.to_string()))?;
+    let mut model = PlantModel::new(&robot, cfg.params.clone())?;
+    let n = model.n();
+    let node = transport::node("tendril-plant")?;
+    let services = Services::open_or_create(&node, &cfg.prefix)?;
+    let commands = transport::subscriber(&services.tension_cmd)?;
+    let listener = transport::listener(&services.tension_cmd_event)?;
+    let state_pub = transport::publisher(&services.plant_state)?;
+    let stop = StopWatch::new(&services)?;
+    let mut log = CsvLog::create(cfg.log.as_deref(), &log_header(n))?;
+    super::clock::tighten_timer_slack();
+    super::clock::apply_scheduling("plant", cfg.cpu, cfg.realtime, super::clock::PLANT_PRIORITY);
+
+    let start = now_ns();
+    let secs = |t: u64| t.saturating_sub(start) as f64 * 1e-9;
+    let mut stats = PlantStats::default();
+    let mut latencies = Vec::with_capacity(1 << 16);
+    let mut step_times = Vec::with_capacity(1 << 16);
+    let mut delayed: VecDeque<(u64, TensionCommand)> = VecDeque::new();
+    let mut last_cmd: Option<TensionCommand> = None;
+    let mut last_cmd_time = start;
+    let mut last_step = start;
+    let mut seq = 0u64;
+    let mut status_sticky = 0u32;
+    let mut pending = Vec::with_capacity(16);
+    let idle = Duration::from_secs_f64(cfg.idle_period_s.clamp(1e-4, 1.0));
+    let mut peers = super::PeerWatch::new(cfg.peer_timeout_s, start);
+    let faults = cfg.params.faults.clone();
+    let mut last_flush = start;
+
+    loop {
+        // Wait for a command (event) or the idle period.
+        if cfg.spin {
+            let until = now_ns() + idle.as_nanos() as u64;
+            while now_ns() < until && !commands.has_samples().unwrap_or(false) {
+                std::hint::spin_loop();
+            }
+        } else {
+            listener
+                .timed_wait(|_| {}, idle)
+                .map_err(|e| IpcError::Receive(format!("tension_cmd event: {e:?}")))?;
+        }
+        pending.clear();
+        transport::drain(&commands, &mut pending)?;
+        let received = pending.len();
+        let now = now_ns();
+        let t = secs(now);
+        for cmd in pending.drain(..) {
+            stats.commands += 1;
+            latencies.push(now.saturating_sub(cmd.header.stamp_ns));
+            if let Some(prev) = last_cmd {
+                if cmd.header.seq > prev.header.seq + 1 {
+                    stats.sequence_gaps += cmd.header.seq - prev.header.seq - 1;
+                }
+            }
+            if let Some(DropFault {
+                fraction,
+                from_s,
+                to_s,
+            }) = faults.drop
+            {
+                if t >= from_s && t < to_s && model.uniform() < fraction {
+                    stats.dropped += 1;
+                    status_sticky |= plant_status::DROPPING;
+                    continue;
+                }
+            }
+            match faults.delay {
+                Some(d) if t >= d.from_s && t < d.to_s => {
+                    stats.delayed += 1;
+                    status_sticky |= plant_status::DELAYING;
+                    delayed.push_back((now + (d.delay_s * 1e9) as u64, cmd));
+                }
+                _ => delayed.push_back((now, cmd)),
+            }
+        }
+        while delayed.front().is_some_and(|(due, _)| *due <= now) {
+            let Some((_, cmd)) = delayed.pop_front() else {
+                break;
+            };
+            let count = (cmd.count as usize).min(MAX_TENDONS);
+            let tau: Vec<f64> = cmd.tensions[..count].iter().map(|&v| v as f64).collect();
+            if model.command(&tau) {
+                stats.out_of_range_commands += 1;
+                status_sticky |= plant_status::COMMAND_OUT_OF_RANGE;
+            }
+            last_cmd = Some(cmd);
+            last_cmd_time = now;
+        }
+        if let Some(StuckFault { at_s, .. }) = faults.stuck {
+            if t >= at_s {
+                model.set_stuck();
+                status_sticky |= plant_status::MOTOR_STUCK;
+            }
+        }
+
+        let t0 = now_ns();
+        let ok = model.step((t0 - last_step) as f64 * 1e-9);
+        let t1 = now_ns();
+        last_step = t0;
+        step_times.push(t1 - t0);
+        stats.steps += 1;
+
+        let mut status = status_sticky;
+        if !ok {
+            status |= plant_status::SOLVE_FAILED;
+        }
+        if secs(t1) - secs(last_cmd_time) > cfg.command_timeout_s {
+            status |= plant_status::COMMAND_STALE;
+        }
+        let measured = model.measure();
+        seq += 1;
+        let mut msg = PlantState {
+            header: Header {
+                seq,
+                stamp_ns: now_ns(),
+            },
+            command_seq: last_cmd.map_or(0, |c| c.header.seq),
+            count: n as u32,
+            status,
+            ..PlantState::default()
+        };
+        for (dst, src) in msg.tensions.iter_mut().zip(model.tensions()) {
+            *dst = *src as f32;
+        }
+        for (dst, src) in msg.tip_pose.iter_mut().zip(measured) {
+            *dst = src as f32;
+        }
+        transport::send(&state_pub, msg)?;
+
+        let mut row = Vec::with_capacity(3 + 2 * n + 8);
+        row.push(t0 as f64);
+        row.push(last_cmd.map_or(0.0, |c| c.header.seq as f64));
+        row.push(last_cmd.map_or(0.0, |c| c.status as f64));
+        row.extend(model.targets().iter().copied());
+        row.extend(model.tensions().iter().copied());
+        let p = model.pose();
+        row.extend([p[0], p[1], p[2], measured[0], measured[1], measured[2]]);
+        row.push(status as f64);
+        row.push((t1 - t0) as f64);
+        log.row(&row)?;
+        if t1 - last_flush > 100_000_000 {
+            log.flush()?;
+            last_flush = t1;
+        }
+
+        if stop.requested() || cfg.duration_s.is_some_and(|d| secs(t1) >= d) {
+            break;
+        }
+        if received > 0 {
+            peers.heard(t1);
+        } else if peers.lost(t1) {
+            log.flush()?;
+            return Err(IpcError::PeersLost(format!(
+                "plant: no tension command for {:.1} s",
+                peers.silence_s(t1)
+            )));
+        }
+    }
+    log.flush()?;
+    stats.solve_failures = model.solve_failures;
+    stats.latency_us = Summary::of_ns(&mut latencies);
+    stats.step_us = Summary::of_ns(&mut step_times);
+    if let Some(path) = &cfg.stats {
+        let json = serde_json::to_vec_pretty(&stats).map_err(|e| IpcError::Other(e.to_string()))?;
+        super::write_file(path, &json)?;
+    }
+    Ok(stats)
+}
