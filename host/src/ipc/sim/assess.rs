@@ -375,53 +375,65 @@ fn plant_faults(
     }
     if let Some(drop) = faults.drop {
         let at = logs.plant_flag(plant_status::DROPPING);
-        let mut f = FaultRecord::new(
-            FaultKind::DroppedCommands,
-            at.map(secs),
-            format!(
-                "{:.0} % of commands from {} to {} s after the plant's start",
-                drop.fraction * 100.0,
-                drop.from_s,
-                drop.to_s
-            ),
+        let what = format!(
+            "{:.0} % of commands from {} to {} s after the plant's start",
+            drop.fraction * 100.0,
+            drop.from_s,
+            drop.to_s
         );
-        match at.and_then(|at| {
-            first_detection(detections, at, |d| d.kind == Detected::CommandsNotApplied)
-                .map(|t| (at, t))
-        }) {
-            Some((at, t)) => f.detect(
-                Some((t - at) * 1e-9),
-                "controller fault list: commands_not_applied",
-            ),
-            None => f.detect(at.map(|_| 0.0), "plant log only: first dropped command"),
-        }
-        out.push(f);
+        out.push(unapplied_commands(
+            FaultKind::DroppedCommands,
+            at,
+            what,
+            detections,
+            secs,
+            "dropped",
+        ));
     }
     if let Some(delay) = faults.delay {
         let at = logs.plant_flag(plant_status::DELAYING);
-        let mut f = FaultRecord::new(
-            FaultKind::DelayedCommands,
-            at.map(secs),
-            format!(
-                "{:.1} ms from {} to {} s after the plant's start",
-                delay.delay_s * 1e3,
-                delay.from_s,
-                delay.to_s
-            ),
+        let what = format!(
+            "{:.1} ms from {} to {} s after the plant's start",
+            delay.delay_s * 1e3,
+            delay.from_s,
+            delay.to_s
         );
-        match at.and_then(|at| {
-            first_detection(detections, at, |d| d.kind == Detected::CommandsNotApplied)
-                .map(|t| (at, t))
-        }) {
-            Some((at, t)) => f.detect(
-                Some((t - at) * 1e-9),
-                "controller fault list: commands_not_applied",
-            ),
-            None => f.detect(at.map(|_| 0.0), "plant log only: first delayed command"),
-        }
-        out.push(f);
+        out.push(unapplied_commands(
+            FaultKind::DelayedCommands,
+            at,
+            what,
+            detections,
+            secs,
+            "delayed",
+        ));
     }
     out
+}
+
+/// A dropped- or delayed-command fault that the plant flagged at `at`
+/// (monotonic ns): detected when the controller lists commands not applied.
+fn unapplied_commands(
+    kind: FaultKind,
+    at: Option<f64>,
+    what: String,
+    detections: &[DetectedFault],
+    secs: impl Fn(f64) -> f64,
+    verb: &str,
+) -> FaultRecord {
+    let mut f = FaultRecord::new(kind, at.map(&secs), what);
+    match at.and_then(|at| {
+        first_detection(detections, at, |d| d.kind == Detected::CommandsNotApplied).map(|t| (at, t))
+    }) {
+        Some((at, t)) => f.detect(
+            Some((t - at) * 1e-9),
+            "controller fault list: commands_not_applied",
+        ),
+        None => f.detect(
+            at.map(|_| 0.0),
+            &format!("plant log only: first {verb} command"),
+        ),
+    }
+    f
 }
 
 /// Time (monotonic ns) of the first controller detection at or after
