@@ -51,7 +51,7 @@ impl Learner for CascadeForward {
 
     fn fit(&mut self, train: Split<'_>, valid: Split<'_>, seed: u64) -> Result<(), LearnError> {
         let (net, score) = fit_best(&self.candidates, true, &self.training, train, valid, seed)?;
-        log::info!(
+        log::debug!(
             "Cascade-forward: hidden={:?} (valid RMSE {score:.5})",
             net.hidden()
         );

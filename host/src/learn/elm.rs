@@ -183,7 +183,7 @@ impl Learner for Elm {
         (self.hidden, self.ridge, self.scale) = (h, r, s);
         self.layer = Some(layer);
         self.out = w;
-        log::info!("ELM: hidden={h} ridge={r:e} scale={s} (valid RMSE {score:.5})");
+        log::debug!("ELM: hidden={h} ridge={r:e} scale={s} (valid RMSE {score:.5})");
         Ok(())
     }
 

@@ -246,7 +246,7 @@ impl Learner for Knn {
         let best = argmin(&scores)
             .ok_or_else(|| LearnError::Numerical("every KNN candidate gave NaN".into()))?;
         (self.k, self.weighting) = cands[best];
-        log::info!(
+        log::debug!(
             "KNN: k={} weights={} (valid RMSE {:.5})",
             self.k,
             self.weighting.label(),

@@ -398,7 +398,7 @@ impl Learner for Mlp {
 
     fn fit(&mut self, train: Split<'_>, valid: Split<'_>, seed: u64) -> Result<(), LearnError> {
         let (net, score) = fit_best(&self.candidates, false, &self.training, train, valid, seed)?;
-        log::info!(
+        log::debug!(
             "MLP: hidden={} (valid RMSE {score:.5})",
             hidden_label(net.hidden())
         );

@@ -277,7 +277,7 @@ impl Learner for Rbf {
         self.sigma = sigma;
         self.out = w;
         self.chosen = (k, wf, r);
-        log::info!(
+        log::debug!(
             "RBF: centres={k} width factor={wf} (σ={sigma:.4}) ridge={r:e} (valid RMSE {score:.5})"
         );
         Ok(())

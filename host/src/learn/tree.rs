@@ -276,7 +276,7 @@ impl Learner for RegressionTree {
         self.depth = d;
         self.min_leaf = self.min_leaves[g];
         self.tree = grown.into_iter().nth(g);
-        log::info!(
+        log::debug!(
             "Regression tree: depth={} min_leaf={} (valid RMSE {:.5})",
             self.depth,
             self.min_leaf,
