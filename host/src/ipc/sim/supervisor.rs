@@ -211,6 +211,17 @@ impl Children {
             .stdin(Stdio::null())
             .env(crate::ipc::SUPERVISED_ENV, std::process::id().to_string())
             .process_group(group);
+        // The children's routine lines (net loaded, tracking resumed) are
+        // detail for a sim user: they log warnings and errors unless the
+        // launcher itself was asked for more (`-v`) or RUST_LOG says otherwise.
+        if std::env::var_os("RUST_LOG").is_none() {
+            let spec = match log::max_level() {
+                log::LevelFilter::Debug => "warn,tendril=debug",
+                log::LevelFilter::Trace => "warn,tendril=trace",
+                _ => "warn",
+            };
+            cmd.env("RUST_LOG", spec);
+        }
         let parent = std::process::id() as libc::pid_t;
         // SAFETY: the closure calls only async-signal-safe functions.
         unsafe {
@@ -242,7 +253,7 @@ impl Children {
         }
         let generation = self.generations[role_index(role)];
         self.generations[role_index(role)] += 1;
-        log::info!("sim: started {} {generation} (pid {pid})", role.name());
+        log::debug!("sim: started {} {generation} (pid {pid})", role.name());
         self.running.push(Running {
             role,
             generation,
