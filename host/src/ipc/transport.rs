@@ -113,11 +113,37 @@ fn pubsub<T: Message>(
         .map_err(|e| IpcError::Service(format!("{}: {e:?}", name.as_str())))
 }
 
+/// How long a service another process is creating may stay "in creation"
+/// before opening it is an error (s).
+pub const CREATION_RACE_S: f64 = 2.0;
+
 impl Services {
     /// Open the services under `prefix`, creating any that do not exist.
     /// Create them in a launcher *before* spawning peers: concurrent
     /// `open_or_create` calls racing a dead-node cleanup can fail.
+    ///
+    /// Processes started independently (by hand, or by a test) race each
+    /// other's creation: a service another process is still creating is
+    /// reported as "hangs in creation" / "being created by another
+    /// instance". That is transient, so those errors are retried for up to
+    /// [`CREATION_RACE_S`] before they count.
     pub fn open_or_create(node: &Node<Svc>, prefix: &str) -> Result<Services, IpcError> {
+        let deadline =
+            std::time::Instant::now() + std::time::Duration::from_secs_f64(CREATION_RACE_S);
+        loop {
+            match Self::open_or_create_once(node, prefix) {
+                Err(IpcError::Service(why))
+                    if (why.contains("HangsInCreation") || why.contains("IsBeingCreated"))
+                        && std::time::Instant::now() < deadline =>
+                {
+                    std::thread::sleep(std::time::Duration::from_millis(10));
+                }
+                other => return other,
+            }
+        }
+    }
+
+    fn open_or_create_once(node: &Node<Svc>, prefix: &str) -> Result<Services, IpcError> {
         let event_name = service_name(prefix, "tension_cmd")?;
         let tension_cmd_event = node
             .service_builder(&event_name)
