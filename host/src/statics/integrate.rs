@@ -25,6 +25,52 @@ pub fn piece_steps(steps: usize, a: f64, b: f64, length: f64, has_knots: bool) -
     }
 }
 
+/// One piece of the fixed-step schedule between anchors.
+#[derive(Clone, Copy, Debug)]
+pub struct Piece {
+    /// Start of the piece (arc length, m).
+    pub a: f64,
+    /// End of the piece: an anchor (a knot) or the tip, m.
+    pub b: f64,
+    /// RK4 steps on the piece ([`piece_steps`]).
+    pub n: usize,
+    /// Step length, m.
+    pub h: f64,
+    /// The tendons that load the piece (those anchored at or beyond `b`).
+    pub running: TendonSet,
+}
+
+impl Piece {
+    /// Whether the piece ends at an inner anchor (its point load follows).
+    pub fn ends_at_anchor(&self, length: f64) -> bool {
+        self.b < length
+    }
+}
+
+/// The pieces base to tip, the anchors as knots: the one schedule both the
+/// state integration and its tangent follow, so they stay in step.
+pub fn pieces(rod: &Rod, steps: usize) -> impl Iterator<Item = Piece> + '_ {
+    let steps = steps.max(1);
+    let has_knots = !rod.knots().is_empty();
+    let ends = rod
+        .knots()
+        .iter()
+        .copied()
+        .chain(std::iter::once(rod.length));
+    ends.scan(0.0, move |a, b| {
+        let n = piece_steps(steps, *a, b, rod.length, has_knots);
+        let piece = Piece {
+            a: *a,
+            b,
+            n,
+            h: (b - *a) / n as f64,
+            running: rod.running_to(b),
+        };
+        *a = b;
+        Some(piece)
+    })
+}
+
 /// Integrate from s = 0 to s = L with `steps` RK4 steps over the length,
 /// piece by piece between the anchors, applying each anchor's point load at
 /// its knot; `observe` sees the state at every node (s_k, state_k), base and
@@ -38,29 +84,17 @@ pub fn integrate_observed<F>(
 where
     F: FnMut(f64, &RodState),
 {
-    let steps = steps.max(1);
-    let has_knots = !rod.knots().is_empty();
     let mut y = base;
     observe(0.0, &y);
-    let mut a = 0.0;
-    for b in rod
-        .knots()
-        .iter()
-        .copied()
-        .chain(std::iter::once(rod.length))
-    {
-        let n = piece_steps(steps, a, b, rod.length, has_knots);
-        let h = (b - a) / n as f64;
-        let running = rod.running_to(b);
-        for k in 0..n {
-            let s = a + k as f64 * h;
-            y = rk4_step(rod, s, &y, h, running)?;
-            observe(s + h, &y);
+    for piece in pieces(rod, steps) {
+        for k in 0..piece.n {
+            let s = piece.a + k as f64 * piece.h;
+            y = rk4_step(rod, s, &y, piece.h, piece.running)?;
+            observe(s + piece.h, &y);
         }
-        if b < rod.length {
-            y = rod.across_anchor(b, &y);
+        if piece.ends_at_anchor(rod.length) {
+            y = rod.across_anchor(piece.b, &y);
         }
-        a = b;
     }
     Ok(y)
 }

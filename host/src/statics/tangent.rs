@@ -17,7 +17,7 @@
 
 use nalgebra::{Matrix3, Matrix3x6, Matrix6, Vector3};
 
-use super::integrate::piece_steps;
+use super::integrate::pieces;
 use super::rod::{Rod, RodRates, RodState, SingularSystem, TendonSet};
 use crate::robot::hat;
 
@@ -274,28 +274,16 @@ pub fn integrate_with_tangent(
     steps: usize,
     track_rotation: bool,
 ) -> Result<(RodState, Tangent), SingularSystem> {
-    let steps = steps.max(1);
-    let has_knots = !rod.knots().is_empty();
     let mut y = base;
     let mut t = Tangent::at_base(&rod.kse);
-    let mut a = 0.0;
-    for b in rod
-        .knots()
-        .iter()
-        .copied()
-        .chain(std::iter::once(rod.length))
-    {
-        let n = piece_steps(steps, a, b, rod.length, has_knots);
-        let h = (b - a) / n as f64;
-        let running = rod.running_to(b);
-        for k in 0..n {
-            let s = a + k as f64 * h;
-            (y, t) = rk4_step_with_tangent(rod, s, &y, &t, h, running, track_rotation)?;
+    for piece in pieces(rod, steps) {
+        for k in 0..piece.n {
+            let s = piece.a + k as f64 * piece.h;
+            (y, t) = rk4_step_with_tangent(rod, s, &y, &t, piece.h, piece.running, track_rotation)?;
         }
-        if b < rod.length {
-            (y, t) = rod.across_anchor_with_tangent(b, &y, &t)?;
+        if piece.ends_at_anchor(rod.length) {
+            (y, t) = rod.across_anchor_with_tangent(piece.b, &y, &t)?;
         }
-        a = b;
     }
     Ok((y, t))
 }
