@@ -187,6 +187,7 @@ fn two_hundred_seconds_of_controller_periods_allocate_nothing() {
         let inbox = Inbox {
             setpoint: Some(setpoint),
             setpoints: 1,
+            superseded_nonfinite: 0,
             state,
             states: usize::from(state.is_some()),
             weights,

@@ -224,12 +224,26 @@ pub fn send<T: Message>(publisher: &Pub<T>, msg: T) -> Result<(), IpcError> {
 
 /// Drain a subscriber and return the newest message and how many arrived.
 pub fn latest<T: Message>(subscriber: &Sub<T>) -> Result<(Option<T>, usize), IpcError> {
-    let mut newest = None;
+    latest_inspecting(subscriber, |_| {})
+}
+
+/// [`latest`], calling `superseded` on every message a newer one replaced
+/// (oldest first), so that a receiver which keeps only the newest can still
+/// see what it dropped — a NaN setpoint must be counted even when the next
+/// one arrived in the same period.
+pub fn latest_inspecting<T: Message>(
+    subscriber: &Sub<T>,
+    mut superseded: impl FnMut(&T),
+) -> Result<(Option<T>, usize), IpcError> {
+    let mut newest: Option<T> = None;
     let mut count = 0;
     while let Some(sample) = subscriber
         .receive()
         .map_err(|e| IpcError::Receive(format!("{}: {e:?}", T::NAME)))?
     {
+        if let Some(old) = newest.as_ref() {
+            superseded(old);
+        }
         newest = Some(sample.payload().0);
         count += 1;
     }
@@ -245,4 +259,43 @@ pub fn drain<T: Message>(subscriber: &Sub<T>, out: &mut Vec<T>) -> Result<(), Ip
         out.push(sample.payload().0);
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tendril_shared::messages::Header;
+
+    fn setpoint(seq: u64, x: f32) -> Setpoint {
+        Setpoint {
+            header: Header { seq, stamp_ns: 0 },
+            pose: [x, 0.0, 0.2, 1.0, 0.0, 0.0, 0.0],
+            velocity: [0.0; 7],
+            tangent: [[0.0; 7]; 2],
+            flags: 0,
+            reserved: 0,
+        }
+    }
+
+    /// Two setpoints in one period, the first a NaN: the receiver keeps the
+    /// newest, and the NaN one is still seen (this is how a NaN injected by
+    /// a planner running a little ahead went uncounted on a loaded machine).
+    #[test]
+    fn a_superseded_message_is_still_inspected() {
+        let prefix = format!("tendril-test-transport-{}", std::process::id());
+        let node = node("transport-test").unwrap();
+        let services = Services::open_or_create(&node, &prefix).unwrap();
+        let publisher = publisher(&services.setpoint).unwrap();
+        let subscriber = subscriber(&services.setpoint).unwrap();
+        send(&publisher, setpoint(1, f32::NAN)).unwrap();
+        send(&publisher, setpoint(2, 0.01)).unwrap();
+        let mut seen = Vec::new();
+        let (newest, count) =
+            latest_inspecting(&subscriber, |s: &Setpoint| seen.push(s.header.seq)).unwrap();
+        assert_eq!(count, 2);
+        assert_eq!(newest.unwrap().header.seq, 2);
+        assert_eq!(seen, [1], "the superseded message was not inspected");
+        let (none, zero) = latest(&subscriber).unwrap();
+        assert!(none.is_none() && zero == 0);
+    }
 }

@@ -230,12 +230,18 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
         let tick = ticker.wait(spin_ns);
         let t_wake = now_ns();
         // Newest messages since the last period.
-        let (setpoint, n_sp) = transport::latest(&setpoints)?;
+        let mut superseded_nonfinite = 0;
+        let (setpoint, n_sp) = transport::latest_inspecting(&setpoints, |s: &Setpoint| {
+            if s.pose.iter().any(|v| !v.is_finite()) {
+                superseded_nonfinite += 1;
+            }
+        })?;
         let (state, n_st) = transport::latest(&states)?;
         let (update, _): (Option<WeightUpdate>, usize) = transport::latest(&weights)?;
         let inbox = Inbox {
             setpoint,
             setpoints: n_sp,
+            superseded_nonfinite,
             state,
             states: n_st,
             weights: update.as_ref(),

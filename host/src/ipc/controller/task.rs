@@ -10,6 +10,10 @@ pub struct Inbox<'a> {
     pub setpoint: Option<Setpoint>,
     /// How many setpoints arrived (the newest is kept).
     pub setpoints: usize,
+    /// How many of the older ones (replaced by the newest before the
+    /// firmware saw them) had a NaN/∞ pose: never applied, but counted
+    /// and reported like the ones the firmware rejects.
+    pub superseded_nonfinite: usize,
     /// The newest plant state.
     pub state: Option<PlantState>,
     /// How many plant states arrived.
@@ -425,6 +429,21 @@ impl Controller {
                     "weight update rejected: old net kept",
                 );
             }
+        }
+        if inbox.superseded_nonfinite > 0 {
+            self.stats.rejected_nonfinite += inbox.superseded_nonfinite as u64;
+            log::warn!(
+                "controller: {} setpoint(s) with NaN/∞ rejected (superseded in the same period)",
+                inbox.superseded_nonfinite
+            );
+            let n = self.stats.rejected_nonfinite as f64;
+            self.detect(
+                FaultKind::NonfiniteSetpoint,
+                t_wake,
+                None,
+                n,
+                "setpoint with NaN/∞ rejected",
+            );
         }
         let setpoint = inbox
             .setpoint
