@@ -60,6 +60,38 @@ unsafe impl<T: Message> ZeroCopySend for Wire<T> {
     }
 }
 
+/// Remove the node entries that iceoryx2 cannot clean itself: a process
+/// killed while creating its node leaves its details file (which names the
+/// process) without the monitor token iceoryx2 uses to tell a dead node from
+/// a live one, so no later node ever removes it. Only entries of the given
+/// processes — a launcher's children, already reaped — are touched; returns
+/// how many were removed.
+pub fn remove_orphan_node_entries(dead_pids: &[u32]) -> usize {
+    let global = &iceoryx2::config::Config::global_config().global;
+    let nodes = std::path::PathBuf::from(global.root_path().to_string())
+        .join(global.node.directory.to_string());
+    let Ok(entries) = std::fs::read_dir(&nodes) else {
+        return 0;
+    };
+    let mut removed = 0;
+    for entry in entries.flatten() {
+        let dir = entry.path();
+        let details = dir.join(format!("{}node.details", global.prefix));
+        let Ok(text) = std::fs::read_to_string(&details) else {
+            continue;
+        };
+        let pid = text
+            .lines()
+            .find_map(|l| l.trim().strip_prefix("process = "))
+            .and_then(|v| v.trim().parse::<u32>().ok());
+        if pid.is_some_and(|p| dead_pids.contains(&p)) && std::fs::remove_dir_all(&dir).is_ok() {
+            log::debug!("removed the orphaned iceoryx2 node entry {}", dir.display());
+            removed += 1;
+        }
+    }
+    removed
+}
+
 /// Publisher of one message type.
 pub type Pub<T> = Publisher<Svc, Wire<T>, ()>;
 /// Subscriber of one message type.

@@ -381,6 +381,7 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
     let stop_now = |children: &mut Children| {
         children.stop_all(Duration::from_millis(500));
         node.try_cleanup_dead_nodes();
+        transport::remove_orphan_node_entries(&children.ended_pids());
     };
     for role in [Role::Plant, Role::Controller, Role::Planner] {
         let spawned = configs
@@ -488,6 +489,7 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
         }
     }
     node.try_cleanup_dead_nodes();
+    transport::remove_orphan_node_entries(&children.ended_pids());
     if interrupted() {
         return Err(SimError::Interrupted);
     }

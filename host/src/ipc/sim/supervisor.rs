@@ -370,6 +370,11 @@ impl Children {
         }
     }
 
+    /// Process ids of every child that has ended (and been reaped).
+    pub fn ended_pids(&self) -> Vec<u32> {
+        self.ended.iter().map(|e| e.pid).collect()
+    }
+
     /// Whether any child still runs.
     pub fn any_running(&self) -> bool {
         !self.running.is_empty()
