@@ -414,6 +414,41 @@ fn one_control_law_the_firmware_integral_reaches_the_loop_accuracy() {
 }
 
 #[test]
+fn a_motor_stuck_on_a_tendon_the_path_never_pulls_is_reported_latent_not_missed() {
+    // Tendon 0 stays slack on the default circle: stuck at 0 N, its command
+    // never moves, so nothing can (or needs to) detect it. The run is clean
+    // (`sim_with` asserts exit 0) and the report says why it was not detected.
+    let (r, dir, _) = sim(&[
+        "--trajectory",
+        "circle",
+        "--settle",
+        "1",
+        "--duration",
+        "3",
+        "--stuck",
+        "0@1.5",
+    ]);
+    let faults = r["faults"].as_array().expect("faults");
+    let stuck = faults
+        .iter()
+        .find(|x| x["kind"] == "stuck_motor")
+        .expect("the injected stuck motor is listed");
+    assert!(stuck["detected"].is_null(), "{stuck}");
+    assert!(
+        stuck["detail"].as_str().unwrap().contains("latent"),
+        "{stuck}"
+    );
+    let c = controller_stats(dir.path());
+    let detected = c["faults_detected"].as_array().expect("faults_detected");
+    assert!(
+        detected.iter().all(|x| x["kind"] != "stuck_motor"),
+        "a latent stuck motor raised a detection: {detected:?}"
+    );
+    let rms = f(&r["rms_tracking_error_mm"]);
+    assert!(rms <= 0.3, "RMS {rms} mm with a latent stuck motor");
+}
+
+#[test]
 fn a_stuck_loaded_motor_is_detected_and_the_tensions_are_held() {
     // Tendon 2 carries 1–3 N on the default circle (so `--stuck 2@2` sticks a tendon that carries load).
     let (_r, dir, _) = sim(&[
@@ -434,6 +469,10 @@ fn a_stuck_loaded_motor_is_detected_and_the_tensions_are_held() {
         .collect();
     assert_eq!(stuck.len(), 1, "{faults:?}");
     assert_eq!(stuck[0]["tendon"], 2);
+    // The stuck-motor hold is its own entry, not a watchdog trip (the
+    // planner never fell silent; only a late planner may trip it here).
+    assert_eq!(c["stuck_motor_holds"], 1);
+    assert_eq!(c["watchdog_trips"], c["watchdog_trips_late_planner"]);
     let found_ns = f(&stuck[0]["t_ns"]);
     // When it stuck, from the plant's own log (its MOTOR_STUCK status bit).
     let (h, rows) = csv(&dir.path().join("plant-0.csv"));

@@ -181,6 +181,16 @@ impl Logs {
             .map(|r| r.t_ns)
     }
 
+    /// Largest |commanded − measured| tension of `tendon` in the plant rows
+    /// from `from_ns` on (N); `None` when no row covers that time.
+    pub fn largest_command_departure(&self, tendon: usize, from_ns: f64) -> Option<f64> {
+        self.plant
+            .iter()
+            .filter(|r| r.t_ns >= from_ns)
+            .filter_map(|r| Some((r.commanded.get(tendon)? - r.actual.get(tendon)?).abs()))
+            .reduce(f64::max)
+    }
+
     /// For a plant generation that wrote no statistics (killed): the
     /// commands its log shows applied, and how many of those had a tension
     /// outside `[0, max]` or not finite.

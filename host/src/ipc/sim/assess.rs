@@ -370,6 +370,19 @@ fn plant_faults(
                 found.map(|t| (t - at) * 1e-9),
                 "controller fault list: stuck_motor",
             );
+            // A motor stuck where its tendon is never asked to move (a slack
+            // tendon the path never needs) changes nothing the controller
+            // can see, and nothing the robot does: latent, not missed.
+            let threshold = cfg.controller.stuck_motor.tension_error_n;
+            let departure = logs.largest_command_departure(stuck.tendon, at);
+            if found.is_none() && departure.is_some_and(|d| d <= threshold) {
+                f.detected = None;
+                f.detail.push_str(&format!(
+                    "; latent: its command never left the stuck tension by more than {:.3} N \
+                     (the detection threshold is {threshold} N), so it had no effect to detect",
+                    departure.unwrap_or(0.0)
+                ));
+            }
         }
         out.push(f);
     }
