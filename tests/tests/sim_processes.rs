@@ -509,3 +509,50 @@ fn a_stuck_motor_is_in_faults_and_an_undetected_one_fails_the_run() {
         None => panic!("stuck motor without a detection verdict: {stuck}"),
     }
 }
+
+#[test]
+fn a_planner_stopped_for_a_moment_trips_the_watchdog_and_is_counted_as_late() {
+    // SIGSTOP the planner for 50 periods, then let it go on: its setpoints
+    // stop, the controller's watchdog holds, and when they come back in
+    // sequence the trip is counted as a late planner, not a silent one —
+    // how a clean run on a starved machine shows its watchdog trips.
+    let _one = one_sim_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let mut sim = sim_command(
+        &out,
+        &["--model", DEFAULT_NET, "--settle", "0.5", "--duration", "3"],
+    )
+    .stdout(Stdio::piped())
+    .stderr(Stdio::piped())
+    .spawn()
+    .expect("spawn tendril sim");
+    wait_for_children(&out, &mut sim);
+    let pids = std::fs::read_to_string(out.join(".sim-run").join("pids")).unwrap();
+    let planner: u32 = pids
+        .lines()
+        .find(|l| l.starts_with("planner "))
+        .and_then(|l| l.split_whitespace().nth(2)?.parse().ok())
+        .expect("planner in the pids file");
+    let planner_log = out.join(".sim-run").join("planner-0.csv");
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while std::fs::read_to_string(&planner_log).map_or(0, |t| t.lines().count()) < 100 {
+        assert!(Instant::now() < deadline, "the loop never ran");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::thread::sleep(Duration::from_millis(800));
+    signal(planner, "STOP");
+    std::thread::sleep(Duration::from_millis(50));
+    signal(planner, "CONT");
+    let output = sim.wait_with_output().expect("wait sim");
+    assert!(output.status.success(), "{}", stderr(&output));
+    let text = std::fs::read_to_string(out.join("controller.json")).expect("controller.json");
+    let c: Value = serde_json::from_str(&text).unwrap();
+    let trips = c["watchdog_trips"].as_u64().unwrap();
+    let late = c["watchdog_trips_late_planner"]
+        .as_u64()
+        .expect("watchdog_trips_late_planner");
+    assert!(trips >= 1, "a 50 ms silence did not trip the watchdog");
+    assert_eq!(late, trips, "a late planner's trip counted as a silent one");
+    assert_eq!(c["stuck_motor_holds"], 0);
+}

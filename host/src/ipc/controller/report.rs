@@ -35,6 +35,13 @@ pub struct ControllerStats {
     /// Entries into the watchdog's safe hold after tracking began (a
     /// silent planner); the hold before the first setpoint is not a trip.
     pub watchdog_trips: u64,
+    /// Of those, trips after which the same planner's setpoints came back
+    /// with no sequence gap: the planner was late (starved of CPU, or its
+    /// messages delayed), not silent. A real-time planner on an idle
+    /// machine has none; a loaded machine shows them.
+    pub watchdog_trips_late_planner: u64,
+    /// Entries into the stuck-motor safe hold (not watchdog trips).
+    pub stuck_motor_holds: u64,
     /// Periods spent in safe hold after tracking began (watchdog or a
     /// detected fault).
     pub hold_cycles: u64,

@@ -51,6 +51,10 @@ pub struct Controller {
     outside: bool,
     tracking_started: bool,
     stuck_hold: bool,
+    /// Sequence number of the last setpoint before the current watchdog hold.
+    hold_after_seq: Option<u64>,
+    /// Setpoints lost (sequence gap) before the newest one taken.
+    last_sp_gap: u64,
     cmd: TensionCommand,
     row: [f64; LOG_FIXED + MAX_TENDONS],
 }
@@ -129,6 +133,8 @@ impl Controller {
             outside: false,
             tracking_started: false,
             stuck_hold: false,
+            hold_after_seq: None,
+            last_sp_gap: 0,
             cmd: TensionCommand::default(),
             row: [0.0; LOG_FIXED + MAX_TENDONS],
         })
@@ -202,6 +208,7 @@ impl Controller {
     fn take_setpoint(&mut self, s: Setpoint, count: usize, t_wake: u64) -> FwSetpoint {
         self.stats.setpoints += 1;
         self.sp_age.record(t_wake.saturating_sub(s.header.stamp_ns));
+        self.last_sp_gap = 0;
         match self.last_sp {
             Some(p) if s.header.seq <= p.header.seq => {
                 self.stats.planner_restarts += 1;
@@ -213,6 +220,7 @@ impl Controller {
             Some(p) => {
                 // `count` consecutive setpoints arrived, the newest is `s`.
                 let lost = s.header.seq.saturating_sub(p.header.seq + count as u64);
+                self.last_sp_gap = lost;
                 if lost > 0 {
                     self.stats.setpoints_lost += lost;
                     self.detect(
@@ -373,8 +381,12 @@ impl Controller {
             self.stats.startup_hold_cycles += 1;
         } else if hold {
             self.stats.hold_cycles += 1;
-            if !self.in_hold {
+            if !self.in_hold && self.stuck_hold {
+                // The stuck-motor hold, listed as `stuck_motor` already.
+                self.stats.stuck_motor_holds += 1;
+            } else if !self.in_hold {
                 self.stats.watchdog_trips += 1;
+                self.hold_after_seq = self.last_sp.map(|s| s.header.seq);
                 log::warn!(
                     "controller: no setpoint for {:.1} periods: safe hold",
                     self.watchdog_periods
@@ -393,6 +405,15 @@ impl Controller {
             }
         } else if self.in_hold {
             log::info!("controller: setpoints back, tracking resumed");
+            let resumed_in_sequence = self.last_sp_gap == 0
+                && self
+                    .hold_after_seq
+                    .zip(self.last_sp)
+                    .is_some_and(|(before, s)| s.header.seq > before);
+            if resumed_in_sequence {
+                self.stats.watchdog_trips_late_planner += 1;
+            }
+            self.hold_after_seq = None;
         }
         self.in_hold = hold && self.tracking_started;
         if status.contains(Status::SATURATED) {

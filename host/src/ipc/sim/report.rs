@@ -292,7 +292,13 @@ impl SimReport {
                 row("controller cycles", c.cycles.to_string());
                 row("controller overruns", c.overruns.to_string());
                 row("controller skipped periods", c.skipped.to_string());
-                row("watchdog trips", c.watchdog_trips.to_string());
+                row(
+                    "watchdog trips (of which a late planner)",
+                    format!("{} ({})", c.watchdog_trips, c.watchdog_trips_late_planner),
+                );
+                if c.stuck_motor_holds > 0 {
+                    row("stuck-motor holds", c.stuck_motor_holds.to_string());
+                }
                 let lateness = Some(c.lateness_us);
                 row("lateness p50 (µs)", us(&lateness, |s| s.p50));
                 row("lateness p99 (µs)", us(&lateness, |s| s.p99));
