@@ -14,8 +14,10 @@
 //!    safe hold until the next acceptable one;
 //! 4. optional integral outer loop on the measured tip position;
 //! 5. inference → target tensions; a non-finite output is rejected (hold);
-//! 6. clamp the target into `[0, max_tension]`, then move the command toward it
-//!    by at most `slew_rate · dt` per tendon.
+//! 6. the command stage: shift each co-contraction set of the target into
+//!    `[min_tension, max_tension]` ([`crate::command`], keeps the bend),
+//!    clip what remains, then move the command toward it by at most
+//!    `slew_rate · dt` per tendon.
 //!
 //! **Why hold rather than project an unreachable setpoint.** The net's box is
 //! the axis-aligned hull of the training poses; clamping each coordinate into
@@ -31,6 +33,7 @@ use core::fmt;
 use tendril_shared::messages::command_status as wire;
 use tendril_shared::{CascadeNet, TendonLimits, MAX_TENDONS};
 
+use crate::command::co_contract;
 use crate::infer::infer;
 
 pub use tendril_shared::POSE_DIM;
@@ -75,7 +78,7 @@ impl Status {
     pub const OUT_OF_WORKSPACE: Status = Status(1 << 20);
     /// The net produced a NaN/∞ tension: previous target held.
     pub const NONFINITE_OUTPUT: Status = Status(1 << 21);
-    /// A target tension was clamped into `[0, max_tension]`.
+    /// A target tension was clamped into `[min_tension, max_tension]`.
     pub const RANGE_CLAMPED: Status = Status(1 << 22);
     /// A tension change was cut to the slew limit.
     pub const SLEW_LIMITED: Status = Status(1 << 23);
@@ -87,6 +90,9 @@ impl Status {
     pub const BAD_FEEDBACK: Status = Status(1 << 26);
     /// The corrected pose left the box: integral frozen, uncorrected pose used.
     pub const CORRECTION_LIMITED: Status = Status(1 << 27);
+    /// The target left `[min, max]` and a co-contraction set was shifted
+    /// to bring it back (the bend kept; [`crate::command`]).
+    pub const CO_CONTRACTED: Status = Status(1 << 28);
 
     /// Every detail bit (none of them a wire bit).
     const DETAIL: u32 = Status::NEW_SETPOINT.0
@@ -100,7 +106,8 @@ impl Status {
         | Status::CLOCK_FAULT.0
         | Status::NET_MISMATCH.0
         | Status::BAD_FEEDBACK.0
-        | Status::CORRECTION_LIMITED.0;
+        | Status::CORRECTION_LIMITED.0
+        | Status::CO_CONTRACTED.0;
 
     /// No bits set.
     pub const fn empty() -> Status {
@@ -306,18 +313,19 @@ pub struct ControlState {
 
 impl ControlState {
     /// Start at time `now_ns` holding `initial` (clamped to the limits;
-    /// NaN entries become 0).
+    /// NaN entries become the floor).
     pub fn new(limits: &TendonLimits, initial: &Tensions, now_ns: u64) -> ControlState {
         let mut command = [0.0f32; MAX_TENDONS];
-        for ((c, &t), &max) in command
+        for (((c, &t), &min), &max) in command
             .iter_mut()
             .zip(initial)
+            .zip(limits.min_tension_padded())
             .zip(limits.max_tension_padded())
         {
             *c = if t.is_finite() {
-                clamp(t, 0.0, max)
+                clamp(t, min, max)
             } else {
-                0.0
+                min
             };
         }
         ControlState {
@@ -521,22 +529,31 @@ pub fn control_step<const H: usize, const OUT: usize, const W: usize>(
         }
     }
 
-    // 6. Limits: clamp the target, slew the command, clamp again (the
+    // 6. Limits: shift co-contraction sets into range (keeps the bend),
+    //    clip what remains to [min, max], slew the command, clip again (the
     //    previous command is in range unless the limits changed).
+    let min_t = cfg.limits.min_tension_padded();
     let max_t = cfg.limits.max_tension_padded();
     let rate = cfg.limits.slew_rate_padded();
+    let mut wanted = [0.0f32; MAX_TENDONS];
+    for ((w, &tgt), &prev) in wanted.iter_mut().zip(&st.target).zip(&st.command).take(n) {
+        *w = if tgt.is_finite() { tgt } else { prev };
+    }
+    if co_contract(&mut wanted, &cfg.limits) {
+        status |= Status::CO_CONTRACTED;
+    }
     let mut command = [0.0f32; MAX_TENDONS];
     for i in 0..n.min(MAX_TENDONS) {
-        let (Some(&tgt), Some(&max), Some(&r), Some(&prev)) = (
-            st.target.get(i),
+        let (Some(&tgt), Some(&min), Some(&max), Some(&r), Some(&prev)) = (
+            wanted.get(i),
+            min_t.get(i),
             max_t.get(i),
             rate.get(i),
             st.command.get(i),
         ) else {
             continue;
         };
-        let tgt = if tgt.is_finite() { tgt } else { prev };
-        let clamped = clamp(tgt, 0.0, max);
+        let clamped = clamp(tgt, min, max);
         if clamped != tgt {
             status |= Status::RANGE_CLAMPED;
         }
@@ -546,12 +563,12 @@ pub fn control_step<const H: usize, const OUT: usize, const W: usize>(
         if step != delta {
             status |= Status::SLEW_LIMITED;
         }
-        let c = clamp(prev + step, 0.0, max);
+        let c = clamp(prev + step, min, max);
         if let Some(slot) = command.get_mut(i) {
-            *slot = if c.is_finite() { c } else { 0.0 };
+            *slot = if c.is_finite() { c } else { min };
         }
     }
-    if status.intersects(Status::RANGE_CLAMPED | Status::SLEW_LIMITED) {
+    if status.intersects(Status::RANGE_CLAMPED | Status::SLEW_LIMITED | Status::CO_CONTRACTED) {
         status |= Status::SATURATED;
     }
     st.command = command;

@@ -5,6 +5,8 @@
 //!
 //! - [`mod@infer`]: pose → tensions through a decoded [`tendril_shared::CascadeNet`];
 //! - [`control`]: the pure control step and its [`control::Status`] word;
+//! - [`command`]: the command stage's co-contraction shift (keeps the bend
+//!   when a target leaves the tension range);
 //! - [`swap`]: hot swap of the weights (flash default + one RAM slot on the MCU);
 //! - `vectors` and `synth` (cargo feature `harness`, off by default):
 //!   the test-vector format and runner shared by the MCU test image and the
@@ -34,6 +36,7 @@ extern crate std;
 #[cfg(test)]
 mod tests;
 
+pub mod command;
 pub mod control;
 pub mod infer;
 pub mod swap;

@@ -656,9 +656,24 @@ fn config_strategy() -> impl Strategy<Value = ControlConfig> {
         any::<bool>(),
         0.0f32..200.0,
         0.0f32..0.2,
+        (
+            prop_oneof![1 => Just(0.0f32), 1 => 0.0f32..0.6],
+            any::<bool>(),
+        ),
     )
-        .prop_map(|(n, max_t, rate, ramp, ki, margin)| {
-            let mut c = ControlConfig::new(TendonLimits::uniform(n, max_t, rate).unwrap());
+        .prop_map(|(n, max_t, rate, ramp, ki, margin, (floor, sets))| {
+            let limits = TendonLimits::uniform(n, max_t, rate)
+                .unwrap()
+                .with_min_tension(&[floor * max_t; MAX_TENDONS][..n])
+                .unwrap();
+            let limits = if sets {
+                limits
+                    .with_cocontraction(tendril_shared::CoContraction::opposite_pairs(n))
+                    .unwrap()
+            } else {
+                limits
+            };
+            let mut c = ControlConfig::new(limits);
             c.watchdog_ns = 10_000_000;
             c.max_dt_ns = 3_000_000;
             c.box_margin = margin;
@@ -690,6 +705,7 @@ proptest! {
         let net_out = if outputs % 3 == 0 { outputs } else { n };
         let net = Net::decode(&blob(11, 6, net_out)).unwrap();
         let max_t = *cfg.limits.max_tension_padded();
+        let min_t = *cfg.limits.min_tension_padded();
         let rate = *cfg.limits.slew_rate_padded();
         let mut now: u64 = 1_000_000_000;
         let mut st = ControlState::new(&cfg.limits, &initial, now);
@@ -712,7 +728,7 @@ proptest! {
             for i in 0..MAX_TENDONS {
                 let c = o.command[i];
                 prop_assert!(c.is_finite());
-                prop_assert!(c >= 0.0 && c <= max_t[i], "tendon {i}: {c} outside [0, {}]", max_t[i]);
+                prop_assert!(c >= min_t[i] && c <= max_t[i], "tendon {i}: {c} outside [{}, {}]", min_t[i], max_t[i]);
                 let allowed = rate[i] * dt;
                 // Up to the rounding of `prev + step` (an ulp of values ≤ max).
                 prop_assert!((c - prev[i]).abs() <= allowed * (1.0 + 1e-5) + max_t[i] * 3e-7,

@@ -125,9 +125,10 @@ pub fn tension_rmse_normalised(
 /// Task-space error of predicted tensions (`n × T`, newtons) against the
 /// poses they should reach (`n × 7`: px, py, pz in m, qw, qx, qy, qz).
 ///
-/// Each row is clamped to [0, max_tension] of `statics.robot()` (what the
-/// motors would actually apply), solved cold in parallel (rayon), and the tip
-/// compared with the true pose. Rows whose cold solve fails are retried warm
+/// Each row goes through the firmware's command stage for `statics.robot()`
+/// (co-contraction shift, then the clip to [min_tension, max_tension]: what
+/// the MCU would command, [`crate::command_stage`]), is solved cold in
+/// parallel (rayon), and the tip compared with the true pose. Rows whose cold solve fails are retried warm
 /// from the converged row nearest in tension space; rows that still fail are
 /// counted in `failed` and carry NaN errors. Cold first because a warm start
 /// from an unrelated pose can converge to a wrong branch without complaint
@@ -154,7 +155,54 @@ pub fn task_space_errors(
             n
         )));
     }
+    let limits = crate::command_stage::limits_for(statics.robot(), 1.0)
+        .map_err(|e| EvalError::Shape(format!("tension limits: {e}")))?;
+    let commanded: Vec<Vec<f64>> = (0..n)
+        .map(|r| {
+            let row: Vec<f64> = (0..t)
+                .map(|c| predicted_tensions[(r, c)])
+                .map(|v| if v.is_nan() { 0.0 } else { v })
+                .collect();
+            crate::command_stage::command_for(&limits, &row)
+        })
+        .collect();
+    Ok(errors_of_commands(statics, &commanded, true_poses))
+}
+
+/// [`task_space_errors`] through the plain per-tendon clip to
+/// [min_tension, max_tension] instead of the command stage: what the stage
+/// is compared against.
+pub fn task_space_errors_plain_clip(
+    statics: &Statics,
+    predicted_tensions: &DMatrix<f64>,
+    true_poses: &DMatrix<f64>,
+) -> Result<TaskErrors, EvalError> {
+    let n = predicted_tensions.nrows();
+    if predicted_tensions.ncols() != statics.robot().n_tendons()
+        || true_poses.nrows() != n
+        || true_poses.ncols() != 7
+    {
+        return Err(EvalError::Shape(format!(
+            "{}×{} tensions and {}×{} poses for a robot with {} tendons",
+            n,
+            predicted_tensions.ncols(),
+            true_poses.nrows(),
+            true_poses.ncols(),
+            statics.robot().n_tendons()
+        )));
+    }
     let clamped = clamp_tensions(statics, predicted_tensions);
+    Ok(errors_of_commands(statics, &clamped, true_poses))
+}
+
+/// Solve each commanded row (cold, then warm from the nearest converged row
+/// for the failures) and compare its tip with the true pose.
+fn errors_of_commands(
+    statics: &Statics,
+    clamped: &[Vec<f64>],
+    true_poses: &DMatrix<f64>,
+) -> TaskErrors {
+    let n = clamped.len();
     let first: Vec<_> = (0..n)
         .into_par_iter()
         .map(|r| statics.solve(&clamped[r], None).ok())
@@ -199,21 +247,23 @@ pub fn task_space_errors(
         ];
         out.orientation_deg[r] = quaternion_angle_deg(&sol.quaternion, &q_true);
     }
-    Ok(out)
+    out
 }
 
-/// Rows of `tensions` clamped to [0, max_tension] per tendon (NaN → 0).
+/// Rows of `tensions` clamped to [min_tension, max_tension] per tendon
+/// (NaN → the floor).
 pub fn clamp_tensions(statics: &Statics, tensions: &DMatrix<f64>) -> Vec<Vec<f64>> {
     let max = statics.robot().max_tensions();
+    let min = statics.robot().min_tensions();
     (0..tensions.nrows())
         .map(|r| {
             (0..tensions.ncols())
                 .map(|c| {
                     let v = tensions[(r, c)];
                     if v.is_nan() {
-                        0.0
+                        min[c]
                     } else {
-                        v.clamp(0.0, max[c])
+                        v.clamp(min[c], max[c])
                     }
                 })
                 .collect()
@@ -263,6 +313,38 @@ pub struct SplitMetrics {
     pub failed_solves: usize,
     /// Mean wall time of one inference, nanoseconds (batch timing, one thread).
     pub inference_ns_per_query: f64,
+    /// Task-space tip position error through the plain per-tendon clip
+    /// instead of the command stage, mm; `None` when the stage changed no
+    /// row (the two are then identical).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position_mm_plain_clip: Option<ErrorStats>,
+}
+
+/// [`task_space_errors_plain_clip`]'s position statistics when the command
+/// stage changes at least one row of `predicted_tensions` (by > 1 µN);
+/// `None` when it changes none.
+pub fn plain_clip_position_if_different(
+    statics: &Statics,
+    predicted_tensions: &DMatrix<f64>,
+    true_poses: &DMatrix<f64>,
+) -> Result<Option<ErrorStats>, EvalError> {
+    let limits = crate::command_stage::limits_for(statics.robot(), 1.0)
+        .map_err(|e| EvalError::Shape(format!("tension limits: {e}")))?;
+    let clipped = clamp_tensions(statics, predicted_tensions);
+    let differs = clipped.iter().enumerate().any(|(r, clip)| {
+        let row: Vec<f64> = (0..clip.len())
+            .map(|c| predicted_tensions[(r, c)])
+            .map(|v| if v.is_nan() { 0.0 } else { v })
+            .collect();
+        let staged = crate::command_stage::command_for(&limits, &row);
+        staged.iter().zip(clip).any(|(a, b)| (a - b).abs() > 1e-6)
+    });
+    if !differs {
+        return Ok(None);
+    }
+    Ok(Some(
+        task_space_errors_plain_clip(statics, predicted_tensions, true_poses)?.position_stats(),
+    ))
 }
 
 impl SplitMetrics {
@@ -290,10 +372,17 @@ impl SplitMetrics {
             orientation_deg: task.orientation_stats(),
             failed_solves: task.failed,
             inference_ns_per_query,
+            position_mm_plain_clip: plain_clip_position_if_different(
+                statics,
+                predicted_tensions,
+                true_poses,
+            )?,
         })
     }
 
-    /// A small fixed-width table (one metric per line) for stdout.
+    /// A small fixed-width table (one metric per line) for stdout; the tip
+    /// errors are through the command stage, with the plain clip's on a
+    /// last line when it differs.
     pub fn table(&self, title: &str) -> String {
         let p = &self.position_mm;
         let o = &self.orientation_deg;
@@ -317,7 +406,15 @@ impl SplitMetrics {
             o.max,
             self.failed_solves,
             self.inference_ns_per_query
-        )
+        ) + &self
+            .position_mm_plain_clip
+            .as_ref()
+            .map_or(String::new(), |c| {
+                format!(
+                    "  (plain clip, not the command stage: tip mm  mean {:>8.4}  p95 {:>8.4}  max {:>8.4})\n",
+                    c.mean, c.p95, c.max
+                )
+            })
     }
 }
 

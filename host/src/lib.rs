@@ -5,6 +5,7 @@
 //! thin shell over this library.
 
 pub mod cli;
+pub mod command_stage;
 pub mod compare;
 pub mod dataset;
 pub mod evaluate;

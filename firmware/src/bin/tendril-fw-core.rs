@@ -37,7 +37,7 @@ mod mcu {
     use cortex_m_semihosting::{debug, hio};
     use tendril_firmware::control::{control_step, ControlConfig, ControlState, Setpoint};
     use tendril_firmware::{McuNet, McuSlots, NetStore, StepInput, DEFAULT_NET, POSE_DIM};
-    use tendril_shared::{TendonLimits, MAX_TENDONS};
+    use tendril_shared::{CoContraction, TendonLimits, MAX_TENDONS};
 
     /// Steps to run before exiting (a real controller loops forever).
     const STEPS: u32 = 1000;
@@ -78,7 +78,10 @@ mod mcu {
             log::set_max_level(log::LevelFilter::Info);
         }
         let n = DEFAULT_NET.shape().outputs;
-        let ok = match TendonLimits::uniform(n, 10.0, 500.0) {
+        // The seed robots' co-contraction sets: opposite pairs.
+        let limits = TendonLimits::uniform(n, 10.0, 500.0)
+            .and_then(|l| l.with_cocontraction(CoContraction::opposite_pairs(n)));
+        let ok = match limits {
             Ok(limits) => {
                 let cfg = ControlConfig::new(limits);
                 let mut store = McuSlots::new(&DEFAULT_NET, &mut *RAM_NET);

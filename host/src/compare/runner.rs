@@ -10,7 +10,8 @@ use nalgebra::DMatrix;
 use super::{CompareError, CompareOptions, Comparison, Entry};
 use crate::dataset::{prepare, Dataset, Prepared};
 use crate::evaluate::{
-    task_space_errors, tension_rmse, tension_rmse_normalised, EvalError, SplitMetrics,
+    plain_clip_position_if_different, task_space_errors, tension_rmse, tension_rmse_normalised,
+    EvalError, SplitMetrics,
 };
 use crate::learn::{Learner, Split};
 use crate::robot::Robot;
@@ -54,11 +55,9 @@ fn split_metrics(
     task_idx: &[usize],
     infer_us: f64,
 ) -> Result<SplitMetrics, EvalError> {
-    let task = task_space_errors(
-        statics,
-        &pred.select_rows(task_idx),
-        &poses.select_rows(task_idx),
-    )?;
+    let (pred_task, poses_task) = (pred.select_rows(task_idx), poses.select_rows(task_idx));
+    let task = task_space_errors(statics, &pred_task, &poses_task)?;
+    let plain_clip = plain_clip_position_if_different(statics, &pred_task, &poses_task)?;
     Ok(SplitMetrics {
         samples: pred.nrows(),
         tension_rmse_norm100: tension_rmse_normalised(pred, truth, &p.y_range.lo, &p.y_range.hi)?,
@@ -67,6 +66,7 @@ fn split_metrics(
         orientation_deg: task.orientation_stats(),
         failed_solves: task.failed,
         inference_ns_per_query: infer_us * 1e3,
+        position_mm_plain_clip: plain_clip,
     })
 }
 

@@ -84,10 +84,8 @@ impl Controller {
             ));
         }
         let n = robot.n_tendons();
-        let max: Vec<f32> = robot.max_tensions().iter().map(|&v| v as f32).collect();
-        let slew = vec![cfg.slew_n_per_s as f32; n];
-        let limits = TendonLimits::new(&max, &slew)
-            .map_err(|e| IpcError::Config(format!("tension limits: {e:?}")))?;
+        let limits = crate::command_stage::limits_for(robot, cfg.slew_n_per_s)
+            .map_err(|e| IpcError::Config(format!("tension limits: {e}")))?;
         let mut slots: Box<Slots> = Box::default();
         load_net(&mut slots, model, n)
             .map_err(|e| IpcError::Other(format!("{}: {e}", cfg.model.display())))?;

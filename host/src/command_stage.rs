@@ -1,0 +1,219 @@
+//! The host side of the firmware's command stage (`docs/design.md` §5.2):
+//! the co-contraction sets of a robot, derived from its geometry, and the
+//! full tension limits the control step runs with. The stage itself is the
+//! firmware's (`tendril_firmware::command`), so the numbers a user gets from
+//! `evaluate` / `compare` are the ones the MCU would command.
+
+use std::f64::consts::PI;
+
+use tendril_firmware::command::co_contract;
+use tendril_shared::{CoContraction, LimitsError, TendonLimits, MAX_TENDONS};
+
+use crate::robot::{Robot, Routing};
+
+/// Two anchors or angles closer than this are the same (m, rad).
+const SAME: f64 = 1e-9;
+
+/// Co-contraction sets of `robot`: tendons anchored at the same arc length
+/// with the same routing that cancel each other's bending moment.
+///
+/// - An opposite pair (position angles π apart) is a set with weights
+///   `w_i ∝ d_j` (so `w_i d_i = w_j d_j`: no net moment);
+/// - three or more tendons of such a group that are left unpaired, with equal
+///   offsets and unit vectors summing to zero (equally spaced), form one set
+///   with equal weights.
+///
+/// Other tendons belong to no set and are clipped on their own.
+pub fn cocontraction_sets(robot: &Robot) -> CoContraction {
+    let n = robot.tendons.len().min(MAX_TENDONS);
+    let t = &robot.tendons[..n];
+    let mut set = [CoContraction::NONE; MAX_TENDONS];
+    let mut weight = [0.0f32; MAX_TENDONS];
+    let mut next = 0u8;
+    let same_group =
+        |a: usize, b: usize| (t[a].end - t[b].end).abs() < SAME && t[a].routing == t[b].routing;
+    for i in 0..n {
+        if set[i] != CoContraction::NONE {
+            continue;
+        }
+        let partner = (i + 1..n).find(|&j| {
+            set[j] == CoContraction::NONE && same_group(i, j) && {
+                let d = (t[j].angle - t[i].angle).rem_euclid(2.0 * PI);
+                (d - PI).abs() < 1e-6
+            }
+        });
+        if let Some(j) = partner {
+            let top = t[i].offset.max(t[j].offset);
+            set[i] = next;
+            set[j] = next;
+            weight[i] = (t[j].offset / top) as f32;
+            weight[j] = (t[i].offset / top) as f32;
+            next += 1;
+        }
+    }
+    // Equally spaced leftovers of one group.
+    for i in 0..n {
+        if set[i] != CoContraction::NONE {
+            continue;
+        }
+        let members: Vec<usize> = (i..n)
+            .filter(|&j| {
+                set[j] == CoContraction::NONE
+                    && same_group(i, j)
+                    && (t[j].offset - t[i].offset).abs() < SAME
+            })
+            .collect();
+        let (sx, sy) = members.iter().fold((0.0, 0.0), |(x, y), &j| {
+            (x + t[j].angle.cos(), y + t[j].angle.sin())
+        });
+        if members.len() >= 3 && sx.hypot(sy) < 1e-6 {
+            for &j in &members {
+                set[j] = next;
+                weight[j] = 1.0;
+            }
+            next += 1;
+        }
+    }
+    // Every set has ≥ 2 members and unit-or-less positive weights by
+    // construction; `new` checks it again.
+    CoContraction::new(&set[..n], &weight[..n]).unwrap_or_else(|_| CoContraction::none())
+}
+
+/// The limits the control step enforces on `robot`: `[min_tension,
+/// max_tension]` per tendon, one slew rate (N/s), its co-contraction sets.
+pub fn limits_for(robot: &Robot, slew_n_per_s: f64) -> Result<TendonLimits, LimitsError> {
+    let f32s = |v: Vec<f64>| v.into_iter().map(|x| x as f32).collect::<Vec<f32>>();
+    let n = robot.n_tendons();
+    TendonLimits::new(&f32s(robot.max_tensions()), &vec![slew_n_per_s as f32; n])?
+        .with_min_tension(&f32s(robot.min_tensions()))?
+        .with_cocontraction(cocontraction_sets(robot))
+}
+
+/// What the MCU would command for a net's `target` tensions in steady state
+/// (no slew): the co-contraction shift, then the clip to `[min, max]`.
+pub fn command_for(limits: &TendonLimits, target: &[f64]) -> Vec<f64> {
+    let mut t = [0.0f32; MAX_TENDONS];
+    for (slot, &v) in t.iter_mut().zip(target) {
+        *slot = v as f32;
+    }
+    co_contract(&mut t, limits);
+    t.iter()
+        .zip(limits.min_tension().iter().zip(limits.max_tension()))
+        .map(|(&v, (&lo, &hi))| tendril_firmware::control::clamp(v, lo, hi) as f64)
+        .collect()
+}
+
+/// The plain per-tendon clip to `[min, max]` (what the stage replaces).
+pub fn plain_clip(robot: &Robot, target: &[f64]) -> Vec<f64> {
+    target
+        .iter()
+        .zip(&robot.tendons)
+        .map(|(&v, t)| v.clamp(t.min_tension, t.max_tension))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn robot(name: &str) -> Robot {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../robots")
+            .join(name);
+        Robot::load(&path).unwrap()
+    }
+
+    #[test]
+    fn seed_robots_pair_opposite_tendons() {
+        let sets = cocontraction_sets(&robot("seed-paper.toml"));
+        let s = sets.sets();
+        assert_eq!((s[0], s[2]), (s[0], s[0]));
+        assert_eq!(s[1], s[3]);
+        assert_ne!(s[0], s[1]);
+        assert_eq!(&sets.weights()[..4], &[1.0; 4]);
+        assert!(cocontraction_sets(&robot("seed-1t.toml")).is_empty());
+    }
+
+    #[test]
+    fn two_segment_robot_groups_by_anchor() {
+        // Six tendons, three per segment at 120°: no opposite pairs, but each
+        // segment's three are equally spaced → one set per segment.
+        let r = robot("tdcr-2seg.toml");
+        let sets = cocontraction_sets(&r);
+        let s = &sets.sets()[..6];
+        for i in 0..6 {
+            for j in 0..6 {
+                let same_anchor = (r.tendons[i].end - r.tendons[j].end).abs() < 1e-12;
+                assert_eq!(s[i] == s[j], same_anchor, "tendons {i}, {j}: {s:?}");
+            }
+        }
+        assert!(s.iter().all(|&x| x != CoContraction::NONE));
+    }
+
+    #[test]
+    fn on_generated_seed_paper_rows_the_stage_recovers_the_tip_the_clip_loses() {
+        // True tensions from the seed-paper sampler (all four in [5, 15] N);
+        // a "prediction" that co-contracts the pair (1, 3) by +4 N — the tip
+        // barely moves by itself, but whenever it takes tendon 3 over 15 N
+        // the plain clip cuts the bend. The net's own answer, solved without
+        // limits (the statics accept any tension), is the reference: through
+        // the stage the tip is no further off than that answer (the stage
+        // only removes co-contraction); through the clip it is millimetres off.
+        use crate::dataset::Sampler;
+        use crate::statics::{SolverSettings, Statics};
+        let r = robot("seed-paper.toml");
+        let statics = Statics::new(&r, SolverSettings::default());
+        let limits = limits_for(&r, 100.0).unwrap();
+        let rows = Sampler::Uniform.draw_between(40, &r.min_tensions(), &r.max_tensions(), 7);
+        let (mut worst_stage, mut worst_clip, mut worst_own, mut cut) = (0.0f64, 0.0f64, 0.0f64, 0);
+        for t in rows {
+            let truth = statics.solve(&t, None).unwrap().position;
+            let mut predicted = t.clone();
+            predicted[1] += 4.0;
+            predicted[3] += 4.0;
+            if predicted[3] <= 15.0 {
+                continue;
+            }
+            cut += 1;
+            let staged = statics
+                .solve(&command_for(&limits, &predicted), None)
+                .unwrap();
+            let clipped = statics.solve(&plain_clip(&r, &predicted), None).unwrap();
+            let own = statics.solve(&predicted, None).unwrap();
+            worst_own = worst_own.max((own.position - truth).norm());
+            worst_stage = worst_stage.max((staged.position - truth).norm());
+            worst_clip = worst_clip.max((clipped.position - truth).norm());
+        }
+        assert!(cut >= 5, "only {cut} rows left the range");
+        let mm = |x: f64| x * 1e3;
+        assert!(
+            worst_stage <= worst_own + 1e-9,
+            "stage {:.4} mm vs the net's own answer {:.4} mm",
+            mm(worst_stage),
+            mm(worst_own)
+        );
+        assert!(
+            worst_clip > 1e-3 && worst_clip > 10.0 * worst_own,
+            "clip {:.4} mm vs the net's own answer {:.4} mm",
+            mm(worst_clip),
+            mm(worst_own)
+        );
+    }
+
+    #[test]
+    fn the_stage_keeps_the_seed_paper_differential_the_clip_does_not() {
+        let r = robot("seed-paper.toml");
+        let limits = limits_for(&r, 100.0).unwrap();
+        let net = [6.99, 8.08, 15.02, 17.87];
+        let staged = command_for(&limits, &net);
+        let clipped = plain_clip(&r, &net);
+        let diff = |t: &[f64]| (t[2] - t[0], t[3] - t[1]);
+        let (a, b) = diff(&staged);
+        assert!(
+            (a - 8.03).abs() < 1e-4 && (b - 9.79).abs() < 1e-4,
+            "{staged:?}"
+        );
+        let (_, b_clip) = diff(&clipped);
+        assert!((b_clip - 6.92).abs() < 1e-9, "{clipped:?}");
+    }
+}
