@@ -34,9 +34,10 @@ def main() -> None:
     cloud.set(xlabel="x [mm]", ylabel="y [mm]", zlabel="z [mm]",
               title=f"{robot.name}: {len(poses)} tip positions (uniform tensions)")
 
-    # Learned IK: tensions from the net, then the statics say where the tip goes.
+    # Learned IK on poses of the sampler the nets are trained with (adjacent):
+    # tensions from the net, then the statics say where the tip goes.
     net = tendril.Net.load(args.model, robot, allow_extrapolation=True)
-    held_out = poses[:: max(1, len(poses) // 500)]
+    _, held_out = tendril.generate(robot, 500, seed=2)
     predicted, _ = net.predict(held_out)
     reached, converged = robot.fk(predicted)
     error_mm = np.linalg.norm(reached[converged, :3] - held_out[converged, :3], axis=1) * 1000.0
