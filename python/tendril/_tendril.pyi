@@ -1,6 +1,7 @@
 """Type stubs of the compiled module (see the docstrings for units)."""
 
 import os
+import pathlib
 from typing import Optional, Sequence, Tuple, Union
 
 import numpy as np
@@ -39,7 +40,8 @@ class Robot:
     def min_tensions(self) -> _Array:
         """(k,) pretension floors, N."""
     @property
-    def file(self) -> Optional[str]: ...
+    def file(self) -> Optional[pathlib.Path]:
+        """The robot file's path, or None (made from text or built in)."""
     @property
     def toml(self) -> str: ...
     def fk(
