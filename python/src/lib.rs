@@ -1,0 +1,21 @@
+//! Python bindings of tendril (docs/design.md §8): `tendril._tendril`, re-exported
+//! by the pure-Python package `tendril`. The Rust library knows nothing of
+//! Python; this crate only converts arrays and errors and releases the GIL.
+
+mod arrays;
+mod detach;
+mod errors;
+mod generate;
+mod net;
+mod robot;
+
+use pyo3::prelude::*;
+
+#[pymodule]
+fn _tendril(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<robot::Robot>()?;
+    m.add_class::<net::Net>()?;
+    m.add_function(wrap_pyfunction!(generate::generate, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

@@ -1,0 +1,101 @@
+//! `tendril.Net`: a trained `.tnet` net answering tip poses with tensions
+//! through the firmware's f32 inference and the checks of `tendril ik`
+//! (docs/design.md §5, §7).
+
+use std::path::PathBuf;
+
+use numpy::ndarray::Array2;
+use numpy::{AllowTypeChange, IntoPyArray, PyArrayLikeDyn};
+use pyo3::prelude::*;
+use pyo3::types::PyTuple;
+use tendril::ik_net::IkNet;
+use tendril::learn::cascor::export::{read_tnet, ExportError};
+
+use crate::arrays::rows;
+use crate::detach::detached;
+use crate::errors::{invalid, os_error, value_error};
+use crate::robot::Robot;
+
+/// A trained inverse-kinematics net (a ``.tnet`` file) for one robot.
+#[pyclass(frozen, module = "tendril._tendril")]
+pub struct Net {
+    ik: IkNet,
+}
+
+#[pymethods]
+impl Net {
+    /// Load a ``.tnet`` file written by ``tendril train``. robot: the robot
+    /// it drives (default: ``Robot.default()``); tensions are clamped to its
+    /// limits. allow_extrapolation: answer poses outside the net's training
+    /// ranges instead of refusing them.
+    #[staticmethod]
+    #[pyo3(signature = (path, robot=None, allow_extrapolation=false))]
+    fn load(path: PathBuf, robot: Option<&Robot>, allow_extrapolation: bool) -> PyResult<Net> {
+        let fallback;
+        let robot = match robot {
+            Some(r) => r,
+            None => {
+                fallback = Robot::default()?;
+                &fallback
+            }
+        };
+        let net = read_tnet(&path).map_err(|e| match &e {
+            ExportError::Io { .. } => os_error(&e),
+            _ => invalid(&e),
+        })?;
+        let ik = IkNet::new(net, &robot.model, allow_extrapolation).map_err(|e| invalid(&e))?;
+        Ok(Net { ik })
+    }
+
+    /// Number of tendons (outputs) ``k``.
+    #[getter]
+    fn n_tendons(&self) -> usize {
+        self.ik.tendons()
+    }
+
+    /// Tensions for tip poses.
+    ///
+    /// poses: ``(n, 7)`` (or ``(7,)``) = px, py, pz (m), qw, qx, qy, qz (a
+    /// unit quaternion; its sign is normalised to w >= 0).
+    ///
+    /// Returns ``(tensions, raw)``, each ``(n, k)`` in N (``(k,)`` for one
+    /// pose): the net's output clamped to ``[0, max_tension]``, and as the
+    /// net gave it — the ``t*`` and ``raw_t*`` columns of ``tendril ik``.
+    /// A non-finite value, a non-unit quaternion or (unless extrapolation is
+    /// allowed) a pose outside the training ranges raises ``ValueError``
+    /// naming the row.
+    fn predict<'py>(
+        &self,
+        py: Python<'py>,
+        poses: PyArrayLikeDyn<'py, f64, AllowTypeChange>,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let given = rows(&poses, "poses", 7)?;
+        let answers = detached(py, |_| {
+            given
+                .rows
+                .iter()
+                .enumerate()
+                .map(|(r, pose)| {
+                    let pose: [f64; 7] = pose.as_slice().try_into().unwrap_or([f64::NAN; 7]);
+                    self.ik
+                        .solve(&pose)
+                        .map_err(|e| value_error(format!("poses: row {r}: {e}")))
+                })
+                .collect::<PyResult<Vec<_>>>()
+        })??;
+        let k = self.ik.tendons();
+        let mut tensions = Array2::zeros((answers.len(), k));
+        let mut raw = Array2::zeros((answers.len(), k));
+        for (r, a) in answers.iter().enumerate() {
+            for c in 0..k {
+                tensions[(r, c)] = a.tensions[c];
+                raw[(r, c)] = a.raw[c];
+            }
+        }
+        if given.single {
+            let one = |m: Array2<f64>| m.row(0).to_owned().into_pyarray(py);
+            return (one(tensions), one(raw)).into_pyobject(py);
+        }
+        (tensions.into_pyarray(py), raw.into_pyarray(py)).into_pyobject(py)
+    }
+}

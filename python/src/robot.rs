@@ -1,0 +1,300 @@
+//! `tendril.Robot`: a validated robot description and its forward statics
+//! (docs/design.md §2, §8). Batches go through `statics::batch::solve_all`,
+//! the path of `tendril fk --input`, so poses are bit-identical to the CLI's.
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::Vector3;
+use numpy::ndarray::{Array1, Array2};
+use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArrayLikeDyn};
+use pyo3::prelude::*;
+use pyo3::types::PyTuple;
+use tendril::robot::{Robot as RobotModel, BUILTIN_DEFAULT_TOML};
+use tendril::statics::batch::{solve_all, Load};
+use tendril::statics::{SolverSettings, Statics, MAX_STEPS};
+
+use crate::arrays::{check_finite, rows, Rows};
+use crate::detach::detached;
+use crate::errors::{invalid, os_error, runtime_error, value_error};
+
+/// Where the built-in default robot says it came from, in errors and reprs.
+pub const BUILTIN_ORIGIN: &str = "<built-in robots/seed-4t.toml>";
+/// Backbone points `shape` accepts at most (as `tendril fk --shape`).
+const MAX_SHAPE_POINTS: usize = 100_000;
+const FORCE_COLUMNS: [&str; 3] = ["fx", "fy", "fz"];
+const MOMENT_COLUMNS: [&str; 3] = ["mx", "my", "mz"];
+
+/// A tendon-driven continuum robot (the TOML schema of docs/design.md §2).
+///
+/// Make one with ``Robot.load(path)``, ``Robot.from_toml(text)`` or
+/// ``Robot.default()``. Units: m, N, Pa.
+#[pyclass(frozen, module = "tendril._tendril")]
+pub struct Robot {
+    pub model: RobotModel,
+    /// The exact TOML text it was made from.
+    pub source: String,
+    /// The file it was loaded from, if any.
+    pub file: Option<PathBuf>,
+    /// Whether this is the built-in default robot.
+    pub builtin: bool,
+}
+
+fn settings(steps: usize) -> PyResult<SolverSettings> {
+    if !(1..=MAX_STEPS).contains(&steps) {
+        return Err(value_error(format!(
+            "steps: {steps} is outside 1..={MAX_STEPS} (RK4 steps over the backbone length)"
+        )));
+    }
+    Ok(SolverSettings {
+        steps,
+        ..SolverSettings::default()
+    })
+}
+
+/// A tip-load argument: `None` (no load), `(3,)` for every row, or `(n, 3)`.
+fn wrench(
+    arg: Option<&PyArrayLikeDyn<'_, f64, AllowTypeChange>>,
+    name: &str,
+    columns: &[&str; 3],
+    n: usize,
+) -> PyResult<Vec<Vector3<f64>>> {
+    let Some(arg) = arg else {
+        return Ok(vec![Vector3::zeros(); n]);
+    };
+    let given = rows(arg, name, 3)?;
+    check_finite(&given, name, columns)?;
+    let vectors: Vec<Vector3<f64>> = given
+        .rows
+        .iter()
+        .map(|r| Vector3::from_row_slice(r))
+        .collect();
+    match vectors.len() {
+        _ if given.single => Ok(vec![vectors[0]; n]),
+        m if m == n => Ok(vectors),
+        m => Err(value_error(format!(
+            "{name}: {m} rows for {n} rows of tensions; give (3,) for all rows or ({n}, 3)"
+        ))),
+    }
+}
+
+impl Robot {
+    fn statics(&self, steps: usize) -> PyResult<Statics> {
+        Ok(Statics::new(&self.model, settings(steps)?))
+    }
+
+    /// Tension rows checked against the robot, with their tip loads.
+    fn loads(
+        &self,
+        tensions: &Rows,
+        tip_force: Option<&PyArrayLikeDyn<'_, f64, AllowTypeChange>>,
+        tip_moment: Option<&PyArrayLikeDyn<'_, f64, AllowTypeChange>>,
+    ) -> PyResult<Vec<Load>> {
+        let n = tensions.rows.len();
+        let forces = wrench(tip_force, "tip_force", &FORCE_COLUMNS, n)?;
+        let moments = wrench(tip_moment, "tip_moment", &MOMENT_COLUMNS, n)?;
+        tensions
+            .rows
+            .iter()
+            .zip(forces.into_iter().zip(moments))
+            .enumerate()
+            .map(|(r, (t, (tip_force, tip_moment)))| {
+                self.model
+                    .check_tensions(t)
+                    .map_err(|e| value_error(format!("tensions: row {r}: {e}")))?;
+                Ok(Load {
+                    tensions: t.clone(),
+                    tip_force,
+                    tip_moment,
+                })
+            })
+            .collect()
+    }
+}
+
+#[pymethods]
+impl Robot {
+    /// Load and validate a robot file (TOML). Raises ``OSError`` when the
+    /// file cannot be read, ``ValueError`` naming the field when it is invalid.
+    #[staticmethod]
+    fn load(path: PathBuf) -> PyResult<Robot> {
+        match RobotModel::load_with_source(&path) {
+            Ok((model, source)) => Ok(Robot {
+                model,
+                source,
+                file: Some(path),
+                builtin: false,
+            }),
+            Err(e) if std::fs::read(&path).is_err() => Err(os_error(&e)),
+            Err(e) => Err(invalid(&e)),
+        }
+    }
+
+    /// Parse and validate robot TOML text. ``ValueError`` names the field.
+    #[staticmethod]
+    fn from_toml(text: &str) -> PyResult<Robot> {
+        let model = RobotModel::from_toml(text, Path::new("<text>")).map_err(|e| invalid(&e))?;
+        Ok(Robot {
+            model,
+            source: text.to_string(),
+            file: None,
+            builtin: false,
+        })
+    }
+
+    /// The built-in default robot (robots/seed-4t.toml: the seed paper's
+    /// four-tendon robot), the one ``tendril`` uses without ``--robot``.
+    #[staticmethod]
+    pub fn default() -> PyResult<Robot> {
+        let model = RobotModel::from_toml(BUILTIN_DEFAULT_TOML, Path::new(BUILTIN_ORIGIN))
+            .map_err(|e| invalid(&e))?;
+        Ok(Robot {
+            model,
+            source: BUILTIN_DEFAULT_TOML.to_string(),
+            file: None,
+            builtin: true,
+        })
+    }
+
+    /// Robot name from the file.
+    #[getter]
+    fn name(&self) -> &str {
+        &self.model.name
+    }
+
+    /// Number of tendons ``k``.
+    #[getter]
+    fn n_tendons(&self) -> usize {
+        self.model.n_tendons()
+    }
+
+    /// Backbone reference length, m.
+    #[getter]
+    fn length(&self) -> f64 {
+        self.model.length
+    }
+
+    /// Largest tension of each tendon, N, shape ``(k,)``.
+    #[getter]
+    fn max_tensions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.model.max_tensions().into_pyarray(py)
+    }
+
+    /// Pretension floor of each tendon, N, shape ``(k,)``.
+    #[getter]
+    fn min_tensions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.model.min_tensions().into_pyarray(py)
+    }
+
+    /// The robot file's path, or ``None`` (made from text or built in).
+    #[getter]
+    fn file(&self) -> Option<PathBuf> {
+        self.file.clone()
+    }
+
+    /// The TOML text the robot was made from.
+    #[getter]
+    fn toml(&self) -> &str {
+        &self.source
+    }
+
+    fn __repr__(&self) -> String {
+        let origin = match (&self.file, self.builtin) {
+            (Some(f), _) => f.display().to_string(),
+            (None, true) => BUILTIN_ORIGIN.to_string(),
+            (None, false) => "<text>".to_string(),
+        };
+        format!(
+            "Robot({:?}, {} tendons, from {origin})",
+            self.model.name,
+            self.model.n_tendons()
+        )
+    }
+
+    /// Forward statics: tip poses for tendon tensions.
+    ///
+    /// tensions: ``(n, k)`` (or ``(k,)`` for one row), N, each in
+    /// ``[0, max_tension]``. tip_force / tip_moment: external tip load in
+    /// the base frame, N and N m, ``(3,)`` for every row or ``(n, 3)``.
+    /// steps: RK4 steps over the length.
+    ///
+    /// Returns ``(poses, converged)``: poses ``(n, 7)`` = px, py, pz (m),
+    /// qw, qx, qy, qz (unit, w >= 0), NaN where the solve did not converge;
+    /// converged ``(n,)`` bool. For a ``(k,)`` input, ``(7,)`` and a bool.
+    /// Rows run in parallel with the GIL released; the results are
+    /// bit-identical to ``tendril fk --input`` for the same rows.
+    #[pyo3(signature = (tensions, tip_force=None, tip_moment=None, steps=SolverSettings::default().steps))]
+    fn fk<'py>(
+        &self,
+        py: Python<'py>,
+        tensions: PyArrayLikeDyn<'py, f64, AllowTypeChange>,
+        tip_force: Option<PyArrayLikeDyn<'py, f64, AllowTypeChange>>,
+        tip_moment: Option<PyArrayLikeDyn<'py, f64, AllowTypeChange>>,
+        steps: usize,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let statics = self.statics(steps)?;
+        let given = rows(&tensions, "tensions", self.model.n_tendons())?;
+        let loads = self.loads(&given, tip_force.as_ref(), tip_moment.as_ref())?;
+        let results = detached(py, |stop| solve_all(&statics, &loads, stop, &|_| {}))?
+            .ok_or_else(|| value_error("fk: stopped before the end"))?;
+        let mut poses = Array2::from_elem((loads.len(), 7), f64::NAN);
+        let mut converged = Array1::from_elem(loads.len(), false);
+        for (r, result) in results.iter().enumerate() {
+            if let Ok(sol) = result {
+                for (c, x) in sol.pose().into_iter().enumerate() {
+                    poses[(r, c)] = x;
+                }
+                converged[r] = true;
+            }
+        }
+        if given.single {
+            let pose = poses.row(0).to_owned().into_pyarray(py);
+            return (pose, converged[0]).into_pyobject(py);
+        }
+        (poses.into_pyarray(py), converged.into_pyarray(py)).into_pyobject(py)
+    }
+
+    /// Backbone shape for one tension vector: ``points`` (>= 2) positions,
+    /// base to tip, evenly spaced in arc length, base frame, m, shape
+    /// ``(points, 3)``. tensions ``(k,)``, N; tip load as in ``fk``.
+    /// Raises ``RuntimeError`` when the statics do not converge.
+    #[pyo3(signature = (tensions, points=50, tip_force=None, tip_moment=None, steps=SolverSettings::default().steps))]
+    fn shape<'py>(
+        &self,
+        py: Python<'py>,
+        tensions: PyArrayLikeDyn<'py, f64, AllowTypeChange>,
+        points: usize,
+        tip_force: Option<PyArrayLikeDyn<'py, f64, AllowTypeChange>>,
+        tip_moment: Option<PyArrayLikeDyn<'py, f64, AllowTypeChange>>,
+        steps: usize,
+    ) -> PyResult<Bound<'py, numpy::PyArray2<f64>>> {
+        if !(2..=MAX_SHAPE_POINTS).contains(&points) {
+            return Err(value_error(format!(
+                "points: {points} is outside 2..={MAX_SHAPE_POINTS}"
+            )));
+        }
+        let statics = self.statics(steps)?;
+        let given = rows(&tensions, "tensions", self.model.n_tendons())?;
+        if !given.single {
+            return Err(value_error(format!(
+                "tensions: shape takes one tension vector ({},), not a batch",
+                self.model.n_tendons()
+            )));
+        }
+        let load = self
+            .loads(&given, tip_force.as_ref(), tip_moment.as_ref())?
+            .remove(0);
+        let shape = detached(py, |_| {
+            statics
+                .solve_loaded(&load.tensions, load.tip_force, load.tip_moment, None)
+                .map(|sol| statics.shape(&sol, points))
+        })?
+        .map_err(|e| runtime_error(&e))?;
+        let mut out = Array2::zeros((shape.len(), 3));
+        for (r, p) in shape.iter().enumerate() {
+            for c in 0..3 {
+                out[(r, c)] = p[c];
+            }
+        }
+        Ok(out.into_pyarray(py))
+    }
+}

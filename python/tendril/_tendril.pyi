@@ -1,0 +1,90 @@
+"""Type stubs of the compiled module (see the docstrings for units)."""
+
+import os
+import pathlib
+from typing import Optional, Sequence, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+_Array = npt.NDArray[np.float64]
+_ArrayLike = Union[npt.ArrayLike, Sequence[float], Sequence[Sequence[float]]]
+_Path = Union[str, "os.PathLike[str]"]
+
+class Robot:
+    """A tendon-driven continuum robot (TOML schema of docs/design.md §2)."""
+
+    @staticmethod
+    def load(path: _Path) -> "Robot":
+        """Load a robot file; OSError if unreadable, ValueError naming the field if invalid."""
+    @staticmethod
+    def from_toml(text: str) -> "Robot":
+        """Parse robot TOML text; ValueError naming the field if invalid."""
+    @staticmethod
+    def default() -> "Robot":
+        """The built-in default robot (robots/seed-4t.toml)."""
+    @property
+    def name(self) -> str: ...
+    @property
+    def n_tendons(self) -> int:
+        """Number of tendons k."""
+    @property
+    def length(self) -> float:
+        """Backbone reference length, m."""
+    @property
+    def max_tensions(self) -> _Array:
+        """(k,) largest tensions, N."""
+    @property
+    def min_tensions(self) -> _Array:
+        """(k,) pretension floors, N."""
+    @property
+    def file(self) -> Optional[pathlib.Path]:
+        """The robot file's path, or None (made from text or built in)."""
+    @property
+    def toml(self) -> str: ...
+    def fk(
+        self,
+        tensions: _ArrayLike,
+        tip_force: Optional[_ArrayLike] = None,
+        tip_moment: Optional[_ArrayLike] = None,
+        steps: int = 16,
+    ) -> Tuple[_Array, Union[npt.NDArray[np.bool_], bool]]:
+        """Tip poses for tensions (n, k) [N] -> (poses (n, 7), converged (n,));
+        a (k,) input gives ((7,), bool). NaN poses where a solve did not converge."""
+    def shape(
+        self,
+        tensions: _ArrayLike,
+        points: int = 50,
+        tip_force: Optional[_ArrayLike] = None,
+        tip_moment: Optional[_ArrayLike] = None,
+        steps: int = 16,
+    ) -> _Array:
+        """Backbone points (points, 3), m, base to tip, for tensions (k,) [N]."""
+
+class Net:
+    """A trained .tnet inverse-kinematics net for one robot."""
+
+    @staticmethod
+    def load(
+        path: _Path, robot: Optional[Robot] = None, allow_extrapolation: bool = False
+    ) -> "Net": ...
+    @property
+    def n_tendons(self) -> int: ...
+    def predict(self, poses: _ArrayLike) -> Tuple[_Array, _Array]:
+        """Poses (n, 7) -> (clamped tensions (n, k), raw net output (n, k)), N."""
+
+def generate(
+    robot: Robot,
+    samples: int,
+    seed: int = 1,
+    sampler: Optional[str] = None,
+    path: Optional[_Path] = None,
+    *,
+    steps: int = 16,
+    max_failure_fraction: float = 0.001,
+    test_fraction: float = 0.03,
+    progress: bool = False,
+) -> Tuple[_Array, _Array]:
+    """Sample tensions, solve each: (tensions (n, k) N, poses (n, 7)); CSV + sidecar at path."""

@@ -1,0 +1,60 @@
+"""Net.predict against `tendril ik --model` on the same poses."""
+
+import csv
+
+import numpy as np
+import pytest
+
+import tendril
+from conftest import run_cli
+
+
+def test_predict_equals_cli_ik_bit_for_bit(tmp_path, root, cli):
+    robot = tendril.Robot.default()
+    model = root / "firmware" / "vectors" / "default.tnet"
+    _, poses = tendril.generate(robot, 60, seed=9)
+    cols = ["px", "py", "pz", "qw", "qx", "qy", "qz"]
+    with open(tmp_path / "poses.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(cols)
+        w.writerows([[repr(float(x)) for x in p] for p in poses])
+    done = run_cli(cli, "ik", "--model", str(model), "--allow-extrapolation",
+                   "--input", str(tmp_path / "poses.csv"), "--output", str(tmp_path / "t.csv"))
+    assert done.returncode == 0, done.stderr
+    with open(tmp_path / "t.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    k = robot.n_tendons
+    cli_tensions = np.array([[float(r[f"t{i}"]) for i in range(k)] for r in rows])
+    cli_raw = np.array([[float(r[f"raw_t{i}"]) for i in range(k)] for r in rows])
+
+    net = tendril.Net.load(model, robot, allow_extrapolation=True)
+    tensions, raw = net.predict(poses)
+    assert tensions.shape == (60, k) and raw.shape == (60, k)
+    assert np.array_equal(tensions, cli_tensions)
+    assert np.array_equal(raw, cli_raw)
+    # Clamping is to the robot's limits and changes only out-of-range outputs.
+    assert ((tensions >= 0) & (tensions <= robot.max_tensions)).all()
+    assert np.array_equal(tensions, np.clip(raw, 0, robot.max_tensions))
+    one, one_raw = net.predict(poses[3])
+    assert np.array_equal(one, tensions[3]) and np.array_equal(one_raw, raw[3])
+
+
+def test_predict_refuses_bad_poses(root):
+    net = tendril.Net.load(root / "firmware" / "vectors" / "default.tnet", allow_extrapolation=True)
+    pose = np.array([0.0, 0.0, 0.4, 1.0, 0.0, 0.0, 0.0])
+    bad = np.vstack([pose, pose])
+    bad[1, 0] = np.nan
+    with pytest.raises(ValueError, match="poses: row 1: pose px = NaN is not a finite number"):
+        net.predict(bad)
+    with pytest.raises(ValueError, match="poses: row 0: quaternion .* has norm 2"):
+        net.predict([0.0, 0.0, 0.4, 2.0, 0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match=r"poses: expected shape \(7,\) or \(n, 7\)"):
+        net.predict(np.zeros((2, 6)))
+
+
+def test_net_for_another_tendon_count_is_refused(root):
+    one_tendon = tendril.Robot.load(root / "robots" / "seed-1t.toml")
+    with pytest.raises(ValueError, match="tendon count"):
+        tendril.Net.load(root / "firmware" / "vectors" / "default.tnet", one_tendon)
+    with pytest.raises(OSError, match="nothing.tnet"):
+        tendril.Net.load(root / "nothing.tnet")
