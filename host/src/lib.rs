@@ -7,6 +7,7 @@
 pub mod cli;
 pub mod compare;
 pub mod dataset;
+pub mod dynamics;
 pub mod evaluate;
 pub mod firmware_parity;
 pub mod fsutil;
