@@ -246,7 +246,10 @@ pub fn run(job: &OfflineRun, stop: &AtomicBool) -> Result<PathBuf, OfflineError>
     let csv = job.out.join("tip.csv");
     write_csv(&csv, &samples)?;
     let png = job.out.join("tip.png");
-    let title = format!("{}: tip after a tension step at {} s", job.robot.name, job.step.at_s);
+    let title = format!(
+        "{}: tip after a tension step at {} s",
+        job.robot.name, job.step.at_s
+    );
     super::figure::draw_step_response(&samples, job.step.at_s, &title, &png).map_err(|e| {
         OfflineError::Write {
             path: png.clone(),

@@ -97,6 +97,11 @@ pub struct DynamicsSettings {
     pub steps: usize,
     /// Convergence: norm of the tip residual [force N; moment N·m].
     pub tol: f64,
+    /// Largest residual accepted when Newton can improve it no further: the
+    /// roundoff floor of small time steps, whose shooting problem amplifies
+    /// roundoff by e^{λL} (`solver`). 1e-7 N moves the default robot's
+    /// tip by ~2e-8 m (L³/3EI ≈ 0.2 m/N).
+    pub floor_tol: f64,
     /// Newton iterations per time step before giving up.
     pub max_iter: usize,
 }
@@ -110,6 +115,7 @@ impl Default for DynamicsSettings {
             alpha: -0.2,
             steps: 16,
             tol: 1e-9,
+            floor_tol: 1e-7,
             max_iter: 12,
         }
     }

@@ -323,8 +323,7 @@ impl DynamicRod {
         let inertia_m = y.omega.cross(&j_omega) + self.rho_j.component_mul(&omega_t);
         let top = -y.u.cross(&n) - y.rot.tr_mul(&self.rod.f_e) - a_vec + inertia_f
             - bse.component_mul(&hist.ws);
-        let bottom =
-            -y.u.cross(&m) - v.cross(&n) - b_vec + inertia_m - bbt.component_mul(&hist.us);
+        let bottom = -y.u.cross(&m) - v.cross(&n) - b_vec + inertia_m - bbt.component_mul(&hist.us);
         let rhs = Vector6::new(top.x, top.y, top.z, bottom.x, bottom.y, bottom.z);
         let x = match k.cholesky() {
             Some(c) => c.solve(&rhs),

@@ -125,7 +125,14 @@ impl Dynamics {
         let kse = model.rod.kse;
         let n0 = Vector3::new(sol.warm.x[0], sol.warm.x[1], sol.warm.x[2]);
         let w0 = n0.component_div(&kse);
-        let guess = Vector6::new(w0.x, w0.y, w0.z, sol.warm.x[3], sol.warm.x[4], sol.warm.x[5]);
+        let guess = Vector6::new(
+            w0.x,
+            w0.y,
+            w0.z,
+            sol.warm.x[3],
+            sol.warm.x[4],
+            sol.warm.x[5],
+        );
         let mut dynamics = Dynamics {
             robot: robot.clone(),
             model,
@@ -177,19 +184,18 @@ impl Dynamics {
 
     /// Advance one time step δt with `tensions` (N) held over it.
     pub fn step(&mut self, tensions: &[f64]) -> Result<TipState, DynamicsError> {
-        self.step_checked(tensions)
-            .map_err(|e| match e {
-                DynamicsError::NotConverged {
-                    residual,
-                    iterations,
-                    ..
-                } => DynamicsError::NotConverged {
-                    time_s: self.tip.time_s + self.settings.dt_s,
-                    residual,
-                    iterations,
-                },
-                other => other,
-            })
+        self.step_checked(tensions).map_err(|e| match e {
+            DynamicsError::NotConverged {
+                residual,
+                iterations,
+                ..
+            } => DynamicsError::NotConverged {
+                time_s: self.tip.time_s + self.settings.dt_s,
+                residual,
+                iterations,
+            },
+            other => other,
+        })
     }
 
     fn step_checked(&mut self, tensions: &[f64]) -> Result<TipState, DynamicsError> {
@@ -229,58 +235,71 @@ impl Dynamics {
     }
 
     /// Newton on the base strains from `guess`; on success `current` holds
-    /// the grid at the solution and `x`, `tip` are updated.
+    /// the grid at the solution and `x`, `tip` are updated. A stale Jacobian
+    /// that stops contracting is refreshed; with a fresh one the step is
+    /// backtracked. When no step improves the residual any more (the
+    /// roundoff floor of a stiff step), a residual within
+    /// [`DynamicsSettings::floor_tol`] is accepted.
     fn solve(&mut self, guess: Vector6<f64>, c0: f64, dynamic: bool) -> Result<(), DynamicsError> {
         let mut x = guess;
         let (mut tip, mut r) = self.residual(&x, c0, dynamic, false)?;
-        let mut fresh = false;
         for _ in 0..self.settings.max_iter {
             if r.norm() <= self.settings.tol {
-                self.x = x;
-                self.tip.position = tip.p;
-                self.tip.rotation = tip.rot;
-                self.tip.velocity = tip.rot * tip.q;
-                return Ok(());
+                break;
             }
-            if self.jacobian.is_none() {
+            let fresh = self.jacobian.is_none();
+            if fresh {
                 self.jacobian = Some(self.fd_jacobian(&x, &r, c0, dynamic)?);
-                fresh = true;
             }
             let Some(dx) = self.jacobian.as_ref().and_then(|j| j.solve(&(-r))) else {
-                return Err(DynamicsError::NotConverged {
-                    time_s: 0.0,
-                    residual: r.norm(),
-                    iterations: self.settings.max_iter,
-                });
+                break;
             };
-            let trial = x + dx;
-            let (trial_tip, trial_r) = self.residual(&trial, c0, dynamic, false)?;
-            // A stale Jacobian that no longer contracts well is refreshed and
-            // the step retried; a fresh one's step is taken as it is.
-            if !fresh && !(trial_r.norm() < 0.25 * r.norm()) {
-                self.jacobian = None;
-                if trial_r.norm() >= r.norm() {
-                    // Re-record the grid at x, which the trial overwrote.
+            let mut accepted = None;
+            let mut scale = 1.0;
+            for _ in 0..4 {
+                let trial = x + dx * scale;
+                if let Ok((trial_tip, trial_r)) = self.residual(&trial, c0, dynamic, false) {
+                    if trial_r.norm() < r.norm() {
+                        accepted = Some((trial, trial_tip, trial_r));
+                        break;
+                    }
+                }
+                if !fresh {
+                    break;
+                }
+                scale *= 0.25;
+            }
+            match accepted {
+                Some((trial, trial_tip, trial_r)) => {
+                    if !fresh && trial_r.norm() > 0.25 * r.norm() {
+                        self.jacobian = None;
+                    }
+                    (x, tip, r) = (trial, trial_tip, trial_r);
+                }
+                None if fresh => {
+                    // Re-record the grid at x, which the trials overwrote.
                     (tip, r) = self.residual(&x, c0, dynamic, false)?;
-                    continue;
+                    break;
+                }
+                None => {
+                    self.jacobian = None;
+                    (tip, r) = self.residual(&x, c0, dynamic, false)?;
                 }
             }
-            fresh = false;
-            (x, tip, r) = (trial, trial_tip, trial_r);
         }
         let residual = r.norm();
-        if residual <= self.settings.tol {
-            self.x = x;
-            self.tip.position = tip.p;
-            self.tip.rotation = tip.rot;
-            self.tip.velocity = tip.rot * tip.q;
-            return Ok(());
+        if residual > self.settings.floor_tol {
+            return Err(DynamicsError::NotConverged {
+                time_s: 0.0,
+                residual,
+                iterations: self.settings.max_iter,
+            });
         }
-        Err(DynamicsError::NotConverged {
-            time_s: 0.0,
-            residual,
-            iterations: self.settings.max_iter,
-        })
+        self.x = x;
+        self.tip.position = tip.p;
+        self.tip.rotation = tip.rot;
+        self.tip.velocity = tip.rot * tip.q;
+        Ok(())
     }
 
     /// ∂residual/∂x by forward differences. Small time steps make the
@@ -353,7 +372,10 @@ fn pass(
 ) -> Result<(DynState, Vector6<f64>), SingularSystem> {
     let term = |k: usize| history.map_or(TimeVars::default(), |h| h[k].term);
     let length = model.rod.length;
-    let mut y = DynState::at_base(Vector3::new(x[0], x[1], x[2]), Vector3::new(x[3], x[4], x[5]));
+    let mut y = DynState::at_base(
+        Vector3::new(x[0], x[1], x[2]),
+        Vector3::new(x[3], x[4], x[5]),
+    );
     let mut k = 0;
     for piece in pieces {
         let hh = piece.h;
@@ -391,10 +413,16 @@ fn check_settings(s: &DynamicsSettings) -> Result<(), DynamicsError> {
         return bad(format!("BDF-alpha {} must be in [-0.5, 0]", s.alpha));
     }
     if s.steps == 0 || s.steps > MAX_STEPS {
-        return bad(format!("{} spatial steps: must be 1..={MAX_STEPS}", s.steps));
+        return bad(format!(
+            "{} spatial steps: must be 1..={MAX_STEPS}",
+            s.steps
+        ));
     }
-    if !(s.tol.is_finite() && s.tol > 0.0) || s.max_iter == 0 {
-        return bad("tolerance must be positive and iterations at least 1".into());
+    if !(s.tol.is_finite() && s.tol > 0.0 && s.floor_tol >= s.tol) || s.max_iter == 0 {
+        return bad(
+            "tolerance must be positive (floor at least the tolerance) and iterations at least 1"
+                .into(),
+        );
     }
     Ok(())
 }
