@@ -229,7 +229,7 @@ pub fn run(job: &OfflineRun, stop: &AtomicBool) -> Result<PathBuf, OfflineError>
         stop,
         |s| {
             bar.inc(1);
-            if bar.position() % 100 == 0 {
+            if bar.position().is_multiple_of(100) {
                 bar.set_message(format!("t = {:.2} s", s.t_s));
             }
         },

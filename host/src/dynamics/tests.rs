@@ -103,7 +103,7 @@ fn free_vibration(
             .set_tip_load(Vector3::new(force * held, 0.0, 0.0), Vector3::zeros())
             .unwrap();
         let tip = dynamics.step(&[0.0; 4]).unwrap();
-        if k >= release && (k - release) % stride == 0 {
+        if k >= release && (k - release).is_multiple_of(stride) {
             out.push(tip.position.x);
         }
     }
@@ -208,7 +208,7 @@ fn halving_the_time_step_shrinks_the_error_fourfold_as_bdf2_predicts() {
         for k in 1..=(0.2 / dt_s).round() as usize {
             let tau = 2.0 * smooth_step(k as f64 * dt_s, 0.05);
             let tip = dynamics.step(&[tau, 0.0, 0.0, 0.0]).unwrap();
-            if k % stride == 0 {
+            if k.is_multiple_of(stride) {
                 out.push(tip.position);
             }
         }
