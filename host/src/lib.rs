@@ -8,6 +8,7 @@ pub mod cli;
 pub mod command_stage;
 pub mod compare;
 pub mod dataset;
+pub mod dynamics;
 pub mod evaluate;
 pub mod firmware_parity;
 pub mod fsutil;

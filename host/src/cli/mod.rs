@@ -7,6 +7,7 @@ pub mod common;
 mod compare;
 pub mod console;
 mod controller;
+mod dynamics;
 pub mod evaluate;
 mod fk;
 pub mod generate;
@@ -71,6 +72,8 @@ enum Command {
     Ik(ik::IkArgs),
     /// Tension RMSE, task-space tip error and inference time of a .tnet net.
     Evaluate(evaluate::EvaluateArgs),
+    /// Dynamic step response: tip trajectory (CSV) and figure after a tension step.
+    Dynamics(dynamics::DynamicsArgs),
 }
 
 /// Run the subcommand `cli` names (the whole pipeline without one).
@@ -88,5 +91,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Some(Command::Train(a)) => train::run(a),
         Some(Command::Ik(a)) => ik::run(a),
         Some(Command::Evaluate(a)) => evaluate::run(a),
+        Some(Command::Dynamics(a)) => dynamics::run(a),
     }
 }

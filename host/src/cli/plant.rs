@@ -5,7 +5,9 @@ use std::path::PathBuf;
 use anyhow::{bail, Context};
 use clap::Args;
 
-use crate::ipc::plant::{DelayFault, DropFault, PlantConfig, PlantFaults, PlantParams, StuckFault};
+use crate::ipc::plant::{
+    DelayFault, DropFault, PlantConfig, PlantFaults, PlantParams, RobotModel, StuckFault,
+};
 
 /// Plant model and fault options (shared with `tendril sim`).
 #[derive(Args, Clone, Debug)]
@@ -118,6 +120,10 @@ pub struct PlantArgs {
     pub prefix: String,
     #[command(flatten)]
     pub model: PlantOpts,
+    /// Robot model: quasi-static (statics each step) or dynamic (inertia and
+    /// damping, docs/design.md §4.2).
+    #[arg(long = "model", value_enum, default_value_t = RobotModel::QuasiStatic)]
+    pub robot_model: RobotModel,
     /// Stop after this many seconds (default: until SIGTERM or a stop message).
     #[arg(long)]
     pub duration: Option<f64>,
@@ -152,7 +158,10 @@ impl PlantArgs {
         Ok(PlantConfig {
             robot: self.robot,
             prefix: self.prefix,
-            params: self.model.params()?,
+            params: PlantParams {
+                model: self.robot_model,
+                ..self.model.params()?
+            },
             spin: self.model.spin,
             duration_s: self.duration,
             peer_timeout_s: (self.peer_timeout > 0.0).then_some(self.peer_timeout),

@@ -11,6 +11,7 @@ use super::controller::{LoopOpts, OnOff};
 use super::planner::TrajectoryOpts;
 use super::plant::PlantOpts;
 use crate::ipc::planner::Injections;
+use crate::ipc::plant::RobotModel;
 use crate::ipc::sim::{ModelSource, SimConfig, SimFaults};
 
 /// The model `tendril train` writes by default.
@@ -45,6 +46,9 @@ pub struct SimArgs {
     pub tuning: LoopOpts,
     #[command(flatten)]
     pub plant: PlantOpts,
+    /// Plant's robot model: quasi-static or dynamic (docs/design.md §4.2).
+    #[arg(long = "plant", value_enum, default_value_t = RobotModel::QuasiStatic)]
+    pub plant_model: RobotModel,
     /// Pin controller and plant to one CPU (the last this process may use)
     /// and the planner to another: with the plant's real-time priority
     /// above the controller's, the command's event wakes the plant at once
@@ -102,6 +106,7 @@ impl SimArgs {
         // off` to disable): it keeps the 1 kHz loop on time on a busy machine.
         cfg.realtime = self.tuning.realtime != Some(OnOff::Off);
         cfg.plant.params = self.plant.params()?;
+        cfg.plant.params.model = self.plant_model;
         cfg.plant.spin = self.plant.spin;
         cfg.pin = self.pin == OnOff::On;
         cfg.faults = SimFaults {

@@ -27,7 +27,9 @@ use crate::statics::{SolverSettings, Statics, WarmStart};
 
 mod model;
 
-pub use model::{DelayFault, DropFault, PlantFaults, PlantModel, PlantParams, StuckFault};
+pub use model::{
+    DelayFault, DropFault, PlantFaults, PlantModel, PlantParams, RobotModel, StuckFault,
+};
 
 /// Everything the plant process needs: written by a launcher as JSON
 /// (`tendril plant --config FILE`) or built from the flags.

@@ -1,9 +1,23 @@
 //! The plant model: one first-order motor per tendon with saturation,
 //! optional series tendon compliance, the robot's tip from warm-started
-//! Cosserat statics, a noisy tip sensor, and the injectable motor and
-//! message faults (docs/design.md §6).
+//! Cosserat statics or from the dynamic rod (docs/design.md §4.2), a noisy
+//! tip sensor, and the injectable motor and message faults (docs/design.md §6).
 
 use super::*;
+use crate::dynamics::{Damping, Dynamics, DynamicsSettings};
+use crate::statics::pose::{orthonormalise, quaternion_wxyz};
+
+/// How the plant moves the robot.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum RobotModel {
+    /// Each step jumps to the statics equilibrium of the tendon tensions.
+    #[default]
+    QuasiStatic,
+    /// The Cosserat rod with inertia and damping, stepped in time
+    /// (docs/design.md §4.2): the robot swings and rings.
+    Dynamic,
+}
 
 /// Injected faults.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -69,6 +83,11 @@ pub struct PlantParams {
     pub statics_steps: usize,
     /// Faults to inject.
     pub faults: PlantFaults,
+    /// Quasi-static or dynamic robot.
+    pub model: RobotModel,
+    /// Time step of the dynamic robot, s (the plant takes as many as the
+    /// elapsed time holds).
+    pub dynamics_dt_s: f64,
 }
 
 impl Default for PlantParams {
@@ -81,9 +100,15 @@ impl Default for PlantParams {
             seed: 1,
             statics_steps: 16,
             faults: PlantFaults::default(),
+            model: RobotModel::QuasiStatic,
+            dynamics_dt_s: 1e-3,
         }
     }
 }
+
+/// Most dynamic time steps one plant step takes: after a stall longer than
+/// this many steps, the rest of the elapsed time is skipped, not simulated.
+const MAX_SUBSTEPS: usize = 100;
 
 /// The plant's physics, free of any IPC (testable, benchmarkable).
 pub struct PlantModel {
@@ -100,7 +125,11 @@ pub struct PlantModel {
     pose: [f64; 7],
     rng: ChaCha8Rng,
     stuck: bool,
-    /// Statics failures (the last good pose was kept).
+    /// The dynamic robot, when the model is [`RobotModel::Dynamic`].
+    dynamics: Option<Box<Dynamics>>,
+    /// Elapsed time not yet simulated by the dynamic robot, s.
+    lag_s: f64,
+    /// Statics (or dynamics) failures (the last good pose was kept).
     pub solve_failures: u64,
 }
 
@@ -130,6 +159,24 @@ impl PlantModel {
         let sol = statics
             .solve(&zero, None)
             .map_err(|e| IpcError::Other(format!("plant: statics at rest: {e}")))?;
+        let dynamics = match params.model {
+            RobotModel::QuasiStatic => None,
+            RobotModel::Dynamic => Some(Box::new(
+                Dynamics::at_rest(
+                    robot,
+                    Damping::of_robot(robot),
+                    DynamicsSettings {
+                        dt_s: params.dynamics_dt_s,
+                        steps: settings.steps,
+                        ..DynamicsSettings::default()
+                    },
+                    &zero,
+                    nalgebra::Vector3::zeros(),
+                    nalgebra::Vector3::zeros(),
+                )
+                .map_err(|e| IpcError::Config(format!("plant: dynamic robot: {e}")))?,
+            )),
+        };
         Ok(PlantModel {
             max_tension: robot.max_tensions(),
             motor: zero.clone(),
@@ -140,6 +187,8 @@ impl PlantModel {
             pose: sol.pose(),
             rng: ChaCha8Rng::seed_from_u64(params.seed),
             stuck: false,
+            dynamics,
+            lag_s: 0.0,
             solve_failures: 0,
             statics,
             params,
@@ -195,6 +244,9 @@ impl PlantModel {
                 self.motor[i]
             };
         }
+        if self.dynamics.is_some() {
+            return self.step_dynamics(dt);
+        }
         let moved = self
             .tendon
             .iter()
@@ -219,6 +271,39 @@ impl PlantModel {
                 false
             }
         }
+    }
+
+    /// The dynamic robot over `dt` s: whole time steps while at least half
+    /// of one is due, the tendon tensions held over them.
+    fn step_dynamics(&mut self, dt: f64) -> bool {
+        let Some(dynamics) = self.dynamics.as_mut() else {
+            return false;
+        };
+        let dt_s = dynamics.settings().dt_s;
+        self.lag_s += dt;
+        let mut substeps = 0;
+        while self.lag_s >= 0.5 * dt_s {
+            if substeps == MAX_SUBSTEPS {
+                self.lag_s = 0.0;
+                break;
+            }
+            self.lag_s -= dt_s;
+            substeps += 1;
+            match dynamics.step(&self.tendon) {
+                Ok(tip) => {
+                    let q = quaternion_wxyz(&orthonormalise(&tip.rotation));
+                    let p = tip.position;
+                    self.pose = [p.x, p.y, p.z, q[0], q[1], q[2], q[3]];
+                }
+                Err(e) => {
+                    log::debug!("plant: dynamic step failed: {e}");
+                    self.solve_failures += 1;
+                    self.lag_s = 0.0;
+                    return false;
+                }
+            }
+        }
+        true
     }
 
     /// True tip pose (no noise).
@@ -303,6 +388,45 @@ mod tests {
         let s = Statics::new(&robot(), SolverSettings::default());
         let sol = s.solve(m.tensions(), None).unwrap();
         assert!((sol.position - nalgebra::Vector3::from_row_slice(&m.pose()[..3])).norm() < 1e-6);
+    }
+
+    #[test]
+    fn dynamic_plant_swings_and_comes_to_the_quasi_static_pose() {
+        // The dynamic robot lags the motors and rings about the pose the
+        // quasi-static plant jumps to, decaying towards it (docs/design.md
+        // §4.2; that a damped run comes to rest exactly there is checked in
+        // `dynamics::tests`).
+        let plant = |model| {
+            let params = PlantParams {
+                noise_m: 0.0,
+                noise_quat: 0.0,
+                model,
+                ..PlantParams::default()
+            };
+            PlantModel::new(&robot(), params).unwrap()
+        };
+        let mut quasi = plant(RobotModel::QuasiStatic);
+        let mut dynamic = plant(RobotModel::Dynamic);
+        let mut largest_gap: f64 = 0.0;
+        for k in 0..3000 {
+            // The motors get a 2 N step, held.
+            let cmd = [2.0, 0.0, 0.0, 0.0];
+            quasi.command(&cmd);
+            dynamic.command(&cmd);
+            assert!(quasi.step(1e-3) && dynamic.step(1e-3), "step {k} failed");
+            largest_gap = largest_gap.max((quasi.pose()[0] - dynamic.pose()[0]).abs());
+        }
+        let gap = (0..3)
+            .map(|i| (quasi.pose()[i] - dynamic.pose()[i]).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            largest_gap > 1e-3,
+            "the dynamic robot never lagged: {largest_gap}"
+        );
+        assert!(
+            gap < 0.2 * largest_gap,
+            "after 3 s still {gap:.2e} m from the quasi-static pose (largest {largest_gap:.2e} m)"
+        );
     }
 
     #[test]

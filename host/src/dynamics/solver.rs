@@ -1,0 +1,428 @@
+//! The time-stepping solver: the grid of histories and, per time step, the
+//! shooting problem in arc length solved by Newton (`docs/design.md` §4.2).
+//!
+//! The grid is the statics' RK4 schedule (pieces between anchors): every RK4
+//! stage is a grid point with its own history, and so is the end of every
+//! piece (the state before an anchor, or the tip), where the damped internal
+//! wrench enters a boundary condition. The unknowns are the base strains
+//! x = [w(0); u(0)]; the residual is the tip's force and moment balance.
+//! The Jacobian is taken by finite differences and kept across iterations
+//! and time steps (a chord method) until Newton stops contracting.
+
+use nalgebra::{Matrix3, Matrix6, Vector3, Vector6, LU, U6};
+
+use crate::robot::{Robot, TensionError};
+use crate::statics::integrate::{pieces, Piece};
+use crate::statics::{SingularSystem, SolveError, SolverSettings, Statics, MAX_STEPS};
+
+use super::params::{Damping, DynamicsSettings};
+use super::section::{DynRates, DynState, DynamicRod, TimeVars};
+
+/// Why a dynamics run could not start or step.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DynamicsError {
+    /// A setting is out of its range.
+    #[error("dynamics settings: {0}")]
+    BadSettings(String),
+    /// The tension vector does not fit the robot.
+    #[error(transparent)]
+    BadTensions(#[from] TensionError),
+    /// The external tip load is NaN or infinite.
+    #[error("external tip load is not finite")]
+    BadLoad,
+    /// The initial statics solve failed.
+    #[error("initial statics: {0}")]
+    Statics(#[from] SolveError),
+    /// Newton did not reach the tolerance in one time step.
+    #[error("dynamics step at t = {time_s:.4} s did not converge: tip residual {residual:.3e} after {iterations} iterations")]
+    NotConverged {
+        /// Time of the step, s.
+        time_s: f64,
+        /// Residual norm reached.
+        residual: f64,
+        /// Iterations spent.
+        iterations: usize,
+    },
+    /// The strain-rate system could not be solved.
+    #[error(transparent)]
+    Singular(#[from] SingularSystem),
+}
+
+/// The tip at the current time.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TipState {
+    /// Time since the start, s.
+    pub time_s: f64,
+    /// Position, base frame, m.
+    pub position: Vector3<f64>,
+    /// Orientation (columns = body axes in the base frame).
+    pub rotation: Matrix3<f64>,
+    /// Linear velocity, base frame, m/s.
+    pub velocity: Vector3<f64>,
+}
+
+/// One grid point's past: y(i−1), y(i−2), y_t(i−1), and the history term
+/// y_h(i) = c₁ y(i−1) + c₂ y(i−2) + d₁ y_t(i−1) they make for the next step.
+#[derive(Clone, Copy, Debug, Default)]
+struct History {
+    last: TimeVars,
+    before_last: TimeVars,
+    last_rate: TimeVars,
+    term: TimeVars,
+}
+
+/// Finite-difference steps for the unknowns [w(0); u(0)]: the strain w is
+/// ~1e-5 under newton-level loads (EA ≈ 5e5 N), the curvature ~1 1/m.
+const FD_STEP_W: f64 = 1e-9;
+const FD_STEP_U: f64 = 1e-7;
+/// Largest residual change (N, N·m) a finite-difference step may cause.
+const FD_TARGET: f64 = 1e-3;
+
+/// A dynamic robot: state, history and solver.
+#[derive(Clone, Debug)]
+pub struct Dynamics {
+    robot: Robot,
+    model: DynamicRod,
+    settings: DynamicsSettings,
+    pieces: Vec<Piece>,
+    history: Vec<History>,
+    current: Vec<TimeVars>,
+    scratch: Vec<TimeVars>,
+    x: Vector6<f64>,
+    x_prev: Vector6<f64>,
+    jacobian: Option<LU<f64, U6, U6>>,
+    tip: TipState,
+    passes: u64,
+}
+
+impl Dynamics {
+    /// The robot at rest in its statics equilibrium under `tensions` (N) and
+    /// the external tip force (N) and moment (N·m, base frame): the initial
+    /// state of a run.
+    pub fn at_rest(
+        robot: &Robot,
+        damping: Damping,
+        settings: DynamicsSettings,
+        tensions: &[f64],
+        tip_force: Vector3<f64>,
+        tip_moment: Vector3<f64>,
+    ) -> Result<Dynamics, DynamicsError> {
+        check_settings(&settings)?;
+        robot.check_tensions(tensions)?;
+        let statics = Statics::new(
+            robot,
+            SolverSettings {
+                steps: settings.steps,
+                ..SolverSettings::default()
+            },
+        );
+        let sol = statics.solve_loaded(tensions, tip_force, tip_moment, None)?;
+        let mut model = DynamicRod::new(robot, damping);
+        model.set_tensions(tensions);
+        model.set_tip_load(tip_force, tip_moment);
+        let schedule: Vec<Piece> = pieces(&model.rod, settings.steps).collect();
+        let slots: usize = schedule.iter().map(|p| 4 * p.n + 1).sum();
+        let kse = model.rod.kse;
+        let n0 = Vector3::new(sol.warm.x[0], sol.warm.x[1], sol.warm.x[2]);
+        let w0 = n0.component_div(&kse);
+        let guess = Vector6::new(
+            w0.x,
+            w0.y,
+            w0.z,
+            sol.warm.x[3],
+            sol.warm.x[4],
+            sol.warm.x[5],
+        );
+        let mut dynamics = Dynamics {
+            robot: robot.clone(),
+            model,
+            settings,
+            pieces: schedule,
+            history: vec![History::default(); slots],
+            current: vec![TimeVars::default(); slots],
+            scratch: vec![TimeVars::default(); slots],
+            x: guess,
+            x_prev: guess,
+            jacobian: None,
+            tip: TipState {
+                time_s: 0.0,
+                position: sol.position,
+                rotation: sol.rotation,
+                velocity: Vector3::zeros(),
+            },
+            passes: 0,
+        };
+        // The statics are the dynamics with c₀ = 0 and no history.
+        dynamics.solve(guess, 0.0, false)?;
+        dynamics.x_prev = dynamics.x;
+        // At rest: y(−1) = y(−2) = y(0), y_t = 0, so y_h = (c₁ + c₂) y = −c₀ y.
+        let scheme = settings.scheme();
+        for (h, z) in dynamics.history.iter_mut().zip(&dynamics.current) {
+            *h = History {
+                last: *z,
+                before_last: *z,
+                last_rate: TimeVars::default(),
+                term: *z * (scheme.c1() + scheme.c2()),
+            };
+        }
+        dynamics.jacobian = None;
+        Ok(dynamics)
+    }
+
+    /// Change the external tip load (N, N·m, base frame) from the next step on.
+    pub fn set_tip_load(
+        &mut self,
+        force: Vector3<f64>,
+        moment: Vector3<f64>,
+    ) -> Result<(), DynamicsError> {
+        if !(force.iter().chain(moment.iter()).all(|v| v.is_finite())) {
+            return Err(DynamicsError::BadLoad);
+        }
+        self.model.set_tip_load(force, moment);
+        Ok(())
+    }
+
+    /// Advance one time step δt with `tensions` (N) held over it.
+    pub fn step(&mut self, tensions: &[f64]) -> Result<TipState, DynamicsError> {
+        self.step_checked(tensions).map_err(|e| match e {
+            DynamicsError::NotConverged {
+                residual,
+                iterations,
+                ..
+            } => DynamicsError::NotConverged {
+                time_s: self.tip.time_s + self.settings.dt_s,
+                residual,
+                iterations,
+            },
+            other => other,
+        })
+    }
+
+    fn step_checked(&mut self, tensions: &[f64]) -> Result<TipState, DynamicsError> {
+        self.robot.check_tensions(tensions)?;
+        self.model.set_tensions(tensions);
+        let scheme = self.settings.scheme();
+        // Linear extrapolation of the base strains from the last two steps.
+        let guess = self.x * 2.0 - self.x_prev;
+        let x_before = self.x;
+        self.solve(guess, scheme.c0(), true)?;
+        self.x_prev = x_before;
+        let (c0, c1, c2, d1) = (scheme.c0(), scheme.c1(), scheme.c2(), scheme.d1());
+        for (h, z) in self.history.iter_mut().zip(&self.current) {
+            let rate = *z * c0 + h.term;
+            h.before_last = h.last;
+            h.last = *z;
+            h.last_rate = rate;
+            h.term = h.last * c1 + h.before_last * c2 + rate * d1;
+        }
+        self.tip.time_s += self.settings.dt_s;
+        Ok(self.tip)
+    }
+
+    /// The tip now.
+    pub fn tip(&self) -> TipState {
+        self.tip
+    }
+
+    /// The settings of this run.
+    pub fn settings(&self) -> &DynamicsSettings {
+        &self.settings
+    }
+
+    /// Rod passes (integrations base to tip) spent so far.
+    pub fn passes(&self) -> u64 {
+        self.passes
+    }
+
+    /// Newton on the base strains from `guess`; on success `current` holds
+    /// the grid at the solution and `x`, `tip` are updated. A stale Jacobian
+    /// that stops contracting is refreshed; with a fresh one the step is
+    /// backtracked. When no step improves the residual any more (the
+    /// roundoff floor of a stiff step), a residual within
+    /// [`DynamicsSettings::floor_tol`] is accepted.
+    fn solve(&mut self, guess: Vector6<f64>, c0: f64, dynamic: bool) -> Result<(), DynamicsError> {
+        let mut x = guess;
+        let (mut tip, mut r) = self.residual(&x, c0, dynamic, false)?;
+        for _ in 0..self.settings.max_iter {
+            if r.norm() <= self.settings.tol {
+                break;
+            }
+            let fresh = self.jacobian.is_none();
+            if fresh {
+                self.jacobian = Some(self.fd_jacobian(&x, &r, c0, dynamic)?);
+            }
+            let Some(dx) = self.jacobian.as_ref().and_then(|j| j.solve(&(-r))) else {
+                break;
+            };
+            let mut accepted = None;
+            let mut scale = 1.0;
+            for _ in 0..4 {
+                let trial = x + dx * scale;
+                if let Ok((trial_tip, trial_r)) = self.residual(&trial, c0, dynamic, false) {
+                    if trial_r.norm() < r.norm() {
+                        accepted = Some((trial, trial_tip, trial_r));
+                        break;
+                    }
+                }
+                if !fresh {
+                    break;
+                }
+                scale *= 0.25;
+            }
+            match accepted {
+                Some((trial, trial_tip, trial_r)) => {
+                    if !fresh && trial_r.norm() > 0.25 * r.norm() {
+                        self.jacobian = None;
+                    }
+                    (x, tip, r) = (trial, trial_tip, trial_r);
+                }
+                None if fresh => {
+                    // Re-record the grid at x, which the trials overwrote.
+                    (tip, r) = self.residual(&x, c0, dynamic, false)?;
+                    break;
+                }
+                None => {
+                    self.jacobian = None;
+                    (tip, r) = self.residual(&x, c0, dynamic, false)?;
+                }
+            }
+        }
+        let residual = r.norm();
+        if residual > self.settings.floor_tol {
+            return Err(DynamicsError::NotConverged {
+                time_s: 0.0,
+                residual,
+                iterations: self.settings.max_iter,
+            });
+        }
+        self.x = x;
+        self.tip.position = tip.p;
+        self.tip.rotation = tip.rot;
+        self.tip.velocity = tip.rot * tip.q;
+        Ok(())
+    }
+
+    /// ∂residual/∂x by forward differences. Small time steps make the
+    /// shooting problem stiff (the beam's implicit step is a beam on an
+    /// elastic foundation ρA c₀², whose solutions grow like e^{λs} with
+    /// λ⁴ ~ ρA c₀²/EI): a step that changes the residual by more than
+    /// [`FD_TARGET`] is shrunk to stay in the linear range.
+    fn fd_jacobian(
+        &mut self,
+        x: &Vector6<f64>,
+        r: &Vector6<f64>,
+        c0: f64,
+        dynamic: bool,
+    ) -> Result<LU<f64, U6, U6>, DynamicsError> {
+        let mut jac = Matrix6::zeros();
+        for j in 0..6 {
+            let mut step = if j < 3 { FD_STEP_W } else { FD_STEP_U };
+            let mut column = Vector6::zeros();
+            for _ in 0..4 {
+                let mut xj = *x;
+                xj[j] += step;
+                let (_, rj) = self.residual(&xj, c0, dynamic, true)?;
+                let change = (rj - r).norm();
+                column = (rj - r) / step;
+                if change <= FD_TARGET || !change.is_finite() && step < 1e-30 {
+                    break;
+                }
+                step *= if change.is_finite() {
+                    0.5 * FD_TARGET / change
+                } else {
+                    1e-4
+                };
+            }
+            jac.set_column(j, &column);
+        }
+        Ok(jac.lu())
+    }
+
+    /// One pass base to tip from the base strains `x`: the tip state and
+    /// residual. Records the grid into `current` (or `scratch` for a
+    /// finite-difference pass). `dynamic` false: no history (statics).
+    fn residual(
+        &mut self,
+        x: &Vector6<f64>,
+        c0: f64,
+        dynamic: bool,
+        into_scratch: bool,
+    ) -> Result<(DynState, Vector6<f64>), DynamicsError> {
+        self.passes += 1;
+        let history = dynamic.then_some(self.history.as_slice());
+        let record = if into_scratch {
+            &mut self.scratch
+        } else {
+            &mut self.current
+        };
+        Ok(pass(&self.model, &self.pieces, x, c0, history, record)?)
+    }
+}
+
+/// Integrate base to tip with RK4 on the schedule `pieces`, each stage and
+/// each piece end a grid point with its history term; returns the tip state
+/// and the tip residual.
+fn pass(
+    model: &DynamicRod,
+    pieces: &[Piece],
+    x: &Vector6<f64>,
+    c0: f64,
+    history: Option<&[History]>,
+    record: &mut [TimeVars],
+) -> Result<(DynState, Vector6<f64>), SingularSystem> {
+    let term = |k: usize| history.map_or(TimeVars::default(), |h| h[k].term);
+    let length = model.rod.length;
+    let mut y = DynState::at_base(
+        Vector3::new(x[0], x[1], x[2]),
+        Vector3::new(x[3], x[4], x[5]),
+    );
+    let mut k = 0;
+    for piece in pieces {
+        let hh = piece.h;
+        for j in 0..piece.n {
+            let s = piece.a + j as f64 * hh;
+            let (r1, z1) = model.rates(s, &y, &term(k), c0, piece.running)?;
+            let y2 = y.advanced(&r1, 0.5 * hh);
+            let (r2, z2) = model.rates(s + 0.5 * hh, &y2, &term(k + 1), c0, piece.running)?;
+            let y3 = y.advanced(&r2, 0.5 * hh);
+            let (r3, z3) = model.rates(s + 0.5 * hh, &y3, &term(k + 2), c0, piece.running)?;
+            let y4 = y.advanced(&r3, hh);
+            let (r4, z4) = model.rates(s + hh, &y4, &term(k + 3), c0, piece.running)?;
+            record[k..k + 4].copy_from_slice(&[z1, z2, z3, z4]);
+            k += 4;
+            y = y.advanced(&DynRates::rk4_average(&[r1, r2, r3, r4]), hh);
+        }
+        record[k] = y.time_vars(Vector3::zeros(), Vector3::zeros());
+        let end_term = term(k);
+        k += 1;
+        if piece.ends_at_anchor(length) {
+            y = model.across_anchor(piece.b, &y, &end_term, &term(k), c0);
+        } else {
+            return Ok((y, model.tip_residual(&y, &end_term, c0)));
+        }
+    }
+    Ok((y, model.tip_residual(&y, &TimeVars::default(), c0)))
+}
+
+fn check_settings(s: &DynamicsSettings) -> Result<(), DynamicsError> {
+    let bad = |m: String| Err(DynamicsError::BadSettings(m));
+    if !(s.dt_s.is_finite() && s.dt_s > 0.0) {
+        return bad(format!("time step {} s must be positive", s.dt_s));
+    }
+    if !(-0.5..=0.0).contains(&s.alpha) {
+        return bad(format!("BDF-alpha {} must be in [-0.5, 0]", s.alpha));
+    }
+    if s.steps == 0 || s.steps > MAX_STEPS {
+        return bad(format!(
+            "{} spatial steps: must be 1..={MAX_STEPS}",
+            s.steps
+        ));
+    }
+    if !(s.tol.is_finite() && s.tol > 0.0 && s.floor_tol >= s.tol) || s.max_iter == 0 {
+        return bad(
+            "tolerance must be positive (floor at least the tolerance) and iterations at least 1"
+                .into(),
+        );
+    }
+    Ok(())
+}
