@@ -25,7 +25,7 @@ use tendril_shared::messages::{
     command_status, setpoint_flags, Header, PlantState, Setpoint, TensionCommand, WeightUpdate,
     MAX_TENDONS,
 };
-use tendril_shared::{TendonLimits, POSE_DIM};
+use tendril_shared::POSE_DIM;
 
 use super::clock::{now_ns, tighten_timer_slack, Tick, Ticker};
 use super::stats::{CsvLog, Histogram, Summary};
