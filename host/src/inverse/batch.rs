@@ -3,7 +3,6 @@
 //! from the tendons' floors. Rows are independent and solved in parallel;
 //! the output keeps the input order, so it is the same on any thread count.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
@@ -158,7 +157,11 @@ pub fn solve_csv(
                 .chain([&s.position_error])
                 .map(f64::to_string)
                 .collect();
-            cells.push(s.orientation_error.map(|e| e.to_string()).unwrap_or_default());
+            cells.push(
+                s.orientation_error
+                    .map(|e| e.to_string())
+                    .unwrap_or_default(),
+            );
             cells.push(u8::from(a.reachable).to_string());
             writeln!(w, "{}", cells.join(","))?;
         }
