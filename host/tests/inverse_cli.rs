@@ -153,3 +153,37 @@ fn exact_batch_writes_checked_rows_and_refuses_bad_input() {
     );
     assert!(!bad_out.exists());
 }
+
+#[test]
+fn evaluate_reports_net_alone_and_exact_refinement_side_by_side() {
+    // The firmware's test-vector net was trained on the default robot.
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("d.csv");
+    let json_out = dir.path().join("e.json");
+    let d = data.to_str().unwrap();
+    let gen = tendril(&["generate", "--samples", "30", "--seed", "5", "--out", d, "--quiet"]);
+    assert!(gen.status.success(), "{}", String::from_utf8_lossy(&gen.stderr));
+    let out = tendril(&[
+        "evaluate",
+        "--model",
+        "firmware/vectors/default.tnet",
+        "--data",
+        d,
+        "--json-out",
+        json_out.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json_out).unwrap()).unwrap();
+    let r = &v["refinement"];
+    assert_eq!(r["rows"], 30);
+    // Every row is a solved pose of the robot: reachable, and refined to a micron.
+    assert_eq!(r["unreachable"], 0);
+    assert_eq!(r["failed"], 0);
+    let refined = r["refined_tip_error_mm"]["max"].as_f64().unwrap();
+    let net = r["net_tip_error_mm"]["mean"].as_f64().unwrap();
+    assert!(refined <= 1e-3, "refined max {refined} mm");
+    assert!(net > refined, "net alone {net} mm vs refined {refined} mm");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("net + exact IK"), "{stdout}");
+}
