@@ -161,8 +161,21 @@ fn evaluate_reports_net_alone_and_exact_refinement_side_by_side() {
     let data = dir.path().join("d.csv");
     let json_out = dir.path().join("e.json");
     let d = data.to_str().unwrap();
-    let gen = tendril(&["generate", "--samples", "30", "--seed", "5", "--out", d, "--quiet"]);
-    assert!(gen.status.success(), "{}", String::from_utf8_lossy(&gen.stderr));
+    let gen = tendril(&[
+        "generate",
+        "--samples",
+        "30",
+        "--seed",
+        "5",
+        "--out",
+        d,
+        "--quiet",
+    ]);
+    assert!(
+        gen.status.success(),
+        "{}",
+        String::from_utf8_lossy(&gen.stderr)
+    );
     let out = tendril(&[
         "evaluate",
         "--model",
@@ -172,7 +185,11 @@ fn evaluate_reports_net_alone_and_exact_refinement_side_by_side() {
         "--json-out",
         json_out.to_str().unwrap(),
     ]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json_out).unwrap()).unwrap();
     let r = &v["refinement"];
