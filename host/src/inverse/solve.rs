@@ -72,6 +72,10 @@ const RANK_TOLERANCE: f64 = 1e-12;
 /// bending sensitivity), so within the target tolerance the tensions along
 /// it are free and the least total tension picks them.
 const NEAR_NULL: f64 = 1e-3;
+/// Phase-2 moves that may fail to lower Σ τ before it stops: along the
+/// near-null (axial) direction re-reaching the target undoes the move, and
+/// each try costs solves.
+const MAX_REFUSED_MOVES: usize = 2;
 /// Most phase-2 moves along the target set.
 const MAX_REDUNDANCY_MOVES: usize = 20;
 
@@ -410,8 +414,9 @@ impl ExactIk {
         solves: &mut usize,
     ) -> Result<Point, InverseError> {
         let mut trust = 0.5 * self.span();
+        let mut refused = 0;
         for _ in 0..MAX_REDUNDANCY_MOVES {
-            if *solves >= self.settings.max_solves || trust < 1e-9 {
+            if *solves >= self.settings.max_solves || refused >= MAX_REFUSED_MOVES {
                 break;
             }
             let j = self.jacobian(target, &mut best)?.clone();
@@ -445,7 +450,10 @@ impl ExactIk {
             };
             match moved {
                 Some(p) => best = p,
-                None => trust = 0.25 * alpha * d.norm(),
+                None => {
+                    refused += 1;
+                    trust = 0.25 * alpha * d.norm();
+                }
             }
         }
         Ok(best)
