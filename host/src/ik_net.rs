@@ -104,7 +104,7 @@ pub enum IkError {
 /// The tensions for one pose.
 #[derive(Clone, Debug, PartialEq)]
 pub struct IkAnswer {
-    /// Tensions clamped to the robot's limits [0, τ_max], N.
+    /// Tensions clamped to the robot's limits [τ_min, τ_max], N.
     pub tensions: Vec<f64>,
     /// The net's output before clamping, N.
     pub raw: Vec<f64>,
@@ -129,6 +129,7 @@ impl IkAnswer {
 /// A `.tnet` net with the robot limits it answers within.
 pub struct IkNet {
     net: Box<HostNet>,
+    min_tension: Vec<f64>,
     max_tension: Vec<f64>,
     allow_extrapolation: bool,
 }
@@ -158,6 +159,7 @@ impl IkNet {
         }
         Ok(IkNet {
             net,
+            min_tension: robot.min_tensions(),
             max_tension: robot.max_tensions(),
             allow_extrapolation,
         })
@@ -213,16 +215,19 @@ impl IkNet {
         if let Some((tendon, &value)) = raw.iter().enumerate().find(|(_, t)| !t.is_finite()) {
             return Err(IkError::NonFiniteOutput { tendon, value });
         }
+        let limits = self.min_tension.iter().zip(&self.max_tension);
         let tensions = raw
             .iter()
-            .zip(&self.max_tension)
-            .map(|(&t, &max)| t.clamp(0.0, max))
+            .zip(limits.clone())
+            .map(|(&t, (&min, &max))| t.clamp(min, max))
             .collect();
         let beyond_limits = raw
             .iter()
-            .zip(&self.max_tension)
+            .zip(limits)
             .enumerate()
-            .filter(|(_, (&t, &max))| t < -LIMIT_SLACK * max || t > (1.0 + LIMIT_SLACK) * max)
+            .filter(|(_, (&t, (&min, &max)))| {
+                t < min - LIMIT_SLACK * max || t > (1.0 + LIMIT_SLACK) * max
+            })
             .map(|(k, _)| k)
             .collect();
         Ok(IkAnswer {
@@ -245,28 +250,21 @@ pub struct BatchSummary {
     pub extrapolated: usize,
 }
 
-/// Answer every pose of the CSV at `input` (columns px, py, pz, qw, qx, qy,
-/// qz; others ignored) and write `output` atomically: `t0..` (clamped, N)
-/// then `raw_t0..` (the net's output, N), one row per input row. A refused
-/// row fails the whole batch, naming its line; nothing is written then.
-pub fn solve_csv(ik: &IkNet, input: &Path, output: &Path) -> Result<BatchSummary, IkError> {
-    let file_error = |path: &Path, why: String| IkError::File {
-        path: path.to_path_buf(),
+/// The poses of the CSV at `input` (columns px, py, pz, qw, qx, qy, qz;
+/// others ignored), in file order; the first unreadable row fails it,
+/// naming its line (header = line 1).
+pub fn read_poses(input: &Path) -> Result<Vec<[f64; 7]>, IkError> {
+    let file_error = |why: String| IkError::File {
+        path: input.to_path_buf(),
         why,
     };
-    if crate::dataset::disk::same_file(input, output) {
-        return Err(file_error(
-            output,
-            "the output would overwrite the input; choose another --output".into(),
-        ));
-    }
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(true)
         .from_path(input)
-        .map_err(|e| file_error(input, e.to_string()))?;
+        .map_err(|e| file_error(e.to_string()))?;
     let header: Vec<String> = reader
         .headers()
-        .map_err(|e| file_error(input, format!("unreadable header: {e}")))?
+        .map_err(|e| file_error(format!("unreadable header: {e}")))?
         .iter()
         .map(|s| s.trim().to_string())
         .collect();
@@ -274,20 +272,15 @@ pub fn solve_csv(ik: &IkNet, input: &Path, output: &Path) -> Result<BatchSummary
         .iter()
         .map(|c| {
             header.iter().position(|h| h == c).ok_or_else(|| {
-                file_error(
-                    input,
-                    format!("missing column {c} (need px,py,pz,qw,qx,qy,qz)"),
-                )
+                file_error(format!("missing column {c} (need px,py,pz,qw,qx,qy,qz)"))
             })
         })
         .collect::<Result<_, _>>()?;
-    let mut answers = Vec::new();
-    let mut summary = BatchSummary::default();
+    let mut poses = Vec::new();
     for (i, record) in reader.records().enumerate() {
-        let line = i + 2;
         let row_error = |why: String| IkError::Row {
             path: input.to_path_buf(),
-            line,
+            line: i + 2,
             why,
         };
         let record = record.map_err(|e| row_error(e.to_string()))?;
@@ -301,7 +294,34 @@ pub fn solve_csv(ik: &IkNet, input: &Path, output: &Path) -> Result<BatchSummary
                 ))
             })?;
         }
-        let answer = ik.solve(&pose).map_err(|e| row_error(e.to_string()))?;
+        poses.push(pose);
+    }
+    Ok(poses)
+}
+
+/// Answer every pose of the CSV at `input` ([`read_poses`]) and write
+/// `output` atomically: `t0..` (clamped, N) then `raw_t0..` (the net's
+/// output, N), one row per input row. A refused row fails the whole batch,
+/// naming its line; nothing is written then.
+pub fn solve_csv(ik: &IkNet, input: &Path, output: &Path) -> Result<BatchSummary, IkError> {
+    let file_error = |path: &Path, why: String| IkError::File {
+        path: path.to_path_buf(),
+        why,
+    };
+    if crate::dataset::disk::same_file(input, output) {
+        return Err(file_error(
+            output,
+            "the output would overwrite the input; choose another --output".into(),
+        ));
+    }
+    let mut answers = Vec::new();
+    let mut summary = BatchSummary::default();
+    for (i, pose) in read_poses(input)?.iter().enumerate() {
+        let answer = ik.solve(pose).map_err(|e| IkError::Row {
+            path: input.to_path_buf(),
+            line: i + 2,
+            why: e.to_string(),
+        })?;
         summary.rows += 1;
         summary.beyond_limits += usize::from(!answer.beyond_limits.is_empty());
         summary.extrapolated += usize::from(!answer.extrapolated.is_empty());

@@ -14,6 +14,7 @@ pub mod firmware_parity;
 pub mod fsutil;
 pub mod ik_net;
 pub mod interrupt;
+pub mod inverse;
 pub mod ipc;
 pub mod kinematics;
 pub mod learn;

@@ -74,6 +74,23 @@ pub fn run(a: EvaluateArgs) -> anyhow::Result<()> {
             e.hidden_units
         ))
     );
+    let r = &e.refinement;
+    println!(
+        "net alone vs net + exact IK ({} rows, pose targets): tip error mean / p95 / max \
+         {:.4} / {:.4} / {:.4} mm in {:.1} µs vs {:.2e} / {:.2e} / {:.2e} mm in {:.0} µs per query \
+         ({} out of reach, {} not converged)",
+        r.rows,
+        r.net_tip_error_mm.mean,
+        r.net_tip_error_mm.p95,
+        r.net_tip_error_mm.max,
+        r.net_us_per_query,
+        r.refined_tip_error_mm.mean,
+        r.refined_tip_error_mm.p95,
+        r.refined_tip_error_mm.max,
+        r.refined_us_per_query,
+        r.unreachable,
+        r.failed
+    );
     log::info!("wrote {}", job.json_out.display());
     Ok(())
 }

@@ -1,5 +1,6 @@
 //! `tendril ik`: tensions for tip poses through a `.tnet` net, checked and
-//! clamped to the robot's limits by [`crate::ik_net`].
+//! clamped to the robot's limits by [`crate::ik_net`]; with `--exact`, the
+//! model-based IK of [`crate::inverse`] (the net's guess as its start).
 
 use std::path::PathBuf;
 
@@ -7,13 +8,21 @@ use anyhow::bail;
 
 use super::common::{parse_list, RobotArg};
 use crate::ik_net::{solve_csv, IkNet};
+use crate::inverse::{self, ExactIk, IkSettings};
 
-/// Inverse kinematics: tip pose → tendon tensions (N) with a trained net.
+/// Inverse kinematics: tip pose → tendon tensions (N) with a trained net,
+/// or exactly through the statics (`--exact`).
 #[derive(clap::Args, Debug)]
 pub struct IkArgs {
-    /// Weight file written by `tendril train`.
-    #[arg(long, value_name = "FILE")]
-    pub model: PathBuf,
+    /// Weight file written by `tendril train` (with --exact: the start guess).
+    #[arg(long, value_name = "FILE", required_unless_present = "exact")]
+    pub model: Option<PathBuf>,
+    /// Exact model-based IK: tensions whose statics reach the target to 1e-7 m.
+    #[arg(long)]
+    pub exact: bool,
+    /// With --exact: reach the tip position only (the quaternion is checked, not targeted).
+    #[arg(long, requires = "exact")]
+    pub position_only: bool,
     /// The robot the net drives: tensions are clamped to its limits.
     #[command(flatten)]
     pub robot: RobotArg,
@@ -34,23 +43,80 @@ pub struct IkArgs {
     /// Batch input CSV with columns px,py,pz,qw,qx,qy,qz (others ignored).
     #[arg(long, value_name = "CSV", requires = "output")]
     pub input: Option<PathBuf>,
-    /// Batch output CSV: t0.. (clamped) and raw_t0.. (net output), N; written atomically.
+    /// Batch output CSV: t0.. (clamped) and raw_t0.. (net output), N; with --exact t0..,
+    /// the reached pose, its errors and `reachable`. Written atomically.
     #[arg(long, value_name = "CSV", requires = "input")]
     pub output: Option<PathBuf>,
+}
+
+/// The `--pose` argument as 7 numbers.
+fn parse_pose(text: &str) -> anyhow::Result<[f64; 7]> {
+    let values = parse_list(text, "--pose")?;
+    let Ok(pose) = <[f64; 7]>::try_from(values.as_slice()) else {
+        bail!(
+            "--pose needs 7 numbers px,py,pz,qw,qx,qy,qz, got {}",
+            values.len()
+        );
+    };
+    Ok(pose)
+}
+
+/// `tendril ik --exact`.
+fn run_exact(a: &IkArgs, robot: &crate::robot::Robot) -> anyhow::Result<()> {
+    let net = match &a.model {
+        Some(m) => Some(IkNet::load(m, robot, true)?),
+        None => None,
+    };
+    let ik = ExactIk::new(robot, IkSettings::default());
+    if let Some(text) = &a.pose {
+        let answer =
+            inverse::batch::answer(&ik, net.as_ref(), &parse_pose(text)?, a.position_only)?;
+        if a.json {
+            println!("{}", answer.to_json());
+        } else {
+            let s: Vec<String> = answer
+                .solution
+                .tensions
+                .iter()
+                .map(f64::to_string)
+                .collect();
+            println!("{}", s.join(","));
+        }
+        if !answer.reachable {
+            bail!(
+                "target out of reach: printed the closest reachable pose, {:.6} m away ({})",
+                answer.solution.position_error,
+                answer.solution.active_limits()
+            );
+        }
+        return Ok(());
+    }
+    let (Some(input), Some(output)) = (&a.input, &a.output) else {
+        bail!("give --pose px,py,pz,qw,qx,qy,qz or --input poses.csv --output tensions.csv");
+    };
+    let s = inverse::batch::solve_csv(&ik, net.as_ref(), a.position_only, input, output)?;
+    eprintln!(
+        "wrote {} ({} rows, {} out of reach, worst reached error {:.2e} m)",
+        output.display(),
+        s.rows,
+        s.unreachable,
+        s.worst_reached
+    );
+    Ok(())
 }
 
 /// Run `tendril ik`.
 pub fn run(a: IkArgs) -> anyhow::Result<()> {
     let (robot, _) = a.robot.load()?;
-    let ik = IkNet::load(&a.model, &robot, a.allow_extrapolation)?;
+    if a.exact {
+        return run_exact(&a, &robot);
+    }
+    let Some(model) = &a.model else {
+        bail!("give --model model.tnet (or --exact)");
+    };
+    let ik = IkNet::load(model, &robot, a.allow_extrapolation)?;
     if let Some(text) = &a.pose {
-        let values = parse_list(text, "--pose")?;
-        let Ok(pose) = <[f64; 7]>::try_from(values.as_slice()) else {
-            bail!(
-                "--pose needs 7 numbers px,py,pz,qw,qx,qy,qz, got {}",
-                values.len()
-            );
-        };
+        let pose = parse_pose(text)?;
         let answer = ik.solve(&pose)?;
         if !answer.extrapolated.is_empty() {
             log::warn!(

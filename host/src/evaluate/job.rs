@@ -8,10 +8,11 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use super::{EvalError, SplitMetrics};
+use super::{ErrorStats, EvalError, SplitMetrics};
 use crate::dataset::{split_indices, Dataset, DatasetError, Sidecar};
 use crate::fsutil::{check_distinct, write_atomic, PathCollision};
-use crate::learn::cascor::export::{infer_batch, read_tnet, ExportError, HostNet};
+use crate::inverse::{ExactIk, IkSettings, InverseError, Target};
+use crate::learn::cascor::export::{infer, infer_batch, read_tnet, ExportError, HostNet};
 use crate::learn::cascor::job::MAX_HELD_OUT_FRACTION;
 use crate::robot::{Robot, RobotError};
 use crate::statics::{SolverSettings, Statics};
@@ -46,11 +47,38 @@ pub struct EvaluateJob {
     pub json_out: PathBuf,
 }
 
+/// Rows the exact refinement runs on (the first ones of the selection):
+/// each costs milliseconds where the net alone costs microseconds.
+pub const REFINE_ROWS: usize = 200;
+
+/// The net alone against the net's guess refined by the exact IK
+/// (`docs/design.md` §4.1), on the same rows, full pose targets.
+#[derive(Clone, Debug, Serialize)]
+pub struct Refinement {
+    /// Rows compared.
+    pub rows: usize,
+    /// Tip position error of the net alone (tensions clamped), mm.
+    pub net_tip_error_mm: ErrorStats,
+    /// Tip position error after exact refinement, mm (closest pose where
+    /// the target is out of reach).
+    pub refined_tip_error_mm: ErrorStats,
+    /// Targets the exact IK found out of reach.
+    pub unreachable: usize,
+    /// Targets where the exact IK gave up (not converged).
+    pub failed: usize,
+    /// The net's inference alone, µs per query, one thread.
+    pub net_us_per_query: f64,
+    /// Net inference plus exact refinement, µs per query, one thread.
+    pub refined_us_per_query: f64,
+}
+
 /// What an evaluation measured.
 #[derive(Clone, Debug)]
 pub struct Evaluation {
     /// The metrics.
     pub metrics: SplitMetrics,
+    /// Net alone vs net + exact refinement.
+    pub refinement: Refinement,
     /// Hidden units of the evaluated net.
     pub hidden_units: usize,
 }
@@ -94,6 +122,7 @@ struct EvaluationFile<'a> {
     rows: &'static str,
     hidden_units: usize,
     metrics: &'a SplitMetrics,
+    refinement: &'a Refinement,
 }
 
 /// Run the evaluation and write its JSON (atomically, after every check).
@@ -136,6 +165,7 @@ pub fn run(job: &EvaluateJob) -> Result<Evaluation, EvaluateError> {
     }
     let statics = Statics::new(&robot, settings_for(&job.data));
     let metrics = evaluate_net(&statics, &net, &data)?;
+    let refinement = refine(&statics, &net, &data)?;
     let file = EvaluationFile {
         model: job.model.display().to_string(),
         data: job.data.display().to_string(),
@@ -145,6 +175,7 @@ pub fn run(job: &EvaluateJob) -> Result<Evaluation, EvaluateError> {
         },
         hidden_units: net.shape().hidden,
         metrics: &metrics,
+        refinement: &refinement,
     };
     let werr = |why: String| EvaluateError::Write {
         path: job.json_out.clone(),
@@ -157,8 +188,82 @@ pub fn run(job: &EvaluateJob) -> Result<Evaluation, EvaluateError> {
     write_atomic(&job.json_out, json.as_bytes()).map_err(|e| werr(e.to_string()))?;
     Ok(Evaluation {
         metrics,
+        refinement,
         hidden_units: net.shape().hidden,
     })
+}
+
+/// Net alone vs net + exact refinement on the first [`REFINE_ROWS`] rows of
+/// `data` (the tendon counts already checked by [`evaluate_net`]).
+pub fn refine(
+    statics: &Statics,
+    net: &HostNet,
+    data: &Dataset,
+) -> Result<Refinement, EvaluateError> {
+    let robot = statics.robot();
+    let (lo, hi) = (robot.min_tensions(), robot.max_tensions());
+    let ik = ExactIk::new(
+        robot,
+        IkSettings {
+            statics: *statics.settings(),
+            ..IkSettings::default()
+        },
+    );
+    let rows = data.len().min(REFINE_ROWS);
+    let pose_of = |r: usize| -> [f64; 7] { std::array::from_fn(|k| data.poses[(r, k)]) };
+    let guess_of = |pose: &[f64; 7]| -> Vec<f64> {
+        infer(net, pose)
+            .iter()
+            .zip(lo.iter().zip(&hi))
+            .map(|(&t, (&l, &h))| f64::from(t).clamp(l, h))
+            .collect()
+    };
+    let started = Instant::now();
+    for r in 0..rows {
+        std::hint::black_box(guess_of(&pose_of(r)));
+    }
+    let net_time = started.elapsed().as_secs_f64();
+    let mut net_errors = Vec::with_capacity(rows);
+    for r in 0..rows {
+        let pose = pose_of(r);
+        let tip = statics.solve(&guess_of(&pose), None).map_err(|e| {
+            EvaluateError::BadInput(format!("row {r}: statics of the net's tensions: {e}"))
+        })?;
+        net_errors.push(1e3 * distance(&tip.pose(), &pose));
+    }
+    let (mut refined_errors, mut unreachable, mut failed) = (Vec::with_capacity(rows), 0, 0);
+    let started = Instant::now();
+    for r in 0..rows {
+        let pose = pose_of(r);
+        let target = Target::from_pose(&pose, false)
+            .map_err(|e| EvaluateError::BadInput(format!("row {r}: {e}")))?;
+        match ik.solve(&target, Some(&guess_of(&pose)), None) {
+            Ok(s) => refined_errors.push(1e3 * s.position_error),
+            Err(InverseError::Unreachable { closest }) => {
+                unreachable += 1;
+                refined_errors.push(1e3 * closest.position_error);
+            }
+            Err(e) => {
+                log::warn!("row {r}: {e}");
+                failed += 1;
+            }
+        }
+    }
+    let refined_time = started.elapsed().as_secs_f64();
+    let per_query = |t: f64| 1e6 * t / rows.max(1) as f64;
+    Ok(Refinement {
+        rows,
+        net_tip_error_mm: ErrorStats::of(&net_errors),
+        refined_tip_error_mm: ErrorStats::of(&refined_errors),
+        unreachable,
+        failed,
+        net_us_per_query: per_query(net_time),
+        refined_us_per_query: per_query(refined_time + net_time),
+    })
+}
+
+fn distance(a: &[f64; 7], b: &[f64; 7]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
 /// Mean wall time of one f32 inference (ns), timing batches on one thread

@@ -15,11 +15,11 @@
 //! δq = δu × r + δw,   δψ = δu × q + u × δq + δu × r'.
 //! ```
 
-use nalgebra::{Matrix3, Matrix3x6, Matrix6, Vector3};
+use nalgebra::{Matrix3, Matrix3x6, Matrix6, SMatrix, Vector3, Vector6};
 
 use super::integrate::pieces;
-use super::rod::{Rod, RodRates, RodState, SingularSystem, TendonSet};
-use crate::robot::hat;
+use super::rod::{Factor, Rod, RodRates, RodState, SingularSystem, TendonSet};
+use crate::robot::{hat, MAX_TENDONS};
 
 /// ∂(R, w, u)/∂x of a rod state: one column per unknown of x = [n(0); u(0)].
 /// (∂p/∂x is not carried: nothing in the residual depends on p.)
@@ -83,7 +83,7 @@ impl Rod {
         };
         let v = y.v();
         let terms = &sys.terms[..sys.n_terms];
-        let mut psi = [Vector3::zeros(); crate::robot::MAX_TENDONS];
+        let mut psi = [Vector3::zeros(); MAX_TENDONS];
         for (p, term) in psi.iter_mut().zip(terms) {
             *p = sys.dw + sys.du.cross(&term.r) + term.alpha;
         }
@@ -283,6 +283,311 @@ pub fn integrate_with_tangent(
         }
         if piece.ends_at_anchor(rod.length) {
             (y, t) = rod.across_anchor_with_tangent(piece.b, &y, &t)?;
+        }
+    }
+    Ok((y, t))
+}
+
+/// Most columns of a [`FullTangent`]: the six shooting unknowns and one per
+/// tendon.
+pub const MAX_COLUMNS: usize = 6 + MAX_TENDONS;
+
+/// ∂(p, R, w, u)/∂(x, τ) of a rod state: columns 0..6 are the shooting
+/// unknowns x = [n(0); u(0)], columns 6.. the tendon tensions τ_i. This is
+/// what the tip Jacobian ∂pose/∂τ needs (`docs/design.md` §4.1): the
+/// position and rotation are carried, and the tensions enter the strain-rate
+/// system, the anchor jumps and the tip condition directly.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FullTangent {
+    /// Columns in use: 6 + tendons.
+    pub columns: usize,
+    /// ∂p per column.
+    pub p: [Vector3<f64>; MAX_COLUMNS],
+    /// ∂R per column.
+    pub rot: [Matrix3<f64>; MAX_COLUMNS],
+    /// ∂w per column.
+    pub w: [Vector3<f64>; MAX_COLUMNS],
+    /// ∂u per column.
+    pub u: [Vector3<f64>; MAX_COLUMNS],
+}
+
+impl FullTangent {
+    /// At the base: p(0) = 0 and R(0) = I fixed, w(0) = n(0) ⊘ Kse,
+    /// u(0) = u(0); nothing depends on τ yet.
+    pub fn at_base(kse: &Vector3<f64>, tendons: usize) -> FullTangent {
+        let mut t = FullTangent {
+            columns: 6 + tendons,
+            p: [Vector3::zeros(); MAX_COLUMNS],
+            rot: [Matrix3::zeros(); MAX_COLUMNS],
+            w: [Vector3::zeros(); MAX_COLUMNS],
+            u: [Vector3::zeros(); MAX_COLUMNS],
+        };
+        for k in 0..3 {
+            t.w[k][k] = 1.0 / kse[k];
+            t.u[k + 3][k] = 1.0;
+        }
+        t
+    }
+
+    fn advanced(&self, rates: &FullTangent, h: f64) -> FullTangent {
+        let mut out = *self;
+        for j in 0..self.columns {
+            out.p[j] += rates.p[j] * h;
+            out.rot[j] += rates.rot[j] * h;
+            out.w[j] += rates.w[j] * h;
+            out.u[j] += rates.u[j] * h;
+        }
+        out
+    }
+
+    /// RK4's weighted mean (k1 + 2 k2 + 2 k3 + k4) / 6 of four rates.
+    fn rk4_mean(k: [&FullTangent; 4]) -> FullTangent {
+        let mut out = *k[0];
+        for j in 0..k[0].columns {
+            out.p[j] = (k[0].p[j] + (k[1].p[j] + k[2].p[j]) * 2.0 + k[3].p[j]) / 6.0;
+            out.rot[j] = (k[0].rot[j] + (k[1].rot[j] + k[2].rot[j]) * 2.0 + k[3].rot[j]) / 6.0;
+            out.w[j] = (k[0].w[j] + (k[1].w[j] + k[2].w[j]) * 2.0 + k[3].w[j]) / 6.0;
+            out.u[j] = (k[0].u[j] + (k[1].u[j] + k[2].u[j]) * 2.0 + k[3].u[j]) / 6.0;
+        }
+        out
+    }
+}
+
+/// [w; u] stacked.
+fn stack(top: &Vector3<f64>, bottom: &Vector3<f64>) -> Vector6<f64> {
+    Vector6::new(top.x, top.y, top.z, bottom.x, bottom.y, bottom.z)
+}
+
+impl Rod {
+    /// Tendon `i`'s pull on a section per newton of tension (body frame):
+    /// [t_i; r_i × t_i], t_i = q_i/|q_i| — the derivative of the combined
+    /// wrench and of the tip condition with respect to τ_i.
+    fn unit_pull(&self, i: usize, s: f64, state: &RodState) -> Vector6<f64> {
+        let g = self.routing(i, s);
+        let t = Self::tendon_tangent(state, &g).normalize();
+        stack(&t, &g.r.cross(&t))
+    }
+
+    /// State rates and their linearisation in every column of `t`: the
+    /// state columns as in [`Rod::rates_with_tangent`] (rotation always
+    /// tracked) plus ∂p' = ∂R v + R ∂w, and for a tension column the direct
+    /// term ∂g/∂τ_i = [A_i ψ_i; r_i × A_i ψ_i] / τ_i (the tendon's part of g
+    /// is linear in τ_i), which also exists where τ_i = 0.
+    fn rates_with_full_tangent(
+        &self,
+        s: f64,
+        y: &RodState,
+        t: &FullTangent,
+        running: TendonSet,
+    ) -> Result<(RodRates, FullTangent), SingularSystem> {
+        let sys = self.system(s, y, running)?;
+        let rates = RodRates {
+            dp: y.rot * y.v(),
+            dr: y.rot * hat(&y.u),
+            dw: sys.dw,
+            du: sys.du,
+        };
+        let v = y.v();
+        let u_hat = hat(&y.u);
+        let terms = &sys.terms[..sys.n_terms];
+        let mut psi = [Vector3::zeros(); MAX_TENDONS];
+        for (p, term) in psi.iter_mut().zip(terms) {
+            *p = sys.dw + sys.du.cross(&term.r) + term.alpha;
+        }
+        let mut per_tension = [Vector6::zeros(); MAX_TENDONS];
+        for (i, dg) in per_tension.iter_mut().enumerate().take(self.n_tendons) {
+            if running & (1 << i) == 0 {
+                continue;
+            }
+            let g = self.routing(i, s);
+            let q = Self::tendon_tangent(y, &g);
+            let q2 = q.norm_squared();
+            let psi = sys.dw + sys.du.cross(&g.r) + y.u.cross(&q) + y.u.cross(&g.dr) + g.ddr;
+            let a_psi = (psi * q2 - q * q.dot(&psi)) / (q2 * q2.sqrt());
+            *dg = stack(&a_psi, &g.r.cross(&a_psi));
+        }
+        let mut out = *t;
+        for j in 0..t.columns {
+            let dw = t.w[j];
+            let du = t.u[j];
+            let kse_dw = self.kse.component_mul(&dw);
+            let mut top = du.cross(&sys.n) + y.u.cross(&kse_dw) + t.rot[j].tr_mul(&self.f_e);
+            let mut bottom = du.cross(&sys.m)
+                + y.u.cross(&self.kbt.component_mul(&du))
+                + dw.cross(&sys.n)
+                + v.cross(&kse_dw);
+            for (term, psi) in terms.iter().zip(&psi) {
+                let dq = du.cross(&term.r) + dw;
+                let dpsi = du.cross(&term.q) + y.u.cross(&dq) + du.cross(&term.dr);
+                let q_dq = term.q.dot(&dq);
+                let q_psi = term.q.dot(psi);
+                let d_apsi = (psi * (-q_dq) + term.q * (3.0 * q_dq * q_psi / term.q2)
+                    - dq * q_psi
+                    - term.q * dq.dot(psi)
+                    + dpsi * term.q2
+                    - term.q * term.q.dot(&dpsi))
+                    * term.c;
+                top += d_apsi;
+                bottom += term.r.cross(&d_apsi);
+            }
+            let mut dz = -stack(&top, &bottom);
+            if j >= 6 {
+                dz -= per_tension[j - 6];
+            }
+            let solved = match &sys.factor {
+                Factor::Cholesky(c) => {
+                    c.solve_mut(&mut dz);
+                    true
+                }
+                Factor::Lu(lu) => lu.solve_mut(&mut dz),
+            };
+            if !solved {
+                return Err(SingularSystem { s });
+            }
+            out.w[j] = dz.fixed_rows::<3>(0).into();
+            out.u[j] = dz.fixed_rows::<3>(3).into();
+            out.p[j] = t.rot[j] * v + y.rot * dw;
+            out.rot[j] = t.rot[j] * u_hat + y.rot * hat(&du);
+        }
+        Ok((rates, out))
+    }
+
+    /// [`Rod::across_anchor`] with the full linearisation: the combined
+    /// wrench is continuous, K⁺ δz⁺ + Σ_passing δτ_i P_i⁺ = K⁻ δz⁻ +
+    /// Σ_crossing δτ_i P_i⁻ with P_i the unit pull ([`Rod::unit_pull`]);
+    /// p and R do not jump.
+    fn across_anchor_with_full_tangent(
+        &self,
+        s: f64,
+        before: &RodState,
+        t: &FullTangent,
+    ) -> Result<(RodState, FullTangent), SingularSystem> {
+        let after = self.across_anchor(s, before);
+        let crossing = self.running_to(s);
+        let passing = crossing & !self.anchored_at(s);
+        let k_before = self.stiffness(s, before, crossing);
+        let k_after = self.stiffness(s, &after, passing);
+        let cholesky = k_after.cholesky();
+        let lu = k_after.lu();
+        let mut out = *t;
+        for j in 0..t.columns {
+            let mut rhs = k_before * stack(&t.w[j], &t.u[j]);
+            if j >= 6 {
+                let i = j - 6;
+                if crossing & (1 << i) != 0 {
+                    rhs += self.unit_pull(i, s, before);
+                }
+                if passing & (1 << i) != 0 {
+                    rhs -= self.unit_pull(i, s, &after);
+                }
+            }
+            let solved = match &cholesky {
+                Some(c) => {
+                    c.solve_mut(&mut rhs);
+                    true
+                }
+                None => lu.solve_mut(&mut rhs),
+            };
+            if !solved {
+                return Err(SingularSystem { s });
+            }
+            out.w[j] = rhs.fixed_rows::<3>(0).into();
+            out.u[j] = rhs.fixed_rows::<3>(3).into();
+        }
+        Ok((after, out))
+    }
+
+    /// Jacobian of [`Rod::tip_residual`] with respect to every column of
+    /// `t` (x, then τ): a tip-anchored tendon's pull enters directly,
+    /// ∂r/∂τ_i = −[t_i; r_i × t_i].
+    pub fn tip_residual_full_jacobian(
+        &self,
+        tip: &RodState,
+        t: &FullTangent,
+        f_ext: &Vector3<f64>,
+        m_ext: &Vector3<f64>,
+    ) -> SMatrix<f64, 6, MAX_COLUMNS> {
+        let mut jac = SMatrix::<f64, 6, MAX_COLUMNS>::zeros();
+        for j in 0..t.columns {
+            let dw = t.w[j];
+            let du = t.u[j];
+            let mut force = -self.kse.component_mul(&dw) + t.rot[j].tr_mul(f_ext);
+            let mut moment = -self.kbt.component_mul(&du) + t.rot[j].tr_mul(m_ext);
+            for i in 0..self.n_tendons {
+                if self.end[i] < self.length {
+                    continue;
+                }
+                let g = self.routing(i, self.length);
+                if self.tension[i] != 0.0 {
+                    let q = Self::tendon_tangent(tip, &g);
+                    let df = self.force_change(i, &q, &(du.cross(&g.r) + dw));
+                    force += df;
+                    moment += g.r.cross(&df);
+                }
+                if j == 6 + i {
+                    let pull = self.unit_pull(i, self.length, tip);
+                    force -= pull.fixed_rows::<3>(0);
+                    moment -= pull.fixed_rows::<3>(3);
+                }
+            }
+            jac.fixed_view_mut::<3, 1>(0, j).copy_from(&force);
+            jac.fixed_view_mut::<3, 1>(3, j).copy_from(&moment);
+        }
+        jac
+    }
+}
+
+/// One RK4 step of the state and its full tangent together.
+fn rk4_step_with_full_tangent(
+    rod: &Rod,
+    s: f64,
+    y: &RodState,
+    t: &FullTangent,
+    h: f64,
+    running: TendonSet,
+) -> Result<(RodState, FullTangent), SingularSystem> {
+    let (k1, l1) = rod.rates_with_full_tangent(s, y, t, running)?;
+    let (k2, l2) = rod.rates_with_full_tangent(
+        s + 0.5 * h,
+        &y.advanced(&k1, 0.5 * h),
+        &t.advanced(&l1, 0.5 * h),
+        running,
+    )?;
+    let (k3, l3) = rod.rates_with_full_tangent(
+        s + 0.5 * h,
+        &y.advanced(&k2, 0.5 * h),
+        &t.advanced(&l2, 0.5 * h),
+        running,
+    )?;
+    let (k4, l4) =
+        rod.rates_with_full_tangent(s + h, &y.advanced(&k3, h), &t.advanced(&l3, h), running)?;
+    let avg = RodRates {
+        dp: (k1.dp + (k2.dp + k3.dp) * 2.0 + k4.dp) / 6.0,
+        dr: (k1.dr + (k2.dr + k3.dr) * 2.0 + k4.dr) / 6.0,
+        dw: (k1.dw + (k2.dw + k3.dw) * 2.0 + k4.dw) / 6.0,
+        du: (k1.du + (k2.du + k3.du) * 2.0 + k4.du) / 6.0,
+    };
+    let avg_t = FullTangent::rk4_mean([&l1, &l2, &l3, &l4]);
+    Ok((y.advanced(&avg, h), t.advanced(&avg_t, h)))
+}
+
+/// Integrate the rod and its full tangent (with respect to x and τ) from the
+/// base to the tip on the solver's piecewise grid; the tip state is
+/// bit-identical to [`super::integrate::integrate`]'s.
+pub fn integrate_with_full_tangent(
+    rod: &Rod,
+    base: RodState,
+    steps: usize,
+) -> Result<(RodState, FullTangent), SingularSystem> {
+    let mut y = base;
+    let mut t = FullTangent::at_base(&rod.kse, rod.n_tendons);
+    for piece in pieces(rod, steps) {
+        for k in 0..piece.n {
+            let s = piece.a + k as f64 * piece.h;
+            (y, t) = rk4_step_with_full_tangent(rod, s, &y, &t, piece.h, piece.running)?;
+        }
+        if piece.ends_at_anchor(rod.length) {
+            (y, t) = rod.across_anchor_with_full_tangent(piece.b, &y, &t)?;
         }
     }
     Ok((y, t))

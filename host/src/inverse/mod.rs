@@ -1,0 +1,159 @@
+//! Exact, model-based inverse kinematics (`docs/design.md` §4.1): the
+//! tensions τ ∈ [τ_min, τ_max] whose statics put the tip at a target — a tip
+//! position, or a full pose with orientation — to a micron.
+//!
+//! `jacobian` gives ∂pose/∂τ exactly from the shooting sensitivities,
+//! `solve` runs bounded Levenberg–Marquardt on τ and then resolves the
+//! redundancy (least total tension above the floors), `batch` answers a CSV
+//! of targets in parallel.
+
+pub mod batch;
+pub mod jacobian;
+pub mod solve;
+
+use nalgebra::{UnitQuaternion, Vector3};
+
+pub use jacobian::{tip_jacobian, JacobianError, TipJacobian};
+pub use solve::{ExactIk, IkSettings};
+
+use crate::statics::{SolveError, WarmStart};
+
+/// Largest accepted deviation of a target quaternion's norm from 1.
+pub const UNIT_TOLERANCE: f64 = 1e-3;
+
+/// What the tip should reach.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Target {
+    /// Tip position only (base frame, m).
+    Position(Vector3<f64>),
+    /// Tip position (m) and orientation.
+    Pose(Vector3<f64>, UnitQuaternion<f64>),
+}
+
+impl Target {
+    /// A target from a pose px, py, pz, qw, qx, qy, qz (the dataset's
+    /// columns); `position_only` drops the orientation. The quaternion must
+    /// be finite and of unit length within [`UNIT_TOLERANCE`] even when it is
+    /// dropped, so a garbled row never passes.
+    pub fn from_pose(pose: &[f64; 7], position_only: bool) -> Result<Target, InverseError> {
+        const NAMES: [&str; 7] = ["px", "py", "pz", "qw", "qx", "qy", "qz"];
+        for (&value, column) in pose.iter().zip(NAMES) {
+            if !value.is_finite() {
+                return Err(InverseError::NotFinite { column, value });
+            }
+        }
+        let norm = pose[3..].iter().map(|q| q * q).sum::<f64>().sqrt();
+        if (norm - 1.0).abs() > UNIT_TOLERANCE {
+            return Err(InverseError::NotUnit { norm });
+        }
+        let position = Vector3::new(pose[0], pose[1], pose[2]);
+        if position_only {
+            return Ok(Target::Position(position));
+        }
+        let q = nalgebra::Quaternion::new(pose[3], pose[4], pose[5], pose[6]);
+        Ok(Target::Pose(position, UnitQuaternion::from_quaternion(q)))
+    }
+
+    /// The target position, m.
+    pub fn position(&self) -> Vector3<f64> {
+        match self {
+            Target::Position(p) | Target::Pose(p, _) => *p,
+        }
+    }
+}
+
+/// The answer for one target.
+#[derive(Clone, Debug)]
+pub struct IkSolution {
+    /// Tensions, N, within the robot's limits.
+    pub tensions: Vec<f64>,
+    /// The pose these tensions reach: px, py, pz (m), qw, qx, qy, qz.
+    pub pose: [f64; 7],
+    /// Distance from the reached tip to the target position, m.
+    pub position_error: f64,
+    /// Angle between reached and target orientation, rad (pose targets only).
+    pub orientation_error: Option<f64>,
+    /// Tendons at their floor τ_min.
+    pub at_min: Vec<usize>,
+    /// Tendons at their ceiling τ_max.
+    pub at_max: Vec<usize>,
+    /// Statics solves spent.
+    pub solves: usize,
+    /// Warm start of the statics at the answer (for the next point of a path).
+    pub warm: WarmStart,
+}
+
+impl IkSolution {
+    /// "tendon 0 at max, tendons 2, 3 at min" style list of the active limits.
+    pub fn active_limits(&self) -> String {
+        let list = |v: &[usize]| {
+            v.iter()
+                .map(usize::to_string)
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let mut parts = Vec::new();
+        if !self.at_max.is_empty() {
+            parts.push(format!("at max: tendon {}", list(&self.at_max)));
+        }
+        if !self.at_min.is_empty() {
+            parts.push(format!("at min: tendon {}", list(&self.at_min)));
+        }
+        if parts.is_empty() {
+            "no limit active".into()
+        } else {
+            parts.join("; ")
+        }
+    }
+}
+
+/// Why no exact answer could be given.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum InverseError {
+    /// A target value is NaN or infinite.
+    #[error("target {column} = {value} is not a finite number")]
+    NotFinite {
+        /// Column name.
+        column: &'static str,
+        /// The value.
+        value: f64,
+    },
+    /// The target quaternion is not of unit length.
+    #[error("target quaternion has norm {norm}, not 1 (tolerance {UNIT_TOLERANCE})")]
+    NotUnit {
+        /// Its norm.
+        norm: f64,
+    },
+    /// The start tensions do not fit the robot.
+    #[error("start tensions: expected {expected} values, got {got}")]
+    StartCount {
+        /// Tendons of the robot.
+        expected: usize,
+        /// Values given.
+        got: usize,
+    },
+    /// A statics solve failed.
+    #[error(transparent)]
+    Statics(#[from] SolveError),
+    /// The tip Jacobian could not be formed.
+    #[error(transparent)]
+    Jacobian(#[from] JacobianError),
+    /// The iteration ran out before reaching the target or a closest point.
+    #[error("exact IK did not converge: tip {position_error:.3e} m from the target after {solves} statics solves")]
+    NotConverged {
+        /// Distance left, m.
+        position_error: f64,
+        /// Statics solves spent.
+        solves: usize,
+    },
+    /// The target is out of reach: `closest` is the nearest reachable pose.
+    #[error(
+        "target out of reach: the closest reachable tip is {:.6} m away ({})",
+        closest.position_error,
+        closest.active_limits()
+    )]
+    Unreachable {
+        /// The closest reachable answer (its errors are the distance).
+        closest: Box<IkSolution>,
+    },
+}

@@ -1,0 +1,483 @@
+//! Bounded Gauss–Newton in a trust region on the tensions, then the
+//! redundancy (`docs/design.md` §4.1).
+//!
+//! Phase 1 reaches the target: minimise ½|e(τ)|² over the box
+//! [τ_min, τ_max], e = [p − p*] or [p − p*; ℓ θ] with θ the rotation vector
+//! of R R*ᵀ (base frame) and ℓ the orientation weight in metres per radian
+//! (default: the backbone length, so a radian of tip rotation weighs like a
+//! backbone length of tip travel). Each step is the minimum-norm
+//! Gauss–Newton step on the free tensions (off their limits, or at a limit
+//! with the step pointing inside), cut to a trust radius and at the first
+//! limit it meets; a step that does not lower the error shrinks the radius.
+//! When no step can lower it any more the target is out of reach and the
+//! point reached is the closest one.
+//!
+//! Phase 2 resolves the redundancy: antagonistic tendons co-contract with
+//! almost no tip motion, so many τ reach a position. Among them it takes the
+//! least total tension Σ (τ_i − τ_min,i): it moves along −1 projected on the
+//! null space of the free tensions' Jacobian (dropping tensions at a limit
+//! that the move would push out), up to the first limit hit, and re-reaches
+//! the target with phase 1; it stops when the projected direction vanishes
+//! (Σ τ is stationary on the target set, the first-order optimum of this
+//! linear objective) or a move no longer lowers Σ τ.
+
+use nalgebra::{DMatrix, DVector, Rotation3};
+
+use super::jacobian::tip_jacobian;
+use super::{IkSolution, InverseError, Target};
+use crate::robot::Robot;
+use crate::statics::pose::angle_between;
+use crate::statics::rod::Rod;
+use crate::statics::{Solution, SolverSettings, Statics, WarmStart};
+
+/// Settings of the exact IK.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IkSettings {
+    /// Reached when the tip is within this distance of the target, m.
+    pub position_tol: f64,
+    /// ... and, for a pose target, within this angle, rad.
+    pub orientation_tol: f64,
+    /// Metres per radian weighing orientation error against position error;
+    /// `None`: the backbone length.
+    pub orientation_weight: Option<f64>,
+    /// Most statics solves per target before giving up.
+    pub max_solves: usize,
+    /// Resolve the redundancy to the least total tension (phase 2).
+    pub least_tension: bool,
+    /// The forward statics' settings.
+    pub statics: SolverSettings,
+}
+
+impl Default for IkSettings {
+    fn default() -> Self {
+        IkSettings {
+            position_tol: 1e-7,
+            orientation_tol: 1e-6,
+            orientation_weight: None,
+            max_solves: 200,
+            least_tension: true,
+            statics: SolverSettings::default(),
+        }
+    }
+}
+
+/// Tensions are "at a limit" within this much, N.
+const AT_LIMIT: f64 = 1e-9;
+/// Singular values below this fraction of the largest are dropped from a
+/// Gauss–Newton step (roundoff).
+const RANK_TOLERANCE: f64 = 1e-12;
+/// Singular values below this fraction of the largest count as a null
+/// direction of the target set in phase 2: co-contraction moves the tip by
+/// the axial strain only (~1.5 µm per N on the seed robot, 1e-4 of the
+/// bending sensitivity), so within the target tolerance the tensions along
+/// it are free and the least total tension picks them.
+const NEAR_NULL: f64 = 1e-3;
+/// Phase-2 moves that may fail to lower Σ τ before it stops: along the
+/// near-null (axial) direction re-reaching the target undoes the move, and
+/// each try costs solves.
+const MAX_REFUSED_MOVES: usize = 2;
+/// Most phase-2 moves along the target set.
+const MAX_REDUNDANCY_MOVES: usize = 20;
+
+/// The exact IK of one robot.
+#[derive(Clone, Debug)]
+pub struct ExactIk {
+    statics: Statics,
+    rod: Rod,
+    lo: Vec<f64>,
+    hi: Vec<f64>,
+    weight: f64,
+    settings: IkSettings,
+}
+
+/// One evaluated point of the iteration.
+#[derive(Clone, Debug)]
+struct Point {
+    tau: Vec<f64>,
+    sol: Solution,
+    err: DVector<f64>,
+    cost: f64,
+    jac: Option<DMatrix<f64>>,
+}
+
+/// How phase 1 ended.
+enum Reach {
+    Converged(Point),
+    /// No step lowers the error: the closest reachable point.
+    Stalled(Point),
+}
+
+impl ExactIk {
+    /// The exact IK of `robot`.
+    pub fn new(robot: &Robot, settings: IkSettings) -> ExactIk {
+        ExactIk {
+            statics: Statics::new(robot, settings.statics),
+            rod: Rod::new(robot),
+            lo: robot.min_tensions(),
+            hi: robot.max_tensions(),
+            weight: settings.orientation_weight.unwrap_or(robot.length),
+            settings,
+        }
+    }
+
+    /// The robot.
+    pub fn robot(&self) -> &Robot {
+        self.statics.robot()
+    }
+
+    /// Tensions reaching `target`, starting from `start` (clamped into the
+    /// limits; `None`: every tendon at its floor, a cold start) with the
+    /// statics warm start `warm` of a nearby solution if there is one.
+    pub fn solve(
+        &self,
+        target: &Target,
+        start: Option<&[f64]>,
+        warm: Option<&WarmStart>,
+    ) -> Result<IkSolution, InverseError> {
+        let n = self.lo.len();
+        let tau0: Vec<f64> = match start {
+            Some(s) if s.len() != n => {
+                return Err(InverseError::StartCount {
+                    expected: n,
+                    got: s.len(),
+                })
+            }
+            Some(s) => s
+                .iter()
+                .zip(self.lo.iter().zip(&self.hi))
+                .map(|(&t, (&lo, &hi))| if t.is_finite() { t.clamp(lo, hi) } else { lo })
+                .collect(),
+            None => self.lo.clone(),
+        };
+        let mut solves = 0;
+        let first = self.point(target, tau0, warm, &mut solves)?;
+        match self.reach(target, first, &mut solves)? {
+            Reach::Converged(p) => {
+                let p = if self.settings.least_tension {
+                    self.least_tension(target, p, &mut solves)?
+                } else {
+                    p
+                };
+                Ok(self.answer(target, &p, solves))
+            }
+            Reach::Stalled(p) => Err(InverseError::Unreachable {
+                closest: Box::new(self.answer(target, &p, solves)),
+            }),
+        }
+    }
+
+    fn point(
+        &self,
+        target: &Target,
+        tau: Vec<f64>,
+        warm: Option<&WarmStart>,
+        solves: &mut usize,
+    ) -> Result<Point, InverseError> {
+        *solves += 1;
+        let sol = self.statics.solve(&tau, warm)?;
+        let err = self.error(target, &sol);
+        Ok(Point {
+            cost: 0.5 * err.norm_squared(),
+            tau,
+            sol,
+            err,
+            jac: None,
+        })
+    }
+
+    /// e = [p − p*] or [p − p*; ℓ θ(R R*ᵀ)].
+    fn error(&self, target: &Target, sol: &Solution) -> DVector<f64> {
+        let dp = sol.position - target.position();
+        match target {
+            Target::Position(_) => DVector::from_column_slice(dp.as_slice()),
+            Target::Pose(_, q) => {
+                let r = sol.rotation * q.to_rotation_matrix().matrix().transpose();
+                let theta = Rotation3::from_matrix_unchecked(r).scaled_axis() * self.weight;
+                DVector::from_iterator(6, dp.iter().chain(theta.iter()).copied())
+            }
+        }
+    }
+
+    /// ∂e/∂τ at `p` (computed once per point).
+    fn jacobian<'a>(
+        &self,
+        target: &Target,
+        p: &'a mut Point,
+    ) -> Result<&'a DMatrix<f64>, InverseError> {
+        if p.jac.is_none() {
+            let mut rod = self.rod.clone();
+            rod.set_tensions(&p.tau);
+            let full = tip_jacobian(&rod, &p.sol.warm.x, self.settings.statics.steps)?.jacobian;
+            p.jac = Some(match target {
+                Target::Position(_) => full.rows(0, 3).into_owned(),
+                Target::Pose(..) => {
+                    let mut j = full;
+                    j.rows_mut(3, 3).scale_mut(self.weight);
+                    j
+                }
+            });
+        }
+        Ok(p.jac.as_ref().expect("set above"))
+    }
+
+    fn converged(&self, target: &Target, p: &Point) -> bool {
+        let position_ok = p.err.rows(0, 3).norm() <= self.settings.position_tol;
+        match target {
+            Target::Position(_) => position_ok,
+            Target::Pose(..) => {
+                position_ok
+                    && p.err.rows(3, 3).norm() / self.weight <= self.settings.orientation_tol
+            }
+        }
+    }
+
+    fn not_converged(&self, p: &Point, solves: usize) -> InverseError {
+        InverseError::NotConverged {
+            position_error: p.err.rows(0, 3).norm(),
+            solves,
+        }
+    }
+
+    /// Phase 1 (module docs).
+    fn reach(
+        &self,
+        target: &Target,
+        mut cur: Point,
+        solves: &mut usize,
+    ) -> Result<Reach, InverseError> {
+        let mut radius = 0.25 * self.span();
+        let mut slow = 0;
+        loop {
+            if self.converged(target, &cur) {
+                return Ok(Reach::Converged(cur));
+            }
+            if *solves >= self.settings.max_solves {
+                return Err(self.not_converged(&cur, *solves));
+            }
+            let j = self.jacobian(target, &mut cur)?.clone();
+            let Some((free, full)) = self.gauss_newton_step(&j, &cur) else {
+                return Ok(Reach::Stalled(cur));
+            };
+            loop {
+                // Along the step until the first limit, which is then met
+                // exactly (it joins the active set next time if the step
+                // still pushes against it).
+                let mut scale = (radius / full.norm()).min(1.0);
+                let mut blocking = None;
+                for (k, &i) in free.iter().enumerate() {
+                    let room = if full[k] < 0.0 {
+                        (self.lo[i] - cur.tau[i]) / full[k]
+                    } else if full[k] > 0.0 {
+                        (self.hi[i] - cur.tau[i]) / full[k]
+                    } else {
+                        f64::INFINITY
+                    };
+                    if room < scale {
+                        scale = room.max(0.0);
+                        blocking = Some((k, i));
+                    }
+                }
+                let mut tau = cur.tau.clone();
+                for (k, &i) in free.iter().enumerate() {
+                    tau[i] = (tau[i] + scale * full[k]).clamp(self.lo[i], self.hi[i]);
+                }
+                if let Some((k, i)) = blocking {
+                    tau[i] = if full[k] < 0.0 {
+                        self.lo[i]
+                    } else {
+                        self.hi[i]
+                    };
+                }
+                let moved = tau
+                    .iter()
+                    .zip(&cur.tau)
+                    .map(|(a, b)| (a - b).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+                if moved <= 1e-13 * (1.0 + self.span()) {
+                    return Ok(Reach::Stalled(cur));
+                }
+                let trial = self.point(target, tau, Some(&cur.sol.warm), solves);
+                match trial {
+                    Ok(trial) if trial.cost < cur.cost => {
+                        let gain = (cur.cost - trial.cost) / cur.cost;
+                        slow = if gain < 1e-10 { slow + 1 } else { 0 };
+                        cur = trial;
+                        radius = (4.0 * moved).max(radius).min(self.span());
+                        if slow >= 3 {
+                            return Ok(Reach::Stalled(cur));
+                        }
+                        break;
+                    }
+                    // A worse point, or one the statics cannot solve: shrink.
+                    Ok(_) | Err(InverseError::Statics(_)) => {}
+                    Err(e) => return Err(e),
+                }
+                radius = 0.25 * moved;
+                if *solves >= self.settings.max_solves {
+                    return Err(self.not_converged(&cur, *solves));
+                }
+            }
+        }
+    }
+
+    /// The minimum-norm Gauss–Newton step on the free tensions, `None` when
+    /// none is free. Free: off its limits, or at a limit with the step
+    /// pointing inside; a tension the step would push out of its limit is
+    /// held and the step recomputed. Taking the stiff directions
+    /// (co-contraction against the axial stiffness, ~µm per N) at full
+    /// length matters: a Marquardt damping scaled by the bending terms
+    /// stalls there.
+    fn gauss_newton_step(
+        &self,
+        j: &DMatrix<f64>,
+        cur: &Point,
+    ) -> Option<(Vec<usize>, DVector<f64>)> {
+        let g = j.tr_mul(&cur.err);
+        let mut free: Vec<usize> = (0..self.lo.len())
+            .filter(|&i| {
+                let pushed_below = cur.tau[i] <= self.lo[i] + AT_LIMIT && g[i] >= 0.0;
+                let pushed_above = cur.tau[i] >= self.hi[i] - AT_LIMIT && g[i] <= 0.0;
+                !(pushed_below || pushed_above)
+            })
+            .collect();
+        loop {
+            if free.is_empty() {
+                return None;
+            }
+            let svd = j.select_columns(&free).svd(true, true);
+            let eps = RANK_TOLERANCE * svd.singular_values.max();
+            let step = -(svd.pseudo_inverse(eps).ok()? * &cur.err);
+            if !step.iter().all(|v| v.is_finite()) {
+                return None;
+            }
+            let before = free.len();
+            let mut k = 0;
+            free.retain(|&i| {
+                let dk = step[k];
+                k += 1;
+                let out_below = cur.tau[i] <= self.lo[i] + AT_LIMIT && dk < 0.0;
+                let out_above = cur.tau[i] >= self.hi[i] - AT_LIMIT && dk > 0.0;
+                !(out_below || out_above)
+            });
+            if free.len() == before {
+                return Some((free, step));
+            }
+        }
+    }
+
+    /// The widest tension range of any tendon, N.
+    fn span(&self) -> f64 {
+        self.hi
+            .iter()
+            .zip(&self.lo)
+            .map(|(h, l)| h - l)
+            .fold(0.0, f64::max)
+    }
+
+    /// The descent direction of Σ τ on the target set at `tau`: −1 projected
+    /// on the null space of the free tensions' Jacobian, the free set
+    /// shrunk until no tension at a limit is pushed out. `None` when it
+    /// vanishes (first-order optimum).
+    fn descent(&self, j: &DMatrix<f64>, tau: &[f64]) -> Option<(DVector<f64>, Vec<usize>)> {
+        let mut free: Vec<usize> = (0..tau.len()).collect();
+        loop {
+            if free.is_empty() {
+                return None;
+            }
+            let jf = j.select_columns(&free);
+            let svd = jf.clone().svd(true, true);
+            let eps = NEAR_NULL * svd.singular_values.max();
+            let pinv = svd.pseudo_inverse(eps).ok()?;
+            let ones = DVector::from_element(free.len(), 1.0);
+            let d = -(&ones - pinv * (jf * &ones));
+            let before = free.len();
+            let mut k = 0;
+            free.retain(|&i| {
+                let dk = d[k];
+                k += 1;
+                let out_below = tau[i] <= self.lo[i] + AT_LIMIT && dk < 0.0;
+                let out_above = tau[i] >= self.hi[i] - AT_LIMIT && dk > 0.0;
+                !(out_below || out_above)
+            });
+            if free.len() == before {
+                return (d.norm() > 1e-9).then_some((d, free));
+            }
+        }
+    }
+
+    /// Phase 2: least total tension on the target set (module docs).
+    fn least_tension(
+        &self,
+        target: &Target,
+        mut best: Point,
+        solves: &mut usize,
+    ) -> Result<Point, InverseError> {
+        let mut trust = 0.5 * self.span();
+        let mut refused = 0;
+        for _ in 0..MAX_REDUNDANCY_MOVES {
+            if *solves >= self.settings.max_solves || refused >= MAX_REFUSED_MOVES {
+                break;
+            }
+            let j = self.jacobian(target, &mut best)?.clone();
+            let Some((d, free)) = self.descent(&j, &best.tau) else {
+                break;
+            };
+            let mut alpha = trust / d.norm();
+            for (k, &i) in free.iter().enumerate() {
+                if d[k] < 0.0 {
+                    alpha = alpha.min((best.tau[i] - self.lo[i]) / -d[k]);
+                } else if d[k] > 0.0 {
+                    alpha = alpha.min((self.hi[i] - best.tau[i]) / d[k]);
+                }
+            }
+            if alpha * d.norm() <= 1e-12 {
+                break;
+            }
+            let mut tau = best.tau.clone();
+            for (k, &i) in free.iter().enumerate() {
+                tau[i] = (tau[i] + alpha * d[k]).clamp(self.lo[i], self.hi[i]);
+            }
+            let total = |t: &[f64]| t.iter().sum::<f64>();
+            let moved = match self.point(target, tau, Some(&best.sol.warm), solves) {
+                Ok(p) => match self.reach(target, p, solves) {
+                    Ok(Reach::Converged(p)) if total(&p.tau) < total(&best.tau) - 1e-12 => Some(p),
+                    Ok(_) | Err(InverseError::NotConverged { .. }) => None,
+                    Err(e) => return Err(e),
+                },
+                Err(InverseError::Statics(_)) => None,
+                Err(e) => return Err(e),
+            };
+            match moved {
+                Some(p) => best = p,
+                None => {
+                    refused += 1;
+                    trust = 0.25 * alpha * d.norm();
+                }
+            }
+        }
+        Ok(best)
+    }
+
+    fn answer(&self, target: &Target, p: &Point, solves: usize) -> IkSolution {
+        let pose = p.sol.pose();
+        let orientation_error = match target {
+            Target::Position(_) => None,
+            Target::Pose(_, q) => Some(angle_between(
+                &[pose[3], pose[4], pose[5], pose[6]],
+                &[q.w, q.i, q.j, q.k],
+            )),
+        };
+        let select = |at: &dyn Fn(usize) -> bool| (0..p.tau.len()).filter(|&i| at(i)).collect();
+        IkSolution {
+            tensions: p.tau.clone(),
+            pose,
+            position_error: p.err.rows(0, 3).norm(),
+            orientation_error,
+            at_min: select(&|i| p.tau[i] <= self.lo[i] + AT_LIMIT),
+            at_max: select(&|i| p.tau[i] >= self.hi[i] - AT_LIMIT),
+            solves,
+            warm: p.sol.warm.clone(),
+        }
+    }
+}
