@@ -19,7 +19,7 @@ use crate::robot::Robot;
 /// A trained inverse-kinematics net (a ``.tnet`` file) for one robot.
 #[pyclass(frozen, module = "tendril._tendril")]
 pub struct Net {
-    ik: IkNet,
+    pub(crate) ik: IkNet,
 }
 
 #[pymethods]

@@ -9,6 +9,9 @@ use numpy::ndarray::{Array1, Array2};
 use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArrayLikeDyn};
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
+use rayon::prelude::*;
+use tendril::inverse::batch::answer;
+use tendril::inverse::{ExactIk, IkSettings};
 use tendril::robot::{Robot as RobotModel, BUILTIN_DEFAULT_TOML};
 use tendril::statics::batch::{solve_all, Load};
 use tendril::statics::{SolverSettings, Statics, MAX_STEPS};
@@ -16,6 +19,7 @@ use tendril::statics::{SolverSettings, Statics, MAX_STEPS};
 use crate::arrays::{check_finite, rows, Rows};
 use crate::detach::detached;
 use crate::errors::{invalid, os_error, runtime_error, value_error};
+use crate::net::Net;
 
 /// Where the built-in default robot says it came from, in errors and reprs.
 pub const BUILTIN_ORIGIN: &str = "<built-in robots/seed-4t.toml>";
@@ -251,6 +255,96 @@ impl Robot {
             return (pose, converged[0]).into_pyobject(py);
         }
         (poses.into_pyarray(py), converged.into_pyarray(py)).into_pyobject(py)
+    }
+
+    /// Exact, model-based inverse kinematics (docs/design.md §4.1): the
+    /// tensions whose statics put the tip at each target, to a micron.
+    ///
+    /// targets: ``(n, 7)`` (or ``(7,)``) poses px, py, pz (m), qw, qx, qy,
+    /// qz (unit quaternion). position_only: reach the position and ignore
+    /// the orientation. net: a ``Net`` whose answer starts the search
+    /// (faster); without one the search starts from the tension floors.
+    /// Among tensions that reach a target the least total tension above the
+    /// floors is returned.
+    ///
+    /// Returns ``(tensions (n, k) N, poses (n, 7) reached, position_error
+    /// (n,) m, reachable (n,) bool)``; an unreachable target gives the
+    /// closest reachable pose with ``reachable = False``. For a ``(7,)``
+    /// input, one row of each. Rows run in parallel with the GIL released.
+    /// Raises ``ValueError`` for a bad target (naming its row) and
+    /// ``RuntimeError`` when the search fails.
+    #[pyo3(signature = (targets, position_only=false, net=None))]
+    fn ik<'py>(
+        &self,
+        py: Python<'py>,
+        targets: PyArrayLikeDyn<'py, f64, AllowTypeChange>,
+        position_only: bool,
+        net: Option<&Net>,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        let given = rows(&targets, "targets", 7)?;
+        if let Some(n) = net {
+            if n.ik.tendons() != self.model.n_tendons() {
+                return Err(value_error(format!(
+                    "net: {} outputs for a robot with {} tendons",
+                    n.ik.tendons(),
+                    self.model.n_tendons()
+                )));
+            }
+        }
+        let solver = ExactIk::new(&self.model, IkSettings::default());
+        let guess = net.map(|n| &n.ik);
+        let answers = detached(py, |_| {
+            given
+                .rows
+                .par_iter()
+                .map(|row| {
+                    let mut pose = [0.0; 7];
+                    pose.copy_from_slice(row);
+                    answer(&solver, guess, &pose, position_only)
+                })
+                .collect::<Vec<_>>()
+        })?;
+        let (n, k) = (answers.len(), self.model.n_tendons());
+        let mut tensions = Array2::from_elem((n, k), f64::NAN);
+        let mut poses = Array2::from_elem((n, 7), f64::NAN);
+        let mut error = Array1::from_elem(n, f64::NAN);
+        let mut reachable = Array1::from_elem(n, false);
+        for (r, a) in answers.into_iter().enumerate() {
+            let a = a.map_err(|e| {
+                use tendril::inverse::InverseError as E;
+                let text = format!("targets: row {r}: {e}");
+                match e {
+                    E::NotFinite { .. } | E::NotUnit { .. } | E::StartCount { .. } => {
+                        value_error(text)
+                    }
+                    _ => pyo3::exceptions::PyRuntimeError::new_err(text),
+                }
+            })?;
+            for (c, &t) in a.solution.tensions.iter().enumerate() {
+                tensions[(r, c)] = t;
+            }
+            for (c, &x) in a.solution.pose.iter().enumerate() {
+                poses[(r, c)] = x;
+            }
+            error[r] = a.solution.position_error;
+            reachable[r] = a.reachable;
+        }
+        if given.single {
+            return (
+                tensions.row(0).to_owned().into_pyarray(py),
+                poses.row(0).to_owned().into_pyarray(py),
+                error[0],
+                reachable[0],
+            )
+                .into_pyobject(py);
+        }
+        (
+            tensions.into_pyarray(py),
+            poses.into_pyarray(py),
+            error.into_pyarray(py),
+            reachable.into_pyarray(py),
+        )
+            .into_pyobject(py)
     }
 
     /// Backbone shape for one tension vector: ``points`` (>= 2) positions,

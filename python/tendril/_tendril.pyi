@@ -53,6 +53,15 @@ class Robot:
     ) -> Tuple[_Array, Union[npt.NDArray[np.bool_], bool]]:
         """Tip poses for tensions (n, k) [N] -> (poses (n, 7), converged (n,));
         a (k,) input gives ((7,), bool). NaN poses where a solve did not converge."""
+    def ik(
+        self,
+        targets: _ArrayLike,
+        position_only: bool = False,
+        net: Optional["Net"] = None,
+    ) -> Tuple[_Array, _Array, Union[_Array, float], Union[npt.NDArray[np.bool_], bool]]:
+        """Exact IK: targets (n, 7) poses -> (tensions (n, k) N, reached poses (n, 7),
+        position error (n,) m, reachable (n,) bool); least total tension above the
+        floors among the answers; an unreachable target gives the closest pose."""
     def shape(
         self,
         tensions: _ArrayLike,
