@@ -165,6 +165,9 @@ pub(super) struct Cholesky6 {
     inv_diag: [f64; 6],
 }
 
+// Index loops on purpose: the triangular recurrences read as in the textbook,
+// and the constant bounds are what makes them unroll.
+#[allow(clippy::needless_range_loop)]
 impl Cholesky6 {
     /// Factor the matrix whose lower triangle is `k` (row-major); `None`
     /// when a pivot is not positive (or not finite).
@@ -479,6 +482,7 @@ impl Rod {
     /// Bᵢᵀ Aᵢ Bᵢ = c (|q|² BᵢᵀBᵢ − [q; k][q; k]ᵀ) — a rank-one update of a
     /// fixed pattern, so no 3×3 products are formed.
     #[inline(always)]
+    #[allow(clippy::needless_range_loop)] // block indices of K, as in the formula
     fn assemble(
         &self,
         s: f64,
