@@ -8,7 +8,7 @@
 //! storing `w` keeps the internal force exact to roundoff, which is what lets
 //! the shooting residual reach 1e-10 N.
 
-use nalgebra::{Cholesky, Matrix3, Matrix6, Vector3, Vector6, LU, U6};
+use nalgebra::{Matrix3, Matrix6, Vector3, Vector6, LU, U6};
 
 use crate::robot::{hat, Robot, MAX_TENDONS};
 
@@ -112,7 +112,7 @@ pub(super) struct TendonTerms {
 /// The factored 6×6 strain-rate matrix.
 #[derive(Clone, Debug)]
 pub(super) enum Factor {
-    Cholesky(Cholesky<f64, U6>),
+    Cholesky(Cholesky6),
     Lu(LU<f64, U6, U6>),
 }
 
@@ -140,12 +140,145 @@ impl System {
     pub fn solve_mut(&self, b: &mut Matrix6<f64>) -> bool {
         match &self.factor {
             Factor::Cholesky(c) => {
-                c.solve_mut(b);
+                for column in b.as_mut_slice().chunks_exact_mut(6) {
+                    let mut x = [0.0; 6];
+                    x.copy_from_slice(column);
+                    c.solve(&mut x);
+                    column.copy_from_slice(&x);
+                }
                 true
             }
             Factor::Lu(lu) => lu.solve_mut(b),
         }
     }
+}
+
+/// Cholesky factor L (K = L Lᵀ) of a 6×6 symmetric positive definite
+/// matrix, in fixed arrays: the strain-rate system is solved four times per
+/// RK4 step, and at this size fully unrolled loops beat a general
+/// decomposition (measured, see BENCHMARKS.md "Statics").
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Cholesky6 {
+    /// L, row-major; entries above the diagonal unused.
+    l: [[f64; 6]; 6],
+    /// 1 / L_jj.
+    inv_diag: [f64; 6],
+}
+
+// Index loops on purpose: the triangular recurrences read as in the textbook,
+// and the constant bounds are what makes them unroll.
+#[allow(clippy::needless_range_loop)]
+impl Cholesky6 {
+    /// Factor the matrix whose lower triangle is `k` (row-major); `None`
+    /// when a pivot is not positive (or not finite).
+    #[inline(always)]
+    fn new(k: &[[f64; 6]; 6]) -> Option<Cholesky6> {
+        let mut c = Cholesky6 {
+            l: [[0.0; 6]; 6],
+            inv_diag: [0.0; 6],
+        };
+        // One call per column with the column as a constant, so that every
+        // loop has constant bounds and unrolls.
+        let ok = c.column::<0>(k)
+            && c.column::<1>(k)
+            && c.column::<2>(k)
+            && c.column::<3>(k)
+            && c.column::<4>(k)
+            && c.column::<5>(k);
+        ok.then_some(c)
+    }
+
+    /// Column J of L; false when its pivot is not positive and finite.
+    #[inline(always)]
+    fn column<const J: usize>(&mut self, k: &[[f64; 6]; 6]) -> bool {
+        let l = &mut self.l;
+        let mut d = k[J][J];
+        for p in 0..J {
+            d -= l[J][p] * l[J][p];
+        }
+        if !(d > 0.0 && d.is_finite()) {
+            return false;
+        }
+        let ljj = d.sqrt();
+        l[J][J] = ljj;
+        self.inv_diag[J] = 1.0 / ljj;
+        for i in J + 1..6 {
+            let mut x = k[i][J];
+            for p in 0..J {
+                x -= l[i][p] * l[J][p];
+            }
+            l[i][J] = x * self.inv_diag[J];
+        }
+        true
+    }
+
+    /// Solve K x = b in place.
+    #[inline(always)]
+    fn solve(&self, b: &mut [f64; 6]) {
+        self.forward::<0>(b);
+        self.forward::<1>(b);
+        self.forward::<2>(b);
+        self.forward::<3>(b);
+        self.forward::<4>(b);
+        self.forward::<5>(b);
+        self.backward::<5>(b);
+        self.backward::<4>(b);
+        self.backward::<3>(b);
+        self.backward::<2>(b);
+        self.backward::<1>(b);
+        self.backward::<0>(b);
+    }
+
+    /// Row I of L y = b.
+    #[inline(always)]
+    fn forward<const I: usize>(&self, b: &mut [f64; 6]) {
+        let mut x = b[I];
+        for p in 0..I {
+            x -= self.l[I][p] * b[p];
+        }
+        b[I] = x * self.inv_diag[I];
+    }
+
+    /// Row I of Lᵀ x = y.
+    #[inline(always)]
+    fn backward<const I: usize>(&self, b: &mut [f64; 6]) {
+        let mut x = b[I];
+        for p in I + 1..6 {
+            x -= self.l[p][I] * b[p];
+        }
+        b[I] = x * self.inv_diag[I];
+    }
+}
+
+/// Factor K (lower triangle `k`) and solve K x = rhs. K is SPD by
+/// construction: K = diag(Kse, Kbt) + Σ Bᵢᵀ Aᵢ Bᵢ with Bᵢ = [I, −r̂ᵢ] and
+/// Aᵢ ⪰ 0. LU is the fallback if roundoff ever breaks the Cholesky; a
+/// matrix neither can solve is an error, never a guess.
+#[inline(always)]
+fn factor_and_solve(
+    k: &[[f64; 6]; 6],
+    rhs: [f64; 6],
+    s: f64,
+) -> Result<(Factor, [f64; 6]), SingularSystem> {
+    let (factor, x) = match Cholesky6::new(k) {
+        Some(c) => {
+            let mut x = rhs;
+            c.solve(&mut x);
+            (Factor::Cholesky(c), x)
+        }
+        None => {
+            let full = Matrix6::from_fn(|i, j| if j <= i { k[i][j] } else { k[j][i] });
+            let lu = full.lu();
+            let x = lu
+                .solve(&Vector6::from_row_slice(&rhs))
+                .ok_or(SingularSystem { s })?;
+            (Factor::Lu(lu), [x[0], x[1], x[2], x[3], x[4], x[5]])
+        }
+    };
+    if !x.iter().all(|v| v.is_finite()) {
+        return Err(SingularSystem { s });
+    }
+    Ok((factor, x))
 }
 
 /// The rod model of one robot under one set of tendon tensions: everything
@@ -305,7 +438,14 @@ impl Rod {
         state: &RodState,
         running: TendonSet,
     ) -> Result<(Vector3<f64>, Vector3<f64>), SingularSystem> {
-        self.system(s, state, running).map(|sys| (sys.dw, sys.du))
+        // The same assembly and factor as [`Rod::system`] (so the plain and
+        // the tangent pass stay bit-identical), without keeping the parts.
+        let (k, rhs) = self.assemble(s, state, running, |_| {});
+        let (_, x) = factor_and_solve(&k, rhs, s)?;
+        Ok((
+            Vector3::new(x[0], x[1], x[2]),
+            Vector3::new(x[3], x[4], x[5]),
+        ))
     }
 
     /// The strain-rate system at one point, assembled, factored and solved;
@@ -316,83 +456,14 @@ impl Rod {
         state: &RodState,
         running: TendonSet,
     ) -> Result<System, SingularSystem> {
-        let (n, m) = self.internal_wrench(state);
-        let mut a_mat = Matrix3::zeros();
-        let mut g_mat = Matrix3::zeros();
-        let mut h_mat = Matrix3::zeros();
-        let mut a_vec = Vector3::zeros();
-        let mut b_vec = Vector3::zeros();
         let mut terms = [TendonTerms::default(); MAX_TENDONS];
         let mut n_terms = 0;
-        for i in 0..self.n_tendons {
-            let tau = self.tension[i];
-            if tau == 0.0 || running & (1 << i) == 0 {
-                continue;
-            }
-            let g = self.routing(i, s);
-            let q = Self::tendon_tangent(state, &g);
-            let q2 = q.norm_squared();
-            let c = tau / (q2 * q2.sqrt());
-            // A_i = −τ q̂²/|q|³ = c (|q|² I − q qᵀ). With k = r × q (and
-            // qᵀ r̂ = −kᵀ) the coupling blocks have rank-one closed forms that
-            // avoid 3×3 products (measured: ~30 % fewer instructions per solve):
-            // G_i = −A_i r̂ = −c (q kᵀ + |q|² r̂),
-            // H_i = r̂ G_i = c (|q|² (|r|² I − r rᵀ) − k kᵀ).
-            let k = g.r.cross(&q);
-            let a_i = (Matrix3::from_diagonal_element(q2) - q * q.transpose()) * c;
-            let g_i = (q * k.transpose() + hat(&g.r) * q2) * (-c);
-            let h_i =
-                ((Matrix3::from_diagonal_element(g.r.norm_squared()) - g.r * g.r.transpose()) * q2
-                    - k * k.transpose())
-                    * c;
-            // a_i = A_i (û q + û r' + r''), b_i = r̂ a_i.
-            let alpha = state.u.cross(&q) + state.u.cross(&g.dr) + g.ddr;
-            let a_vec_i = a_i * alpha;
-            a_mat += a_i;
-            g_mat += g_i;
-            h_mat += h_i;
-            a_vec += a_vec_i;
-            b_vec += g.r.cross(&a_vec_i);
-            terms[n_terms] = TendonTerms {
-                r: g.r,
-                dr: g.dr,
-                q,
-                q2,
-                c,
-                alpha,
-            };
+        let (k, rhs) = self.assemble(s, state, running, |term| {
+            terms[n_terms] = term;
             n_terms += 1;
-        }
-
-        let mut k = Matrix6::zeros();
-        k.fixed_view_mut::<3, 3>(0, 0)
-            .copy_from(&(Matrix3::from_diagonal(&self.kse) + a_mat));
-        k.fixed_view_mut::<3, 3>(0, 3).copy_from(&g_mat);
-        k.fixed_view_mut::<3, 3>(3, 0).copy_from(&g_mat.transpose());
-        k.fixed_view_mut::<3, 3>(3, 3)
-            .copy_from(&(Matrix3::from_diagonal(&self.kbt) + h_mat));
-
-        let v = state.v();
-        let top = -state.u.cross(&n) - state.rot.tr_mul(&self.f_e) - a_vec;
-        let bottom = -state.u.cross(&m) - v.cross(&n) - b_vec;
-        let rhs = Vector6::new(top.x, top.y, top.z, bottom.x, bottom.y, bottom.z);
-        // SPD by construction: K = diag(Kse, Kbt) + Σ Bᵢᵀ Aᵢ Bᵢ with
-        // Bᵢ = [I, −r̂ᵢ] and Aᵢ ⪰ 0. Fall back to LU if roundoff ever breaks
-        // the Cholesky; a matrix neither can solve is an error, never a guess.
-        let (factor, x) = match k.cholesky() {
-            Some(c) => {
-                let x = c.solve(&rhs);
-                (Factor::Cholesky(c), x)
-            }
-            None => {
-                let lu = k.lu();
-                let x = lu.solve(&rhs).ok_or(SingularSystem { s })?;
-                (Factor::Lu(lu), x)
-            }
-        };
-        if !x.iter().all(|v| v.is_finite()) {
-            return Err(SingularSystem { s });
-        }
+        });
+        let (factor, x) = factor_and_solve(&k, rhs, s)?;
+        let (n, m) = self.internal_wrench(state);
         Ok(System {
             factor,
             dw: Vector3::new(x[0], x[1], x[2]),
@@ -402,6 +473,87 @@ impl Rod {
             terms,
             n_terms,
         })
+    }
+
+    /// The strain-rate matrix K (lower triangle, row-major) and right-hand
+    /// side of [`Rod::strain_rates`], handing each running, pulled tendon's
+    /// terms to `keep`. Per tendon, with Bᵢ = [I, −r̂ᵢ], Bᵢᵀ q = [q; k],
+    /// k = r × q, and BᵢᵀBᵢ = [I, −r̂; r̂, |r|² I − r rᵀ]:
+    /// Bᵢᵀ Aᵢ Bᵢ = c (|q|² BᵢᵀBᵢ − [q; k][q; k]ᵀ) — a rank-one update of a
+    /// fixed pattern, so no 3×3 products are formed.
+    #[inline(always)]
+    #[allow(clippy::needless_range_loop)] // block indices of K, as in the formula
+    fn assemble(
+        &self,
+        s: f64,
+        state: &RodState,
+        running: TendonSet,
+        mut keep: impl FnMut(TendonTerms),
+    ) -> ([[f64; 6]; 6], [f64; 6]) {
+        let (n, m) = self.internal_wrench(state);
+        let mut k = [[0.0; 6]; 6];
+        for i in 0..3 {
+            k[i][i] = self.kse[i];
+            k[i + 3][i + 3] = self.kbt[i];
+        }
+        let mut a_sum = Vector3::zeros();
+        let mut b_sum = Vector3::zeros();
+        for i in 0..self.n_tendons {
+            let tau = self.tension[i];
+            if tau == 0.0 || running & (1 << i) == 0 {
+                continue;
+            }
+            let g = self.routing(i, s);
+            let q = Self::tendon_tangent(state, &g);
+            let q2 = q.norm_squared();
+            let c = tau / (q2 * q2.sqrt());
+            let r = g.r;
+            let kq = r.cross(&q);
+            let z = [q.x, q.y, q.z, kq.x, kq.y, kq.z];
+            // The whole square (constant bounds vectorise; the upper
+            // triangle is never read).
+            for (row, &za) in k.iter_mut().zip(&z) {
+                let cza = c * za;
+                for (kab, &zb) in row.iter_mut().zip(&z) {
+                    *kab -= cza * zb;
+                }
+            }
+            let cq2 = c * q2;
+            for a in 0..3 {
+                k[a][a] += cq2;
+            }
+            // r̂ (lower-left block) and |r|² I − r rᵀ (lower-right block).
+            k[3][1] -= cq2 * r.z;
+            k[3][2] += cq2 * r.y;
+            k[4][0] += cq2 * r.z;
+            k[4][2] -= cq2 * r.x;
+            k[5][0] -= cq2 * r.y;
+            k[5][1] += cq2 * r.x;
+            let r2 = r.norm_squared();
+            for a in 0..3 {
+                for b in 0..3 {
+                    let id = if a == b { r2 } else { 0.0 };
+                    k[a + 3][b + 3] += cq2 * (id - r[a] * r[b]);
+                }
+            }
+            // a_i = A_i (û q + û r' + r''), b_i = r̂ a_i.
+            let alpha = state.u.cross(&q) + state.u.cross(&g.dr) + g.ddr;
+            let a_i = (alpha * q2 - q * q.dot(&alpha)) * c;
+            a_sum += a_i;
+            b_sum += r.cross(&a_i);
+            keep(TendonTerms {
+                r,
+                dr: g.dr,
+                q,
+                q2,
+                c,
+                alpha,
+            });
+        }
+        let v = state.v();
+        let top = -state.u.cross(&n) - state.rot.tr_mul(&self.f_e) - a_sum;
+        let bottom = -state.u.cross(&m) - v.cross(&n) - b_sum;
+        (k, [top.x, top.y, top.z, bottom.x, bottom.y, bottom.z])
     }
 
     /// All state rates at arc length s with the tendons `running`:

@@ -185,12 +185,12 @@ impl Statics {
         };
         // A warm start that fails (a far neighbour) falls back to a cold start
         // from the analytic guess rather than reporting failure.
-        let (x, jac, res, iterations, integrations) = match result {
+        let (x, tip, jac, res, iterations, integrations) = match result {
             Ok(ok) => ok,
             Err((_, it0, int0)) => {
                 let guess = rod.initial_guess(&tip_force, &tip_moment);
                 match problem.newton(guess, None, &self.settings) {
-                    Ok((x, j, r, it, int)) => (x, j, r, it + it0, int + int0),
+                    Ok((x, tip, j, r, it, int)) => (x, tip, j, r, it + it0, int + int0),
                     Err((residual, it, _)) => {
                         // A singular system at the start point is the cause
                         // worth naming, not the NaN residual it leads to.
@@ -203,7 +203,6 @@ impl Statics {
                 }
             }
         };
-        let tip = problem.tip(&x)?;
         let rotation = orthonormalise(&tip.rot);
         Ok(Solution {
             position: tip.p,
@@ -274,8 +273,8 @@ const MAX_HALVINGS: usize = 8;
 /// next step gets a fresh Jacobian (one pass with sensitivities).
 const CHORD_CONTRACTION: f64 = 0.1;
 
-/// (unknowns, Jacobian, residual norm, iterations, integrations)
-type NewtonOk = (Vector6<f64>, Matrix6<f64>, f64, usize, usize);
+/// (unknowns, tip state there, Jacobian, residual norm, iterations, integrations)
+type NewtonOk = (Vector6<f64>, RodState, Matrix6<f64>, f64, usize, usize);
 /// (best residual norm, iterations, integrations)
 type NewtonErr = (f64, usize, usize);
 
@@ -284,19 +283,26 @@ impl Shooting<'_> {
         integrate(self.rod, base_state(self.rod, x), self.steps)
     }
 
-    /// The tip residual at `x`; a singular system on the way makes it
-    /// infinite, which the Newton iteration treats as a failed step.
-    fn residual(&self, x: &Vector6<f64>) -> Vector6<f64> {
+    /// The tip residual at `x` and the tip state it came from; a singular
+    /// system on the way makes the residual infinite, which the Newton
+    /// iteration treats as a failed step.
+    fn residual(&self, x: &Vector6<f64>) -> (Vector6<f64>, Option<RodState>) {
         match self.tip(x) {
-            Ok(tip) => self.rod.tip_residual(&tip, &self.f_ext, &self.m_ext),
-            Err(_) => Vector6::from_element(f64::INFINITY),
+            Ok(tip) => (
+                self.rod.tip_residual(&tip, &self.f_ext, &self.m_ext),
+                Some(tip),
+            ),
+            Err(_) => (Vector6::from_element(f64::INFINITY), None),
         }
     }
 
     /// The residual and its exact Jacobian at `x`, from one pass of the rod
     /// with its sensitivities (`tangent`). The residual is bit-identical to
     /// [`Shooting::residual`]'s.
-    fn residual_and_jacobian(&self, x: &Vector6<f64>) -> Option<(Vector6<f64>, Matrix6<f64>)> {
+    fn residual_and_jacobian(
+        &self,
+        x: &Vector6<f64>,
+    ) -> Option<(Vector6<f64>, Matrix6<f64>, RodState)> {
         let (tip, t) = integrate_with_tangent(
             self.rod,
             base_state(self.rod, x),
@@ -308,7 +314,7 @@ impl Shooting<'_> {
         let j = self
             .rod
             .tip_residual_jacobian(&tip, &t, &self.f_ext, &self.m_ext);
-        Some((r, j))
+        Some((r, j, tip))
     }
 
     /// Newton's method from `x0` with the exact Jacobian, kept while it keeps
@@ -329,10 +335,13 @@ impl Shooting<'_> {
         } else {
             SENSITIVITY_PASS_COST
         };
-        let (mut r, mut jac, mut fresh) = match j0 {
-            Some(j) => (self.residual(&x), j, false),
+        let (mut r, mut tip, mut jac, mut fresh) = match j0 {
+            Some(j) => {
+                let (r, tip) = self.residual(&x);
+                (r, tip, j, false)
+            }
             None => match self.residual_and_jacobian(&x) {
-                Some((r, j)) => (r, j, true),
+                Some((r, j, tip)) => (r, Some(tip), j, true),
                 None => return Err((f64::INFINITY, 0, integrations)),
             },
         };
@@ -342,7 +351,9 @@ impl Shooting<'_> {
                 return Err((norm, iter, integrations));
             }
             if norm < settings.tol {
-                return Ok((x, jac, norm, iter, integrations));
+                if let Some(tip) = tip {
+                    return Ok((x, tip, jac, norm, iter, integrations));
+                }
             }
             let step = jac
                 .lu()
@@ -356,7 +367,7 @@ impl Shooting<'_> {
                 let mut alpha = 1.0;
                 for _ in 0..tries {
                     let x_try = x + dx * alpha;
-                    let r_try = self.residual(&x_try);
+                    let (r_try, tip_try) = self.residual(&x_try);
                     integrations += 1;
                     let n_try = r_try.norm();
                     if n_try.is_finite() && n_try < (1.0 - 1e-4 * alpha) * norm {
@@ -368,6 +379,7 @@ impl Shooting<'_> {
                         jac += (r_try - r - jac * s) * s.transpose() / s.norm_squared();
                         x = x_try;
                         r = r_try;
+                        tip = tip_try;
                         norm = n_try;
                         accepted = true;
                         // A full step that cut the residual well keeps its
@@ -376,7 +388,7 @@ impl Shooting<'_> {
                         if (alpha < 1.0 || contraction > CHORD_CONTRACTION) && norm >= settings.tol
                         {
                             match self.residual_and_jacobian(&x) {
-                                Some((r_new, j_new)) => {
+                                Some((r_new, j_new, _)) => {
                                     r = r_new;
                                     jac = j_new;
                                     fresh = true;
@@ -397,7 +409,7 @@ impl Shooting<'_> {
                     return Err((norm, iter + 1, integrations));
                 }
                 match self.residual_and_jacobian(&x) {
-                    Some((r_new, j_new)) => {
+                    Some((r_new, j_new, _)) => {
                         r = r_new;
                         jac = j_new;
                         fresh = true;
@@ -407,10 +419,11 @@ impl Shooting<'_> {
                 }
             }
         }
-        if norm < settings.tol {
-            Ok((x, jac, norm, settings.max_iter, integrations))
-        } else {
-            Err((norm, settings.max_iter, integrations))
+        match tip {
+            Some(tip) if norm < settings.tol => {
+                Ok((x, tip, jac, norm, settings.max_iter, integrations))
+            }
+            _ => Err((norm, settings.max_iter, integrations)),
         }
     }
 }
