@@ -89,7 +89,7 @@ impl CoContraction {
     /// none for odd `n`.
     pub fn opposite_pairs(n: usize) -> CoContraction {
         let mut c = CoContraction::none();
-        if n % 2 != 0 || n > MAX_TENDONS {
+        if !n.is_multiple_of(2) || n > MAX_TENDONS {
             return c;
         }
         let half = n / 2;

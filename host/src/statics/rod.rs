@@ -212,6 +212,14 @@ impl Cholesky6 {
         true
     }
 
+    /// Solve K x = b in place, b a vector.
+    pub(super) fn solve_vector(&self, b: &mut Vector6<f64>) {
+        let mut x = [0.0; 6];
+        x.copy_from_slice(b.as_slice());
+        self.solve(&mut x);
+        b.copy_from_slice(&x);
+    }
+
     /// Solve K x = b in place.
     #[inline(always)]
     fn solve(&self, b: &mut [f64; 6]) {

@@ -436,7 +436,7 @@ impl Rod {
             }
             let solved = match &sys.factor {
                 Factor::Cholesky(c) => {
-                    c.solve_mut(&mut dz);
+                    c.solve_vector(&mut dz);
                     true
                 }
                 Factor::Lu(lu) => lu.solve_mut(&mut dz),
