@@ -57,7 +57,7 @@ pub const REFINE_ROWS: usize = 200;
 pub struct Refinement {
     /// Rows compared.
     pub rows: usize,
-    /// Tip position error of the net alone (tensions clamped), mm.
+    /// Tip position error of the net alone (through the command stage), mm.
     pub net_tip_error_mm: ErrorStats,
     /// Tip position error after exact refinement, mm (closest pose where
     /// the target is out of reach).
@@ -201,7 +201,10 @@ pub fn refine(
     data: &Dataset,
 ) -> Result<Refinement, EvaluateError> {
     let robot = statics.robot();
-    let (lo, hi) = (robot.min_tensions(), robot.max_tensions());
+    // The net's tensions through the firmware's command stage: what the MCU
+    // would command (co-contraction shift, then the clip).
+    let limits = crate::command_stage::limits_for(robot, 1.0)
+        .map_err(|e| EvaluateError::BadInput(format!("tension limits: {e}")))?;
     let ik = ExactIk::new(
         robot,
         IkSettings {
@@ -212,11 +215,8 @@ pub fn refine(
     let rows = data.len().min(REFINE_ROWS);
     let pose_of = |r: usize| -> [f64; 7] { std::array::from_fn(|k| data.poses[(r, k)]) };
     let guess_of = |pose: &[f64; 7]| -> Vec<f64> {
-        infer(net, pose)
-            .iter()
-            .zip(lo.iter().zip(&hi))
-            .map(|(&t, (&l, &h))| f64::from(t).clamp(l, h))
-            .collect()
+        let raw: Vec<f64> = infer(net, pose).iter().map(|&t| f64::from(t)).collect();
+        crate::command_stage::command_for(&limits, &raw)
     };
     let started = Instant::now();
     for r in 0..rows {
