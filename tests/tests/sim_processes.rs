@@ -463,8 +463,9 @@ fn injected_nan_setpoints_and_dropped_commands_appear_in_faults_with_detection()
 #[test]
 fn a_stuck_motor_is_in_faults_and_an_undetected_one_fails_the_run() {
     let _one = one_sim_at_a_time();
-    // Tendon 0 pulls toward +x, where the circle starts: it carries load
-    // (the stuck time is plant time: the plant starts before the loop).
+    // Tendon 2 carries 1–3 N on the default circle, so a stuck motor there
+    // has an effect to detect (the stuck time is plant time: the plant
+    // starts before the loop). A fault with no effect is reported latent.
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
     let o = run_sim(
@@ -477,7 +478,7 @@ fn a_stuck_motor_is_in_faults_and_an_undetected_one_fails_the_run() {
             "--duration",
             "5",
             "--stuck",
-            "0@3",
+            "2@3",
         ],
     );
     let r = report(&out);
@@ -506,7 +507,13 @@ fn a_stuck_motor_is_in_faults_and_an_undetected_one_fails_the_run() {
                 r["verdict"]
             );
         }
-        None => panic!("stuck motor without a detection verdict: {stuck}"),
+        None => {
+            assert!(
+                stuck["detail"].as_str().unwrap_or("").contains("latent"),
+                "stuck motor without a detection verdict: {stuck}"
+            );
+            assert!(o.status.success(), "{}", stderr(&o));
+        }
     }
 }
 
