@@ -71,10 +71,8 @@ fn task_space_error_matches_independent_solves() {
         let p = nalgebra::Vector3::new(poses[(r, 0)], poses[(r, 1)], poses[(r, 2)]);
         let clamped: Vec<f64> = pred_t[r].iter().map(|v| v.clamp(0.0, 10.0)).collect();
         // The stage runs in f32 as on the MCU: tensions agree to ~1e-6 N.
-        for (commanded, got, tol_mm) in [
-            (staged(&pred_t[r]), &errs, 1e-5),
-            (clamped, &clip, 1e-9),
-        ] {
+        for (commanded, got, tol_mm) in [(staged(&pred_t[r]), &errs, 1e-5), (clamped, &clip, 1e-9)]
+        {
             let s = statics.solve(&commanded, None).unwrap();
             let expect_mm = 1000.0 * (s.position - p).norm();
             assert!(

@@ -385,10 +385,17 @@ impl Controller {
             } else if !self.in_hold {
                 self.stats.watchdog_trips += 1;
                 self.hold_after_seq = self.last_sp.map(|s| s.header.seq);
-                log::warn!(
-                    "controller: no setpoint for {:.1} periods: safe hold",
-                    self.watchdog_periods
-                );
+                // Once on the console; every trip is in the statistics and
+                // the fault list (a starved machine can trip it often).
+                if self.stats.watchdog_trips == 1 {
+                    log::warn!(
+                        "controller: no setpoint for {:.1} periods: safe hold (further trips \
+                         are counted in the report, not logged)",
+                        self.watchdog_periods
+                    );
+                } else {
+                    log::debug!("controller: watchdog trip {}", self.stats.watchdog_trips);
+                }
                 let periods = self
                     .last_sp
                     .map_or(0.0, |s| t_wake.saturating_sub(s.header.stamp_ns) as f64)
