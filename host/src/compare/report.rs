@@ -149,7 +149,8 @@ impl Comparison {
              Same split and normalisation for every learner: {nf} training rows, {nv} validation rows \
              (hyper-parameters chosen on these only), {nt} test rows; seed {}. \
              Tension RMSE over all tendons (normalised units ×100 and newtons). Task-space error: \
-             predicted tensions clamped to [0, τ_max] → Cosserat statics → tip, against the true tip; \
+             predicted tensions → the firmware's command stage (co-contraction shift, then the clip to \
+             [τ_min, τ_max]: what the MCU commands) → Cosserat statics → tip, against the true tip; \
              test split in full, train split on a seeded subsample of {} rows. \
              Inference time: single-row queries, mean over {} test rows. Best value per column in bold. \
              KNN (distance-weighted) and a deep tree reproduce their training rows by construction, \
