@@ -181,6 +181,27 @@ impl Logs {
             .map(|r| r.t_ns)
     }
 
+    /// First plant row at or after `from_ns` where the commanded tension of
+    /// `tendon` differs from the measured one by more than `threshold` (N):
+    /// when a stuck motor first had an effect anyone could see.
+    pub fn first_command_departure(
+        &self,
+        tendon: usize,
+        from_ns: f64,
+        threshold: f64,
+    ) -> Option<f64> {
+        self.plant
+            .iter()
+            .filter(|r| r.t_ns >= from_ns)
+            .find(|r| {
+                matches!(
+                    (r.commanded.get(tendon), r.actual.get(tendon)),
+                    (Some(c), Some(a)) if (c - a).abs() > threshold
+                )
+            })
+            .map(|r| r.t_ns)
+    }
+
     /// Largest |commanded − measured| tension of `tendon` in the plant rows
     /// from `from_ns` on (N); `None` when no row covers that time.
     pub fn largest_command_departure(&self, tendon: usize, from_ns: f64) -> Option<f64> {

@@ -366,14 +366,20 @@ fn plant_faults(
             let found = first_detection(detections, at, |d| {
                 d.kind == Detected::StuckMotor && d.tendon.is_none_or(|k| k == stuck.tendon)
             });
+            // Latency from when the fault first had an effect: a motor that
+            // sticks while its tendon is not asked to move is invisible until
+            // the path asks (its command leaves the stuck tension).
+            let threshold = cfg.controller.stuck_motor.tension_error_n;
+            let effect = logs
+                .first_command_departure(stuck.tendon, at, threshold)
+                .unwrap_or(at);
             f.detect(
-                found.map(|t| (t - at) * 1e-9),
-                "controller fault list: stuck_motor",
+                found.map(|t| (t - effect).max(0.0) * 1e-9),
+                "controller fault list: stuck_motor (latency from the first command the stuck motor did not follow)",
             );
             // A motor stuck where its tendon is never asked to move (a slack
             // tendon the path never needs) changes nothing the controller
             // can see, and nothing the robot does: latent, not missed.
-            let threshold = cfg.controller.stuck_motor.tension_error_n;
             let departure = logs.largest_command_departure(stuck.tendon, at);
             if found.is_none() && departure.is_some_and(|d| d <= threshold) {
                 f.detected = None;
