@@ -6,7 +6,8 @@
 //! one pass gives residual and Jacobian, and Newton converges quadratically.
 //! A Jacobian that keeps contracting the residual fast is reused (chord
 //! steps, one plain pass each), and a warm start carries the previous
-//! solution's, so a nearby solve usually costs two or three plain passes.
+//! solution's and starts from its unknowns shifted by the change of the
+//! analytic guess, so a nearby solve costs a few plain passes.
 //! (The `levenberg-marquardt` crate was not used: it recomputes a full
 //! finite-difference Jacobian every iteration, the cost this avoids.)
 
@@ -52,6 +53,11 @@ pub struct WarmStart {
     pub x: Vector6<f64>,
     /// Residual Jacobian at or near `x` (the last one Newton used).
     pub jacobian: Matrix6<f64>,
+    /// The analytic guess ([`Rod::initial_guess`]) for the tensions and tip
+    /// load solved: a warm solve starts from `x` moved by how much the
+    /// guess moves, which carries most of the tensions' first-order effect
+    /// at no cost.
+    guess: Vector6<f64>,
 }
 
 /// A converged statics solution.
@@ -179,8 +185,9 @@ impl Statics {
         let warm_ok = warm.filter(|w| {
             w.x.iter().all(|v| v.is_finite()) && w.jacobian.iter().all(|v| v.is_finite())
         });
+        let guess = rod.initial_guess(&tip_force, &tip_moment);
         let result = match warm_ok {
-            Some(w) => problem.newton(w.x, Some(w.jacobian), &self.settings),
+            Some(w) => problem.newton(w.x + (guess - w.guess), Some(w.jacobian), &self.settings),
             None => Err((f64::INFINITY, 0, 0)),
         };
         // A warm start that fails (a far neighbour) falls back to a cold start
@@ -188,7 +195,6 @@ impl Statics {
         let (x, tip, jac, res, iterations, integrations) = match result {
             Ok(ok) => ok,
             Err((_, it0, int0)) => {
-                let guess = rod.initial_guess(&tip_force, &tip_moment);
                 match problem.newton(guess, None, &self.settings) {
                     Ok((x, tip, j, r, it, int)) => (x, tip, j, r, it + it0, int + int0),
                     Err((residual, it, _)) => {
@@ -211,7 +217,11 @@ impl Statics {
             residual: res,
             iterations,
             integrations,
-            warm: WarmStart { x, jacobian: jac },
+            warm: WarmStart {
+                x,
+                jacobian: jac,
+                guess,
+            },
             tensions: tensions.to_vec(),
         })
     }
