@@ -271,15 +271,19 @@ impl Robot {
     /// (n,) m, reachable (n,) bool)``; an unreachable target gives the
     /// closest reachable pose with ``reachable = False``. For a ``(7,)``
     /// input, one row of each. Rows run in parallel with the GIL released.
+    /// strict: raise ``ValueError`` for the first unreachable target (its
+    /// row, its distance from the closest reachable pose and the limits
+    /// that bind) instead of returning it flagged.
     /// Raises ``ValueError`` for a bad target (naming its row) and
     /// ``RuntimeError`` when the search fails.
-    #[pyo3(signature = (targets, position_only=false, net=None))]
+    #[pyo3(signature = (targets, position_only=false, net=None, strict=false))]
     fn ik<'py>(
         &self,
         py: Python<'py>,
         targets: PyArrayLikeDyn<'py, f64, AllowTypeChange>,
         position_only: bool,
         net: Option<&Net>,
+        strict: bool,
     ) -> PyResult<Bound<'py, PyTuple>> {
         let given = rows(&targets, "targets", 7)?;
         if let Some(n) = net {
@@ -325,6 +329,13 @@ impl Robot {
             }
             for (c, &x) in a.solution.pose.iter().enumerate() {
                 poses[(r, c)] = x;
+            }
+            if strict && !a.reachable {
+                return Err(value_error(format!(
+                    "targets: row {r}: unreachable: the closest reachable pose is {:.3e} m away \
+                     (tendons at their minimum: {:?}, at their maximum: {:?})",
+                    a.solution.position_error, a.solution.at_min, a.solution.at_max
+                )));
             }
             error[r] = a.solution.position_error;
             reachable[r] = a.reachable;

@@ -58,10 +58,12 @@ class Robot:
         targets: _ArrayLike,
         position_only: bool = False,
         net: Optional["Net"] = None,
+        strict: bool = False,
     ) -> Tuple[_Array, _Array, Union[_Array, float], Union[npt.NDArray[np.bool_], bool]]:
         """Exact IK: targets (n, 7) poses -> (tensions (n, k) N, reached poses (n, 7),
         position error (n,) m, reachable (n,) bool); least total tension above the
-        floors among the answers; an unreachable target gives the closest pose."""
+        floors among the answers; an unreachable target gives the closest pose, or
+        with strict=True raises ValueError naming its row, distance and binding limits."""
     def shape(
         self,
         tensions: _ArrayLike,

@@ -48,6 +48,15 @@ def test_an_unreachable_target_gives_the_closest_pose_and_says_so():
     assert (t <= robot.max_tensions + 1e-12).all()
 
 
+def test_strict_ik_raises_for_an_unreachable_target_and_names_it():
+    robot = tendril.Robot.default()
+    near, _ = robot.fk(np.array([2.0, 1.0, 0.0, 0.0]))
+    far = np.array([0.3, 0.0, 0.1, 1.0, 0.0, 0.0, 0.0])
+    robot.ik(near, position_only=True, strict=True)  # reachable: no exception
+    with pytest.raises(ValueError, match=r"row 1: unreachable: .* m away"):
+        robot.ik(np.stack([near, far]), position_only=True, strict=True)
+
+
 def test_bad_targets_raise_value_error_naming_the_row():
     robot = tendril.Robot.default()
     bad = np.array([[0.0, 0.0, 0.4, 1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.4, 2.0, 0.0, 0.0, 0.0]])
