@@ -17,6 +17,9 @@
 
 use crate::tnet::{self, Activation, Field, Reader, Shape, TnetError, TnetView};
 
+mod sliced;
+pub use sliced::CheckJob;
+
 /// Zero slots after the last row: the inference rounds every row's dot
 /// product up to a multiple of 8 terms, reading up to 7 entries past the row.
 pub const ROW_PAD: usize = 7;
@@ -218,7 +221,20 @@ fn fill(dst: &mut [f32], bytes: &[u8]) {
     }
 }
 
-/// Parse the whole file — header, every array, and (if `crc`) the CRC —
+/// What [`walk`] checks after the last array.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Trailer {
+    /// Four bytes that match the CRC-32 of everything before them.
+    Crc,
+    /// Exactly four bytes, their value not judged yet (the incremental
+    /// check, [`CheckJob`], hashes the body in later slices).
+    Length,
+    /// Exactly four bytes or [`TnetError::Malformed`] (the write after a
+    /// complete check).
+    Assumed,
+}
+
+/// Parse the whole file — header, every array, and the trailer —
 /// calling `visit(field, index_in_field, destination, bytes)` for each run
 /// of consecutive `f32`s, in file order: each range array whole, and each
 /// weight row as two runs (bias and inputs; earlier hidden units), because
@@ -226,7 +242,7 @@ fn fill(dst: &mut [f32], bytes: &[u8]) {
 /// structure and capacity, not values (the visitor does).
 fn walk<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
     bytes: &[u8],
-    crc: bool,
+    trailer: Trailer,
     mut visit: impl FnMut(Field, usize, Dest, &[u8]),
 ) -> Result<NetHeader, TnetError> {
     let mut r = Reader::new(bytes);
@@ -277,10 +293,13 @@ fn walk<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
         let start = out_base + o * (1 + IN + nh);
         row(&mut r, Field::OutputWeights, file_at, start, nh)?;
     }
-    if crc {
-        tnet::check_trailer(bytes, r.remaining())?;
-    } else if r.remaining().len() != 4 {
-        return Err(TnetError::Malformed);
+    match trailer {
+        Trailer::Crc => tnet::check_trailer(bytes, r.remaining())?,
+        Trailer::Length => {
+            tnet::stored_crc(r.remaining())?;
+        }
+        Trailer::Assumed if r.remaining().len() != 4 => return Err(TnetError::Malformed),
+        Trailer::Assumed => {}
     }
     Ok(NetHeader {
         shape,
@@ -330,23 +349,24 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
         let mut lo_out = [0.0f32; OUT];
         let mut hi_out = [0.0f32; OUT];
         let mut first_bad: Option<TnetError> = None;
-        let header = walk::<IN, MAX_HIDDEN, OUT, W>(bytes, true, |field, at, dest, run| {
-            if first_bad.is_none() {
-                if let Some(i) = first_non_finite(run) {
-                    first_bad = Some(TnetError::NonFinite {
-                        field,
-                        index: at + i,
-                    });
+        let header =
+            walk::<IN, MAX_HIDDEN, OUT, W>(bytes, Trailer::Crc, |field, at, dest, run| {
+                if first_bad.is_none() {
+                    if let Some(i) = first_non_finite(run) {
+                        first_bad = Some(TnetError::NonFinite {
+                            field,
+                            index: at + i,
+                        });
+                    }
                 }
-            }
-            match dest {
-                Dest::InputLo => fill(&mut lo_in, run),
-                Dest::InputHi => fill(&mut hi_in, run),
-                Dest::OutputLo => fill(&mut lo_out, run),
-                Dest::OutputHi => fill(&mut hi_out, run),
-                Dest::Weights(_) => {}
-            }
-        })?;
+                match dest {
+                    Dest::InputLo => fill(&mut lo_in, run),
+                    Dest::InputHi => fill(&mut hi_in, run),
+                    Dest::OutputLo => fill(&mut lo_out, run),
+                    Dest::OutputHi => fill(&mut hi_out, run),
+                    Dest::Weights(_) => {}
+                }
+            })?;
         // Only now that the CRC vouches for the bytes, judge the values.
         if let Some(e) = first_bad {
             return Err(e);
@@ -405,13 +425,14 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
             });
         }
         self.clear();
-        let written = walk::<IN, MAX_HIDDEN, OUT, W>(bytes, false, |_, _, dest, run| match dest {
-            Dest::InputLo => fill(&mut self.input_lo, run),
-            Dest::InputHi => fill(&mut self.input_hi, run),
-            Dest::OutputLo => fill(&mut self.output_lo, run),
-            Dest::OutputHi => fill(&mut self.output_hi, run),
-            Dest::Weights(i) => fill(self.weights.get_mut(i..).unwrap_or(&mut []), run),
-        });
+        let written =
+            walk::<IN, MAX_HIDDEN, OUT, W>(bytes, Trailer::Assumed, |_, _, dest, run| match dest {
+                Dest::InputLo => fill(&mut self.input_lo, run),
+                Dest::InputHi => fill(&mut self.input_hi, run),
+                Dest::OutputLo => fill(&mut self.output_lo, run),
+                Dest::OutputHi => fill(&mut self.output_hi, run),
+                Dest::Weights(i) => fill(self.weights.get_mut(i..).unwrap_or(&mut []), run),
+            });
         match written {
             Ok(h) if h == header => {
                 self.shape = header.shape;
