@@ -8,10 +8,10 @@
 //! - [`command`]: the command stage's co-contraction shift (keeps the bend
 //!   when a target leaves the tension range);
 //! - [`swap`]: hot swap of the weights (flash default + one RAM slot on the MCU);
-//! - `vectors` and `synth` (cargo feature `harness`, off by default):
-//!   the test-vector format and runner shared by the MCU test image and the
-//!   host parity test, and a deterministic synthetic net; test harnesses,
-//!   not part of a controller build.
+//! - `vectors`, `synth` and `swap_demo` (cargo feature `harness`, off by
+//!   default): the test-vector format and runner shared by the MCU test image
+//!   and the host parity test, a deterministic synthetic net, and the hot-swap
+//!   run of `tendril-fw-swap`; test harnesses, not part of a controller build.
 #![no_std]
 #![deny(missing_docs)]
 // Panic freedom is checked, not promised: no unwrap/expect/panic/indexing
@@ -42,6 +42,8 @@ pub mod command;
 pub mod control;
 pub mod infer;
 pub mod swap;
+#[cfg(any(test, feature = "harness"))]
+pub mod swap_demo;
 #[cfg(any(test, feature = "harness"))]
 pub mod synth;
 #[cfg(any(test, feature = "harness"))]
