@@ -214,11 +214,25 @@ fn first_non_finite(bytes: &[u8]) -> Option<usize> {
 }
 
 /// Store the byte run's `f32`s at the start of `dst` (as many as fit: the
-/// capacity was checked before; this keeps the code panic-free).
-fn fill(dst: &mut [f32], bytes: &[u8]) {
-    for (d, v) in dst.iter_mut().zip(floats(bytes)) {
-        *d = v;
+/// capacity was checked before; this keeps the code panic-free); returns
+/// whether every stored value is finite.
+///
+/// The finiteness test rides along for two reasons. It keeps the net's
+/// invariant even if a borrowed receive buffer changed between the check
+/// and the write (the hot swap checks and writes in different control
+/// periods, docs/design.md §5.3). And it keeps the loop a loop of unaligned
+/// word loads and stores, under 1 M4 instruction per byte whatever the
+/// alignment: a plain copy loop becomes a `memcpy` call, whose path for a
+/// misaligned source (a run of a `.tnet` starts at any byte offset) costs
+/// about 5 per byte.
+fn fill(dst: &mut [f32], bytes: &[u8]) -> bool {
+    let mut special = 0u32;
+    for (d, c) in dst.iter_mut().zip(bytes.chunks_exact(4)) {
+        let w = word(c);
+        special |= u32::from(w & 0x7f80_0000 == 0x7f80_0000);
+        *d = f32::from_bits(w);
     }
+    special == 0
 }
 
 /// What [`walk`] checks after the last array.
@@ -359,13 +373,14 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
                         });
                     }
                 }
-                match dest {
+                // Finiteness is judged above, in file order.
+                let _finite = match dest {
                     Dest::InputLo => fill(&mut lo_in, run),
                     Dest::InputHi => fill(&mut hi_in, run),
                     Dest::OutputLo => fill(&mut lo_out, run),
                     Dest::OutputHi => fill(&mut hi_out, run),
-                    Dest::Weights(_) => {}
-                }
+                    Dest::Weights(_) => true,
+                };
             })?;
         // Only now that the CRC vouches for the bytes, judge the values.
         if let Some(e) = first_bad {
@@ -425,15 +440,40 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
             });
         }
         self.clear();
-        let written =
-            walk::<IN, MAX_HIDDEN, OUT, W>(bytes, Trailer::Assumed, |_, _, dest, run| match dest {
+        let mut finite = true;
+        let written = walk::<IN, MAX_HIDDEN, OUT, W>(bytes, Trailer::Assumed, |_, _, dest, run| {
+            finite &= match dest {
                 Dest::InputLo => fill(&mut self.input_lo, run),
                 Dest::InputHi => fill(&mut self.input_hi, run),
                 Dest::OutputLo => fill(&mut self.output_lo, run),
                 Dest::OutputHi => fill(&mut self.output_hi, run),
                 Dest::Weights(i) => fill(self.weights.get_mut(i..).unwrap_or(&mut []), run),
-            });
+            }
+        });
+        // The checked bytes are borrowed, so they cannot have changed; a
+        // receive buffer handed over through `unsafe` (the MCU's bus
+        // driver) could, between the check and this write, which the hot
+        // swap does in different control periods. Never let that break the
+        // net's invariant (finite values, non-empty ranges).
+        let (ni, no) = (header.shape.inputs, header.shape.outputs);
+        let sound = finite
+            && tnet::check_ranges(
+                Field::InputLo,
+                prefix(&self.input_lo, ni),
+                prefix(&self.input_hi, ni),
+            )
+            .is_ok()
+            && tnet::check_ranges(
+                Field::OutputLo,
+                prefix(&self.output_lo, no),
+                prefix(&self.output_hi, no),
+            )
+            .is_ok();
         match written {
+            Ok(_) if !sound => {
+                self.clear();
+                Err(TnetError::Malformed)
+            }
             Ok(h) if h == header => {
                 self.shape = header.shape;
                 self.hidden_activation = header.hidden_activation;

@@ -211,7 +211,8 @@ impl<'a, const IN: usize, const H: usize, const OUT: usize, const W: usize>
         let dests: [&mut [f32]; 4] = [&mut lo_in, &mut hi_in, &mut lo_out, &mut hi_out];
         for (dst, span) in dests.into_iter().zip(&self.spans) {
             let end = span.start.saturating_add(span.count.saturating_mul(4));
-            fill(dst, self.bytes.get(span.start..end).unwrap_or(&[]));
+            // Finiteness was judged by the value scan.
+            let _finite = fill(dst, self.bytes.get(span.start..end).unwrap_or(&[]));
         }
         let (ni, no) = (self.header.shape.inputs, self.header.shape.outputs);
         tnet::check_ranges(Field::InputLo, prefix(&lo_in, ni), prefix(&hi_in, ni))?;
