@@ -199,12 +199,6 @@ fn word(c: &[u8]) -> u32 {
     }
 }
 
-/// The `f32`s of a little-endian byte run (postcard writes an `f32` as its
-/// four IEEE-754 bytes), in order.
-fn floats(bytes: &[u8]) -> impl Iterator<Item = f32> + '_ {
-    bytes.chunks_exact(4).map(|c| f32::from_bits(word(c)))
-}
-
 /// Index of the first NaN or ±∞ in a byte run of `f32`s: exponent bits all
 /// ones (a bit test instead of a float compare; same answer as `is_finite`).
 fn first_non_finite(bytes: &[u8]) -> Option<usize> {

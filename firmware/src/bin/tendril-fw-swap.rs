@@ -10,9 +10,10 @@
 //!
 //! `period <k> step <instr> slice <instr> <idle|working|swapped|rejected> infer <hex>×8`
 //!
-//! The QEMU test (`tests/tests/firmware_qemu.rs`) checks every line against
-//! host inference of the net that should be running and against the
-//! budget [`tendril_firmware::SWAP_PERIOD_BUDGET`].
+//! and at the end `stack_high_water <bytes>` (painted stack). The QEMU test
+//! (`tests/tests/firmware_qemu.rs`) checks every period line against host
+//! inference of the net that should be running and against the budget
+//! [`tendril_firmware::SWAP_PERIOD_BUDGET`].
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(not(target_os = "none"))]
@@ -24,7 +25,7 @@ fn main() {
 mod mcu {
     use core::fmt::Write;
     use core::hint::black_box;
-    use core::ptr::{read_volatile, write_volatile};
+    use core::ptr::{addr_of, read_volatile, write_volatile};
 
     use cortex_m_rt::entry;
     use cortex_m_semihosting::{debug, hio};
@@ -54,6 +55,39 @@ mod mcu {
     }
 
     static LOGGER: SemihostingLogger = SemihostingLogger;
+
+    extern "C" {
+        /// End of static RAM (.data/.bss/.uninit), from cortex-m-rt's link.x.
+        static __sheap: u32;
+        /// Initial stack pointer: top of RAM.
+        static _stack_start: u32;
+    }
+
+    const PAINT: u32 = 0x5AA5_C33C;
+
+    /// Fill the unused stack (from the end of statics up to just below the
+    /// current stack pointer) with a pattern; returns the painted floor.
+    fn paint_stack() -> usize {
+        let floor = addr_of!(__sheap) as usize;
+        let sp: usize;
+        unsafe { core::arch::asm!("mov {}, sp", out(reg) sp) };
+        let mut a = floor;
+        while a + 4 <= sp.saturating_sub(64) {
+            unsafe { write_volatile(a as *mut u32, PAINT) };
+            a += 4;
+        }
+        floor
+    }
+
+    /// Bytes of stack ever used: top of RAM minus the lowest overwritten word.
+    fn stack_high_water(floor: usize) -> usize {
+        let top = addr_of!(_stack_start) as usize;
+        let mut a = floor;
+        while a < top && unsafe { read_volatile(a as *const u32) } == PAINT {
+            a += 4;
+        }
+        top - a
+    }
 
     const SYST_CSR: *mut u32 = 0xE000_E010 as *mut u32;
     const SYST_RVR: *mut u32 = 0xE000_E014 as *mut u32;
@@ -92,23 +126,40 @@ mod mcu {
         if log::set_logger(&LOGGER).is_ok() {
             log::set_max_level(log::LevelFilter::Info);
         }
-        let Ok(mut out) = hio::hstdout() else {
-            debug::exit(debug::EXIT_FAILURE);
-            loop {}
+        let ok = match hio::hstdout() {
+            Ok(mut out) => run(RAM_NET, BLOBS, &mut out),
+            Err(()) => false,
         };
-        let mut ok = true;
+        debug::exit(if ok {
+            debug::EXIT_SUCCESS
+        } else {
+            debug::EXIT_FAILURE
+        });
+        #[allow(clippy::empty_loop)]
+        loop {}
+    }
+
+    /// The run; whether it completed.
+    fn run(
+        ram_net: &'static mut McuNet,
+        blobs: &'static mut [[u8; BLOB_LEN]; 4],
+        out: &mut hio::HostStream,
+    ) -> bool {
         let mut lens = [0usize; 4];
-        let blobs: &'static mut [[u8; BLOB_LEN]; 4] = BLOBS;
         for ((offer, buf), len) in Offer::ALL.iter().zip(blobs.iter_mut()).zip(&mut lens) {
             match swap_demo::offer_blob(*offer, buf) {
                 Ok(n) => *len = n,
                 Err(e) => {
                     let _ = writeln!(out, "error blob {}: {e}", offer.name());
-                    ok = false;
+                    return false;
                 }
             }
         }
         let blobs: &'static [[u8; BLOB_LEN]; 4] = blobs;
+        // Paint after making the blobs (the synthetic-net encoder keeps its
+        // weights on the stack), so the mark is the loop's: control steps,
+        // inference, swap slices, the logger, and this image's printing.
+        let floor = paint_stack();
         unsafe {
             write_volatile(SYST_RVR, 0x00FF_FFFF);
             write_volatile(SYST_CVR, 0);
@@ -131,25 +182,19 @@ mod mcu {
             s.outputs,
             s.macs()
         );
-        let limits = match swap_demo::limits() {
-            Ok(l) => l,
-            Err(_) => {
-                debug::exit(debug::EXIT_FAILURE);
-                loop {}
-            }
+        let Ok(limits) = swap_demo::limits() else {
+            let _ = writeln!(out, "error limits");
+            return false;
         };
         let want = (POSE_DIM, limits.n_tendons());
         let cfg = ControlConfig::new(limits);
-        let mut store = McuSlots::new(&DEFAULT_NET, RAM_NET);
+        let mut store = McuSlots::new(&DEFAULT_NET, ram_net);
         let mut swap = McuSwap::new();
         let mut state = ControlState::new(&cfg.limits, &[0.0; MAX_TENDONS], 0);
         for k in 1..=swap_demo::PERIODS {
-            for (i, offer) in Offer::ALL.iter().enumerate() {
+            for ((offer, blob), len) in Offer::ALL.iter().zip(blobs).zip(lens) {
                 if offer.period() == k {
-                    let blob = blobs
-                        .get(i)
-                        .and_then(|b| b.get(..lens.get(i).copied().unwrap_or(0)));
-                    let r = swap.offer(blob.unwrap_or(&[]), want);
+                    let r = swap.offer(blob.get(..len).unwrap_or(&[]), want);
                     let _ = writeln!(
                         out,
                         "offer {k} {} {}",
@@ -194,17 +239,12 @@ mod mcu {
                 instr(t_step),
                 instr(t_slice)
             );
-            write_hex(&mut out, &y);
+            write_hex(out, &y);
             let _ = writeln!(out);
         }
+        let _ = writeln!(out, "stack_high_water {}", stack_high_water(floor));
         let _ = writeln!(out, "done {}", swap_demo::PERIODS);
-        debug::exit(if ok {
-            debug::EXIT_SUCCESS
-        } else {
-            debug::EXIT_FAILURE
-        });
-        #[allow(clippy::empty_loop)]
-        loop {}
+        true
     }
 
     #[panic_handler]
