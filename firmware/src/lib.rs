@@ -8,10 +8,10 @@
 //! - [`command`]: the command stage's co-contraction shift (keeps the bend
 //!   when a target leaves the tension range);
 //! - [`swap`]: hot swap of the weights (flash default + one RAM slot on the MCU);
-//! - `vectors` and `synth` (cargo feature `harness`, off by default):
-//!   the test-vector format and runner shared by the MCU test image and the
-//!   host parity test, and a deterministic synthetic net; test harnesses,
-//!   not part of a controller build.
+//! - `vectors`, `synth` and `swap_demo` (cargo feature `harness`, off by
+//!   default): the test-vector format and runner shared by the MCU test image
+//!   and the host parity test, a deterministic synthetic net, and the hot-swap
+//!   run of `tendril-fw-swap`; test harnesses, not part of a controller build.
 #![no_std]
 #![deny(missing_docs)]
 // Panic freedom is checked, not promised: no unwrap/expect/panic/indexing
@@ -34,12 +34,16 @@
 extern crate std;
 
 #[cfg(test)]
+mod swap_tests;
+#[cfg(test)]
 mod tests;
 
 pub mod command;
 pub mod control;
 pub mod infer;
 pub mod swap;
+#[cfg(any(test, feature = "harness"))]
+pub mod swap_demo;
 #[cfg(any(test, feature = "harness"))]
 pub mod synth;
 #[cfg(any(test, feature = "harness"))]
@@ -50,7 +54,7 @@ pub use control::{
     Status, StepInput, StepOutput, Tensions, POSE_DIM,
 };
 pub use infer::infer;
-pub use swap::{FlashSlot, NetSlots, NetStore, SwapError};
+pub use swap::{FlashSlot, IncrementalSwap, NetSlots, NetStore, SwapError, SwapEvent};
 
 /// Capacity the MCU binary is built with: at most this many hidden units
 /// (`tendril_shared::MAX_HIDDEN`, the trainer's cap, so every exported net fits).
@@ -68,6 +72,23 @@ pub type McuNet = tendril_shared::IkNet;
 /// for hot-swapped updates.
 pub type McuSlots<'a> =
     FlashSlot<'a, POSE_DIM, MCU_MAX_HIDDEN, { tendril_shared::MAX_TENDONS }, MCU_WEIGHTS>;
+
+/// The MCU loop's hot swap: one bounded slice per control period
+/// (docs/design.md §5.3), for [`McuSlots`].
+pub type McuSwap<'b> =
+    IncrementalSwap<'b, POSE_DIM, MCU_MAX_HIDDEN, { tendril_shared::MAX_TENDONS }, MCU_WEIGHTS>;
+
+/// Bytes of hashing or value scanning per swap slice in the MCU loop: at
+/// ≈ 4.75 M4 instructions per hashed byte, ≈ 20,000 instructions, so a
+/// slice plus the control step stays inside [`SWAP_PERIOD_BUDGET`].
+pub const SWAP_SLICE_BYTES: usize = 4096;
+
+/// The instruction budget of one 1 kHz control period on a 100 MHz
+/// Cortex-M4F while a swap runs: the control step plus one swap slice.
+/// 80 % of the 100,000 instructions a period has at one instruction per
+/// cycle, leaving the rest for the bus driver and interrupts
+/// (docs/design.md §5.3).
+pub const SWAP_PERIOD_BUDGET: u64 = 80_000;
 
 mod default_net {
     use super::McuNet;

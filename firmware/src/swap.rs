@@ -1,8 +1,13 @@
-//! Hot swap of the running net (docs/design.md §5). A new blob is validated
-//! completely (structure, capacity, CRC, finite values, ranges, and the
-//! robot's input/output counts) before a single byte of any net is written,
-//! so a rejected blob changes nothing and the next control step runs on the
-//! old net.
+//! Hot swap of the running net (docs/design.md §5, §5.3). A new blob is
+//! validated completely (structure, capacity, CRC, finite values, ranges, and
+//! the robot's input/output counts) before a single byte of any net is
+//! written, so a rejected blob changes nothing and the next control step runs
+//! on the old net.
+//!
+//! Two ways in: [`NetStore::load`] checks and installs in one call (the
+//! host, tests, the vector run), and [`IncrementalSwap`] cuts the same work
+//! into one bounded slice per control period (the MCU loop: the check of a
+//! 64-unit update alone is longer than a 1 kHz period on a 100 MHz M4).
 //!
 //! Two stores, one contract ([`NetStore`]):
 //! - [`FlashSlot`], the MCU's: the default net is a `static` in flash
@@ -14,7 +19,9 @@
 //! - [`NetSlots`], the host controller's: two RAM buffers, decode into the
 //!   spare one, flip an index.
 
-use tendril_shared::{CascadeNet, NetHeader, TnetError};
+use core::task::Poll;
+
+use tendril_shared::{CascadeNet, CheckJob, Checked, NetHeader, TnetError};
 
 /// Why a blob was not swapped in.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
@@ -22,6 +29,10 @@ pub enum SwapError {
     /// The blob is not a valid `.tnet` for this capacity.
     #[error("weight blob rejected: {0}")]
     Decode(#[from] TnetError),
+    /// A newer blob arrived before this one was checked; this one was
+    /// dropped unwritten ([`IncrementalSwap::offer`]).
+    #[error("weight blob superseded by a newer one before it was checked")]
+    Superseded,
     /// Valid, but its shape does not fit the robot.
     #[error("weight blob has {inputs} inputs and {outputs} outputs, the controller needs {want_inputs} and {want_outputs}")]
     ShapeMismatch {
@@ -72,7 +83,21 @@ pub trait NetStore<const IN: usize, const H: usize, const OUT: usize, const W: u
     /// Validate `blob` completely and make it the running net. `want` =
     /// required (inputs, outputs). On any error the running net is
     /// unchanged.
-    fn load(&mut self, blob: &[u8], want: (usize, usize)) -> Result<(), SwapError>;
+    fn load(&mut self, blob: &[u8], want: (usize, usize)) -> Result<(), SwapError> {
+        let result = CascadeNet::<IN, H, OUT, W>::check(blob)
+            .map_err(SwapError::from)
+            .and_then(|checked| {
+                check_want(checked.header(), want)?;
+                self.install(&checked)
+            });
+        log_result(&result, self.active().shape());
+        result
+    }
+
+    /// Write a completely checked net (whose shape suits the robot) and make
+    /// it the running net: the last step of [`NetStore::load`] and of an
+    /// [`IncrementalSwap`]. Bounded work (one parse of the blob, no check).
+    fn install(&mut self, checked: &Checked<'_>) -> Result<(), SwapError>;
 
     /// Go back to the built-in net (for [`FlashSlot`], the flash default;
     /// a store without one keeps its running net). Returns whether the
@@ -119,15 +144,6 @@ impl<'a, const IN: usize, const H: usize, const OUT: usize, const W: usize>
     pub fn running_ram(&self) -> bool {
         self.on_ram
     }
-
-    fn try_load(&mut self, blob: &[u8], want: (usize, usize)) -> Result<(), SwapError> {
-        let checked = CascadeNet::<IN, H, OUT, W>::check(blob)?;
-        check_want(checked.header(), want)?;
-        self.on_ram = false;
-        self.ram.decode_checked(&checked)?;
-        self.on_ram = true;
-        Ok(())
-    }
 }
 
 impl<const IN: usize, const H: usize, const OUT: usize, const W: usize> NetStore<IN, H, OUT, W>
@@ -141,10 +157,11 @@ impl<const IN: usize, const H: usize, const OUT: usize, const W: usize> NetStore
         }
     }
 
-    fn load(&mut self, blob: &[u8], want: (usize, usize)) -> Result<(), SwapError> {
-        let result = self.try_load(blob, want);
-        log_result(&result, self.active().shape());
-        result
+    fn install(&mut self, checked: &Checked<'_>) -> Result<(), SwapError> {
+        self.on_ram = false;
+        self.ram.decode_checked(checked)?;
+        self.on_ram = true;
+        Ok(())
     }
 
     fn revert(&mut self) -> bool {
@@ -194,19 +211,7 @@ impl<const IN: usize, const H: usize, const OUT: usize, const W: usize> NetSlots
     /// `want` = required (inputs, outputs), checked before decoding; on any
     /// error the active net is unchanged.
     pub fn load(&mut self, blob: &[u8], want: (usize, usize)) -> Result<(), SwapError> {
-        let result = self.try_load(blob, want);
-        log_result(&result, self.active().shape());
-        result
-    }
-
-    fn try_load(&mut self, blob: &[u8], want: (usize, usize)) -> Result<(), SwapError> {
-        let checked = CascadeNet::<IN, H, OUT, W>::check(blob)?;
-        check_want(checked.header(), want)?;
-        let [a, b] = &mut self.slots;
-        let spare = if self.active == 0 { b } else { a };
-        spare.decode_checked(&checked)?;
-        self.active = 1 - self.active.min(1);
-        Ok(())
+        NetStore::load(self, blob, want)
     }
 }
 
@@ -217,11 +222,118 @@ impl<const IN: usize, const H: usize, const OUT: usize, const W: usize> NetStore
         NetSlots::active(self)
     }
 
-    fn load(&mut self, blob: &[u8], want: (usize, usize)) -> Result<(), SwapError> {
-        NetSlots::load(self, blob, want)
+    fn install(&mut self, checked: &Checked<'_>) -> Result<(), SwapError> {
+        let [a, b] = &mut self.slots;
+        let spare = if self.active == 0 { b } else { a };
+        spare.decode_checked(checked)?;
+        self.active = 1 - self.active.min(1);
+        Ok(())
     }
 
     fn revert(&mut self) -> bool {
         false
+    }
+}
+
+/// What one [`IncrementalSwap::slice`] did.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SwapEvent {
+    /// No update in progress; nothing done.
+    Idle,
+    /// One slice of the check done; the old net keeps running.
+    Working,
+    /// The update was written and is the running net from the next control
+    /// step on.
+    Swapped,
+    /// The update was refused (the old net keeps running); the job is over.
+    Rejected(SwapError),
+}
+
+/// An update being checked.
+#[derive(Clone, Copy, Debug)]
+struct Job<'b, const IN: usize, const H: usize, const OUT: usize, const W: usize> {
+    check: CheckJob<'b, IN, H, OUT, W>,
+    want: (usize, usize),
+    /// The check finished in an earlier slice: this slice installs.
+    checked: bool,
+}
+
+/// Hot swap without a missed period (docs/design.md §5.3): the check of an
+/// offered blob ([`CheckJob`]) runs one bounded slice per control period
+/// while the old net keeps running, and the accepted net is written and
+/// selected in a slice of its own, between two control steps, so every step
+/// runs either the old net or the new one, never a mix. A blob that fails
+/// anywhere ends the job and leaves the old net running.
+///
+/// A second blob offered while one is in progress supersedes it: the first
+/// is dropped unwritten ([`SwapError::Superseded`]) and the check starts
+/// over on the second (the newest net the sender meant wins; nothing of the
+/// first was written, so there is nothing to undo).
+///
+/// The blob is borrowed for the whole job (`'b`): the bus driver's receive
+/// buffer, which must not change until the job ends.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct IncrementalSwap<'b, const IN: usize, const H: usize, const OUT: usize, const W: usize> {
+    job: Option<Job<'b, IN, H, OUT, W>>,
+}
+
+impl<'b, const IN: usize, const H: usize, const OUT: usize, const W: usize>
+    IncrementalSwap<'b, IN, H, OUT, W>
+{
+    /// No update in progress.
+    pub const fn new() -> Self {
+        IncrementalSwap { job: None }
+    }
+
+    /// Start swapping in `blob` for a robot that needs `want` = (inputs,
+    /// outputs). No work yet (the next [`IncrementalSwap::slice`] does the
+    /// first). Returns [`SwapError::Superseded`] if this replaced a job in
+    /// progress (its blob is no longer borrowed).
+    pub fn offer(&mut self, blob: &'b [u8], want: (usize, usize)) -> Result<(), SwapError> {
+        let superseded = self.job.is_some();
+        self.job = Some(Job {
+            check: CheckJob::new(blob),
+            want,
+            checked: false,
+        });
+        if superseded {
+            log::warn!("{}; checking the newer blob", SwapError::Superseded);
+            Err(SwapError::Superseded)
+        } else {
+            Ok(())
+        }
+    }
+
+    /// `true` while a blob is being checked (its buffer is still borrowed).
+    pub const fn busy(&self) -> bool {
+        self.job.is_some()
+    }
+
+    /// One slice of work, between two control steps: up to `budget` bytes
+    /// of hashing or value scanning (or the structure, the ranges, or the
+    /// final write into `store`, each one bounded by the capacity).
+    pub fn slice<S: NetStore<IN, H, OUT, W>>(&mut self, store: &mut S, budget: usize) -> SwapEvent {
+        let Some(job) = self.job.as_mut() else {
+            return SwapEvent::Idle;
+        };
+        let result = match job.check.advance(budget) {
+            Poll::Pending => return SwapEvent::Working,
+            Poll::Ready(Ok(_)) if !job.checked => {
+                // Checked in this slice: write in the next one, so no slice
+                // does the last check step and the write.
+                job.checked = true;
+                return SwapEvent::Working;
+            }
+            Poll::Ready(Ok(checked)) => {
+                check_want(checked.header(), job.want).and_then(|()| store.install(&checked))
+            }
+            Poll::Ready(Err(e)) => Err(SwapError::from(e)),
+        };
+        self.job = None;
+        log_result(&result, store.active().shape());
+        match result {
+            Ok(()) => SwapEvent::Swapped,
+            Err(e) => SwapEvent::Rejected(e),
+        }
     }
 }

@@ -104,10 +104,22 @@ pub fn build_mcu_binary(
     target_dir: &Path,
     label: &str,
 ) -> Result<PathBuf, ParityError> {
+    build_mcu_bin(root, "tendril-fw", net, target_dir, label)
+}
+
+/// [`build_mcu_binary`] for the firmware binary `bin` (`tendril-fw`, or the
+/// hot-swap run `tendril-fw-swap`); the copy is named `<bin>-<label>`.
+pub fn build_mcu_bin(
+    root: &Path,
+    bin: &str,
+    net: Option<&Path>,
+    target_dir: &Path,
+    label: &str,
+) -> Result<PathBuf, ParityError> {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let mut cmd = Command::new(cargo);
     cmd.args(["build", "-p", "tendril-firmware", "--features", "harness"])
-        .args(["--bin", "tendril-fw"])
+        .args(["--bin", bin])
         .args(["--release", "--target", TARGET])
         .env("CARGO_TARGET_DIR", target_dir)
         .current_dir(root);
@@ -123,8 +135,8 @@ pub fn build_mcu_binary(
             "cargo build of the MCU binary failed ({status})"
         )));
     }
-    let elf = target_dir.join(TARGET).join("release").join("tendril-fw");
-    let copy = target_dir.join(format!("tendril-fw-{label}"));
+    let elf = target_dir.join(TARGET).join("release").join(bin);
+    let copy = target_dir.join(format!("{bin}-{label}"));
     std::fs::copy(&elf, &copy)
         .map_err(|e| ParityError::Run(format!("copying {}: {e}", elf.display())))?;
     Ok(copy)

@@ -34,7 +34,7 @@ mod format_tests;
 pub use activation::Activation;
 pub use capacity::{IkNet, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS, POSE_DIM};
 pub use limits::{CoContraction, LimitsError, TendonLimits};
-pub use net::{weight_capacity, CascadeNet, Checked, NetHeader, Row};
+pub use net::{weight_capacity, CascadeNet, CheckJob, Checked, NetHeader, Row};
 #[cfg(feature = "std")]
 pub use tnet::encode_to_vec;
 pub use tnet::{encode, encoded_len, Shape, TnetError, TnetView};

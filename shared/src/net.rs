@@ -17,6 +17,9 @@
 
 use crate::tnet::{self, Activation, Field, Reader, Shape, TnetError, TnetView};
 
+mod sliced;
+pub use sliced::CheckJob;
+
 /// Zero slots after the last row: the inference rounds every row's dot
 /// product up to a multiple of 8 terms, reading up to 7 entries past the row.
 pub const ROW_PAD: usize = 7;
@@ -196,12 +199,6 @@ fn word(c: &[u8]) -> u32 {
     }
 }
 
-/// The `f32`s of a little-endian byte run (postcard writes an `f32` as its
-/// four IEEE-754 bytes), in order.
-fn floats(bytes: &[u8]) -> impl Iterator<Item = f32> + '_ {
-    bytes.chunks_exact(4).map(|c| f32::from_bits(word(c)))
-}
-
 /// Index of the first NaN or ±∞ in a byte run of `f32`s: exponent bits all
 /// ones (a bit test instead of a float compare; same answer as `is_finite`).
 fn first_non_finite(bytes: &[u8]) -> Option<usize> {
@@ -211,14 +208,41 @@ fn first_non_finite(bytes: &[u8]) -> Option<usize> {
 }
 
 /// Store the byte run's `f32`s at the start of `dst` (as many as fit: the
-/// capacity was checked before; this keeps the code panic-free).
-fn fill(dst: &mut [f32], bytes: &[u8]) {
-    for (d, v) in dst.iter_mut().zip(floats(bytes)) {
-        *d = v;
+/// capacity was checked before; this keeps the code panic-free); returns
+/// whether every stored value is finite.
+///
+/// The finiteness test rides along for two reasons. It keeps the net's
+/// invariant even if a borrowed receive buffer changed between the check
+/// and the write (the hot swap checks and writes in different control
+/// periods, docs/design.md §5.3). And it keeps the loop a loop of unaligned
+/// word loads and stores, under 1 M4 instruction per byte whatever the
+/// alignment: a plain copy loop becomes a `memcpy` call, whose path for a
+/// misaligned source (a run of a `.tnet` starts at any byte offset) costs
+/// about 5 per byte.
+fn fill(dst: &mut [f32], bytes: &[u8]) -> bool {
+    let mut special = 0u32;
+    for (d, c) in dst.iter_mut().zip(bytes.chunks_exact(4)) {
+        let w = word(c);
+        special |= u32::from(w & 0x7f80_0000 == 0x7f80_0000);
+        *d = f32::from_bits(w);
     }
+    special == 0
 }
 
-/// Parse the whole file — header, every array, and (if `crc`) the CRC —
+/// What [`walk`] checks after the last array.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Trailer {
+    /// Four bytes that match the CRC-32 of everything before them.
+    Crc,
+    /// Exactly four bytes, their value not judged yet (the incremental
+    /// check, [`CheckJob`], hashes the body in later slices).
+    Length,
+    /// Exactly four bytes or [`TnetError::Malformed`] (the write after a
+    /// complete check).
+    Assumed,
+}
+
+/// Parse the whole file — header, every array, and the trailer —
 /// calling `visit(field, index_in_field, destination, bytes)` for each run
 /// of consecutive `f32`s, in file order: each range array whole, and each
 /// weight row as two runs (bias and inputs; earlier hidden units), because
@@ -226,7 +250,7 @@ fn fill(dst: &mut [f32], bytes: &[u8]) {
 /// structure and capacity, not values (the visitor does).
 fn walk<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
     bytes: &[u8],
-    crc: bool,
+    trailer: Trailer,
     mut visit: impl FnMut(Field, usize, Dest, &[u8]),
 ) -> Result<NetHeader, TnetError> {
     let mut r = Reader::new(bytes);
@@ -277,10 +301,13 @@ fn walk<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
         let start = out_base + o * (1 + IN + nh);
         row(&mut r, Field::OutputWeights, file_at, start, nh)?;
     }
-    if crc {
-        tnet::check_trailer(bytes, r.remaining())?;
-    } else if r.remaining().len() != 4 {
-        return Err(TnetError::Malformed);
+    match trailer {
+        Trailer::Crc => tnet::check_trailer(bytes, r.remaining())?,
+        Trailer::Length => {
+            tnet::stored_crc(r.remaining())?;
+        }
+        Trailer::Assumed if r.remaining().len() != 4 => return Err(TnetError::Malformed),
+        Trailer::Assumed => {}
     }
     Ok(NetHeader {
         shape,
@@ -330,23 +357,25 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
         let mut lo_out = [0.0f32; OUT];
         let mut hi_out = [0.0f32; OUT];
         let mut first_bad: Option<TnetError> = None;
-        let header = walk::<IN, MAX_HIDDEN, OUT, W>(bytes, true, |field, at, dest, run| {
-            if first_bad.is_none() {
-                if let Some(i) = first_non_finite(run) {
-                    first_bad = Some(TnetError::NonFinite {
-                        field,
-                        index: at + i,
-                    });
+        let header =
+            walk::<IN, MAX_HIDDEN, OUT, W>(bytes, Trailer::Crc, |field, at, dest, run| {
+                if first_bad.is_none() {
+                    if let Some(i) = first_non_finite(run) {
+                        first_bad = Some(TnetError::NonFinite {
+                            field,
+                            index: at + i,
+                        });
+                    }
                 }
-            }
-            match dest {
-                Dest::InputLo => fill(&mut lo_in, run),
-                Dest::InputHi => fill(&mut hi_in, run),
-                Dest::OutputLo => fill(&mut lo_out, run),
-                Dest::OutputHi => fill(&mut hi_out, run),
-                Dest::Weights(_) => {}
-            }
-        })?;
+                // Finiteness is judged above, in file order.
+                let _finite = match dest {
+                    Dest::InputLo => fill(&mut lo_in, run),
+                    Dest::InputHi => fill(&mut hi_in, run),
+                    Dest::OutputLo => fill(&mut lo_out, run),
+                    Dest::OutputHi => fill(&mut hi_out, run),
+                    Dest::Weights(_) => true,
+                };
+            })?;
         // Only now that the CRC vouches for the bytes, judge the values.
         if let Some(e) = first_bad {
             return Err(e);
@@ -405,14 +434,40 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
             });
         }
         self.clear();
-        let written = walk::<IN, MAX_HIDDEN, OUT, W>(bytes, false, |_, _, dest, run| match dest {
-            Dest::InputLo => fill(&mut self.input_lo, run),
-            Dest::InputHi => fill(&mut self.input_hi, run),
-            Dest::OutputLo => fill(&mut self.output_lo, run),
-            Dest::OutputHi => fill(&mut self.output_hi, run),
-            Dest::Weights(i) => fill(self.weights.get_mut(i..).unwrap_or(&mut []), run),
+        let mut finite = true;
+        let written = walk::<IN, MAX_HIDDEN, OUT, W>(bytes, Trailer::Assumed, |_, _, dest, run| {
+            finite &= match dest {
+                Dest::InputLo => fill(&mut self.input_lo, run),
+                Dest::InputHi => fill(&mut self.input_hi, run),
+                Dest::OutputLo => fill(&mut self.output_lo, run),
+                Dest::OutputHi => fill(&mut self.output_hi, run),
+                Dest::Weights(i) => fill(self.weights.get_mut(i..).unwrap_or(&mut []), run),
+            }
         });
+        // The checked bytes are borrowed, so they cannot have changed; a
+        // receive buffer handed over through `unsafe` (the MCU's bus
+        // driver) could, between the check and this write, which the hot
+        // swap does in different control periods. Never let that break the
+        // net's invariant (finite values, non-empty ranges).
+        let (ni, no) = (header.shape.inputs, header.shape.outputs);
+        let sound = finite
+            && tnet::check_ranges(
+                Field::InputLo,
+                prefix(&self.input_lo, ni),
+                prefix(&self.input_hi, ni),
+            )
+            .is_ok()
+            && tnet::check_ranges(
+                Field::OutputLo,
+                prefix(&self.output_lo, no),
+                prefix(&self.output_hi, no),
+            )
+            .is_ok();
         match written {
+            Ok(_) if !sound => {
+                self.clear();
+                Err(TnetError::Malformed)
+            }
             Ok(h) if h == header => {
                 self.shape = header.shape;
                 self.hidden_activation = header.hidden_activation;

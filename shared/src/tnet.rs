@@ -552,27 +552,33 @@ pub(crate) fn header(r: &mut Reader<'_>) -> Result<(Shape, Activation, Activatio
     ))
 }
 
-/// Check the CRC trailer after the last field: exactly four bytes must
-/// remain and match the CRC-32 of `all[..all.len() - 4]`.
-pub(crate) fn check_trailer(all: &[u8], rest: &[u8]) -> Result<(), TnetError> {
-    match rest.len() {
-        0..=3 => return Err(TnetError::Truncated),
-        4 => {}
-        n => return Err(TnetError::TrailingBytes { extra: n - 4 }),
+/// The CRC stored in the trailer after the last field: exactly four bytes
+/// must remain ([`TnetError::Truncated`] / [`TnetError::TrailingBytes`]).
+pub(crate) fn stored_crc(rest: &[u8]) -> Result<u32, TnetError> {
+    match rest {
+        [a, b, c, d] => Ok(u32::from_le_bytes([*a, *b, *c, *d])),
+        [_, _, _, _, extra @ ..] => Err(TnetError::TrailingBytes { extra: extra.len() }),
+        _ => Err(TnetError::Truncated),
     }
-    let body = all
-        .get(..all.len().saturating_sub(4))
-        .ok_or(TnetError::Truncated)?;
-    let stored = match rest {
-        [a, b, c, d] => u32::from_le_bytes([*a, *b, *c, *d]),
-        _ => return Err(TnetError::Truncated),
-    };
-    let mut crc = Crc32::new();
-    crc.update(body);
-    let computed = crc.finish();
+}
+
+/// Compare the stored CRC with the one computed over the body.
+pub(crate) fn crc_matches(stored: u32, computed: u32) -> Result<(), TnetError> {
     if stored == computed {
         Ok(())
     } else {
         Err(TnetError::CrcMismatch { stored, computed })
     }
+}
+
+/// Check the CRC trailer after the last field: exactly four bytes must
+/// remain and match the CRC-32 of `all[..all.len() - 4]`.
+pub(crate) fn check_trailer(all: &[u8], rest: &[u8]) -> Result<(), TnetError> {
+    let stored = stored_crc(rest)?;
+    let body = all
+        .get(..all.len().saturating_sub(4))
+        .ok_or(TnetError::Truncated)?;
+    let mut crc = Crc32::new();
+    crc.update(body);
+    crc_matches(stored, crc.finish())
 }

@@ -14,6 +14,11 @@
 //! blob). A second test builds the binary with `TENDRIL_FW_NET` pointing at
 //! another file and checks that net is the one that runs.
 //!
+//! A third test runs the hot-swap image `tendril-fw-swap` (docs/design.md
+//! §5.3): the largest net the MCU accepts (7-64-8) swapped in while the
+//! control loop runs, every period's instruction count against the budget
+//! and every period's inference against the net that should be running.
+//!
 //! Without `qemu-system-arm` or the target these tests fail with a
 //! one-line "install …" message: a test that cannot run does not pass.
 //! `scripts/test` checks both first and, when one is missing and cannot be
@@ -25,8 +30,9 @@ use std::sync::Mutex;
 use std::time::Duration;
 
 use tendril::firmware_parity::{self as parity, ParityError};
+use tendril_firmware::swap_demo::{self, Offer, BLOB_LEN, FLASH_SEED};
 use tendril_firmware::vectors::{self, HAS_SETPOINT, SWAP_GOOD, SWAP_REVERT};
-use tendril_firmware::{infer, McuNet};
+use tendril_firmware::{infer, McuNet, SWAP_PERIOD_BUDGET};
 use tendril_tests::workspace_root;
 
 /// Builds share one target directory (and the ELF path): one at a time.
@@ -164,4 +170,147 @@ fn tendril_fw_net_selects_the_flash_net() {
     let other = workspace_root().join("firmware/vectors/swap.tnet");
     let out = check_parity(&other, true, "env");
     assert!(out.lines().any(|l| l == "net 7 12 4 242"), "{out}");
+}
+
+/// One `period` line of the hot-swap image.
+struct Period {
+    k: u32,
+    step: u64,
+    slice: u64,
+    event: String,
+    infer: Vec<f32>,
+}
+
+fn parse_period(line: &str) -> Option<Period> {
+    let w: Vec<&str> = line.split(' ').collect();
+    match w.as_slice() {
+        ["period", k, "step", step, "slice", slice, event, "infer", values @ ..] => Some(Period {
+            k: k.parse().ok()?,
+            step: step.parse().ok()?,
+            slice: slice.parse().ok()?,
+            event: (*event).to_string(),
+            infer: values.iter().map(|v| bits(v)).collect(),
+        }),
+        _ => None,
+    }
+}
+
+fn demo_net(seed: u64) -> Box<McuNet> {
+    let mut buf = vec![0u8; BLOB_LEN];
+    let n = swap_demo::net_blob(seed, &mut buf).expect("synthetic 7-64-8 net");
+    Box::new(McuNet::decode(&buf[..n]).expect("synthetic net decodes"))
+}
+
+#[test]
+fn hot_swap_of_the_largest_net_misses_no_period() {
+    require_prerequisites();
+    let root = workspace_root();
+    let base = std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join("target"))
+        .join("thumbv7em-parity");
+    // The image runs the 7-64-8 net of FLASH_SEED from flash.
+    std::fs::create_dir_all(&base).expect("target dir");
+    let flash_file = base.join("swap-flash.tnet");
+    let mut buf = vec![0u8; BLOB_LEN];
+    let n = swap_demo::net_blob(FLASH_SEED, &mut buf).expect("flash net");
+    std::fs::write(&flash_file, &buf[..n]).expect("write the flash net");
+    let elf = {
+        let _guard = BUILD.lock().unwrap_or_else(|e| e.into_inner());
+        parity::build_mcu_bin(&root, "tendril-fw-swap", Some(&flash_file), &base, "swap")
+            .unwrap_or_else(|e| panic!("{e}"))
+    };
+    let (ok, out) =
+        parity::run_qemu(&elf, Duration::from_secs(120)).unwrap_or_else(|e| panic!("{e}"));
+    assert!(ok, "swap image exited with failure; output:\n{out}");
+    let flash = demo_net(FLASH_SEED);
+    let first = demo_net(Offer::First.seed());
+    let last = demo_net(Offer::Last.seed());
+    let s = flash.shape();
+    assert_eq!((s.inputs, s.hidden, s.outputs), (7, 64, 8));
+    assert!(
+        out.lines().any(|l| l == format!("net 7 64 8 {}", s.macs())),
+        "{out}"
+    );
+    assert!(
+        out.lines()
+            .any(|l| l == format!("offer {} last superseded-previous", Offer::Last.period())),
+        "the last blob did not supersede the one in progress:\n{out}"
+    );
+
+    let periods: Vec<Period> = out.lines().filter_map(parse_period).collect();
+    assert_eq!(periods.len(), swap_demo::PERIODS as usize, "{out}");
+    // Which net must run each period: the flash net, then the first update
+    // from the period after its swap slice, then the last one. The
+    // corrupted blob and the superseded one must never run.
+    let mut running: &McuNet = &flash;
+    let mut swaps = Vec::new();
+    let mut rejections = Vec::new();
+    let (mut max_step, mut max_slice, mut max_total) = (0, 0, 0);
+    for p in &periods {
+        let total = p.step + p.slice;
+        assert!(
+            total <= SWAP_PERIOD_BUDGET,
+            "period {}: control step {} + swap slice {} = {total} instructions, over the budget {SWAP_PERIOD_BUDGET}",
+            p.k,
+            p.step,
+            p.slice
+        );
+        (max_step, max_slice, max_total) = (
+            max_step.max(p.step),
+            max_slice.max(p.slice),
+            max_total.max(total),
+        );
+        let pose = swap_demo::pose(p.k);
+        let want = infer(running, &pose);
+        assert_eq!(p.infer.len(), 8);
+        for (o, (g, w)) in p.infer.iter().zip(&want).enumerate() {
+            assert!(
+                close(*g, *w),
+                "period {} output {o}: MCU {g}, expected {w}",
+                p.k
+            );
+        }
+        match p.event.as_str() {
+            "swapped" => {
+                running = match swaps.len() {
+                    0 => &first,
+                    1 => &last,
+                    _ => panic!("period {}: a third swap", p.k),
+                };
+                swaps.push(p.k);
+            }
+            "rejected" => rejections.push(p.k),
+            "working" | "idle" => {}
+            other => panic!("period {}: unknown event {other}", p.k),
+        }
+    }
+    // The nets differ, so the inference check tells them apart.
+    let pose = swap_demo::pose(1);
+    assert_ne!(infer(&flash, &pose), infer(&first, &pose));
+    assert_ne!(infer(&first, &pose), infer(&last, &pose));
+    // The schedule: the first update lands before the corrupted blob is
+    // offered, the corrupted one is refused before the next offer, and the
+    // last one lands after it was offered; each check took several periods
+    // (the work really is spread out).
+    assert_eq!(swaps.len(), 2, "swaps at {swaps:?}");
+    assert_eq!(rejections.len(), 1, "rejections at {rejections:?}");
+    assert!(
+        swaps[0] >= Offer::First.period() + 3 && swaps[0] < Offer::Corrupted.period(),
+        "{swaps:?}"
+    );
+    assert!(
+        rejections[0] >= Offer::Corrupted.period() + 2
+            && rejections[0] < Offer::Superseded.period()
+    );
+    assert!(swaps[1] >= Offer::Last.period() + 3, "{swaps:?}");
+    let idle_step = periods
+        .iter()
+        .filter(|p| p.event == "idle")
+        .map(|p| p.step)
+        .max()
+        .unwrap_or(0);
+    eprintln!(
+        "hot swap 7-64-8 under QEMU: swaps at periods {swaps:?}, rejection at {rejections:?}; per period max: control step {max_step}, swap slice {max_slice}, step + slice {max_total} instructions (budget {SWAP_PERIOD_BUDGET}); control step alone when idle: max {idle_step}"
+    );
 }

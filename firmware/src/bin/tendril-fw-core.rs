@@ -4,10 +4,15 @@
 //! benchmarks): the built-in net in flash, one RAM slot for hot swaps, the
 //! control step, the `.tnet` decoder and the semihosting logger.
 //!
-//! The "hardware" is three mailboxes in RAM (setpoint in, tension command
-//! out, weight update in) that a real board would fill from its bus; here
-//! nothing fills them, so the loop runs `STEPS` steps on an empty setpoint
-//! (the watchdog holds) and exits 0 through semihosting.
+//! The "hardware" is four mailboxes in RAM (setpoint in, tension command
+//! out, weight update in, update busy out) that a real board would fill from
+//! its bus; here nothing fills them, so the loop runs `STEPS` steps on an
+//! empty setpoint (the watchdog holds) and exits 0 through semihosting.
+//!
+//! Every period runs the control step, then one slice of the hot swap
+//! ([`tendril_firmware::McuSwap`], docs/design.md §5.3): an offered update
+//! is checked a bounded slice per period while the running net keeps
+//! running, and written and selected in a slice of its own.
 //!
 //! `cargo build -p tendril-firmware --bin tendril-fw-core --release --target thumbv7em-none-eabihf`
 //! then `llvm-size` on `target/thumbv7em-none-eabihf/release/tendril-fw-core`.
@@ -36,7 +41,9 @@ mod mcu {
     use cortex_m_rt::entry;
     use cortex_m_semihosting::{debug, hio};
     use tendril_firmware::control::{control_step, ControlConfig, ControlState, Setpoint};
-    use tendril_firmware::{McuNet, McuSlots, NetStore, StepInput, DEFAULT_NET, POSE_DIM};
+    use tendril_firmware::{
+        McuNet, McuSlots, McuSwap, NetStore, StepInput, DEFAULT_NET, POSE_DIM, SWAP_SLICE_BYTES,
+    };
     use tendril_shared::{CoContraction, TendonLimits, MAX_TENDONS};
 
     /// Steps to run before exiting (a real controller loops forever).
@@ -48,8 +55,13 @@ mod mcu {
     static mut SETPOINT: (u64, [f32; POSE_DIM]) = (0, [0.0; POSE_DIM]);
     /// Command mailbox.
     static mut COMMAND: [f32; MAX_TENDONS] = [0.0; MAX_TENDONS];
-    /// Weight-update mailbox: address and length of a received blob (0 = none).
+    /// Weight-update mailbox: address and length of a received blob (0 =
+    /// none). The loop takes it (and clears it) at the start of a period.
     static mut UPDATE: (usize, usize) = (0, 0);
+    /// `true` while the last blob taken is still being checked: the bus
+    /// driver keeps its buffer unchanged until this reads `false` or the
+    /// mailbox has taken a newer blob (which supersedes it).
+    static mut UPDATE_BUSY: bool = false;
 
     /// `log` records on the semihosting console.
     struct SemihostingLogger;
@@ -85,6 +97,7 @@ mod mcu {
             Ok(limits) => {
                 let cfg = ControlConfig::new(limits);
                 let mut store = McuSlots::new(&DEFAULT_NET, &mut *RAM_NET);
+                let mut swap = McuSwap::new();
                 let mut state = ControlState::new(&cfg.limits, &[0.0; MAX_TENDONS], 0);
                 for k in 1..=STEPS {
                     // SAFETY: single-threaded; the mailboxes are plain data
@@ -97,11 +110,12 @@ mod mcu {
                         )
                     };
                     if update.1 != 0 {
-                        // SAFETY: the bus driver guarantees the blob stays
-                        // valid until the mailbox is cleared below.
-                        let blob =
+                        // SAFETY: the bus driver keeps the blob unchanged
+                        // while UPDATE_BUSY reads true (or until it hands
+                        // over a newer one), see the mailbox.
+                        let blob: &'static [u8] =
                             unsafe { core::slice::from_raw_parts(update.0 as *const u8, update.1) };
-                        let _ = store.load(blob, (POSE_DIM, n));
+                        let _ = swap.offer(blob, (POSE_DIM, n));
                         unsafe { write_volatile(addr_of_mut!(UPDATE), (0, 0)) };
                     }
                     let input = StepInput {
@@ -116,6 +130,10 @@ mod mcu {
                     let (next, out) = control_step(&cfg, store.active(), &state, &input);
                     state = next;
                     unsafe { write_volatile(addr_of_mut!(COMMAND), out.command) };
+                    // Between this step and the next: one bounded slice of
+                    // an update in progress (the outcome is logged).
+                    let _ = swap.slice(&mut store, SWAP_SLICE_BYTES);
+                    unsafe { write_volatile(addr_of_mut!(UPDATE_BUSY), swap.busy()) };
                 }
                 true
             }
