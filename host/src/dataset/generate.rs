@@ -17,7 +17,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 
 use super::io::ColumnRange;
-use super::sample::{snake_order, Sampler};
+use super::sample::{anchor_groups, snake_order, Sampler};
 use super::Dataset;
 use crate::statics::{Solution, SolveError, Statics, WarmStart};
 
@@ -105,6 +105,7 @@ where
 {
     let max = statics.robot().max_tensions();
     let min = statics.robot().min_tensions();
+    let groups = anchor_groups(statics.robot());
     let width = max.len() + 7;
     let mut tally = Tally {
         lo: vec![f64::INFINITY; width],
@@ -122,9 +123,9 @@ where
         }
         let len = BLOCK.min(opts.samples - done);
         done += len;
-        let tensions = opts
-            .sampler
-            .draw_between(len, &min, &max, block_seed(opts.seed, b));
+        let tensions =
+            opts.sampler
+                .draw_grouped(len, &min, &max, &groups, block_seed(opts.seed, b));
         let order = snake_order(&tensions, &max, SNAKE_CELLS);
         let outcomes = solve_batch_with(statics, &tensions, &order, &bar, stop, |o| match o {
             Outcome::Solved(s) => Ok((s.pose(), false)),

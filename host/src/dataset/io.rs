@@ -273,6 +273,11 @@ pub struct Sidecar {
     pub robot_name: String,
     /// Sampler name (`adjacent` or `uniform`).
     pub sampler: String,
+    /// The adjacent sampler's tendon groups (one per anchor, each in ring
+    /// order; two neighbours of each pull in every sample); empty for
+    /// `uniform`, and in sidecars written before it was recorded.
+    #[serde(default)]
+    pub sampler_groups: Vec<Vec<usize>>,
     /// Random seed.
     pub seed: u64,
     /// Samples asked for.

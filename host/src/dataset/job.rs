@@ -18,6 +18,7 @@ use sha2::{Digest, Sha256};
 use super::disk::{free_bytes, parent_dir, same_file};
 use super::generate::{column_ranges, generate_rows, GenerateOptions, StreamError};
 use super::io::{RowWriter, MAX_VALUE_BYTES};
+use super::sample::anchor_groups;
 use super::split::{test_mask, MinMax, Ranges, SPLIT_SEED, TEST_FRACTION};
 use super::{DatasetError, Sampler, Sidecar};
 use crate::robot::{Robot, RobotError};
@@ -310,6 +311,7 @@ pub fn generate(
         robot_sha256: hex(&Sha256::digest(source.as_bytes())),
         robot_name: robot.name.clone(),
         sampler: sampler.name().into(),
+        sampler_groups: sampler_groups(sampler, &robot),
         seed: req.seed,
         requested: req.samples,
         count: tally.kept,
@@ -423,9 +425,31 @@ pub fn is_up_to_date(req: &GenerateRequest) -> bool {
     req.out.exists()
         && side.robot_sha256 == hex(&Sha256::digest(source.as_bytes()))
         && side.sampler == sampler.name()
+        && same_groups(&side.sampler_groups, &sampler_groups(sampler, &robot))
         && side.seed == req.seed
         && side.requested == req.samples
         && side.solver.steps == req.steps
+}
+
+/// The groups the sidecar records for `sampler` on `robot`.
+fn sampler_groups(sampler: Sampler, robot: &Robot) -> Vec<Vec<usize>> {
+    match sampler {
+        Sampler::Adjacent => anchor_groups(robot),
+        Sampler::Uniform => Vec::new(),
+    }
+}
+
+/// Whether a sidecar's recorded groups draw as `groups` do. Sidecars written
+/// before the groups were recorded have none; they drew all tendons as one
+/// ring in index order, which is what one group listed in index order draws.
+fn same_groups(recorded: &[Vec<usize>], groups: &[Vec<usize>]) -> bool {
+    recorded == groups
+        || (recorded.is_empty()
+            && match groups {
+                [] => true,
+                [one] => one.iter().copied().eq(0..one.len()),
+                _ => false,
+            })
 }
 
 fn hex(bytes: &[u8]) -> String {

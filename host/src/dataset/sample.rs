@@ -1,8 +1,39 @@
 //! Tension samplers (`docs/design.md` §3).
 
+use std::f64::consts::TAU;
+
 use rand::Rng;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+
+use crate::robot::Robot;
+
+/// Anchors closer than this (m) are one anchor.
+const SAME_ANCHOR_M: f64 = 1e-9;
+
+/// The robot's tendons grouped by anchor (`end`), the group nearest the base
+/// first; within a group, counter-clockwise by angle from +x, so that
+/// neighbours in the list (and the last and the first) are neighbours on
+/// the disk. Tendons with equal angles keep their file order.
+pub fn anchor_groups(robot: &Robot) -> Vec<Vec<usize>> {
+    let tendons = &robot.tendons;
+    let mut order: Vec<usize> = (0..tendons.len()).collect();
+    order.sort_by(|&a, &b| tendons[a].end.total_cmp(&tendons[b].end).then(a.cmp(&b)));
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    for i in order {
+        match groups.last_mut() {
+            Some(g) if (tendons[g[0]].end - tendons[i].end).abs() < SAME_ANCHOR_M => g.push(i),
+            _ => groups.push(vec![i]),
+        }
+    }
+    for g in &mut groups {
+        g.sort_by(|&a, &b| {
+            let angle = |i: usize| tendons[i].angle.rem_euclid(TAU);
+            angle(a).total_cmp(&angle(b)).then(a.cmp(&b))
+        });
+    }
+    groups
+}
 
 /// How tension vectors are drawn.
 #[derive(
@@ -10,9 +41,11 @@ use rand_chacha::ChaCha8Rng;
 )]
 #[serde(rename_all = "lowercase")]
 pub enum Sampler {
-    /// Exactly two adjacent tendons (i, i+1 mod n) pull, each uniform in
-    /// [0, τ_max]; the rest are slack. Keeps IK a function for antagonistic
-    /// tendon sets; the default for robots with more than two tendons.
+    /// In each anchor group ([`anchor_groups`]) exactly two neighbouring
+    /// tendons pull (a group of one: that tendon), each uniform in
+    /// [τ_min, τ_max]; the rest stay at their floor. Keeps IK a function for
+    /// antagonistic tendon sets; the default for robots with more than two
+    /// tendons.
     Adjacent,
     /// Every tendon uniform in [0, τ_max] (the paper's sampler). With
     /// antagonistic tendons the inverse map is not unique.
@@ -47,7 +80,26 @@ impl Sampler {
     /// deterministically from `seed`: the floors are the tendons' pretension
     /// (`min_tension`), which a slack tendon of the adjacent sampler keeps.
     /// With zero floors this draws exactly what [`Sampler::draw`] always did.
+    ///
+    /// The adjacent sampler treats all tendons as one ring in index order;
+    /// [`Sampler::draw_grouped`] takes the robot's anchor groups.
     pub fn draw_between(&self, count: usize, min: &[f64], max: &[f64], seed: u64) -> Vec<Vec<f64>> {
+        self.draw_grouped(count, min, max, &[(0..max.len()).collect()], seed)
+    }
+
+    /// As [`Sampler::draw_between`], the adjacent sampler pulling two
+    /// neighbours in each of `groups` (tendon indices, each group in ring
+    /// order, as [`anchor_groups`] gives them). A robot with one anchor whose
+    /// tendons are listed counter-clockwise draws exactly what
+    /// [`Sampler::draw_between`] draws.
+    pub fn draw_grouped(
+        &self,
+        count: usize,
+        min: &[f64],
+        max: &[f64],
+        groups: &[Vec<usize>],
+        seed: u64,
+    ) -> Vec<Vec<f64>> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let n = max.len();
         let within = |i: usize, rng: &mut ChaCha8Rng| {
@@ -60,13 +112,17 @@ impl Sampler {
                 Sampler::Adjacent => {
                     let mut t: Vec<f64> =
                         (0..n).map(|i| min.get(i).copied().unwrap_or(0.0)).collect();
-                    if n == 1 {
-                        t[0] = within(0, &mut rng);
-                    } else {
-                        let i = rng.random_range(0..n);
-                        let j = (i + 1) % n;
-                        t[i] = within(i, &mut rng);
-                        t[j] = within(j, &mut rng);
+                    for group in groups {
+                        match group.len() {
+                            0 => {}
+                            1 => t[group[0]] = within(group[0], &mut rng),
+                            m => {
+                                let k = rng.random_range(0..m);
+                                let (i, j) = (group[k], group[(k + 1) % m]);
+                                t[i] = within(i, &mut rng);
+                                t[j] = within(j, &mut rng);
+                            }
+                        }
                     }
                     t
                 }
@@ -137,6 +193,70 @@ mod tests {
             let at_floor = (0..4).filter(|&i| t[i] == min[i]).count();
             assert!(at_floor >= 2, "{t:?}");
         }
+    }
+
+    /// Three segments of 0.1 m with four, three and one tendons (eight, the
+    /// most a robot may have), listed out of angle order and interleaved.
+    fn three_segments() -> Robot {
+        let mut text = String::from(
+            "name = \"three-seg\"\n[backbone]\nlength = 0.3\nradius = 0.0007\n\
+             youngs_modulus = 54e9\nshear_modulus = 20.8e9\ndensity = 0.0\n\
+             [environment]\ngravity = [0.0, 0.0, 0.0]\n",
+        );
+        for (angle, end) in [
+            (270.0, 0.2),
+            (90.0, 0.1),
+            (0.0, 0.1),
+            (45.0, 0.3),
+            (30.0, 0.2),
+            (270.0, 0.1),
+            (180.0, 0.1),
+            (150.0, 0.2),
+        ] {
+            text += &format!(
+                "[[tendon]]\noffset = 0.008\nangle_deg = {angle}\nmax_tension = 4.0\n\
+                 end = {end}\nrouting = \"straight\"\n"
+            );
+        }
+        Robot::from_toml(&text, std::path::Path::new("three-seg.toml")).unwrap()
+    }
+
+    #[test]
+    fn anchor_groups_follow_the_segments_and_the_ring() {
+        let robot = three_segments();
+        assert_eq!(
+            anchor_groups(&robot),
+            vec![vec![2, 1, 6, 5], vec![4, 7, 0], vec![3]]
+        );
+        let seed = Robot::from_toml(
+            include_str!("../../../robots/seed-4t.toml"),
+            std::path::Path::new("seed-4t.toml"),
+        )
+        .unwrap();
+        assert_eq!(anchor_groups(&seed), vec![vec![0, 1, 2, 3]]);
+    }
+
+    #[test]
+    fn adjacent_sampler_pulls_two_neighbours_in_every_segment() {
+        let robot = three_segments();
+        let groups = anchor_groups(&robot);
+        let (min, max) = (robot.min_tensions(), robot.max_tensions());
+        let draws = Sampler::Adjacent.draw_grouped(3000, &min, &max, &groups, 11);
+        let mut pairs_seen = std::collections::BTreeSet::new();
+        for t in &draws {
+            for g in &groups {
+                let pulled: Vec<usize> = (0..g.len()).filter(|&k| t[g[k]] != 0.0).collect();
+                assert_eq!(pulled.len(), g.len().min(2), "{t:?}");
+                if let [a, b] = pulled[..] {
+                    // Neighbours on the disk: next to each other in the ring.
+                    assert!(b == a + 1 || (a == 0 && b == g.len() - 1), "{t:?}");
+                    pairs_seen.insert((g[a], g[b]));
+                }
+            }
+            assert!(t.iter().zip(&max).all(|(x, m)| (0.0..=*m).contains(x)));
+        }
+        // Every neighbouring pair of the four- and the three-tendon segment is drawn.
+        assert_eq!(pairs_seen.len(), 4 + 3);
     }
 
     #[test]
