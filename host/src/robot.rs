@@ -95,6 +95,27 @@ pub struct Robot {
     pub gravity: Vector3<f64>,
     /// Tendons, tendon 0 first.
     pub tendons: Vec<Tendon>,
+    /// Material damping of the dynamic model from the optional `[damping]`
+    /// table (None: the dynamics' documented default); the statics never
+    /// read it (`docs/design.md` §4.2).
+    pub damping: Option<DampingKeys>,
+}
+
+/// The optional `[damping]` table: Kelvin–Voigt damping n = Kse (v − e₃) +
+/// Bse v_t, m = Kbt u + Bbt u_t of the dynamic model (`docs/design.md` §4.2).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum DampingKeys {
+    /// `retardation_s = t_r`: B = t_r K, so a mode of angular frequency ω
+    /// gets the damping ratio ω t_r / 2.
+    Retardation(f64),
+    /// `bse = [shear x, shear y, extension]` (N·s) and `bbt = [bending x,
+    /// bending y, torsion]` (N·m²·s), the diagonals; a missing one is zero.
+    Diagonals {
+        /// Bse, N·s.
+        bse: [f64; 3],
+        /// Bbt, N·m²·s.
+        bbt: [f64; 3],
+    },
 }
 
 // --- the file schema (serde), kept apart from the validated type -------------
@@ -107,6 +128,15 @@ struct RobotFile {
     environment: EnvironmentFile,
     #[serde(default)]
     tendon: Vec<TendonFile>,
+    damping: Option<DampingFile>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct DampingFile {
+    retardation_s: Option<f64>,
+    bse: Option<[f64; 3]>,
+    bbt: Option<[f64; 3]>,
 }
 
 #[derive(Deserialize)]
@@ -142,6 +172,35 @@ struct TendonFile {
 enum RoutingName {
     Straight,
     Helical,
+}
+
+impl DampingFile {
+    fn validate(&self, v: &Validator<'_>) -> Result<DampingKeys, RobotError> {
+        let diagonal = |name: &str, d: Option<[f64; 3]>| -> Result<[f64; 3], RobotError> {
+            let d = d.unwrap_or_default();
+            for (k, x) in d.iter().enumerate() {
+                v.non_negative(&format!("damping.{name}[{k}]"), *x)?;
+            }
+            Ok(d)
+        };
+        match (self.retardation_s, self.bse.is_some() || self.bbt.is_some()) {
+            (Some(_), true) => Err(v.err(
+                "damping",
+                "give either retardation_s or the bse/bbt diagonals, not both".into(),
+            )),
+            (Some(t), false) => Ok(DampingKeys::Retardation(
+                v.non_negative("damping.retardation_s", t)?,
+            )),
+            (None, true) => Ok(DampingKeys::Diagonals {
+                bse: diagonal("bse", self.bse)?,
+                bbt: diagonal("bbt", self.bbt)?,
+            }),
+            (None, false) => Err(v.err(
+                "damping",
+                "an empty [damping] table: give retardation_s or bse/bbt (or drop the table for the default)".into(),
+            )),
+        }
+    }
 }
 
 impl Robot {
@@ -195,6 +254,7 @@ impl Robot {
                 Vector3::from(raw.environment.gravity)
             },
             tendons: Vec::new(),
+            damping: raw.damping.as_ref().map(|d| d.validate(&v)).transpose()?,
         };
         if raw.name.trim().is_empty() {
             return Err(v.err("name", "must not be empty".into()));
@@ -858,6 +918,49 @@ routing = "straight"
         let r = parse(GOOD).unwrap();
         assert!(r.to_string().ends_with("1 tendon"), "{r}");
         assert_eq!(count(4, "tendon"), "4 tendons");
+    }
+
+    #[test]
+    fn damping_keys_are_optional_and_validated() {
+        assert_eq!(parse(GOOD).unwrap().damping, None);
+        let with = |table: &str| parse(&format!("{GOOD}[damping]\n{table}\n"));
+        assert_eq!(
+            with("retardation_s = 0.01").unwrap().damping,
+            Some(DampingKeys::Retardation(0.01))
+        );
+        // A missing diagonal is zero.
+        assert_eq!(
+            with("bbt = [5e-4, 5e-4, 5e-4]").unwrap().damping,
+            Some(DampingKeys::Diagonals {
+                bse: [0.0; 3],
+                bbt: [5e-4; 3]
+            })
+        );
+        for (table, field) in [
+            ("bbt = [5e-4, -1.0, 5e-4]", "damping.bbt[1]"),
+            ("bse = [0.0, 0.0, nan]", "damping.bse[2]"),
+            ("retardation_s = -0.002", "damping.retardation_s"),
+            ("retardation_s = 0.01\nbbt = [1e-4, 1e-4, 1e-4]", "damping"),
+            ("", "damping"),
+            ("retardation = 0.01", "damping.retardation"),
+        ] {
+            let e = with(table).unwrap_err();
+            assert_eq!(e.field, field, "{table:?}: {e}");
+        }
+    }
+
+    #[test]
+    fn damping_keys_leave_the_statics_bit_identical() {
+        // The statics never read `[damping]`: the same tip to the last bit.
+        let plain = parse(GOOD).unwrap();
+        let damped = parse(&format!("{GOOD}[damping]\nretardation_s = 0.05\n")).unwrap();
+        let tip = |robot: &Robot| {
+            crate::statics::Statics::new(robot, crate::statics::SolverSettings::default())
+                .solve(&[3.0], None)
+                .unwrap()
+                .position
+        };
+        assert_eq!(tip(&plain), tip(&damped));
     }
 
     #[test]

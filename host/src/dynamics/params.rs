@@ -3,7 +3,7 @@
 
 use nalgebra::Vector3;
 
-use crate::robot::Robot;
+use crate::robot::{DampingKeys, Robot};
 
 /// Coefficients of the BDF-α time derivative (Till, Aloi & Rucker 2019):
 ///
@@ -56,11 +56,21 @@ pub struct Damping {
 }
 
 impl Damping {
-    /// Retardation time of the default damping, s. With B = t_r K every
-    /// mode of angular frequency ω gets the damping ratio ζ = ω t_r / 2: on
-    /// the default robot (f₁ = 3.6 Hz) 2 ms gives ζ₁ ≈ 2.3 %, the order of a
-    /// lightly damped steel backbone with spacer disks.
-    pub const DEFAULT_RETARDATION_S: f64 = 2e-3;
+    /// Retardation time of the default damping, s (robots without a
+    /// `[damping]` table). With B = t_r K every mode of angular frequency ω
+    /// gets the damping ratio ζ = ω t_r / 2.
+    ///
+    /// Source: Till, Aloi & Rucker's tendon-robot dynamics example (the
+    /// companion code of their IJRR 2019 paper, JohnDTill/ContinuumRobotExamples,
+    /// 02_Dynamics/03_Tendon_Robot) damps a spring-steel backbone with spacer
+    /// disks (E = 207 GPa, r = 0.675 mm, L = 0.714 m, 34 g) by
+    /// Bbt = 5e-4 N·m²·s, i.e. t_r = Bbt / (E I) = 5e-4 / 0.03375 = 14.8 ms.
+    /// Kelvin–Voigt damping is a material law (B = η × section property, t_r
+    /// = η/E), and the seed robot is the same construction in the same
+    /// material, so it keeps t_r: ζ₁ ≈ 17 % at f₁ = 3.6 Hz. (Keeping their
+    /// absolute Bbt instead gives ζ₁ ≈ 5.3 %; a robot file can say so with
+    /// `[damping] bbt = [5e-4, 5e-4, 5e-4]`, see `docs/design.md` §4.2.)
+    pub const DEFAULT_RETARDATION_S: f64 = 14.8e-3;
 
     /// No material damping (free vibration checks).
     pub fn none() -> Damping {
@@ -79,10 +89,17 @@ impl Damping {
         }
     }
 
-    /// The robot's damping: [`Damping::proportional`] with
-    /// [`Damping::DEFAULT_RETARDATION_S`].
+    /// The robot's damping: its file's `[damping]` table, or
+    /// [`Damping::proportional`] with [`Damping::DEFAULT_RETARDATION_S`].
     pub fn of_robot(robot: &Robot) -> Damping {
-        Damping::proportional(robot, Self::DEFAULT_RETARDATION_S)
+        match robot.damping {
+            None => Damping::proportional(robot, Self::DEFAULT_RETARDATION_S),
+            Some(DampingKeys::Retardation(t_r)) => Damping::proportional(robot, t_r),
+            Some(DampingKeys::Diagonals { bse, bbt }) => Damping {
+                bse: Vector3::from(bse),
+                bbt: Vector3::from(bbt),
+            },
+        }
     }
 }
 

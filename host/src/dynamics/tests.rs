@@ -182,6 +182,55 @@ fn first_mode_loses_under_one_percent_per_period_to_numerical_damping() {
 }
 
 #[test]
+fn stiffness_proportional_damping_gives_the_first_mode_zeta_of_omega_tr_over_two() {
+    // Kelvin–Voigt damping B = t_r K is stiffness-proportional (Rayleigh)
+    // damping: every mode keeps its shape and gets ζ = ω t_r / 2. For the
+    // default t_r and the Euler–Bernoulli ω₁ = 2π · 3.611 Hz that is ζ₁ ≈ 0.168.
+    let settings = DynamicsSettings::default();
+    let stride = 2;
+    let x = free_vibration(settings, Damping::DEFAULT_RETARDATION_S, 0.8, stride);
+    let sample_s = settings.dt_s * stride as f64;
+    let (f1, modulus) = prony(&x, sample_s, 8)[0];
+    let sigma = modulus.ln() / sample_s;
+    let omega_d = 2.0 * std::f64::consts::PI * f1;
+    let zeta = -sigma / (sigma * sigma + omega_d * omega_d).sqrt();
+    let expected = 2.0 * std::f64::consts::PI * 3.611 * Damping::DEFAULT_RETARDATION_S / 2.0;
+    eprintln!("default damping: first mode {f1:.4} Hz (damped), zeta {zeta:.4}, closed form {expected:.4}");
+    assert!(
+        (zeta / expected - 1.0).abs() < 0.02,
+        "zeta1 {zeta:.4}, closed form {expected:.4}"
+    );
+}
+
+#[test]
+fn robot_file_damping_keys_reach_the_dynamics() {
+    let seed = robot("seed-4t.toml");
+    assert_eq!(
+        Damping::of_robot(&seed),
+        Damping::proportional(&seed, Damping::DEFAULT_RETARDATION_S)
+    );
+    let with = |keys| Robot {
+        damping: Some(keys),
+        ..seed.clone()
+    };
+    assert_eq!(
+        Damping::of_robot(&with(crate::robot::DampingKeys::Retardation(0.01))),
+        Damping::proportional(&seed, 0.01)
+    );
+    let diagonals = crate::robot::DampingKeys::Diagonals {
+        bse: [0.0; 3],
+        bbt: [5e-4, 5e-4, 4e-4],
+    };
+    assert_eq!(
+        Damping::of_robot(&with(diagonals)),
+        Damping {
+            bse: Vector3::zeros(),
+            bbt: Vector3::new(5e-4, 5e-4, 4e-4),
+        }
+    );
+}
+
+#[test]
 fn halving_the_time_step_shrinks_the_error_fourfold_as_bdf2_predicts() {
     // α = 0 is BDF2, second order: the trajectory's change from δt to δt/2
     // is four times its change from δt/2 to δt/4. A smooth 50 ms tension
