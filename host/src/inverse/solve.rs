@@ -62,7 +62,7 @@ impl Default for IkSettings {
 }
 
 /// Tensions are "at a limit" within this much, N.
-const AT_LIMIT: f64 = 1e-9;
+pub(crate) const AT_LIMIT: f64 = 1e-9;
 /// Singular values below this fraction of the largest are dropped from a
 /// Gauss–Newton step (roundoff).
 const RANK_TOLERANCE: f64 = 1e-12;
@@ -97,7 +97,10 @@ struct Point {
     sol: Solution,
     err: DVector<f64>,
     cost: f64,
+    /// ∂e/∂τ.
     jac: Option<DMatrix<f64>>,
+    /// The tip Jacobian ∂pose/∂τ it was cut from (unweighted, 6 rows).
+    tip_jac: Option<DMatrix<f64>>,
 }
 
 /// How phase 1 ended.
@@ -123,6 +126,11 @@ impl ExactIk {
     /// The robot.
     pub fn robot(&self) -> &Robot {
         self.statics.robot()
+    }
+
+    /// The tension limits (τ_min, τ_max), N.
+    pub fn limits(&self) -> (&[f64], &[f64]) {
+        (&self.lo, &self.hi)
     }
 
     /// Tensions reaching `target`, starting from `start` (clamped into the
@@ -182,20 +190,37 @@ impl ExactIk {
             sol,
             err,
             jac: None,
+            tip_jac: None,
         })
     }
 
-    /// e = [p − p*] or [p − p*; ℓ θ(R R*ᵀ)].
+    /// e = [p − p*], [p − p*; ℓ θ(R R*ᵀ)] or [px − x*, py − y*].
     fn error(&self, target: &Target, sol: &Solution) -> DVector<f64> {
-        let dp = sol.position - target.position();
         match target {
-            Target::Position(_) => DVector::from_column_slice(dp.as_slice()),
-            Target::Pose(_, q) => {
+            Target::Position(p) => DVector::from_column_slice((sol.position - p).as_slice()),
+            Target::Pose(p, q) => {
+                let dp = sol.position - p;
                 let r = sol.rotation * q.to_rotation_matrix().matrix().transpose();
                 let theta = Rotation3::from_matrix_unchecked(r).scaled_axis() * self.weight;
                 DVector::from_iterator(6, dp.iter().chain(theta.iter()).copied())
             }
+            Target::Lateral(xy) => {
+                DVector::from_vec(vec![sol.position.x - xy.x, sol.position.y - xy.y])
+            }
         }
+    }
+
+    /// The tip Jacobian ∂pose/∂τ (6 × tendons, rows as
+    /// [`super::TipJacobian::jacobian`]) of the statics solution `warm` at
+    /// `tensions`.
+    pub fn tip_jacobian_at(
+        &self,
+        tensions: &[f64],
+        warm: &WarmStart,
+    ) -> Result<DMatrix<f64>, InverseError> {
+        let mut rod = self.rod.clone();
+        rod.set_tensions(tensions);
+        Ok(tip_jacobian(&rod, &warm.x, self.settings.statics.steps)?.jacobian)
     }
 
     /// ∂e/∂τ at `p` (computed once per point).
@@ -205,25 +230,26 @@ impl ExactIk {
         p: &'a mut Point,
     ) -> Result<&'a DMatrix<f64>, InverseError> {
         if p.jac.is_none() {
-            let mut rod = self.rod.clone();
-            rod.set_tensions(&p.tau);
-            let full = tip_jacobian(&rod, &p.sol.warm.x, self.settings.statics.steps)?.jacobian;
+            let full = self.tip_jacobian_at(&p.tau, &p.sol.warm)?;
             p.jac = Some(match target {
                 Target::Position(_) => full.rows(0, 3).into_owned(),
+                Target::Lateral(_) => full.rows(0, 2).into_owned(),
                 Target::Pose(..) => {
-                    let mut j = full;
+                    let mut j = full.clone();
                     j.rows_mut(3, 3).scale_mut(self.weight);
                     j
                 }
             });
+            p.tip_jac = Some(full);
         }
         Ok(p.jac.as_ref().expect("set above"))
     }
 
     fn converged(&self, target: &Target, p: &Point) -> bool {
-        let position_ok = p.err.rows(0, 3).norm() <= self.settings.position_tol;
+        let position_ok =
+            p.err.rows(0, target.position_rows()).norm() <= self.settings.position_tol;
         match target {
-            Target::Position(_) => position_ok,
+            Target::Position(_) | Target::Lateral(_) => position_ok,
             Target::Pose(..) => {
                 position_ok
                     && p.err.rows(3, 3).norm() / self.weight <= self.settings.orientation_tol
@@ -233,7 +259,7 @@ impl ExactIk {
 
     fn not_converged(&self, p: &Point, solves: usize) -> InverseError {
         InverseError::NotConverged {
-            position_error: p.err.rows(0, 3).norm(),
+            position_error: p.err.rows(0, p.err.len().min(3)).norm(),
             solves,
         }
     }
@@ -462,7 +488,7 @@ impl ExactIk {
     fn answer(&self, target: &Target, p: &Point, solves: usize) -> IkSolution {
         let pose = p.sol.pose();
         let orientation_error = match target {
-            Target::Position(_) => None,
+            Target::Position(_) | Target::Lateral(_) => None,
             Target::Pose(_, q) => Some(angle_between(
                 &[pose[3], pose[4], pose[5], pose[6]],
                 &[q.w, q.i, q.j, q.k],
@@ -472,12 +498,13 @@ impl ExactIk {
         IkSolution {
             tensions: p.tau.clone(),
             pose,
-            position_error: p.err.rows(0, 3).norm(),
+            position_error: p.err.rows(0, target.position_rows()).norm(),
             orientation_error,
             at_min: select(&|i| p.tau[i] <= self.lo[i] + AT_LIMIT),
             at_max: select(&|i| p.tau[i] >= self.hi[i] - AT_LIMIT),
             solves,
             warm: p.sol.warm.clone(),
+            jacobian: p.tip_jac.clone(),
         }
     }
 }
