@@ -33,7 +33,16 @@ pub struct Lifted {
 /// warm-started along the path.
 pub struct Lifter {
     ik: ExactIk,
-    previous: Option<(Vec<f64>, WarmStart)>,
+    previous: Option<Previous>,
+}
+
+/// The last lift, the start of the next.
+struct Previous {
+    xy: [f64; 2],
+    tensions: Vec<f64>,
+    warm: WarmStart,
+    /// ∂τ/∂x, ∂τ/∂y there (the tangent's tension directions).
+    dtau: [DVector<f64>; 2],
 }
 
 /// Tensions strictly inside their limits by more than this count as free
@@ -83,8 +92,20 @@ impl Lifter {
             return Err(KinematicsError::NotFinite);
         }
         let target = Target::Lateral(Vector2::new(xy[0], xy[1]));
+        // Warm: the previous tensions moved along its tangent (a first-order
+        // predictor, so a path step of a fraction of a millimetre starts
+        // within ~µm and the Gauss–Newton finishes in a step or two).
         let warm = match &self.previous {
-            Some((tau, warm)) => self.ik.solve(&target, Some(tau), Some(warm)).ok(),
+            Some(p) => {
+                let (dx, dy) = (xy[0] - p.xy[0], xy[1] - p.xy[1]);
+                let start: Vec<f64> = p
+                    .tensions
+                    .iter()
+                    .enumerate()
+                    .map(|(i, t)| t + p.dtau[0][i] * dx + p.dtau[1][i] * dy)
+                    .collect();
+                self.ik.solve(&target, Some(&start), Some(&p.warm)).ok()
+            }
             None => None,
         };
         let solution = match warm {
@@ -98,11 +119,16 @@ impl Lifter {
                 e => KinematicsError::Inverse(e),
             })?,
         };
-        let tangent = self.tangent(&solution).ok_or(KinematicsError::Singular {
+        let (tangent, dtau) = self.tangent(&solution).ok_or(KinematicsError::Singular {
             x_mm: xy[0] * 1e3,
             y_mm: xy[1] * 1e3,
         })?;
-        self.previous = Some((solution.tensions.clone(), solution.warm.clone()));
+        self.previous = Some(Previous {
+            xy,
+            tensions: solution.tensions.clone(),
+            warm: solution.warm.clone(),
+            dtau,
+        });
         Ok(Lifted {
             pose: solution.pose,
             tangent,
@@ -126,8 +152,9 @@ impl Lifter {
     /// lift has a corner; each direction then takes its one-sided
     /// derivative: the least-norm tension direction moving the tip along it,
     /// a tension at a limit joining only if the direction moves it inward.
-    /// `None` when no tension direction moves the tip laterally.
-    fn tangent(&self, s: &IkSolution) -> Option<Tangent> {
+    /// `None` when no tension direction moves the tip laterally. Also
+    /// returns the tension directions ∂τ/∂x, ∂τ/∂y.
+    fn tangent(&self, s: &IkSolution) -> Option<(Tangent, [DVector<f64>; 2])> {
         let jacobian = match &s.jacobian {
             Some(j) => j.clone(),
             None => self.ik.tip_jacobian_at(&s.tensions, &s.warm).ok()?,
@@ -135,11 +162,13 @@ impl Lifter {
         let (lo, hi) = self.ik.limits();
         let q = [s.pose[3], s.pose[4], s.pose[5], s.pose[6]];
         let mut tangent = [[0.0; 7]; 2];
+        let n = s.tensions.len();
+        let mut dtaus = [DVector::zeros(n), DVector::zeros(n)];
         for (k, row) in tangent.iter_mut().enumerate() {
             let mut direction = Vector2::zeros();
             direction[k] = 1.0;
-            let dtau = tension_direction(&jacobian, &s.tensions, lo, hi, &direction)?;
-            let d = &jacobian * dtau;
+            dtaus[k] = tension_direction(&jacobian, &s.tensions, lo, hi, &direction)?;
+            let d = &jacobian * &dtaus[k];
             let dtheta = [d[3], d[4], d[5]];
             // ½ [0; ω] ⊗ q with q = (w, v): (−ω·v, w ω + ω × v) / 2.
             let (w, v) = (q[0], [q[1], q[2], q[3]]);
@@ -154,7 +183,7 @@ impl Lifter {
                 *out = 0.5 * dqk;
             }
         }
-        Some(tangent)
+        Some((tangent, dtaus))
     }
 }
 
