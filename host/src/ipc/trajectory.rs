@@ -414,6 +414,7 @@ mod tests {
     use super::*;
     use crate::robot::Robot;
     use crate::statics::SolverSettings;
+    use nalgebra::Vector3;
 
     fn statics() -> Statics {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml");
@@ -478,5 +479,48 @@ mod tests {
         far[1].pose[0] = 0.5;
         let traj = Trajectory::new(&Shape::Table { rows: far }, &s).unwrap();
         assert!(traj.sample(0.0).tangent.is_none());
+    }
+
+    /// Feed-forward tensions of a pose table: reachable rows (poses of
+    /// known tensions) get tensions whose fresh forward solve gives the
+    /// row's pose; a row out of reach is no failure, its miss is the
+    /// distance to where its (closest-pose) tensions put the tip.
+    #[test]
+    fn pose_table_rows_get_exact_feedforward_tensions() {
+        let s = statics();
+        let truth = [
+            [3.0, 1.0, 0.0, 0.0],
+            [0.0, 2.0, 1.5, 0.0],
+            [0.5, 0.0, 0.0, 4.0],
+        ];
+        let mut rows: Vec<PoseRow> = truth
+            .iter()
+            .enumerate()
+            .map(|(i, tau)| PoseRow {
+                t_s: i as f64,
+                pose: s.solve(tau, None).unwrap().pose(),
+            })
+            .collect();
+        let traj = Trajectory::new(&Shape::Table { rows: rows.clone() }, &s).unwrap();
+        assert_eq!(traj.tendons(), 4);
+        let mut ff = Vec::new();
+        for row in &rows {
+            assert_eq!(traj.feedforward(row.t_s, &mut ff), 0.0);
+            let reached = statics().solve(&ff, None).unwrap();
+            let p = reached.position;
+            let miss = (p - Vector3::new(row.pose[0], row.pose[1], row.pose[2])).norm();
+            assert!(miss <= 1e-6, "row at {} s: {miss:e} m", row.t_s);
+            assert!(ff.iter().all(|&t| (0.0..=10.0).contains(&t)), "{ff:?}");
+        }
+        rows[1].pose[0] += 0.3;
+        let traj = Trajectory::new(&Shape::Table { rows: rows.clone() }, &s).unwrap();
+        let miss = traj.feedforward(1.0, &mut ff);
+        let p = statics().solve(&ff, None).unwrap().position;
+        let expected = (p - Vector3::new(rows[1].pose[0], rows[1].pose[1], rows[1].pose[2])).norm();
+        assert!(
+            miss > 0.1 && (miss - expected).abs() < 1e-9,
+            "{miss} vs {expected}"
+        );
+        assert_eq!(traj.feedforward(2.0, &mut ff), 0.0);
     }
 }
