@@ -78,6 +78,10 @@ const NEAR_NULL: f64 = 1e-3;
 const MAX_REFUSED_MOVES: usize = 2;
 /// Most phase-2 moves along the target set.
 const MAX_REDUNDANCY_MOVES: usize = 20;
+/// Steps no longer than this fraction of the widest tension range update
+/// the last ∂e/∂τ (Broyden) instead of a new sensitivity pass, which costs
+/// ~1.6 statics solves: a warm path step is a few hundredths of a newton.
+const BROYDEN_STEP: f64 = 0.02;
 
 /// The exact IK of one robot.
 #[derive(Clone, Debug)]
@@ -99,7 +103,8 @@ struct Point {
     cost: f64,
     /// ∂e/∂τ.
     jac: Option<DMatrix<f64>>,
-    /// The tip Jacobian ∂pose/∂τ it was cut from (unweighted, 6 rows).
+    /// The tip Jacobian ∂pose/∂τ it was cut from (unweighted, 6 rows);
+    /// `None` when `jac` is a Broyden update.
     tip_jac: Option<DMatrix<f64>>,
 }
 
@@ -223,6 +228,40 @@ impl ExactIk {
         Ok(tip_jacobian(&rod, &warm.x, self.settings.statics.steps)?.jacobian)
     }
 
+    /// Broyden's rank-one update of `from`'s ∂e/∂τ for `to` when the step
+    /// between them is small: J + (Δe − J Δτ) Δτᵀ / |Δτ|², exact along the
+    /// step taken. A step it proposes that fails gets a fresh Jacobian
+    /// ([`ExactIk::refresh`]) before the trust radius shrinks.
+    fn broyden(&self, from: &Point, to: &mut Point) {
+        let Some(j) = &from.jac else { return };
+        if to.jac.is_some() {
+            return;
+        }
+        let dtau = DVector::from_iterator(
+            to.tau.len(),
+            to.tau.iter().zip(&from.tau).map(|(a, b)| a - b),
+        );
+        let norm2 = dtau.norm_squared();
+        if norm2 == 0.0 || norm2.sqrt() > BROYDEN_STEP * self.span() {
+            return;
+        }
+        let de = &to.err - &from.err;
+        let correction = (de - j * &dtau) * dtau.transpose() / norm2;
+        to.jac = Some(j + correction);
+        to.tip_jac = None;
+    }
+
+    /// Drops a Broyden ∂e/∂τ so that the next use computes it anew;
+    /// `false` when it was exact already.
+    fn refresh(p: &mut Point) -> bool {
+        if p.jac.is_some() && p.tip_jac.is_none() {
+            p.jac = None;
+            true
+        } else {
+            false
+        }
+    }
+
     /// ∂e/∂τ at `p` (computed once per point).
     fn jacobian<'a>(
         &self,
@@ -282,6 +321,9 @@ impl ExactIk {
             }
             let j = self.jacobian(target, &mut cur)?.clone();
             let Some((free, full)) = self.gauss_newton_step(&j, &cur) else {
+                if Self::refresh(&mut cur) {
+                    continue;
+                }
                 return Ok(Reach::Stalled(cur));
             };
             loop {
@@ -321,22 +363,35 @@ impl ExactIk {
                     .sum::<f64>()
                     .sqrt();
                 if moved <= 1e-13 * (1.0 + self.span()) {
+                    if Self::refresh(&mut cur) {
+                        break;
+                    }
                     return Ok(Reach::Stalled(cur));
                 }
                 let trial = self.point(target, tau, Some(&cur.sol.warm), solves);
                 match trial {
-                    Ok(trial) if trial.cost < cur.cost => {
+                    Ok(mut trial) if trial.cost < cur.cost => {
                         let gain = (cur.cost - trial.cost) / cur.cost;
                         slow = if gain < 1e-10 { slow + 1 } else { 0 };
+                        self.broyden(&cur, &mut trial);
                         cur = trial;
                         radius = (4.0 * moved).max(radius).min(self.span());
                         if slow >= 3 {
+                            if Self::refresh(&mut cur) {
+                                slow = 0;
+                                break;
+                            }
                             return Ok(Reach::Stalled(cur));
                         }
                         break;
                     }
-                    // A worse point, or one the statics cannot solve: shrink.
-                    Ok(_) | Err(InverseError::Statics(_)) => {}
+                    // A worse point, or one the statics cannot solve: with
+                    // a Broyden Jacobian, a fresh one first; else shrink.
+                    Ok(_) | Err(InverseError::Statics(_)) => {
+                        if Self::refresh(&mut cur) {
+                            break;
+                        }
+                    }
                     Err(e) => return Err(e),
                 }
                 radius = 0.25 * moved;
@@ -466,11 +521,16 @@ impl ExactIk {
             }
             let total = |t: &[f64]| t.iter().sum::<f64>();
             let moved = match self.point(target, tau, Some(&best.sol.warm), solves) {
-                Ok(p) => match self.reach(target, p, solves) {
-                    Ok(Reach::Converged(p)) if total(&p.tau) < total(&best.tau) - 1e-12 => Some(p),
-                    Ok(_) | Err(InverseError::NotConverged { .. }) => None,
-                    Err(e) => return Err(e),
-                },
+                Ok(mut p) => {
+                    self.broyden(&best, &mut p);
+                    match self.reach(target, p, solves) {
+                        Ok(Reach::Converged(p)) if total(&p.tau) < total(&best.tau) - 1e-12 => {
+                            Some(p)
+                        }
+                        Ok(_) | Err(InverseError::NotConverged { .. }) => None,
+                        Err(e) => return Err(e),
+                    }
+                }
                 Err(InverseError::Statics(_)) => None,
                 Err(e) => return Err(e),
             };
