@@ -10,7 +10,9 @@
 //! with the step pointing inside), cut to a trust radius and at the first
 //! limit it meets; a step that does not lower the error shrinks the radius.
 //! When no step can lower it any more the target is out of reach and the
-//! point reached is the closest one.
+//! point reached is the closest one. After a small step the Jacobian is
+//! Broyden's update of the last one, refreshed when a step it proposes
+//! fails. A lateral target (the planner's lift) is e = [px − x*, py − y*].
 //!
 //! Phase 2 resolves the redundancy: antagonistic tendons co-contract with
 //! almost no tip motion, so many τ reach a position. Among them it takes the
