@@ -84,6 +84,12 @@ const MAX_REDUNDANCY_MOVES: usize = 20;
 /// the last ∂e/∂τ (Broyden) instead of a new sensitivity pass, which costs
 /// ~1.6 statics solves: a warm path step is a few hundredths of a newton.
 const BROYDEN_STEP: f64 = 0.02;
+/// Steps shorter than this fraction of the range keep the last ∂e/∂τ as it
+/// is (the change Δe would be the statics' round-off).
+const CHORD_STEP: f64 = 1e-7;
+/// Most Broyden updates in a row before an exact Jacobian again (their
+/// errors add up).
+const MAX_BROYDEN_AGE: usize = 3;
 
 /// The exact IK of one robot.
 #[derive(Clone, Debug)]
@@ -108,6 +114,8 @@ struct Point {
     /// The tip Jacobian ∂pose/∂τ it was cut from (unweighted, 6 rows);
     /// `None` when `jac` is a Broyden update.
     tip_jac: Option<DMatrix<f64>>,
+    /// Broyden updates since `jac` was last computed exactly.
+    age: usize,
 }
 
 /// How phase 1 ended.
@@ -198,6 +206,7 @@ impl ExactIk {
             err,
             jac: None,
             tip_jac: None,
+            age: 0,
         })
     }
 
@@ -236,7 +245,7 @@ impl ExactIk {
     /// ([`ExactIk::refresh`]) before the trust radius shrinks.
     fn broyden(&self, from: &Point, to: &mut Point) {
         let Some(j) = &from.jac else { return };
-        if to.jac.is_some() {
+        if to.jac.is_some() || from.age >= MAX_BROYDEN_AGE {
             return;
         }
         let dtau = DVector::from_iterator(
@@ -244,13 +253,21 @@ impl ExactIk {
             to.tau.iter().zip(&from.tau).map(|(a, b)| a - b),
         );
         let norm2 = dtau.norm_squared();
-        if norm2 == 0.0 || norm2.sqrt() > BROYDEN_STEP * self.span() {
+        let step = norm2.sqrt();
+        if step > BROYDEN_STEP * self.span() {
             return;
         }
-        let de = &to.err - &from.err;
-        let correction = (de - j * &dtau) * dtau.transpose() / norm2;
-        to.jac = Some(j + correction);
-        to.tip_jac = None;
+        let updated = if step < CHORD_STEP * self.span() {
+            j.clone()
+        } else {
+            let de = &to.err - &from.err;
+            j + (de - j * &dtau) * dtau.transpose() / norm2
+        };
+        if updated.iter().all(|v| v.is_finite()) {
+            to.jac = Some(updated);
+            to.tip_jac = None;
+            to.age = from.age + 1;
+        }
     }
 
     /// Drops a Broyden ∂e/∂τ so that the next use computes it anew;
@@ -282,6 +299,7 @@ impl ExactIk {
                 }
             });
             p.tip_jac = Some(full);
+            p.age = 0;
         }
         Ok(p.jac.as_ref().expect("set above"))
     }
@@ -416,6 +434,9 @@ impl ExactIk {
         j: &DMatrix<f64>,
         cur: &Point,
     ) -> Option<(Vec<usize>, DVector<f64>)> {
+        if !j.iter().all(|v| v.is_finite()) {
+            return None;
+        }
         let g = j.tr_mul(&cur.err);
         let mut free: Vec<usize> = (0..self.lo.len())
             .filter(|&i| {
@@ -463,6 +484,9 @@ impl ExactIk {
     /// shrunk until no tension at a limit is pushed out. `None` when it
     /// vanishes (first-order optimum).
     fn descent(&self, j: &DMatrix<f64>, tau: &[f64]) -> Option<(DVector<f64>, Vec<usize>)> {
+        if !j.iter().all(|v| v.is_finite()) {
+            return None;
+        }
         let mut free: Vec<usize> = (0..tau.len()).collect();
         loop {
             if free.is_empty() {
