@@ -5,7 +5,9 @@
 //! start), the next target the tip of tensions 0.05 N away; cold: from every tendon at
 //! its floor; net: from the `.tnet` net's guess (firmware/vectors/default.tnet,
 //! trained on the default robot), the net's own time included; pose: a full
-//! pose target, cold.
+//! pose target, cold; lift_path: the planner's lift (lateral target, least
+//! total tension, tangent), one point after another along the default 30 mm
+//! circle (500 points, 0.19 mm apart), each from the previous one.
 //! Run: `cargo bench -p tendril --bench inverse`.
 
 use std::hint::black_box;
@@ -14,6 +16,7 @@ use std::path::Path;
 use criterion::{criterion_group, criterion_main, Criterion};
 use tendril::ik_net::IkNet;
 use tendril::inverse::{ExactIk, IkSettings, Target};
+use tendril::kinematics::Lifter;
 use tendril::robot::Robot;
 use tendril::statics::{SolverSettings, Statics};
 
@@ -56,6 +59,21 @@ fn targets(c: &mut Criterion) {
         b.iter(|| {
             let guess = net.solve(black_box(&pose)).unwrap();
             ik.solve(&target, Some(&guess.tensions), None).unwrap()
+        })
+    });
+
+    let circle: Vec<[f64; 2]> = (0..500)
+        .map(|i| {
+            let a = std::f64::consts::TAU * i as f64 / 500.0;
+            [0.015 * a.cos(), 0.015 * a.sin()]
+        })
+        .collect();
+    let mut lifter = Lifter::new(&statics);
+    let mut next_point = circle.iter().cycle();
+    c.bench_function("inverse/lift_path", |b| {
+        b.iter(|| {
+            let xy = *next_point.next().expect("cycles");
+            lifter.lifted(black_box(xy)).unwrap()
         })
     });
 

@@ -252,7 +252,8 @@ fn unreachable_target_gives_the_closest_reachable_pose_and_its_limits() {
     // The closest pose is what the statics give for its tensions.
     let reached = fk(&robot, &closest.tensions);
     assert!(distance(&reached, &closest.pose) < 1e-9);
-    let to_target = (Vector3::new(reached[0], reached[1], reached[2]) - target.position()).norm();
+    let to_target =
+        (Vector3::new(reached[0], reached[1], reached[2]) - target.position().unwrap()).norm();
     assert!((to_target - closest.position_error).abs() < 1e-9);
     let message = InverseError::Unreachable { closest }.to_string();
     assert!(message.contains("at max: tendon 0"), "{message}");

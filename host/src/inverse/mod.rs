@@ -1,6 +1,7 @@
 //! Exact, model-based inverse kinematics (`docs/design.md` §4.1): the
 //! tensions τ ∈ [τ_min, τ_max] whose statics put the tip at a target — a tip
-//! position, or a full pose with orientation — to a micron.
+//! position, a full pose with orientation, or a lateral position (x, y) with
+//! height and orientation free (the planner's lift) — to a micron.
 //!
 //! `jacobian` gives ∂pose/∂τ exactly from the shooting sensitivities,
 //! `solve` runs bounded Levenberg–Marquardt on τ and then resolves the
@@ -11,7 +12,7 @@ pub mod batch;
 pub mod jacobian;
 pub mod solve;
 
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::{DMatrix, UnitQuaternion, Vector2, Vector3};
 
 pub use jacobian::{tip_jacobian, JacobianError, TipJacobian};
 pub use solve::{ExactIk, IkSettings};
@@ -28,6 +29,10 @@ pub enum Target {
     Position(Vector3<f64>),
     /// Tip position (m) and orientation.
     Pose(Vector3<f64>, UnitQuaternion<f64>),
+    /// Lateral tip position (x, y) in the base frame, m; height and
+    /// orientation follow from the tensions (a bending robot's two degrees
+    /// of freedom, `docs/design.md` §6).
+    Lateral(Vector2<f64>),
 }
 
 impl Target {
@@ -54,10 +59,20 @@ impl Target {
         Ok(Target::Pose(position, UnitQuaternion::from_quaternion(q)))
     }
 
-    /// The target position, m.
-    pub fn position(&self) -> Vector3<f64> {
+    /// The target position, m (`None` for a lateral target: its height is free).
+    pub fn position(&self) -> Option<Vector3<f64>> {
         match self {
-            Target::Position(p) | Target::Pose(p, _) => *p,
+            Target::Position(p) | Target::Pose(p, _) => Some(*p),
+            Target::Lateral(_) => None,
+        }
+    }
+
+    /// How many leading components of the error are position (m): 2 for a
+    /// lateral target, else 3.
+    pub(crate) fn position_rows(&self) -> usize {
+        match self {
+            Target::Lateral(_) => 2,
+            Target::Position(_) | Target::Pose(..) => 3,
         }
     }
 }
@@ -69,7 +84,8 @@ pub struct IkSolution {
     pub tensions: Vec<f64>,
     /// The pose these tensions reach: px, py, pz (m), qw, qx, qy, qz.
     pub pose: [f64; 7],
-    /// Distance from the reached tip to the target position, m.
+    /// Distance from the reached tip to the target position (for a lateral
+    /// target: the lateral distance), m.
     pub position_error: f64,
     /// Angle between reached and target orientation, rad (pose targets only).
     pub orientation_error: Option<f64>,
@@ -81,6 +97,9 @@ pub struct IkSolution {
     pub solves: usize,
     /// Warm start of the statics at the answer (for the next point of a path).
     pub warm: WarmStart,
+    /// The tip Jacobian ∂pose/∂τ at the answer (6 × tendons, rows as
+    /// [`TipJacobian::jacobian`]) when the iteration formed it there.
+    pub jacobian: Option<DMatrix<f64>>,
 }
 
 impl IkSolution {

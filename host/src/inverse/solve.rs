@@ -10,7 +10,9 @@
 //! with the step pointing inside), cut to a trust radius and at the first
 //! limit it meets; a step that does not lower the error shrinks the radius.
 //! When no step can lower it any more the target is out of reach and the
-//! point reached is the closest one.
+//! point reached is the closest one. After a small step the Jacobian is
+//! Broyden's update of the last one, refreshed when a step it proposes
+//! fails. A lateral target (the planner's lift) is e = [px − x*, py − y*].
 //!
 //! Phase 2 resolves the redundancy: antagonistic tendons co-contract with
 //! almost no tip motion, so many τ reach a position. Among them it takes the
@@ -62,7 +64,7 @@ impl Default for IkSettings {
 }
 
 /// Tensions are "at a limit" within this much, N.
-const AT_LIMIT: f64 = 1e-9;
+pub(crate) const AT_LIMIT: f64 = 1e-9;
 /// Singular values below this fraction of the largest are dropped from a
 /// Gauss–Newton step (roundoff).
 const RANK_TOLERANCE: f64 = 1e-12;
@@ -78,6 +80,16 @@ const NEAR_NULL: f64 = 1e-3;
 const MAX_REFUSED_MOVES: usize = 2;
 /// Most phase-2 moves along the target set.
 const MAX_REDUNDANCY_MOVES: usize = 20;
+/// Steps no longer than this fraction of the widest tension range update
+/// the last ∂e/∂τ (Broyden) instead of a new sensitivity pass, which costs
+/// ~1.6 statics solves: a warm path step is a few hundredths of a newton.
+const BROYDEN_STEP: f64 = 0.02;
+/// Steps shorter than this fraction of the range keep the last ∂e/∂τ as it
+/// is (the change Δe would be the statics' round-off).
+const CHORD_STEP: f64 = 1e-7;
+/// Most Broyden updates in a row before an exact Jacobian again (their
+/// errors add up).
+const MAX_BROYDEN_AGE: usize = 3;
 
 /// The exact IK of one robot.
 #[derive(Clone, Debug)]
@@ -97,7 +109,13 @@ struct Point {
     sol: Solution,
     err: DVector<f64>,
     cost: f64,
+    /// ∂e/∂τ.
     jac: Option<DMatrix<f64>>,
+    /// The tip Jacobian ∂pose/∂τ it was cut from (unweighted, 6 rows);
+    /// `None` when `jac` is a Broyden update.
+    tip_jac: Option<DMatrix<f64>>,
+    /// Broyden updates since `jac` was last computed exactly.
+    age: usize,
 }
 
 /// How phase 1 ended.
@@ -123,6 +141,11 @@ impl ExactIk {
     /// The robot.
     pub fn robot(&self) -> &Robot {
         self.statics.robot()
+    }
+
+    /// The tension limits (τ_min, τ_max), N.
+    pub fn limits(&self) -> (&[f64], &[f64]) {
+        (&self.lo, &self.hi)
     }
 
     /// Tensions reaching `target`, starting from `start` (clamped into the
@@ -182,19 +205,79 @@ impl ExactIk {
             sol,
             err,
             jac: None,
+            tip_jac: None,
+            age: 0,
         })
     }
 
-    /// e = [p − p*] or [p − p*; ℓ θ(R R*ᵀ)].
+    /// e = [p − p*], [p − p*; ℓ θ(R R*ᵀ)] or [px − x*, py − y*].
     fn error(&self, target: &Target, sol: &Solution) -> DVector<f64> {
-        let dp = sol.position - target.position();
         match target {
-            Target::Position(_) => DVector::from_column_slice(dp.as_slice()),
-            Target::Pose(_, q) => {
+            Target::Position(p) => DVector::from_column_slice((sol.position - p).as_slice()),
+            Target::Pose(p, q) => {
+                let dp = sol.position - p;
                 let r = sol.rotation * q.to_rotation_matrix().matrix().transpose();
                 let theta = Rotation3::from_matrix_unchecked(r).scaled_axis() * self.weight;
                 DVector::from_iterator(6, dp.iter().chain(theta.iter()).copied())
             }
+            Target::Lateral(xy) => {
+                DVector::from_vec(vec![sol.position.x - xy.x, sol.position.y - xy.y])
+            }
+        }
+    }
+
+    /// The tip Jacobian ∂pose/∂τ (6 × tendons, rows as
+    /// [`super::TipJacobian::jacobian`]) of the statics solution `warm` at
+    /// `tensions`.
+    pub fn tip_jacobian_at(
+        &self,
+        tensions: &[f64],
+        warm: &WarmStart,
+    ) -> Result<DMatrix<f64>, InverseError> {
+        let mut rod = self.rod.clone();
+        rod.set_tensions(tensions);
+        Ok(tip_jacobian(&rod, &warm.x, self.settings.statics.steps)?.jacobian)
+    }
+
+    /// Broyden's rank-one update of `from`'s ∂e/∂τ for `to` when the step
+    /// between them is small: J + (Δe − J Δτ) Δτᵀ / |Δτ|², exact along the
+    /// step taken. A step it proposes that fails gets a fresh Jacobian
+    /// ([`ExactIk::refresh`]) before the trust radius shrinks.
+    fn broyden(&self, from: &Point, to: &mut Point) {
+        let Some(j) = &from.jac else { return };
+        if to.jac.is_some() || from.age >= MAX_BROYDEN_AGE {
+            return;
+        }
+        let dtau = DVector::from_iterator(
+            to.tau.len(),
+            to.tau.iter().zip(&from.tau).map(|(a, b)| a - b),
+        );
+        let norm2 = dtau.norm_squared();
+        let step = norm2.sqrt();
+        if step > BROYDEN_STEP * self.span() {
+            return;
+        }
+        let updated = if step < CHORD_STEP * self.span() {
+            j.clone()
+        } else {
+            let de = &to.err - &from.err;
+            j + (de - j * &dtau) * dtau.transpose() / norm2
+        };
+        if updated.iter().all(|v| v.is_finite()) {
+            to.jac = Some(updated);
+            to.tip_jac = None;
+            to.age = from.age + 1;
+        }
+    }
+
+    /// Drops a Broyden ∂e/∂τ so that the next use computes it anew;
+    /// `false` when it was exact already.
+    fn refresh(p: &mut Point) -> bool {
+        if p.jac.is_some() && p.tip_jac.is_none() {
+            p.jac = None;
+            true
+        } else {
+            false
         }
     }
 
@@ -205,25 +288,27 @@ impl ExactIk {
         p: &'a mut Point,
     ) -> Result<&'a DMatrix<f64>, InverseError> {
         if p.jac.is_none() {
-            let mut rod = self.rod.clone();
-            rod.set_tensions(&p.tau);
-            let full = tip_jacobian(&rod, &p.sol.warm.x, self.settings.statics.steps)?.jacobian;
+            let full = self.tip_jacobian_at(&p.tau, &p.sol.warm)?;
             p.jac = Some(match target {
                 Target::Position(_) => full.rows(0, 3).into_owned(),
+                Target::Lateral(_) => full.rows(0, 2).into_owned(),
                 Target::Pose(..) => {
-                    let mut j = full;
+                    let mut j = full.clone();
                     j.rows_mut(3, 3).scale_mut(self.weight);
                     j
                 }
             });
+            p.tip_jac = Some(full);
+            p.age = 0;
         }
         Ok(p.jac.as_ref().expect("set above"))
     }
 
     fn converged(&self, target: &Target, p: &Point) -> bool {
-        let position_ok = p.err.rows(0, 3).norm() <= self.settings.position_tol;
+        let position_ok =
+            p.err.rows(0, target.position_rows()).norm() <= self.settings.position_tol;
         match target {
-            Target::Position(_) => position_ok,
+            Target::Position(_) | Target::Lateral(_) => position_ok,
             Target::Pose(..) => {
                 position_ok
                     && p.err.rows(3, 3).norm() / self.weight <= self.settings.orientation_tol
@@ -233,7 +318,7 @@ impl ExactIk {
 
     fn not_converged(&self, p: &Point, solves: usize) -> InverseError {
         InverseError::NotConverged {
-            position_error: p.err.rows(0, 3).norm(),
+            position_error: p.err.rows(0, p.err.len().min(3)).norm(),
             solves,
         }
     }
@@ -256,6 +341,9 @@ impl ExactIk {
             }
             let j = self.jacobian(target, &mut cur)?.clone();
             let Some((free, full)) = self.gauss_newton_step(&j, &cur) else {
+                if Self::refresh(&mut cur) {
+                    continue;
+                }
                 return Ok(Reach::Stalled(cur));
             };
             loop {
@@ -295,22 +383,35 @@ impl ExactIk {
                     .sum::<f64>()
                     .sqrt();
                 if moved <= 1e-13 * (1.0 + self.span()) {
+                    if Self::refresh(&mut cur) {
+                        break;
+                    }
                     return Ok(Reach::Stalled(cur));
                 }
                 let trial = self.point(target, tau, Some(&cur.sol.warm), solves);
                 match trial {
-                    Ok(trial) if trial.cost < cur.cost => {
+                    Ok(mut trial) if trial.cost < cur.cost => {
                         let gain = (cur.cost - trial.cost) / cur.cost;
                         slow = if gain < 1e-10 { slow + 1 } else { 0 };
+                        self.broyden(&cur, &mut trial);
                         cur = trial;
                         radius = (4.0 * moved).max(radius).min(self.span());
                         if slow >= 3 {
+                            if Self::refresh(&mut cur) {
+                                slow = 0;
+                                break;
+                            }
                             return Ok(Reach::Stalled(cur));
                         }
                         break;
                     }
-                    // A worse point, or one the statics cannot solve: shrink.
-                    Ok(_) | Err(InverseError::Statics(_)) => {}
+                    // A worse point, or one the statics cannot solve: with
+                    // a Broyden Jacobian, a fresh one first; else shrink.
+                    Ok(_) | Err(InverseError::Statics(_)) => {
+                        if Self::refresh(&mut cur) {
+                            break;
+                        }
+                    }
                     Err(e) => return Err(e),
                 }
                 radius = 0.25 * moved;
@@ -333,6 +434,9 @@ impl ExactIk {
         j: &DMatrix<f64>,
         cur: &Point,
     ) -> Option<(Vec<usize>, DVector<f64>)> {
+        if !j.iter().all(|v| v.is_finite()) {
+            return None;
+        }
         let g = j.tr_mul(&cur.err);
         let mut free: Vec<usize> = (0..self.lo.len())
             .filter(|&i| {
@@ -380,6 +484,9 @@ impl ExactIk {
     /// shrunk until no tension at a limit is pushed out. `None` when it
     /// vanishes (first-order optimum).
     fn descent(&self, j: &DMatrix<f64>, tau: &[f64]) -> Option<(DVector<f64>, Vec<usize>)> {
+        if !j.iter().all(|v| v.is_finite()) {
+            return None;
+        }
         let mut free: Vec<usize> = (0..tau.len()).collect();
         loop {
             if free.is_empty() {
@@ -440,11 +547,16 @@ impl ExactIk {
             }
             let total = |t: &[f64]| t.iter().sum::<f64>();
             let moved = match self.point(target, tau, Some(&best.sol.warm), solves) {
-                Ok(p) => match self.reach(target, p, solves) {
-                    Ok(Reach::Converged(p)) if total(&p.tau) < total(&best.tau) - 1e-12 => Some(p),
-                    Ok(_) | Err(InverseError::NotConverged { .. }) => None,
-                    Err(e) => return Err(e),
-                },
+                Ok(mut p) => {
+                    self.broyden(&best, &mut p);
+                    match self.reach(target, p, solves) {
+                        Ok(Reach::Converged(p)) if total(&p.tau) < total(&best.tau) - 1e-12 => {
+                            Some(p)
+                        }
+                        Ok(_) | Err(InverseError::NotConverged { .. }) => None,
+                        Err(e) => return Err(e),
+                    }
+                }
                 Err(InverseError::Statics(_)) => None,
                 Err(e) => return Err(e),
             };
@@ -462,7 +574,7 @@ impl ExactIk {
     fn answer(&self, target: &Target, p: &Point, solves: usize) -> IkSolution {
         let pose = p.sol.pose();
         let orientation_error = match target {
-            Target::Position(_) => None,
+            Target::Position(_) | Target::Lateral(_) => None,
             Target::Pose(_, q) => Some(angle_between(
                 &[pose[3], pose[4], pose[5], pose[6]],
                 &[q.w, q.i, q.j, q.k],
@@ -472,12 +584,13 @@ impl ExactIk {
         IkSolution {
             tensions: p.tau.clone(),
             pose,
-            position_error: p.err.rows(0, 3).norm(),
+            position_error: p.err.rows(0, target.position_rows()).norm(),
             orientation_error,
             at_min: select(&|i| p.tau[i] <= self.lo[i] + AT_LIMIT),
             at_max: select(&|i| p.tau[i] >= self.hi[i] - AT_LIMIT),
             solves,
             warm: p.sol.warm.clone(),
+            jacobian: p.tip_jac.clone(),
         }
     }
 }

@@ -71,8 +71,23 @@ pub struct PlannerConfig {
 /// injected bad setpoint; the logged pose is the trajectory's.
 pub const LOG_INJECTED: u32 = 1 << 31;
 
-/// Column names of the planner log.
+/// The leading column names of the planner log (then [`log_header`]'s
+/// feed-forward columns).
 pub const LOG_HEADER: &str = "t_ns,seq,flags,px,py,pz,qw,qx,qy,qz";
+
+/// Column names of the planner log for a robot with `tendons` tendons: the
+/// setpoint, then the exact IK's feed-forward tensions `ff0..` (N) for it and
+/// `ff_miss_m`, the distance from the setpoint's position to the tip those
+/// tensions give (0 on the reachable path; > 0 for a pose-table row out of
+/// reach, whose reference is the closest reachable pose; NaN without one).
+pub fn log_header(tendons: usize) -> String {
+    let mut header = LOG_HEADER.to_string();
+    for i in 0..tendons {
+        header.push_str(&format!(",ff{i}"));
+    }
+    header.push_str(",ff_miss_m");
+    header
+}
 
 /// Run the planner process until stopped or done.
 pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
@@ -93,7 +108,8 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
     // The controller's commands say it is alive (the peers-lost rule).
     let commands = transport::subscriber(&services.tension_cmd)?;
     let stop = StopWatch::new(&services)?;
-    let mut log = CsvLog::create(cfg.log.as_deref(), LOG_HEADER)?;
+    let mut log = CsvLog::create(cfg.log.as_deref(), &log_header(traj.tendons()))?;
+    let mut feedforward = Vec::with_capacity(traj.tendons());
     tighten_timer_slack();
     super::clock::apply_scheduling(
         "planner",
@@ -111,11 +127,13 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
     loop {
         let tick = ticker.wait(0);
         let t = (tick.deadline_ns - start) as f64 * 1e-9;
-        let (point, mut flags) = if t < cfg.settle_s {
-            (traj.sample(0.0), setpoint_flags::HOLD)
+        let (t_path, mut flags) = if t < cfg.settle_s {
+            (0.0, setpoint_flags::HOLD)
         } else {
-            (traj.sample(t - cfg.settle_s), setpoint_flags::HAS_VELOCITY)
+            (t - cfg.settle_s, setpoint_flags::HAS_VELOCITY)
         };
+        let point = traj.sample(t_path);
+        let miss = traj.feedforward(t_path, &mut feedforward);
         let mut pose = point.pose.map(|v| v as f32);
         let mut velocity = point.velocity.map(|v| v as f32);
         let tangent = match point.tangent {
@@ -168,6 +186,8 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
         let log_flags = flags | if injected { LOG_INJECTED } else { 0 };
         let mut row = vec![stamp as f64, seq as f64, log_flags as f64];
         row.extend(clean.iter().map(|&v| v as f64));
+        row.extend_from_slice(&feedforward);
+        row.push(miss);
         log.row(&row)?;
         if stamp - last_flush > 100_000_000 {
             log.flush()?;

@@ -1,16 +1,19 @@
 //! Planner trajectories. A continuum robot with bending tendons has fewer
 //! degrees of freedom than a 7-number pose, so an arbitrary pose is not
 //! reachable: the planner plans the tip's lateral position (x, y) and lifts
-//! each point to the full reachable pose with
-//! [`crate::kinematics::Lifter`], tabulated once at start-up.
+//! each point to the full reachable pose with the exact IK
+//! ([`crate::kinematics::Lifter`], `docs/design.md` §4.1), tabulated once at
+//! start-up with the tensions as a feed-forward reference. A pose table's
+//! rows get theirs from the exact IK on the full pose.
 
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
 use super::IpcError;
+use crate::inverse::{ExactIk, InverseError, Target};
 use crate::kinematics::{Lifter, Tangent};
-use crate::statics::Statics;
+use crate::statics::{Statics, WarmStart};
 
 /// A desired tip pose and its time derivative at one instant.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -81,8 +84,15 @@ pub struct PoseRow {
 pub struct Trajectory {
     times: Vec<f64>,
     poses: Vec<[f64; 7]>,
-    /// One per pose, or empty (a pose table).
+    /// One per pose, or empty (a pose table with a row out of reach).
     tangents: Vec<Tangent>,
+    /// Feed-forward tensions (N), one set per pose: the exact IK's answer
+    /// (`docs/design.md` §4.1); NaN where it gave none.
+    feedforward: Vec<Vec<f64>>,
+    /// Distance (m) from each pose's position to where its feed-forward
+    /// tensions put the tip: 0 when reached, the closest reachable
+    /// distance for a pose out of reach, NaN without an answer.
+    feedforward_miss: Vec<f64>,
     /// Repeats after its last time (circle, figure eight).
     periodic: bool,
     /// Piecewise-constant targets (steps, hold): no interpolation, zero velocity.
@@ -92,20 +102,47 @@ pub struct Trajectory {
 /// Table resolution for lifted continuous paths (s).
 const TABLE_DT: f64 = 0.01;
 
+/// Lifted lateral positions as trajectory columns.
+#[derive(Default)]
+struct LiftedPath {
+    poses: Vec<[f64; 7]>,
+    tangents: Vec<Tangent>,
+    tensions: Vec<Vec<f64>>,
+}
+
+impl LiftedPath {
+    fn push(&mut self, lifter: &mut Lifter, xy: [f64; 2]) -> Result<(), IpcError> {
+        let lifted = lifter.lifted(xy)?;
+        self.poses.push(lifted.pose);
+        self.tangents.push(lifted.tangent);
+        self.tensions.push(lifted.tensions);
+        Ok(())
+    }
+
+    fn into_trajectory(self, times: Vec<f64>, periodic: bool, stepwise: bool) -> Trajectory {
+        Trajectory {
+            times,
+            feedforward_miss: vec![0.0; self.poses.len()],
+            poses: self.poses,
+            tangents: self.tangents,
+            feedforward: self.tensions,
+            periodic,
+            stepwise,
+        }
+    }
+}
+
 impl Trajectory {
-    /// Tabulate `shape` for `statics`' robot.
+    /// Tabulate `shape` for `statics`' robot: lateral targets lifted to
+    /// reachable poses by the exact IK, each point warm-started from the
+    /// previous one ([`Lifter`]).
     pub fn new(shape: &Shape, statics: &Statics) -> Result<Trajectory, IpcError> {
         let mut lifter = Lifter::new(statics);
         match shape {
             Shape::Hold { center_m } => {
-                let (pose, tangent) = lifter.lift_with_tangent(*center_m)?;
-                Ok(Trajectory {
-                    times: vec![0.0],
-                    poses: vec![pose],
-                    tangents: vec![tangent],
-                    periodic: false,
-                    stepwise: true,
-                })
+                let mut path = LiftedPath::default();
+                path.push(&mut lifter, *center_m)?;
+                Ok(path.into_trajectory(vec![0.0], false, true))
             }
             Shape::Steps {
                 targets_m: targets,
@@ -116,22 +153,12 @@ impl Trajectory {
                         "steps need at least one target and a positive dwell".into(),
                     ));
                 }
-                let mut times = Vec::new();
-                let mut poses = Vec::new();
-                let mut tangents = Vec::new();
-                for (i, xy) in targets.iter().enumerate() {
-                    let (pose, tangent) = lifter.lift_with_tangent(*xy)?;
-                    times.push(i as f64 * dwell);
-                    poses.push(pose);
-                    tangents.push(tangent);
+                let mut path = LiftedPath::default();
+                for xy in targets {
+                    path.push(&mut lifter, *xy)?;
                 }
-                Ok(Trajectory {
-                    times,
-                    poses,
-                    tangents,
-                    periodic: false,
-                    stepwise: true,
-                })
+                let times = (0..targets.len()).map(|i| i as f64 * dwell).collect();
+                Ok(path.into_trajectory(times, false, true))
             }
             Shape::Circle {
                 center_m: center,
@@ -152,8 +179,7 @@ impl Trajectory {
                 let period = 1.0 / freq;
                 let n = ((period / TABLE_DT).ceil() as usize).max(16);
                 let mut times = Vec::with_capacity(n + 1);
-                let mut poses = Vec::with_capacity(n + 1);
-                let mut tangents = Vec::with_capacity(n + 1);
+                let mut path = LiftedPath::default();
                 for i in 0..=n {
                     let t = period * i as f64 / n as f64;
                     let a = std::f64::consts::TAU * freq * t;
@@ -165,18 +191,10 @@ impl Trajectory {
                     } else {
                         [center[0] + radius * a.cos(), center[1] + radius * a.sin()]
                     };
-                    let (pose, tangent) = lifter.lift_with_tangent(xy)?;
                     times.push(t);
-                    poses.push(pose);
-                    tangents.push(tangent);
+                    path.push(&mut lifter, xy)?;
                 }
-                Ok(Trajectory {
-                    times,
-                    poses,
-                    tangents,
-                    periodic: true,
-                    stepwise: false,
-                })
+                Ok(path.into_trajectory(times, true, false))
             }
             Shape::Table { rows } => {
                 if rows.is_empty() || rows.windows(2).any(|w| w[1].t_s <= w[0].t_s) {
@@ -200,10 +218,13 @@ impl Trajectory {
                     log::warn!("pose table: no tangents for the correction ({e})");
                     Vec::new()
                 });
+                let (feedforward, feedforward_miss) = table_feedforward(lifter.ik(), rows);
                 Ok(Trajectory {
                     times: rows.iter().map(|r| r.t_s).collect(),
                     poses: rows.iter().map(|r| r.pose).collect(),
                     tangents,
+                    feedforward,
+                    feedforward_miss,
                     periodic: false,
                     stepwise: false,
                 })
@@ -211,13 +232,15 @@ impl Trajectory {
         }
     }
 
-    /// Duration of one pass (s); 0 for a hold.
-    pub fn duration(&self) -> f64 {
-        *self.times.last().unwrap_or(&0.0)
+    /// Tendons of the feed-forward tensions.
+    pub fn tendons(&self) -> usize {
+        self.feedforward.first().map_or(0, Vec::len)
     }
 
-    /// Pose and velocity at time `t` (s) from the start.
-    pub fn sample(&self, t: f64) -> PosePoint {
+    /// The segment at time `t` (s from the start): index of the pose in
+    /// force and the fraction of the way to the next one (0 when stepwise or
+    /// past the end).
+    fn segment(&self, t: f64) -> (usize, f64) {
         let n = self.poses.len();
         let t = if self.periodic && self.duration() > 0.0 {
             t.rem_euclid(self.duration())
@@ -230,7 +253,37 @@ impl Trajectory {
             .rposition(|&ti| ti <= t)
             .unwrap_or_default();
         if self.stepwise || i + 1 >= n {
-            let i = i.min(n - 1);
+            return (i.min(n - 1), 0.0);
+        }
+        let (t0, t1) = (self.times[i], self.times[i + 1]);
+        (i, ((t - t0) / (t1 - t0)).clamp(0.0, 1.0))
+    }
+
+    /// Feed-forward tensions (N) at time `t` (s), interpolated like the
+    /// poses, into `out` (resized to the tendons); returns the tip's
+    /// distance from the path there (m, see [`Trajectory::tendons`]).
+    pub fn feedforward(&self, t: f64, out: &mut Vec<f64>) -> f64 {
+        let (i, f) = self.segment(t);
+        let a = &self.feedforward[i];
+        out.clear();
+        if f == 0.0 {
+            out.extend_from_slice(a);
+            return self.feedforward_miss[i];
+        }
+        let b = &self.feedforward[i + 1];
+        out.extend(a.iter().zip(b).map(|(a, b)| a + f * (b - a)));
+        self.feedforward_miss[i].max(self.feedforward_miss[i + 1])
+    }
+
+    /// Duration of one pass (s); 0 for a hold.
+    pub fn duration(&self) -> f64 {
+        *self.times.last().unwrap_or(&0.0)
+    }
+
+    /// Pose and velocity at time `t` (s) from the start.
+    pub fn sample(&self, t: f64) -> PosePoint {
+        let (i, f) = self.segment(t);
+        if self.stepwise || i + 1 >= self.poses.len() {
             return PosePoint {
                 pose: self.poses[i],
                 velocity: [0.0; 7],
@@ -238,7 +291,6 @@ impl Trajectory {
             };
         }
         let (t0, t1) = (self.times[i], self.times[i + 1]);
-        let f = ((t - t0) / (t1 - t0)).clamp(0.0, 1.0);
         let mut pose = [0.0; 7];
         let mut velocity = [0.0; 7];
         for k in 0..7 {
@@ -268,6 +320,62 @@ impl Trajectory {
             tangent,
         }
     }
+}
+
+/// Exact tensions for each row of a pose table (full-pose targets with the
+/// IK's default orientation weight, the backbone length in m/rad,
+/// `docs/design.md` §4.1), each row warm-started from the previous one, and
+/// each row's miss: 0 when reached, the distance to the closest reachable
+/// pose when out of reach (the row is named in the log, its reference is
+/// that closest pose's tensions), NaN when the IK gave no answer.
+fn table_feedforward(ik: &ExactIk, rows: &[PoseRow]) -> (Vec<Vec<f64>>, Vec<f64>) {
+    let n = ik.robot().tendons.len();
+    let mut tensions = Vec::with_capacity(rows.len());
+    let mut misses = Vec::with_capacity(rows.len());
+    let mut previous: Option<(Vec<f64>, WarmStart)> = None;
+    let mut out_of_reach = 0;
+    for (i, row) in rows.iter().enumerate() {
+        let answer = Target::from_pose(&row.pose, false).and_then(|target| {
+            let start = previous.as_ref().map(|(t, w)| (t.as_slice(), w));
+            ik.solve(&target, start.map(|s| s.0), start.map(|s| s.1))
+        });
+        let (tau, miss) = match answer {
+            Ok(s) => {
+                previous = Some((s.tensions.clone(), s.warm));
+                (s.tensions, 0.0)
+            }
+            Err(InverseError::Unreachable { closest }) => {
+                out_of_reach += 1;
+                log::warn!(
+                    "pose table row {} (t = {} s) is out of reach: feed-forward from the closest reachable pose, {:.3} mm and {:.4} rad away ({})",
+                    i + 1,
+                    row.t_s,
+                    closest.position_error * 1e3,
+                    closest.orientation_error.unwrap_or(f64::NAN),
+                    closest.active_limits()
+                );
+                previous = Some((closest.tensions.clone(), closest.warm));
+                (closest.tensions, closest.position_error)
+            }
+            Err(e) => {
+                log::warn!(
+                    "pose table row {} (t = {} s): no feed-forward tensions ({e})",
+                    i + 1,
+                    row.t_s
+                );
+                (vec![f64::NAN; n], f64::NAN)
+            }
+        };
+        tensions.push(tau);
+        misses.push(miss);
+    }
+    if out_of_reach > 0 {
+        log::warn!(
+            "pose table: {out_of_reach} of {} rows out of reach (their feed-forward is the closest reachable pose's)",
+            rows.len()
+        );
+    }
+    (tensions, misses)
 }
 
 /// Read a pose table (`t,px,py,pz,qw,qx,qy,qz`, header line required).
@@ -306,6 +414,7 @@ mod tests {
     use super::*;
     use crate::robot::Robot;
     use crate::statics::SolverSettings;
+    use nalgebra::Vector3;
 
     fn statics() -> Statics {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml");
@@ -370,5 +479,48 @@ mod tests {
         far[1].pose[0] = 0.5;
         let traj = Trajectory::new(&Shape::Table { rows: far }, &s).unwrap();
         assert!(traj.sample(0.0).tangent.is_none());
+    }
+
+    /// Feed-forward tensions of a pose table: reachable rows (poses of
+    /// known tensions) get tensions whose fresh forward solve gives the
+    /// row's pose; a row out of reach is no failure, its miss is the
+    /// distance to where its (closest-pose) tensions put the tip.
+    #[test]
+    fn pose_table_rows_get_exact_feedforward_tensions() {
+        let s = statics();
+        let truth = [
+            [3.0, 1.0, 0.0, 0.0],
+            [0.0, 2.0, 1.5, 0.0],
+            [0.5, 0.0, 0.0, 4.0],
+        ];
+        let mut rows: Vec<PoseRow> = truth
+            .iter()
+            .enumerate()
+            .map(|(i, tau)| PoseRow {
+                t_s: i as f64,
+                pose: s.solve(tau, None).unwrap().pose(),
+            })
+            .collect();
+        let traj = Trajectory::new(&Shape::Table { rows: rows.clone() }, &s).unwrap();
+        assert_eq!(traj.tendons(), 4);
+        let mut ff = Vec::new();
+        for row in &rows {
+            assert_eq!(traj.feedforward(row.t_s, &mut ff), 0.0);
+            let reached = statics().solve(&ff, None).unwrap();
+            let p = reached.position;
+            let miss = (p - Vector3::new(row.pose[0], row.pose[1], row.pose[2])).norm();
+            assert!(miss <= 1e-6, "row at {} s: {miss:e} m", row.t_s);
+            assert!(ff.iter().all(|&t| (0.0..=10.0).contains(&t)), "{ff:?}");
+        }
+        rows[1].pose[0] += 0.3;
+        let traj = Trajectory::new(&Shape::Table { rows: rows.clone() }, &s).unwrap();
+        let miss = traj.feedforward(1.0, &mut ff);
+        let p = statics().solve(&ff, None).unwrap().position;
+        let expected = (p - Vector3::new(rows[1].pose[0], rows[1].pose[1], rows[1].pose[2])).norm();
+        assert!(
+            miss > 0.1 && (miss - expected).abs() < 1e-9,
+            "{miss} vs {expected}"
+        );
+        assert_eq!(traj.feedforward(2.0, &mut ff), 0.0);
     }
 }
