@@ -181,6 +181,7 @@ impl ExactIk {
                 } else {
                     p
                 };
+                let p = self.onto_limits(target, p, &mut solves)?;
                 Ok(self.answer(target, &p, solves))
             }
             Reach::Stalled(p) => Err(InverseError::Unreachable {
@@ -569,6 +570,46 @@ impl ExactIk {
             }
         }
         Ok(best)
+    }
+
+    /// Tensions within [`AT_LIMIT`] of a limit are put on it (a slack
+    /// tendon reads 0 N, not 3e-11 N, after the last Gauss–Newton step
+    /// nudged it), and the pose is solved again for them, if the result
+    /// still reaches the target; otherwise `p` as it is.
+    fn onto_limits(
+        &self,
+        target: &Target,
+        p: Point,
+        solves: &mut usize,
+    ) -> Result<Point, InverseError> {
+        let snapped: Vec<f64> = p
+            .tau
+            .iter()
+            .zip(self.lo.iter().zip(&self.hi))
+            .map(|(&t, (&lo, &hi))| {
+                if t - lo <= AT_LIMIT {
+                    lo
+                } else if hi - t <= AT_LIMIT {
+                    hi
+                } else {
+                    t
+                }
+            })
+            .collect();
+        if snapped == p.tau {
+            return Ok(p);
+        }
+        match self.point(target, snapped, Some(&p.sol.warm), solves) {
+            Ok(mut q) if self.converged(target, &q) => {
+                // The Jacobians of tensions 1e-9 N away are the same to
+                // far below their use (the lift's tangent, Broyden).
+                q.jac = p.jac;
+                q.tip_jac = p.tip_jac;
+                Ok(q)
+            }
+            Ok(_) | Err(InverseError::Statics(_)) => Ok(p),
+            Err(e) => Err(e),
+        }
     }
 
     fn answer(&self, target: &Target, p: &Point, solves: usize) -> IkSolution {

@@ -319,9 +319,12 @@ mod tests {
             let fresh = statics().solve(&lifted.tensions, None).unwrap();
             let miss = (fresh.position.x - xy[0]).hypot(fresh.position.y - xy[1]);
             assert!(miss <= 1e-6, "xy {xy:?}: {miss:e} m");
+            // Two solves of the same tensions that each meet the residual
+            // tolerance (5e-10 N·m) may differ by up to L/EI × 5e-10 ≈ 6e-9
+            // in rotation on the seed robot.
             let pose = fresh.pose();
             for (k, (a, b)) in pose.iter().zip(&lifted.pose).enumerate() {
-                assert!((a - b).abs() < 1e-9, "xy {xy:?} component {k}");
+                assert!((a - b).abs() < 1e-8, "xy {xy:?} component {k}: {:e}", a - b);
             }
             // Least total tension: at most one tendon of each antagonistic pair pulls.
             let t = &lifted.tensions;
