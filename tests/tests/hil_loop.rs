@@ -481,10 +481,23 @@ fn a_stuck_loaded_motor_is_detected_and_the_tensions_are_held() {
         .iter()
         .find(|r| (r[ist] as u32) & tendril_shared::messages::plant_status::MOTOR_STUCK != 0)
         .expect("the plant never stuck")[it];
-    let latency = (found_ns - stuck_at) * 1e-9;
+    assert!(found_ns >= stuck_at, "detected before the motor stuck");
+    // A stuck motor is visible only once its command leaves the stuck
+    // tension: how long that takes depends on where on the circle it
+    // stuck (near a tension peak it can be seconds). From then on the
+    // rule (0.5 N off for 0.1 s) must fire within its hold time plus a few
+    // periods. The plant's own log says when: commanded vs measured tension.
+    let (ic, ia) = (col(&h, "cmd2"), col(&h, "tau2"));
+    let visible_at = rows
+        .iter()
+        .find(|r| r[it] >= stuck_at && (r[ic] - r[ia]).abs() > 0.5)
+        .expect("the stuck motor's command never left its tension")[it];
+    let latency = (found_ns - visible_at) * 1e-9;
     assert!(
-        (0.0..1.0).contains(&latency),
-        "stuck motor detected {latency} s after it stuck"
+        (0.0..0.3).contains(&latency),
+        "stuck motor detected {latency} s after its command left the stuck tension \
+         ({} s after it stuck)",
+        (found_ns - stuck_at) * 1e-9
     );
     // Safe hold: from 10 ms after the detection, every command equals the
     // one before it (the controller's log).
