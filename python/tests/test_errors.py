@@ -1,5 +1,6 @@
 """Bad input raises a Python exception carrying the CLI's one-line message."""
 
+import signal
 import threading
 import _thread
 
@@ -84,6 +85,10 @@ def test_ctrl_c_during_a_long_fk_raises_keyboard_interrupt():
     # the batch stops at the next chain of rows, so a dev build waits for one
     # chain (32 rows), not the whole batch.
     tensions = np.random.default_rng(1).uniform(0, 10, (1280, 4))
+    # A process started in the background by a non-interactive shell
+    # inherits SIGINT ignored, and then interrupt_main() does nothing: give
+    # SIGINT Python's own handler for this test, as an interactive session has.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     timer = threading.Timer(0.1, _thread.interrupt_main)
     timer.start()
     try:
@@ -91,3 +96,4 @@ def test_ctrl_c_during_a_long_fk_raises_keyboard_interrupt():
             robot.fk(tensions, steps=200)
     finally:
         timer.cancel()
+        signal.signal(signal.SIGINT, previous)
