@@ -1,5 +1,6 @@
 //! Helpers for the process-level tests in `tests/tests/`: locating the
-//! `tendril` binary that `cargo test` built and running it.
+//! `tendril` binary that `cargo test` built, running it, and reading the
+//! numeric CSV logs its processes write.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -44,4 +45,34 @@ pub fn tendril(args: &[&str]) -> Output {
 /// Path of a robot file in `robots/`.
 pub fn robot(name: &str) -> PathBuf {
     workspace_root().join("robots").join(name)
+}
+
+/// Rows of a numeric CSV log with its header. Rows that do not parse as
+/// numbers, or have the wrong width, are left out (a log cut by a kill).
+pub fn csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut lines = text.lines();
+    let header: Vec<String> = lines
+        .next()
+        .expect("header")
+        .split(',')
+        .map(str::to_string)
+        .collect();
+    let rows = lines
+        .filter_map(|l| {
+            l.split(',')
+                .map(|x| x.parse::<f64>().ok())
+                .collect::<Option<Vec<_>>>()
+        })
+        .filter(|r| r.len() == header.len())
+        .collect();
+    (header, rows)
+}
+
+/// Index of column `name` in a CSV header.
+pub fn col(header: &[String], name: &str) -> usize {
+    header
+        .iter()
+        .position(|h| h == name)
+        .unwrap_or_else(|| panic!("no column {name}"))
 }

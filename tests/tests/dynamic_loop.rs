@@ -19,7 +19,7 @@ use std::process::Command;
 
 use tendril::dynamics::Damping;
 use tendril::robot::Robot;
-use tendril_tests::{robot, tendril_bin, workspace_root};
+use tendril_tests::{col, csv, robot, tendril_bin, workspace_root};
 
 /// The default exported net (what the MCU build embeds).
 const DEFAULT_NET: &str = "firmware/vectors/default.tnet";
@@ -53,34 +53,6 @@ fn dynamic_sim(args: &[&str]) -> tempfile::TempDir {
         String::from_utf8_lossy(&out.stderr)
     );
     dir
-}
-
-/// A numeric CSV log: header and rows.
-fn csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
-    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let mut lines = text.lines();
-    let header: Vec<String> = lines
-        .next()
-        .expect("header")
-        .split(',')
-        .map(str::to_string)
-        .collect();
-    let rows = lines
-        .filter_map(|l| {
-            l.split(',')
-                .map(|x| x.parse().ok())
-                .collect::<Option<Vec<f64>>>()
-        })
-        .filter(|r| r.len() == header.len())
-        .collect();
-    (header, rows)
-}
-
-fn col(header: &[String], name: &str) -> usize {
-    header
-        .iter()
-        .position(|h| h == name)
-        .unwrap_or_else(|| panic!("no column {name}"))
 }
 
 /// The true tip (plant log: x, y, m) against the planner's desired tip at

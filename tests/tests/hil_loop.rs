@@ -14,7 +14,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
-use tendril_tests::{tendril_bin, workspace_root};
+use tendril_tests::{col, csv, tendril_bin, workspace_root};
 
 /// The default exported net, relative to the workspace root.
 const DEFAULT_NET: &str = "firmware/vectors/default.tnet";
@@ -58,34 +58,6 @@ fn sim_with(model: &[&str], args: &[&str]) -> (Value, tempfile::TempDir, String)
 
 fn f(v: &Value) -> f64 {
     v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
-}
-
-/// Rows of a numeric CSV log with its header.
-fn csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
-    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let mut lines = text.lines();
-    let header: Vec<String> = lines
-        .next()
-        .unwrap()
-        .split(',')
-        .map(str::to_string)
-        .collect();
-    let rows = lines
-        .filter_map(|l| {
-            l.split(',')
-                .map(|x| x.parse::<f64>().ok())
-                .collect::<Option<Vec<_>>>()
-        })
-        .filter(|r| r.len() == header.len())
-        .collect();
-    (header, rows)
-}
-
-fn col(header: &[String], name: &str) -> usize {
-    header
-        .iter()
-        .position(|h| h == name)
-        .unwrap_or_else(|| panic!("no column {name}"))
 }
 
 /// Every tension command the plant(s) ever logged is finite and within the
