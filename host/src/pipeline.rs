@@ -68,6 +68,25 @@ impl Report {
     }
 }
 
+/// Where `tendril run` writes for `robot_file` when not told: `out/` for
+/// the default robot (as `cargo run --release`), else `out/<file stem>/`
+/// (`out/tdcr-2seg/`), so runs on different robots never reuse each other's
+/// dataset or net. The file stem, not the robot's name, because the name is
+/// free text and the stem is already a valid file name.
+pub fn default_out_dir(robot_file: &Path) -> PathBuf {
+    let default = Path::new(DEFAULT_ROBOT);
+    let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => a == b,
+    };
+    if same(robot_file, default) {
+        PathBuf::from(OUT_DIR)
+    } else {
+        let stem = robot_file.file_stem().unwrap_or(robot_file.as_os_str());
+        Path::new(OUT_DIR).join(stem)
+    }
+}
+
 /// Run the pipeline on the default robot, writing under `out/`.
 pub fn run_default() -> anyhow::Result<()> {
     run(Path::new(DEFAULT_ROBOT), Path::new(OUT_DIR))

@@ -14,6 +14,7 @@ pub mod generate;
 pub mod ik;
 mod planner;
 mod plant;
+mod run;
 mod sim;
 pub mod train;
 mod workspace;
@@ -50,6 +51,8 @@ impl Cli {
 #[allow(clippy::large_enum_variant)]
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// The whole pipeline on a robot file: dataset, net, comparison, firmware, closed loop.
+    Run(run::RunArgs),
     /// Forward statics: tip pose for tendon tensions (one, or a CSV batch).
     Fk(fk::FkArgs),
     /// Generate the tension <-> pose dataset (CSV + JSON sidecar).
@@ -80,6 +83,7 @@ enum Command {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         None => crate::pipeline::run_default(),
+        Some(Command::Run(a)) => run::run(a),
         Some(Command::Fk(a)) => fk::run(a),
         Some(Command::Generate(a)) => generate::run(a),
         Some(Command::Compare(a)) => compare::run(a),

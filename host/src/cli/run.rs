@@ -1,0 +1,28 @@
+//! `tendril run`: the main job on any robot file (`cargo run --release`
+//! with no subcommand is `tendril run` on the default robot into `out/`).
+
+use std::path::PathBuf;
+
+use super::common::RobotArg;
+
+/// Run the whole pipeline (dataset → net → comparison → firmware parity →
+/// closed loop) on a robot file, writing a report and figures.
+#[derive(clap::Args, Debug)]
+pub struct RunArgs {
+    #[command(flatten)]
+    pub robot: RobotArg,
+    /// Output directory (default: `out/` for the default robot, else
+    /// `out/<file stem>/`).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+}
+
+/// Run `tendril run`.
+pub fn run(args: RunArgs) -> anyhow::Result<()> {
+    // Validate first, so a bad file is one clear error before any work.
+    args.robot.load()?;
+    let out = args
+        .out
+        .unwrap_or_else(|| crate::pipeline::default_out_dir(&args.robot.robot));
+    crate::pipeline::run(&args.robot.robot, &out)
+}
