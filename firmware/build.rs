@@ -7,7 +7,11 @@
 //!    `CascadeNet::from_view` (every float as `f32::from_bits`, so the value
 //!    is bit-exact). The net lives in flash, not RAM, and a net that does not
 //!    fit `McuNet` is a compile error.
-//! 2. For the MCU build only (`target_os = "none"`): put the workspace's
+//! 2. The test image's vector files (`inputs.bin`, `swap.tnet`,
+//!    `swap_nan.tnet`): copied into `$OUT_DIR` from the directory named by
+//!    `TENDRIL_FW_VECTORS` (default `firmware/vectors`), so a parity run can
+//!    embed vectors made for the net it checks (any tendon count).
+//! 3. For the MCU build only (`target_os = "none"`): put the workspace's
 //!    `memory.x` where cortex-m-rt's `link.x` finds it and link the binary
 //!    with `link.x` (as cortex-m-quickstart does).
 
@@ -108,6 +112,16 @@ fn default_net_source(path: &Path) -> Result<String, String> {
     Ok(src)
 }
 
+/// `p` as given when absolute, else relative to the workspace root (where
+/// `cargo` is run).
+fn workspace_path(manifest: &Path, p: PathBuf) -> PathBuf {
+    if p.is_absolute() {
+        p
+    } else {
+        manifest.join("..").join(p)
+    }
+}
+
 fn main() {
     let manifest = PathBuf::from(env::var_os("CARGO_MANIFEST_DIR").unwrap_or_default());
     let out = PathBuf::from(env::var_os("OUT_DIR").unwrap_or_default());
@@ -115,15 +129,7 @@ fn main() {
     println!("cargo:rerun-if-env-changed=TENDRIL_FW_NET");
 
     let net_path = match env::var_os("TENDRIL_FW_NET") {
-        Some(p) if !p.is_empty() => {
-            let p = PathBuf::from(p);
-            if p.is_absolute() {
-                p
-            } else {
-                // Relative to the workspace root, where `cargo` is run.
-                manifest.join("..").join(p)
-            }
-        }
+        Some(p) if !p.is_empty() => workspace_path(&manifest, PathBuf::from(p)),
         _ => manifest.join("vectors").join("default.tnet"),
     };
     println!("cargo:rerun-if-changed={}", net_path.display());
@@ -135,6 +141,22 @@ fn main() {
             }
         }
         Err(e) => panic!("firmware default net (TENDRIL_FW_NET): {e}"),
+    }
+
+    println!("cargo:rerun-if-env-changed=TENDRIL_FW_VECTORS");
+    let vectors = match env::var_os("TENDRIL_FW_VECTORS") {
+        Some(p) if !p.is_empty() => workspace_path(&manifest, PathBuf::from(p)),
+        _ => manifest.join("vectors"),
+    };
+    for file in ["inputs.bin", "swap.tnet", "swap_nan.tnet"] {
+        let from = vectors.join(file);
+        println!("cargo:rerun-if-changed={}", from.display());
+        if let Err(e) = fs::copy(&from, out.join(file)) {
+            panic!(
+                "firmware test vectors (TENDRIL_FW_VECTORS): cannot copy {}: {e}",
+                from.display()
+            );
+        }
     }
 
     let memory_x = manifest.join("..").join("memory.x");

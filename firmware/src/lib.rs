@@ -11,7 +11,8 @@
 //! - `vectors`, `synth` and `swap_demo` (cargo feature `harness`, off by
 //!   default): the test-vector format and runner shared by the MCU test image
 //!   and the host parity test, a deterministic synthetic net, and the hot-swap
-//!   run of `tendril-fw-swap`; test harnesses, not part of a controller build.
+//!   run of `tendril-fw-swap`; test harnesses, not part of a controller build;
+//! - `vector_gen` (cargo feature `vector-gen`, std): those files for any net.
 #![no_std]
 #![deny(missing_docs)]
 // Panic freedom is checked, not promised: no unwrap/expect/panic/indexing
@@ -46,6 +47,8 @@ pub mod swap;
 pub mod swap_demo;
 #[cfg(any(test, feature = "harness"))]
 pub mod synth;
+#[cfg(feature = "vector-gen")]
+pub mod vector_gen;
 #[cfg(any(test, feature = "harness"))]
 pub mod vectors;
 

@@ -104,15 +104,17 @@ pub fn build_mcu_binary(
     target_dir: &Path,
     label: &str,
 ) -> Result<PathBuf, ParityError> {
-    build_mcu_bin(root, "tendril-fw", net, target_dir, label)
+    build_mcu_bin(root, "tendril-fw", net, None, target_dir, label)
 }
 
 /// [`build_mcu_binary`] for the firmware binary `bin` (`tendril-fw`, or the
-/// hot-swap run `tendril-fw-swap`); the copy is named `<bin>-<label>`.
+/// hot-swap run `tendril-fw-swap`), with the test vectors of `vectors` (the
+/// committed `firmware/vectors/` if `None`); the copy is named `<bin>-<label>`.
 pub fn build_mcu_bin(
     root: &Path,
     bin: &str,
     net: Option<&Path>,
+    vectors: Option<&Path>,
     target_dir: &Path,
     label: &str,
 ) -> Result<PathBuf, ParityError> {
@@ -132,6 +134,10 @@ pub fn build_mcu_bin(
     match net {
         Some(p) => cmd.env("TENDRIL_FW_NET", p),
         None => cmd.env_remove("TENDRIL_FW_NET"),
+    };
+    match vectors {
+        Some(p) => cmd.env("TENDRIL_FW_VECTORS", p),
+        None => cmd.env_remove("TENDRIL_FW_VECTORS"),
     };
     let status = cmd
         .status()
@@ -193,9 +199,10 @@ pub fn run_qemu(elf: &Path, limit: Duration) -> Result<(bool, String), ParityErr
 }
 
 /// The host build of the firmware core on the same files: `flash_net` as
-/// the running net, the committed vectors and swap blobs of `root`.
-pub fn host_run(root: &Path, flash_net: &Path) -> Result<String, ParityError> {
-    let dir = root.join("firmware").join("vectors");
+/// the running net, the vectors and swap blobs in `vectors_dir` (the
+/// committed ones are `firmware/vectors/` of the checkout).
+pub fn host_run(vectors_dir: &Path, flash_net: &Path) -> Result<String, ParityError> {
+    let dir = vectors_dir;
     let read =
         |p: &Path| std::fs::read(p).map_err(|e| ParityError::Run(format!("{}: {e}", p.display())));
     let flash_blob = read(flash_net)?;
@@ -300,19 +307,49 @@ fn bench_field(out: &str, key: &str) -> Option<f64> {
     words.get(i + 1)?.parse().ok()
 }
 
-/// Build, run and compare for `net` (see the module doc).
+/// Vector files made for `net` (any tendon count; `tendril_firmware::vector_gen`)
+/// in `dir`, written atomically; returns `dir` made absolute.
+pub fn write_vectors(net: &Path, dir: &Path) -> Result<PathBuf, ParityError> {
+    let blob =
+        std::fs::read(net).map_err(|e| ParityError::Run(format!("{}: {e}", net.display())))?;
+    let g = tendril_firmware::vector_gen::generate(&blob)
+        .map_err(|e| ParityError::Run(format!("test vectors for {}: {e}", net.display())))?;
+    std::fs::create_dir_all(dir)
+        .map_err(|e| ParityError::Run(format!("{}: {e}", dir.display())))?;
+    for (file, bytes) in [
+        ("inputs.bin", &g.inputs),
+        ("swap.tnet", &g.swap),
+        ("swap_nan.tnet", &g.swap_nan),
+    ] {
+        let path = dir.join(file);
+        crate::fsutil::write_atomic(&path, bytes)
+            .map_err(|e| ParityError::Run(format!("{}: {e}", path.display())))?;
+    }
+    std::fs::canonicalize(dir).map_err(|e| ParityError::Run(format!("{}: {e}", dir.display())))
+}
+
+/// Build, run and compare for `net` (see the module doc): the vectors are
+/// made for `net`, so a net for any robot (1–8 tendons) is checked.
 pub fn check(root: &Path, net: &Path, target_dir: &Path) -> Result<ParityReport, ParityError> {
     prerequisites()?;
     let net = std::fs::canonicalize(net)
         .map_err(|e| ParityError::Run(format!("{}: {e}", net.display())))?;
-    let elf = build_mcu_binary(root, Some(&net), target_dir, "parity")?;
+    let vectors = write_vectors(&net, &target_dir.join("parity-vectors"))?;
+    let elf = build_mcu_bin(
+        root,
+        "tendril-fw",
+        Some(&net),
+        Some(&vectors),
+        target_dir,
+        "parity",
+    )?;
     let (ok, mcu) = run_qemu(&elf, Duration::from_secs(120))?;
     if !ok {
         return Err(ParityError::Mismatch(format!(
             "the MCU binary exited with failure:\n{mcu}"
         )));
     }
-    let host = host_run(root, &net)?;
+    let host = host_run(&vectors, &net)?;
     let (lines, bit_identical, worst) = compare_outputs(&mcu, &host, 1e-6)?;
     let net_line: Vec<usize> = result_lines(&mcu)
         .first()

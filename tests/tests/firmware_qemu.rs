@@ -14,15 +14,17 @@
 //! blob). A second test builds the binary with `TENDRIL_FW_NET` pointing at
 //! another file and checks that net is the one that runs.
 //!
-//! A third test runs the hot-swap image `tendril-fw-swap` (docs/design.md
-//! §5.3): the largest net the MCU accepts (7-64-8) swapped in while the
+//! A third builds the two-segment robot's six-tendon net
+//! (`firmware/vectors/tdcr-2seg.tnet`) into flash with vectors made for it
+//! (`TENDRIL_FW_VECTORS`). A fourth runs the hot-swap image
+//! `tendril-fw-swap` (docs/design.md §5.3): the largest net the MCU accepts (7-64-8) swapped in while the
 //! control loop runs, every period's instruction count against the budget
 //! and every period's inference against the net that should be running.
 //!
 //! Without `qemu-system-arm` or the target these tests fail with a
 //! one-line "install …" message: a test that cannot run does not pass.
 //! `scripts/test` checks both first and, when one is missing and cannot be
-//! installed, runs every other test and reports these two as not run
+//! installed, runs every other test and reports them as not run
 //! (non-zero exit); CI installs both (`.ci/run`).
 
 use std::path::{Path, PathBuf};
@@ -38,16 +40,33 @@ use tendril_tests::workspace_root;
 /// Builds share one target directory (and the ELF path): one at a time.
 static BUILD: Mutex<()> = Mutex::new(());
 
-/// Build the MCU binary in its own target directory (the outer `cargo test`
-/// holds the lock on the normal one), with `TENDRIL_FW_NET` set to `net` or
-/// unset.
-fn build_mcu_binary(root: &Path, net: Option<&Path>, label: &str) -> PathBuf {
-    let _guard = BUILD.lock().unwrap_or_else(|e| e.into_inner());
-    let base = std::env::var_os("CARGO_TARGET_DIR")
+/// The target directory of the MCU builds: its own (the outer `cargo test`
+/// holds the lock on the normal one).
+fn mcu_target_dir(root: &Path) -> PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
-        .unwrap_or_else(|| root.join("target"));
-    parity::build_mcu_binary(root, net, &base.join("thumbv7em-parity"), label)
-        .unwrap_or_else(|e| panic!("{e}"))
+        .unwrap_or_else(|| root.join("target"))
+        .join("thumbv7em-parity")
+}
+
+/// Build the MCU binary with `TENDRIL_FW_NET` set to `net` or unset, and
+/// `TENDRIL_FW_VECTORS` to `vectors` or unset (the committed vectors).
+fn build_mcu_binary(
+    root: &Path,
+    net: Option<&Path>,
+    vectors: Option<&Path>,
+    label: &str,
+) -> PathBuf {
+    let _guard = BUILD.lock().unwrap_or_else(|e| e.into_inner());
+    parity::build_mcu_bin(
+        root,
+        "tendril-fw",
+        net,
+        vectors,
+        &mcu_target_dir(root),
+        label,
+    )
+    .unwrap_or_else(|e| panic!("{e}"))
 }
 
 fn bits(word: &str) -> f32 {
@@ -62,16 +81,18 @@ fn close(a: f32, b: f32) -> bool {
 }
 
 /// Run the MCU binary built with `flash_net` (the file; `env` = whether via
-/// `TENDRIL_FW_NET`) and compare it with the host run of the same files;
-/// returns the MCU output.
-fn check_parity(flash_net: &Path, env: bool, label: &str) -> String {
+/// `TENDRIL_FW_NET`) and the vectors in `vectors` (`None`: the committed
+/// `firmware/vectors/`, via the build's default) and compare it with the
+/// host run of the same files; returns the MCU output.
+fn check_parity(flash_net: &Path, env: bool, vectors: Option<&Path>, label: &str) -> String {
     let root = workspace_root();
-    let vectors_dir = root.join("firmware").join("vectors");
-    let elf = build_mcu_binary(&root, env.then_some(flash_net), label);
+    let committed = root.join("firmware").join("vectors");
+    let vectors_dir = vectors.unwrap_or(&committed);
+    let elf = build_mcu_binary(&root, env.then_some(flash_net), vectors, label);
     let (ok, mcu_out) =
         parity::run_qemu(&elf, Duration::from_secs(120)).unwrap_or_else(|e| panic!("{e}"));
     assert!(ok, "MCU binary exited with failure; output:\n{mcu_out}");
-    let host_out = parity::host_run(&root, flash_net).unwrap_or_else(|e| panic!("{e}"));
+    let host_out = parity::host_run(vectors_dir, flash_net).unwrap_or_else(|e| panic!("{e}"));
     let (lines, identical, worst) =
         parity::compare_outputs(&mcu_out, &host_out, 1e-6).unwrap_or_else(|e| panic!("{e}"));
     assert!(lines > 100, "too few result lines: {lines}");
@@ -158,7 +179,7 @@ fn require_prerequisites() {
 fn mcu_build_under_qemu_matches_host_build() {
     require_prerequisites();
     let default = workspace_root().join("firmware/vectors/default.tnet");
-    let out = check_parity(&default, false, "default");
+    let out = check_parity(&default, false, None, "default");
     // The default exported net: 7 inputs, 64 hidden units, 4 tendons.
     assert!(out.lines().any(|l| l == "net 7 64 4 2816"), "{out}");
 }
@@ -168,8 +189,31 @@ fn tendril_fw_net_selects_the_flash_net() {
     require_prerequisites();
     // Any valid net for the same robot will do: the 7-12-4 update blob.
     let other = workspace_root().join("firmware/vectors/swap.tnet");
-    let out = check_parity(&other, true, "env");
+    let out = check_parity(&other, true, None, "env");
     assert!(out.lines().any(|l| l == "net 7 12 4 242"), "{out}");
+}
+
+/// The two-segment robot's exported net (six tendons, `tendril run --robot
+/// robots/tdcr-2seg.toml`, committed as `firmware/vectors/tdcr-2seg.tnet`)
+/// in flash, with vectors made for it: the MCU image takes any tendon count
+/// up to `MAX_TENDONS`.
+#[test]
+fn two_segment_robot_net_runs_bit_identically_on_the_mcu() {
+    require_prerequisites();
+    let root = workspace_root();
+    let net = root.join("firmware/vectors/tdcr-2seg.tnet");
+    let vectors = parity::write_vectors(&net, &mcu_target_dir(&root).join("vectors-2seg"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let out = check_parity(&net, true, Some(&vectors), "2seg");
+    let shape = McuNet::decode(&std::fs::read(&net).expect("net"))
+        .expect("decodes")
+        .shape();
+    assert_eq!(shape.outputs, 6, "the two-segment robot has six tendons");
+    assert!(
+        out.lines()
+            .any(|l| l.starts_with("net 7 ") && l.split(' ').nth(3) == Some("6")),
+        "{out}"
+    );
 }
 
 /// One `period` line of the hot-swap image.
@@ -217,8 +261,15 @@ fn hot_swap_of_the_largest_net_misses_no_period() {
     std::fs::write(&flash_file, &buf[..n]).expect("write the flash net");
     let elf = {
         let _guard = BUILD.lock().unwrap_or_else(|e| e.into_inner());
-        parity::build_mcu_bin(&root, "tendril-fw-swap", Some(&flash_file), &base, "swap")
-            .unwrap_or_else(|e| panic!("{e}"))
+        parity::build_mcu_bin(
+            &root,
+            "tendril-fw-swap",
+            Some(&flash_file),
+            None,
+            &base,
+            "swap",
+        )
+        .unwrap_or_else(|e| panic!("{e}"))
     };
     let (ok, out) =
         parity::run_qemu(&elf, Duration::from_secs(120)).unwrap_or_else(|e| panic!("{e}"));

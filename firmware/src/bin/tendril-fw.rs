@@ -17,18 +17,19 @@
 //!
 //! Embedded files, refreshed from the net the main job exports
 //! (`cargo run --release` writes `out/model.tnet`) with
-//! `cargo run -p tendril-firmware --features harness --example gen_vectors -- --tnet out/model.tnet`:
+//! `cargo run -p tendril-firmware --features vector-gen --example gen_vectors -- --tnet out/model.tnet`:
 //! `default.tnet` (that net), `inputs.bin` (control-loop inputs inside its
 //! input box), `swap.tnet` and `swap_nan.tnet` (a small update and a
 //! corrupted copy, for the hot-swap steps), all in `firmware/vectors/`.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
-/// The embedded test vectors.
-static VECTORS: &[u8] = include_bytes!("../../vectors/inputs.bin");
+/// The embedded test vectors (`firmware/vectors/`, or the directory `TENDRIL_FW_VECTORS` names at
+/// build time; build.rs copies them into `OUT_DIR`).
+static VECTORS: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/inputs.bin"));
 /// The hot-swap update blob.
-static SWAP: &[u8] = include_bytes!("../../vectors/swap.tnet");
+static SWAP: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/swap.tnet"));
 /// The update blob with a NaN weight under a valid CRC.
-static SWAP_NAN: &[u8] = include_bytes!("../../vectors/swap_nan.tnet");
+static SWAP_NAN: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/swap_nan.tnet"));
 
 /// The swap blobs of the vector run.
 const BLOBS: tendril_firmware::vectors::SwapBlobs<'static> = tendril_firmware::vectors::SwapBlobs {

@@ -15,6 +15,13 @@ pub struct RunArgs {
     /// `out/<file stem>/`).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Dataset size (default: `tendril generate`'s for the robot).
+    #[arg(long, value_name = "N")]
+    pub samples: Option<usize>,
+    /// A smoke run to check a new robot file end to end in a minute or two:
+    /// 2,000 samples, at most 16 hidden units, 4-second closed-loop runs.
+    #[arg(long)]
+    pub quick: bool,
 }
 
 /// Run `tendril run`.
@@ -24,5 +31,14 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let out = args
         .out
         .unwrap_or_else(|| crate::pipeline::default_out_dir(&args.robot.robot));
-    crate::pipeline::run(&args.robot.robot, &out)
+    let options = crate::pipeline::RunOptions {
+        samples: args.samples,
+        quick: args.quick,
+    };
+    let command = format!(
+        "tendril run --robot {}{}",
+        args.robot.robot.display(),
+        if args.quick { " --quick" } else { "" }
+    );
+    crate::pipeline::run(&args.robot.robot, &out, &options, command)
 }
