@@ -266,7 +266,7 @@ pub fn run(
 
     // 4b. Firmware parity: the exported net in the MCU binary's flash,
     // under QEMU, against the host build of the same core.
-    report.add(firmware_parity_section(&model))?;
+    report.add(firmware_parity_section(&model, &out.join("parity.json")))?;
 
     // 5. Closed loop: planner, controller and plant as real processes over
     // iceoryx2, with the IK net alone and with the integral correction, on
@@ -309,7 +309,8 @@ fn dataset(robot_file: &Path, data_path: &Path, samples: Option<usize>) -> anyho
 
 /// The report section of the firmware-parity stage; a missing QEMU or
 /// target skips it with the reason, a mismatch is reported as a failure.
-fn firmware_parity_section(model: &Path) -> String {
+/// A passing run's numbers also go to `json` (for scripts and tests).
+fn firmware_parity_section(model: &Path, json: &Path) -> String {
     let title = "## 4b. Firmware parity (Cortex-M4F under QEMU vs host)";
     let Some(root) = crate::firmware_parity::workspace_root() else {
         return format!("{title}\n\nSkipped: not run from the source checkout.\n");
@@ -332,6 +333,12 @@ fn firmware_parity_section(model: &Path) -> String {
     log::set_max_level(level);
     match checked {
         Ok(r) => {
+            let written = serde_json::to_string_pretty(&r)
+                .map_err(anyhow::Error::from)
+                .and_then(|text| write_atomic(json, text.as_bytes()).map_err(Into::into));
+            if let Err(e) = written {
+                log::warn!("writing {}: {e}", json.display());
+            }
             let instr = match (r.instructions_per_inference, r.instruction_budget) {
                 (Some(i), Some(b)) => {
                     format!("{i:.0} M4F instructions per inference (budget {b:.0})")
