@@ -69,7 +69,11 @@ fuzz_target!(|data: &[u8]| {
                 tangent: (flags & 4 != 0).then_some(Tangent {
                     dim: (word(8) % 5) as usize,
                     columns: [pose, pose.map(|v| -3.0 * v), pose.map(|v| 0.5 * v)],
-                    axes: [[pose[0], pose[1], pose[2]], [pose[3], pose[4], pose[5]], tip],
+                    axes: [
+                        [pose[0], pose[1], pose[2]],
+                        [pose[3], pose[4], pose[5]],
+                        tip,
+                    ],
                 }),
             }),
             feedback: (flags & 2 != 0).then_some(Feedback {
