@@ -234,10 +234,17 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
         center_m: [0.0, 0.0],
         radius_m: 0.015,
         freq_hz: 0.2,
+        height_m: None,
     };
     let steps = TrajectoryShape::Steps {
-        targets_m: vec![[0.01, 0.0], [0.0, 0.01], [-0.01, 0.0], [0.0, -0.01]],
+        targets_m: vec![
+            vec![0.01, 0.0],
+            vec![0.0, 0.01],
+            vec![-0.01, 0.0],
+            vec![0.0, -0.01],
+        ],
         dwell_s: 2.0,
+        height_m: None,
     };
     let runs = [
         (

@@ -180,6 +180,7 @@ impl SimConfig {
                     center_m: [0.0, 0.0],
                     radius_m: 0.015,
                     freq_hz: 0.2,
+                    height_m: None,
                 },
                 rate_hz: 1000.0,
                 settle_s: 2.0,
