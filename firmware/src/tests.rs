@@ -348,7 +348,13 @@ fn run_biased(
         st = control_step(cfg, &net, &st, &inp).0;
         if lateral && k > 1 {
             if !slewing {
-                lateral_law_reference(&mut reference, &pose, &tip, &cfg.integral, 1_000_000u64 as f32 * 1e-9);
+                lateral_law_reference(
+                    &mut reference,
+                    &pose,
+                    &tip,
+                    &cfg.integral,
+                    1_000_000u64 as f32 * 1e-9,
+                );
             }
             if st.correction == before && reference != before {
                 // The step undid a correction that left the box: so does the reference.

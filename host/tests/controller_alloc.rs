@@ -152,9 +152,9 @@ fn two_hundred_seconds_of_controller_periods_allocate_nothing() {
             tangent: point
                 .tangent
                 .map_or([[0.0; 7]; 3], |d| d.columns.map(|r| r.map(|v| v as f32))),
-            tangent_axes: point
-                .tangent
-                .map_or([[0.0; 3]; 3], |d| d.family.axes_padded().map(|a| a.map(|v| v as f32))),
+            tangent_axes: point.tangent.map_or([[0.0; 3]; 3], |d| {
+                d.family.axes_padded().map(|a| a.map(|v| v as f32))
+            }),
             tangent_dim: point.tangent.map_or(0, |d| d.family.dim() as u32),
             flags: setpoint_flags::HAS_VELOCITY | setpoint_flags::HAS_TANGENT,
         };

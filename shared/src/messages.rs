@@ -261,7 +261,10 @@ mod tests {
         // Size = sum of field sizes: no compiler-inserted holes whose bytes
         // would be undefined in shared memory.
         assert_eq!(size_of::<Header>(), 16);
-        assert_eq!(size_of::<Setpoint>(), 16 + 7 * 4 * 2 + 7 * 4 * 3 + 3 * 4 * 3 + 4 + 4);
+        assert_eq!(
+            size_of::<Setpoint>(),
+            16 + 7 * 4 * 2 + 7 * 4 * 3 + 3 * 4 * 3 + 4 + 4
+        );
         assert_eq!(
             size_of::<TensionCommand>(),
             16 + 8 + MAX_TENDONS * 4 + 4 + 4

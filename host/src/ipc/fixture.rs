@@ -14,8 +14,8 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tendril_shared::{encode_to_vec, Activation, Shape, TnetView};
 
-use super::IpcError;
 use super::trajectory::Trajectory;
+use super::IpcError;
 use crate::kinematics::{bend_tensions, Family};
 use crate::statics::Statics;
 
@@ -284,8 +284,12 @@ mod tests {
     /// predicted tensions, run forward through the statics, land within
     /// `bound` m of the point.
     fn check_quick_net_for(file: &str, points: &[Vec<f64>], bound: f64) {
-        let robot = Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots").join(file))
-            .unwrap();
+        let robot = Robot::load(
+            &Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../robots")
+                .join(file),
+        )
+        .unwrap();
         let s = Statics::new(&robot, SolverSettings::default());
         let n = robot.n_tendons();
         let blob = quick_net_for(&s, 1000, 48, 5).unwrap();
@@ -312,12 +316,14 @@ mod tests {
 
     #[test]
     fn quick_net_for_a_two_segment_robot_inverts_its_volume_to_millimetres() {
-        let robot = Robot::load(
-            &Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/tdcr-2seg.toml"),
-        )
-        .unwrap();
+        let robot =
+            Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/tdcr-2seg.toml"))
+                .unwrap();
         let s = Statics::new(&robot, SolverSettings::default());
-        let z = Lifter::new(&s).unwrap().mid_height([0.0, 0.0], 0.01).unwrap();
+        let z = Lifter::new(&s)
+            .unwrap()
+            .mid_height([0.0, 0.0], 0.01)
+            .unwrap();
         let points = [
             vec![0.01, 0.0, z],
             vec![-0.006, 0.007, z + 0.002],

@@ -241,10 +241,7 @@ fn on_family(
 }
 
 /// The mid height for a lateral path of `radius` about `center`, computed once.
-fn mid_height_once(
-    center: [f64; 2],
-    radius: f64,
-) -> impl FnMut(&Lifter) -> Result<f64, IpcError> {
+fn mid_height_once(center: [f64; 2], radius: f64) -> impl FnMut(&Lifter) -> Result<f64, IpcError> {
     let mut cached = None;
     move |lifter: &Lifter| {
         if let Some(z) = cached {
@@ -303,9 +300,10 @@ impl Trajectory {
                 // height of the smallest circle about their centroid holding them.
                 let lateral = |t: &Vec<f64>| [t[0], *t.get(1).unwrap_or(&0.0)];
                 let n = targets.len() as f64;
-                let centroid = targets.iter().map(lateral).fold([0.0; 2], |c, t| {
-                    [c[0] + t[0] / n, c[1] + t[1] / n]
-                });
+                let centroid = targets
+                    .iter()
+                    .map(lateral)
+                    .fold([0.0; 2], |c, t| [c[0] + t[0] / n, c[1] + t[1] / n]);
                 let radius = targets
                     .iter()
                     .map(|t| {
@@ -348,7 +346,11 @@ impl Trajectory {
                     ));
                 }
                 if k < 2 {
-                    return Err(unfit(shape, &family, "a lateral path needs two coordinates"));
+                    return Err(unfit(
+                        shape,
+                        &family,
+                        "a lateral path needs two coordinates",
+                    ));
                 }
                 let height = match (k, height_m) {
                     (3, Some(z)) => Some(*z),
@@ -388,7 +390,11 @@ impl Trajectory {
                 turns,
             } => {
                 if k != 3 {
-                    return Err(unfit(shape, &family, "a helix needs a robot that reaches a volume"));
+                    return Err(unfit(
+                        shape,
+                        &family,
+                        "a helix needs a robot that reaches a volume",
+                    ));
                 }
                 let halves = 2.0 * turns;
                 if !(*freq > 0.0 && *radius >= 0.0 && halves >= 1.0 && halves.fract() == 0.0)
@@ -408,7 +414,11 @@ impl Trajectory {
                     // Up over the first `turns` revolutions, down over the next.
                     let f = if t <= rise { t / rise } else { 2.0 - t / rise };
                     let z = heights[0] + f * (heights[1] - heights[0]);
-                    let u = [center[0] + radius * a.cos(), center[1] + radius * a.sin(), z];
+                    let u = [
+                        center[0] + radius * a.cos(),
+                        center[1] + radius * a.sin(),
+                        z,
+                    ];
                     path.push(&mut lifter, &u)?;
                 }
                 Ok(path.into_trajectory(times, true, false))
@@ -547,7 +557,8 @@ impl Trajectory {
         let tangent = match (self.tangents.get(i), self.tangents.get(i + 1)) {
             (Some(a), Some(b)) => {
                 let mut d = *a;
-                for (column, (ca, cb)) in d.columns.iter_mut().zip(a.columns.iter().zip(&b.columns)) {
+                for (column, (ca, cb)) in d.columns.iter_mut().zip(a.columns.iter().zip(&b.columns))
+                {
                     for (v, (x, y)) in column.iter_mut().zip(ca.iter().zip(cb)) {
                         *v = x + f * (y - x);
                     }

@@ -171,7 +171,10 @@ mod tests {
         let one = family("seed-1t.toml");
         assert_eq!(one.dim(), 1);
         let a = one.axes()[0];
-        assert!((a[0] - 1.0).abs() < 1e-9 && a[1].abs() < 1e-9 && a[2] == 0.0, "{a:?}");
+        assert!(
+            (a[0] - 1.0).abs() < 1e-9 && a[1].abs() < 1e-9 && a[2] == 0.0,
+            "{a:?}"
+        );
     }
 
     #[test]

@@ -155,11 +155,7 @@ impl Lifter {
                     .tensions
                     .iter()
                     .enumerate()
-                    .map(|(i, t)| {
-                        t + (0..k)
-                            .map(|j| p.dtau[j][i] * (u[j] - p.u[j]))
-                            .sum::<f64>()
-                    })
+                    .map(|(i, t)| t + (0..k).map(|j| p.dtau[j][i] * (u[j] - p.u[j])).sum::<f64>())
                     .collect();
                 self.ik.solve(&target, Some(&start), Some(&p.warm)).ok()
             }
@@ -406,12 +402,7 @@ fn least_norm(
 /// loop applies the same first-order shift in f32 (`docs/design.md` §6).
 pub fn family_shift(pose: &[f64; 7], tangent: &Tangent, c: &[f64]) -> [f64; 7] {
     let mut out = *pose;
-    for (column, cj) in tangent
-        .columns
-        .iter()
-        .zip(c)
-        .take(tangent.family.dim())
-    {
+    for (column, cj) in tangent.columns.iter().zip(c).take(tangent.family.dim()) {
         for (v, d) in out.iter_mut().zip(column) {
             *v += d * cj;
         }
@@ -664,10 +655,7 @@ mod tests {
         let floors = s.robot().min_tensions();
         let rest = s.solve(&floors, None).unwrap();
         let u0 = family.coordinates(&rest.position.into())[0];
-        [0.002, 0.01, 0.03]
-            .iter()
-            .map(|d| vec![u0 + d])
-            .collect()
+        [0.002, 0.01, 0.03].iter().map(|d| vec![u0 + d]).collect()
     }
 
     #[test]
