@@ -655,12 +655,16 @@ pub(crate) fn corrected_pose(st: &ControlState) -> [f32; POSE_DIM] {
     let c = st.correction;
     match st.tangent {
         Some(t) => {
-            for (k, v) in p.iter_mut().enumerate() {
-                let mut shift = 0.0f32;
-                for (column, cj) in t.columns.iter().zip(c).take(t.dim) {
-                    shift += column[k] * cj;
+            // Σ_j c_j T_j first, then added: for k = 2 the same roundings
+            // as the lateral law's `v + (T_x c_x + T_y c_y)`.
+            let mut shift = [0.0f32; POSE_DIM];
+            for (column, cj) in t.columns.iter().zip(c).take(t.dim) {
+                for (s, d) in shift.iter_mut().zip(column) {
+                    *s += d * cj;
                 }
-                *v += shift;
+            }
+            for (v, s) in p.iter_mut().zip(shift) {
+                *v += s;
             }
         }
         None => {

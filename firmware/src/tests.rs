@@ -353,7 +353,7 @@ fn run_biased(
                     &pose,
                     &tip,
                     &cfg.integral,
-                    1_000_000u64 as f32 * 1e-9,
+                    1_000_000_f32 * 1e-9,
                 );
             }
             if st.correction == before && reference != before {

@@ -291,7 +291,7 @@ impl Trajectory {
                 dwell_s: dwell,
                 height_m,
             } => {
-                if targets.is_empty() || !(*dwell > 0.0) {
+                if targets.is_empty() || dwell.is_nan() || *dwell <= 0.0 {
                     return Err(IpcError::Config(
                         "steps need at least one target and a positive dwell".into(),
                     ));
@@ -397,9 +397,12 @@ impl Trajectory {
                     ));
                 }
                 let halves = 2.0 * turns;
-                if !(*freq > 0.0 && *radius >= 0.0 && halves >= 1.0 && halves.fract() == 0.0)
-                    || !heights.iter().all(|z| z.is_finite())
-                {
+                let valid = *freq > 0.0
+                    && *radius >= 0.0
+                    && halves >= 1.0
+                    && halves.fract() == 0.0
+                    && heights.iter().all(|z| z.is_finite());
+                if !valid {
                     return Err(IpcError::Config(
                         "a helix needs a positive frequency and radius, finite heights and a \
                          whole number of half turns (≥ ½)"

@@ -593,8 +593,8 @@ mod tests {
                 .sqrt();
             assert!(miss <= 1e-6, "u {u:?}: {miss:e} m");
             let pose = fresh.pose();
-            for k in 0..3 {
-                assert!((pose[k] - lifted.pose[k]).abs() < 1e-8, "u {u:?} p{k}");
+            for (k, (a, b)) in pose.iter().zip(&lifted.pose).take(3).enumerate() {
+                assert!((a - b).abs() < 1e-8, "u {u:?} p{k}");
             }
             let limits = s.robot().max_tensions();
             assert!(
