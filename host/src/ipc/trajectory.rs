@@ -780,4 +780,155 @@ mod tests {
         );
         assert_eq!(traj.feedforward(2.0, &mut ff), 0.0);
     }
+
+    fn statics_of(file: &str) -> Statics {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../robots")
+            .join(file);
+        Statics::new(&Robot::load(&path).unwrap(), SolverSettings::default())
+    }
+
+    /// A helix on the two-segment robot: every sample's tip is on the
+    /// circle, and its height is the linear rise and fall between the two
+    /// heights (the lifted poses put the tip there, so the planner's poses
+    /// are the shape's points).
+    #[test]
+    fn helix_rises_and_falls_linearly_on_its_circle() {
+        let s = statics_of("tdcr-2seg.toml");
+        let z = Lifter::new(&s)
+            .unwrap()
+            .mid_height([0.0, 0.0], 0.01)
+            .unwrap();
+        let (z0, z1) = (z - 0.002, z + 0.002);
+        let shape = Shape::Helix {
+            center_m: [0.0, 0.0],
+            radius_m: 0.01,
+            freq_hz: 0.5,
+            heights_m: [z0, z1],
+            turns: 1.0,
+        };
+        let traj = Trajectory::new(&shape, &s).unwrap();
+        assert!((traj.duration() - 4.0).abs() < 1e-12);
+        for t in [0.0, 0.5, 1.0, 2.0, 3.0, 3.9] {
+            let p = traj.sample(t);
+            let r = p.pose[0].hypot(p.pose[1]);
+            assert!((r - 0.01).abs() < 2e-6, "t {t}: r = {r}");
+            let rise = if t <= 2.0 { t / 2.0 } else { 2.0 - t / 2.0 };
+            let want = z0 + rise * (z1 - z0);
+            assert!(
+                (p.pose[2] - want).abs() < 1e-6,
+                "t {t}: z {} vs {want}",
+                p.pose[2]
+            );
+            assert_eq!(p.tangent.unwrap().family.dim(), 3);
+        }
+    }
+
+    /// 3-D steps on the two-segment robot hold each target exactly.
+    #[test]
+    fn volume_steps_hold_their_3d_targets() {
+        let s = statics_of("tdcr-2seg.toml");
+        let z = 0.395;
+        let targets = vec![vec![0.008, 0.0, z], vec![0.0, 0.008, z + 0.002]];
+        let shape = Shape::Steps {
+            targets_m: targets.clone(),
+            dwell_s: 1.0,
+            height_m: None,
+        };
+        let traj = Trajectory::new(&shape, &s).unwrap();
+        for (i, target) in targets.iter().enumerate() {
+            let p = traj.sample(i as f64 + 0.5);
+            for k in 0..3 {
+                assert!(
+                    (p.pose[k] - target[k]).abs() < 1e-6,
+                    "target {i}: {:?}",
+                    p.pose
+                );
+            }
+        }
+    }
+
+    /// A sweep on the one-tendon robot: the tip's coordinate along the
+    /// axis follows the raised cosine between the two coordinates.
+    #[test]
+    fn sweep_follows_its_raised_cosine_along_the_axis() {
+        let s = statics_of("seed-1t.toml");
+        let family = Family::of(&s).unwrap();
+        let (from, to) = (0.05, 0.09);
+        let shape = Shape::Sweep {
+            from_m: from,
+            to_m: to,
+            freq_hz: 0.25,
+        };
+        let traj = Trajectory::new(&shape, &s).unwrap();
+        for t in [0.0, 0.7, 2.0, 3.3] {
+            let p = traj.sample(t);
+            let u = family.coordinates(&[p.pose[0], p.pose[1], p.pose[2]])[0];
+            let want = from + (to - from) * 0.5 * (1.0 - (std::f64::consts::TAU * 0.25 * t).cos());
+            // Linear interpolation of a 10 ms table: within 1e-6 m.
+            assert!((u - want).abs() < 1e-6, "t {t}: {u} vs {want}");
+        }
+    }
+
+    /// Shapes a robot's family cannot follow are one clear error naming
+    /// the shape and the family.
+    #[test]
+    fn shapes_the_family_cannot_follow_are_clear_errors() {
+        let circle = Shape::Circle {
+            center_m: [0.0, 0.0],
+            radius_m: 0.01,
+            freq_hz: 0.2,
+            height_m: None,
+        };
+        let err = Trajectory::new(&circle, &statics_of("seed-1t.toml")).unwrap_err();
+        let text = err.to_string();
+        assert!(
+            text.contains("circle") && text.contains("curve (k = 1"),
+            "{text}"
+        );
+        let four = statics();
+        let sweep = Shape::Sweep {
+            from_m: 0.0,
+            to_m: 0.01,
+            freq_hz: 0.2,
+        };
+        let text = Trajectory::new(&sweep, &four).unwrap_err().to_string();
+        assert!(text.contains("sweep") && text.contains("surface"), "{text}");
+        let high = Shape::Circle {
+            center_m: [0.0, 0.0],
+            radius_m: 0.01,
+            freq_hz: 0.2,
+            height_m: Some(0.39),
+        };
+        let text = Trajectory::new(&high, &four).unwrap_err().to_string();
+        assert!(
+            text.contains("height") && text.contains("surface"),
+            "{text}"
+        );
+        let steps = Shape::Steps {
+            targets_m: vec![vec![0.01, 0.0, 0.39]],
+            dwell_s: 1.0,
+            height_m: None,
+        };
+        let text = Trajectory::new(&steps, &four).unwrap_err().to_string();
+        assert!(text.contains("3 coordinates"), "{text}");
+    }
+
+    /// Configurations written before heights existed still read.
+    #[test]
+    fn shapes_without_a_height_still_deserialise() {
+        let text = r#"{"kind":"circle","center_m":[0.0,0.0],"radius_m":0.015,"freq_hz":0.2}"#;
+        let shape: Shape = serde_json::from_str(text).unwrap();
+        assert_eq!(
+            shape,
+            Shape::Circle {
+                center_m: [0.0, 0.0],
+                radius_m: 0.015,
+                freq_hz: 0.2,
+                height_m: None
+            }
+        );
+        let text = r#"{"kind":"steps","targets_m":[[0.01,0.0]],"dwell_s":2.0}"#;
+        assert!(serde_json::from_str::<Shape>(text).is_ok());
+    }
 }
