@@ -838,12 +838,8 @@ mod tests {
         let traj = Trajectory::new(&shape, &s).unwrap();
         for (i, target) in targets.iter().enumerate() {
             let p = traj.sample(i as f64 + 0.5);
-            for k in 0..3 {
-                assert!(
-                    (p.pose[k] - target[k]).abs() < 1e-6,
-                    "target {i}: {:?}",
-                    p.pose
-                );
+            for (a, b) in p.pose.iter().zip(target) {
+                assert!((a - b).abs() < 1e-6, "target {i}: {:?}", p.pose);
             }
         }
     }
