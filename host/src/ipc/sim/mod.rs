@@ -655,3 +655,49 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
         .map_err(|e| SimError::Config(format!("sim figure: {e}")))?;
     Ok(report)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ipc::trajectory::Trajectory;
+    use crate::robot::Robot;
+    use crate::statics::SolverSettings;
+
+    fn statics_of(file: &str) -> Statics {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../robots")
+            .join(file);
+        Statics::new(&Robot::load(&path).unwrap(), SolverSettings::default())
+    }
+
+    /// Each robot gets the runs of its family (the default robot the two it
+    /// always had), and every run's trajectory lifts on that robot.
+    #[test]
+    fn default_loop_runs_follow_the_family_and_all_lift() {
+        for (file, names) in [
+            ("seed-4t.toml", vec!["circle", "steps"]),
+            ("tdcr-2seg.toml", vec!["circle", "steps", "helix"]),
+            ("seed-1t.toml", vec!["sweep"]),
+        ] {
+            let s = statics_of(file);
+            let runs = default_loop_runs(&s).unwrap();
+            let got: Vec<&str> = runs.iter().map(|r| r.name).collect();
+            assert_eq!(got, names, "{file}");
+            for run in &runs {
+                let traj = Trajectory::new(&run.shape, &s)
+                    .unwrap_or_else(|e| panic!("{file} {}: {e}", run.name));
+                assert!(traj.duration() > 0.0 && run.duration_s > 0.0);
+            }
+        }
+        let four = default_loop_runs(&statics_of("seed-4t.toml")).unwrap();
+        assert_eq!(
+            four[0].shape,
+            Shape::Circle {
+                center_m: [0.0, 0.0],
+                radius_m: 0.015,
+                freq_hz: 0.2,
+                height_m: None
+            }
+        );
+    }
+}
