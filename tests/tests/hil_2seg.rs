@@ -287,4 +287,25 @@ fn a_circle_for_a_one_tendon_robot_is_a_clear_error() {
         stderr.contains("trajectory circle") && stderr.contains("curve (k = 1"),
         "{stderr}"
     );
+    // `tendril sim` says so in one line before it starts anything.
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(tendril_bin())
+        .args([
+            "sim",
+            "--robot",
+            ONE_TENDON,
+            "--trajectory",
+            "circle",
+            "--out",
+        ])
+        .arg(dir.path())
+        .current_dir(workspace_root())
+        .output()
+        .expect("spawn tendril sim");
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let errors: Vec<&str> = stderr.lines().filter(|l| l.contains("error")).collect();
+    assert_eq!(errors.len(), 1, "{stderr}");
+    assert!(errors[0].contains("trajectory circle"), "{stderr}");
+    assert!(!dir.path().join("report.json").exists());
 }

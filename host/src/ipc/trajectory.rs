@@ -126,6 +126,65 @@ impl Shape {
             Shape::Table { .. } => "table",
         }
     }
+
+    /// Whether a robot of `family` can follow the shape (its kind and the
+    /// number of coordinates of its points), before anything is lifted:
+    /// an [`IpcError::Config`] naming the shape and the family if not.
+    pub fn check(&self, family: &Family) -> Result<(), IpcError> {
+        let k = family.dim();
+        let points = |points: &[&Vec<f64>], height: &Option<f64>| {
+            for p in points {
+                let fits = p.len() == k || (k == 3 && p.len() == 2);
+                if !fits {
+                    let why = format!(
+                        "a point has {} coordinates, the robot's family {k}",
+                        p.len()
+                    );
+                    return Err(unfit(self, family, &why));
+                }
+                if height.is_some() && !(k == 3 && p.len() == 2) {
+                    return Err(unfit(
+                        self,
+                        family,
+                        "a height needs lateral (x, y) points on a robot that reaches a volume",
+                    ));
+                }
+            }
+            Ok(())
+        };
+        match self {
+            Shape::Hold { center_m, height_m } => points(&[center_m], height_m),
+            Shape::Steps {
+                targets_m,
+                height_m,
+                ..
+            } => points(&targets_m.iter().collect::<Vec<_>>(), height_m),
+            Shape::Circle { height_m, .. } | Shape::FigureEight { height_m, .. } => {
+                if k < 2 {
+                    Err(unfit(self, family, "a lateral path needs two coordinates"))
+                } else if height_m.is_some() && k != 3 {
+                    Err(unfit(
+                        self,
+                        family,
+                        "a height needs a robot that reaches a volume",
+                    ))
+                } else {
+                    Ok(())
+                }
+            }
+            Shape::Helix { .. } if k != 3 => Err(unfit(
+                self,
+                family,
+                "a helix needs a robot that reaches a volume",
+            )),
+            Shape::Sweep { .. } if k != 1 => Err(unfit(
+                self,
+                family,
+                "a sweep is for a robot whose tip moves on a curve (plan a circle or steps)",
+            )),
+            Shape::Helix { .. } | Shape::Sweep { .. } | Shape::Table { .. } => Ok(()),
+        }
+    }
 }
 
 /// One row of a pose table.
@@ -278,6 +337,7 @@ impl Trajectory {
         let mut lifter = Lifter::new(statics)?;
         let family = lifter.family();
         let k = family.dim();
+        shape.check(&family)?;
         match shape {
             Shape::Hold { center_m, height_m } => {
                 let mut z = mid_height_once([center_m[0], *center_m.get(1).unwrap_or(&0.0)], 0.0);

@@ -438,6 +438,13 @@ pub struct Event {
 /// `verdict.clean == false` and the reasons.
 pub fn run(cfg: &SimConfig) -> Result<SimReport, SimError> {
     cfg.validate()?;
+    // A shape the robot cannot follow is one line now, not a planner that
+    // dies after the net was fitted.
+    let robot =
+        crate::robot::Robot::load(&cfg.robot).map_err(|e| SimError::Config(e.to_string()))?;
+    let statics = Statics::new(&robot, crate::statics::SolverSettings::default());
+    let family = crate::kinematics::Family::of(&statics).map_err(IpcError::from)?;
+    cfg.planner.shape.check(&family)?;
     install_interrupt_latch();
     let dir = RunDir::create(&cfg.out)?;
     let result = run_in(cfg, &dir);
