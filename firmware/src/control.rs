@@ -162,19 +162,24 @@ impl fmt::Debug for Status {
     }
 }
 
-/// Integral outer loop: `c += ki · (p_setpoint − p_measured) · dt`, applied
-/// to the setpoint before inference (docs/design.md §5: removes the net's
-/// steady-state error). `ki = 0` disables it.
+/// Integral outer loop, applied to the setpoint before inference
+/// (docs/design.md §5, §6: removes the net's steady-state error). `ki = 0`
+/// disables it.
 ///
-/// With a setpoint tangent ([`Setpoint::tangent`]) only the lateral error is
-/// integrated and the setpoint moves along the robot's reachable poses,
-/// `pose + ∂pose/∂px · c_x + ∂pose/∂py · c_y`; without one the position alone
-/// moves. The second leaves the poses a net trained on reachable poses has
-/// seen, and can turn the loop's gain negative (measured on the default
-/// robot: the position-only loop diverged to 31 mm RMS on the 30 mm circle).
-/// No integration while the command is still slewing toward its target or
-/// the lateral error exceeds `window` (those are transients, not IK error,
-/// and integrating them winds the correction up).
+/// With a setpoint tangent ([`Setpoint::tangent`], k columns T_j along unit
+/// axes a_j) one law for every robot: the error along each axis
+/// `e_j = a_j · (p_setpoint − p_measured)` is integrated,
+/// `c_j += ki · e_j · dt`, and the setpoint moves along the robot's
+/// reachable poses, `pose + Σ_j c_j T_j` (k = 2 with axes x, y: the lateral
+/// loop of a one-segment robot; k = 3 a volume; k = 1 a curve). Without one
+/// the position alone moves, `p += c`, all three components. The second
+/// leaves the poses a net trained on reachable poses has seen, and can turn
+/// the loop's gain negative (measured on the default robot: the
+/// position-only loop diverged to 31 mm RMS on the 30 mm circle). No
+/// integration while the command is still slewing toward its target or the
+/// error exceeds `window` (|e| over the k axes; the lateral error without a
+/// tangent): those are transients, not IK error, and integrating them winds
+/// the correction up.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct IntegralConfig {
     /// Integral gain, 1/s (0 = off).
@@ -183,7 +188,8 @@ pub struct IntegralConfig {
     pub limit: f32,
     /// Feedback older than this freezes the correction ([`Status::PLANT_STALE`]), ns.
     pub feedback_timeout_ns: u64,
-    /// Integrate only while the lateral tip error is at most this, m
+    /// Integrate only while the tip error along the tangent's axes (the
+    /// lateral error without a tangent) is at most this, m
     /// (`f32::INFINITY`: always).
     pub window: f32,
 }
@@ -245,6 +251,47 @@ impl ControlConfig {
     }
 }
 
+/// Most columns of a [`Tangent`]: a tip reaches at most a volume.
+pub const MAX_TANGENT_DIM: usize = 3;
+
+/// The robot's reachable poses near a setpoint, to first order: k columns
+/// `∂pose/∂u_j` (per m), u_j = a_j · p the tip's coordinate along unit axis
+/// a_j (base frame). Entries past `dim` are ignored.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tangent {
+    /// k: how many columns and axes are valid (1..=[`MAX_TANGENT_DIM`]).
+    pub dim: usize,
+    /// `∂pose/∂u_j`.
+    pub columns: [[f32; POSE_DIM]; MAX_TANGENT_DIM],
+    /// The unit axes a_j.
+    pub axes: [[f32; 3]; MAX_TANGENT_DIM],
+}
+
+impl Tangent {
+    /// The lateral family of a one-segment robot: columns `∂pose/∂px`,
+    /// `∂pose/∂py` along the axes x and y.
+    pub const fn lateral(columns: [[f32; POSE_DIM]; 2]) -> Tangent {
+        Tangent {
+            dim: 2,
+            columns: [columns[0], columns[1], [0.0; POSE_DIM]],
+            axes: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0; 3]],
+        }
+    }
+
+    /// Whether the loop may use it: k in 1..=3 and its valid columns and
+    /// axes finite.
+    pub fn is_valid(&self) -> bool {
+        (1..=MAX_TANGENT_DIM).contains(&self.dim)
+            && self
+                .columns
+                .iter()
+                .take(self.dim)
+                .flatten()
+                .chain(self.axes.iter().take(self.dim).flatten())
+                .all(|v| v.is_finite())
+    }
+}
+
 /// A desired tip pose.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Setpoint {
@@ -252,11 +299,10 @@ pub struct Setpoint {
     pub seq: u64,
     /// `px, py, pz` (m), `qw, qx, qy, qz`.
     pub pose: [f32; POSE_DIM],
-    /// `[∂pose/∂px, ∂pose/∂py]` along the robot's reachable poses at `pose`
-    /// (per m), if the planner knows it: lets the integral loop move the
-    /// setpoint the way the robot can move ([`IntegralConfig`]). Ignored if
-    /// any entry is not finite.
-    pub tangent: Option<[[f32; POSE_DIM]; 2]>,
+    /// The robot's reachable poses about `pose`, if the planner knows
+    /// them: lets the integral loop move the setpoint the way the robot can
+    /// move ([`IntegralConfig`]). Ignored unless [`Tangent::is_valid`].
+    pub tangent: Option<Tangent>,
 }
 
 /// Measured tip position from the plant.
@@ -294,8 +340,8 @@ pub struct ControlState {
     pub last_setpoint_seq: u64,
     /// Pose of the last accepted setpoint (valid when `has_setpoint`).
     pub pose: [f32; POSE_DIM],
-    /// Its tangent along the reachable poses, if it came with a finite one.
-    pub tangent: Option<[[f32; POSE_DIM]; 2]>,
+    /// Its tangent along the reachable poses, if it came with a valid one.
+    pub tangent: Option<Tangent>,
     /// The last command was held back by the slew limit (the tip is still
     /// on its way: the integral loop waits).
     pub slew_limited: bool,
@@ -303,7 +349,8 @@ pub struct ControlState {
     pub has_setpoint: bool,
     /// Whether the watchdog holds (latched until an acceptable setpoint).
     pub watchdog: bool,
-    /// Integral correction of the position, m.
+    /// Integral correction, m: c_j along the tangent's axes (first k
+    /// entries), or of the position without a tangent.
     pub correction: [f32; 3],
     /// Sequence number of the last feedback used.
     pub last_feedback_seq: u64,
@@ -441,9 +488,7 @@ pub fn control_step<const H: usize, const OUT: usize, const W: usize>(
             st.last_setpoint_seq = sp.seq;
             st.last_setpoint_ns = now;
             st.pose = sp.pose;
-            st.tangent = sp
-                .tangent
-                .filter(|d| d.iter().flatten().all(|v| v.is_finite()));
+            st.tangent = sp.tangent.filter(Tangent::is_valid);
             st.has_setpoint = true;
             st.watchdog = false;
             status |= Status::NEW_SETPOINT;
@@ -473,23 +518,8 @@ pub fn control_step<const H: usize, const OUT: usize, const W: usize>(
                 st.last_feedback_ns = now;
                 fresh = true;
                 let before = st.correction;
-                let (ex, ey) = (
-                    st.pose[0] - fb.tip_position[0],
-                    st.pose[1] - fb.tip_position[1],
-                );
-                // Only the lateral error when moving along the reachable poses:
-                // there the height follows from x and y.
-                let axes = if st.tangent.is_some() { 2 } else { 3 };
-                if !st.slew_limited && ex * ex + ey * ey <= ic.window * ic.window {
-                    for ((c, &p), &m) in st
-                        .correction
-                        .iter_mut()
-                        .zip(&st.pose)
-                        .zip(&fb.tip_position)
-                        .take(axes)
-                    {
-                        *c = clamp(*c + ic.ki * (p - m) * dt, -ic.limit, ic.limit);
-                    }
+                if !st.slew_limited {
+                    integrate(&mut st, &fb.tip_position, ic, dt);
                 }
                 if !in_box(net, &corrected_pose(&st), cfg.box_margin) {
                     st.correction = before;
@@ -583,17 +613,58 @@ pub fn control_step<const H: usize, const OUT: usize, const W: usize>(
     )
 }
 
+/// One integration of the correction on the measured tip `tip` (module
+/// docs of [`IntegralConfig`]): e_j = a_j · (p_set − p_meas) along the
+/// tangent's k axes, or the position error without a tangent (windowed on
+/// its lateral part); nothing when the error is outside the window.
+fn integrate(st: &mut ControlState, tip: &[f32; 3], ic: IntegralConfig, dt: f32) {
+    let mut error = [0.0f32; 3];
+    for ((e, &p), &m) in error.iter_mut().zip(&st.pose).zip(tip) {
+        *e = p - m;
+    }
+    let (along, axes) = match st.tangent {
+        Some(t) => {
+            let mut along = [0.0f32; 3];
+            for (u, a) in along.iter_mut().zip(&t.axes).take(t.dim) {
+                *u = a[0] * error[0] + a[1] * error[1] + a[2] * error[2];
+            }
+            (along, t.dim)
+        }
+        None => (error, 3),
+    };
+    // The window: |e| over the tangent's axes, the lateral error without.
+    let windowed = if st.tangent.is_some() { axes } else { 2 };
+    let size2 = along
+        .iter()
+        .take(windowed)
+        .fold(0.0f32, |sum, e| sum + e * e);
+    if size2 > ic.window * ic.window {
+        return;
+    }
+    for (c, &e) in st.correction.iter_mut().zip(&along).take(axes) {
+        *c = clamp(*c + ic.ki * e * dt, -ic.limit, ic.limit);
+    }
+}
+
 /// The setpoint with the integral correction applied: along the tangent
-/// if there is one (first order; the quaternion's norm changes by O(c²),
-/// far inside the quaternion tolerance for millimetre corrections), else to
-/// the position alone.
+/// if there is one, `pose + Σ_j c_j T_j` (first order; the quaternion's
+/// norm changes by O(c²), far inside the quaternion tolerance for
+/// millimetre corrections), else to the position alone.
 pub(crate) fn corrected_pose(st: &ControlState) -> [f32; POSE_DIM] {
     let mut p = st.pose;
     let c = st.correction;
     match st.tangent {
-        Some([dx, dy]) => {
-            for ((v, a), b) in p.iter_mut().zip(dx).zip(dy) {
-                *v += a * c[0] + b * c[1];
+        Some(t) => {
+            // Σ_j c_j T_j first, then added: for k = 2 the same roundings
+            // as the lateral law's `v + (T_x c_x + T_y c_y)`.
+            let mut shift = [0.0f32; POSE_DIM];
+            for (column, cj) in t.columns.iter().zip(c).take(t.dim) {
+                for (s, d) in shift.iter_mut().zip(column) {
+                    *s += d * cj;
+                }
+            }
+            for (v, s) in p.iter_mut().zip(shift) {
+                *v += s;
             }
         }
         None => {

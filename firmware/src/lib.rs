@@ -54,7 +54,7 @@ pub mod vectors;
 
 pub use control::{
     control_step, ControlConfig, ControlState, Feedback, IntegralConfig, SafeHold, Setpoint,
-    Status, StepInput, StepOutput, Tensions, POSE_DIM,
+    Status, StepInput, StepOutput, Tangent, Tensions, MAX_TANGENT_DIM, POSE_DIM,
 };
 pub use infer::infer;
 pub use swap::{FlashSlot, IncrementalSwap, NetSlots, NetStore, SwapError, SwapEvent};

@@ -295,19 +295,42 @@ fn net_with_wrong_output_count_is_refused() {
     assert_eq!(o.command, [0.0; MAX_TENDONS]);
 }
 
-/// A plant whose tip is the commanded lateral position shifted by `bias`;
-/// runs the loop with `tangent` for `steps` periods and returns the state.
-fn run_lateral_bias(
+/// The integral law as it was for the lateral (k = 2) tangent before the
+/// law was generalised, kept as the independent reference: window on the
+/// lateral error, integrate x and y, shift along the two columns.
+fn lateral_law_reference(
+    correction: &mut [f32; 3],
+    pose: &[f32; 7],
+    tip: &[f32; 3],
+    ic: &IntegralConfig,
+    dt: f32,
+) {
+    let (ex, ey) = (pose[0] - tip[0], pose[1] - tip[1]);
+    if ex * ex + ey * ey <= ic.window * ic.window {
+        for ((c, &p), &m) in correction.iter_mut().zip(pose).zip(tip).take(2) {
+            *c = clamp(*c + ic.ki * (p - m) * dt, -ic.limit, ic.limit);
+        }
+    }
+}
+
+/// A plant whose tip is the commanded position shifted by `bias`; runs the
+/// loop with `tangent` for `steps` periods and returns the state. With a
+/// lateral tangent every step's correction is checked bit for bit against
+/// [`lateral_law_reference`].
+fn run_biased(
     cfg: &ControlConfig,
-    tangent: Option<[[f32; 7]; 2]>,
-    bias: [f32; 2],
+    tangent: Option<Tangent>,
+    bias: [f32; 3],
     steps: u64,
 ) -> ControlState {
     let net = Net::decode(&blob(3, 12, 4)).unwrap();
     let pose = mid_pose();
     let mut st = ControlState::new(&cfg.limits, &[0.0; MAX_TENDONS], 0);
+    let lateral = tangent.is_some_and(|t| t == Tangent::lateral([t.columns[0], t.columns[1]]));
+    let mut reference = [0.0f32; 3];
     for k in 1..steps {
         let p = corrected_pose(&st);
+        let tip = [p[0] - bias[0], p[1] - bias[1], p[2] - bias[2]];
         let inp = StepInput {
             now_ns: k * 1_000_000,
             setpoint: Some(Setpoint {
@@ -317,16 +340,37 @@ fn run_lateral_bias(
             }),
             feedback: Some(Feedback {
                 seq: k,
-                tip_position: [p[0] - bias[0], p[1] - bias[1], pose[2]],
+                tip_position: tip,
             }),
         };
+        let slewing = st.slew_limited;
+        let before = st.correction;
         st = control_step(cfg, &net, &st, &inp).0;
+        if lateral && k > 1 {
+            if !slewing {
+                lateral_law_reference(
+                    &mut reference,
+                    &pose,
+                    &tip,
+                    &cfg.integral,
+                    1_000_000_f32 * 1e-9,
+                );
+            }
+            if st.correction == before && reference != before {
+                // The step undid a correction that left the box: so does the reference.
+                reference = before;
+            }
+            assert_eq!(
+                st.correction.map(f32::to_bits),
+                reference.map(f32::to_bits),
+                "step {k}"
+            );
+        }
     }
     st
 }
 
-#[test]
-fn integral_loop_moves_the_setpoint_along_the_tangent() {
+fn integral_cfg() -> ControlConfig {
     let mut cfg = cfg4();
     cfg.integral = IntegralConfig {
         ki: 50.0,
@@ -334,6 +378,12 @@ fn integral_loop_moves_the_setpoint_along_the_tangent() {
         feedback_timeout_ns: 5_000_000,
         window: 0.01,
     };
+    cfg
+}
+
+#[test]
+fn integral_loop_moves_the_setpoint_along_the_tangent() {
+    let cfg = integral_cfg();
     // A tangent that also tilts the tip: moving in x changes z and qy.
     let mut d = [[0.0f32; 7]; 2];
     d[0][0] = 1.0;
@@ -341,8 +391,8 @@ fn integral_loop_moves_the_setpoint_along_the_tangent() {
     d[0][5] = 2.5;
     d[1][1] = 1.0;
     d[1][4] = -2.5;
-    let bias = [0.002f32, -0.001];
-    let st = run_lateral_bias(&cfg, Some(d), bias, 2000);
+    let bias = [0.002f32, -0.001, 0.0];
+    let st = run_biased(&cfg, Some(Tangent::lateral(d)), bias, 2000);
     assert!(
         (st.correction[0] - bias[0]).abs() < 1e-6,
         "{:?}",
@@ -370,10 +420,82 @@ fn integral_loop_moves_the_setpoint_along_the_tangent() {
     // A non-finite tangent is dropped: the position alone moves.
     let mut bad = d;
     bad[1][3] = f32::NAN;
-    let st = run_lateral_bias(&cfg, Some(bad), bias, 2000);
+    let st = run_biased(&cfg, Some(Tangent::lateral(bad)), bias, 2000);
     assert!(st.tangent.is_none());
     assert!((corrected_pose(&st)[5] - mid_pose()[5]).abs() < 1e-9);
     assert!((st.correction[0] - bias[0]).abs() < 1e-6);
+}
+
+/// k = 3 (a two-segment robot): the correction along x, y, z converges to
+/// the plant's bias on each axis, and the setpoint moves along all three
+/// columns (one of which tilts the tip).
+#[test]
+fn integral_loop_corrects_a_volume_along_three_columns() {
+    let cfg = integral_cfg();
+    let mut columns = [[0.0f32; 7]; 3];
+    columns[0][0] = 1.0;
+    columns[0][5] = 2.0;
+    columns[1][1] = 1.0;
+    columns[2][2] = 1.0;
+    columns[2][4] = -1.5;
+    let tangent = Tangent {
+        dim: 3,
+        columns,
+        axes: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+    };
+    let bias = [0.001f32, -0.0015, 0.0007];
+    let st = run_biased(&cfg, Some(tangent), bias, 2000);
+    for j in 0..3 {
+        assert!(
+            (st.correction[j] - bias[j]).abs() < 1e-6,
+            "{:?}",
+            st.correction
+        );
+    }
+    let p = corrected_pose(&st);
+    let want_qx = mid_pose()[4] - 1.5 * st.correction[2];
+    assert!((p[4] - want_qx).abs() < 1e-7, "{} vs {want_qx}", p[4]);
+}
+
+/// k = 1 along an oblique axis: only the error's component along the axis
+/// is integrated (the tip cannot move across it), and it converges to the
+/// bias's component a · b.
+#[test]
+fn integral_loop_on_a_curve_integrates_the_error_along_its_axis() {
+    let cfg = integral_cfg();
+    let a = [0.6f32, 0.8, 0.0];
+    let mut columns = [[0.0f32; 7]; 3];
+    columns[0][0] = a[0];
+    columns[0][1] = a[1];
+    columns[0][2] = -0.1;
+    let tangent = Tangent {
+        dim: 1,
+        columns,
+        axes: [a, [0.0; 3], [0.0; 3]],
+    };
+    // A bias along the axis: the shift along the column removes it.
+    let bias = [0.0012f32, 0.0016, 0.0];
+    let st = run_biased(&cfg, Some(tangent), bias, 2000);
+    let along = a[0] * bias[0] + a[1] * bias[1];
+    assert!(
+        (st.correction[0] - along).abs() < 1e-6,
+        "{:?} vs {along}",
+        st.correction
+    );
+    assert_eq!((st.correction[1], st.correction[2]), (0.0, 0.0));
+}
+
+#[test]
+fn tangents_of_no_dimension_or_too_many_are_ignored() {
+    let mut t = Tangent::lateral([[0.0; 7]; 2]);
+    assert!(t.is_valid());
+    t.dim = 0;
+    assert!(!t.is_valid());
+    t.dim = 4;
+    assert!(!t.is_valid());
+    t.dim = 3;
+    t.axes[2][1] = f32::INFINITY;
+    assert!(!t.is_valid());
 }
 
 #[test]
@@ -386,10 +508,10 @@ fn integral_loop_waits_out_large_errors_and_slewing() {
         window: 0.002,
     };
     // 3 mm off: outside the 2 mm window, nothing is integrated.
-    let st = run_lateral_bias(&cfg, None, [0.003, 0.0], 500);
+    let st = run_biased(&cfg, None, [0.003, 0.0, 0.0], 500);
     assert_eq!(st.correction, [0.0; 3]);
     // 1 mm off: inside, removed.
-    let st = run_lateral_bias(&cfg, None, [0.001, 0.0], 2000);
+    let st = run_biased(&cfg, None, [0.001, 0.0, 0.0], 2000);
     assert!(
         (st.correction[0] - 0.001).abs() < 1e-6,
         "{:?}",
@@ -402,7 +524,7 @@ fn integral_loop_waits_out_large_errors_and_slewing() {
     slow.integral = cfg.integral;
     // (The first step integrates once, ki·e·dt = 5e-5 m: nothing was
     // commanded yet, so nothing was held back.)
-    let st = run_lateral_bias(&slow, None, [0.001, 0.0], 500);
+    let st = run_biased(&slow, None, [0.001, 0.0, 0.0], 500);
     assert!(st.slew_limited);
     assert!(st.correction[0] <= 5.0001e-5, "{:?}", st.correction);
 }

@@ -8,7 +8,7 @@
 use libfuzzer_sys::fuzz_target;
 use tendril_firmware::control::{
     control_step, ControlConfig, ControlState, Feedback, IntegralConfig, SafeHold, Setpoint,
-    StepInput,
+    StepInput, Tangent,
 };
 use tendril_firmware::DEFAULT_NET;
 use tendril_shared::{TendonLimits, MAX_TENDONS};
@@ -65,8 +65,16 @@ fuzz_target!(|data: &[u8]| {
             setpoint: (flags & 1 != 0).then_some(Setpoint {
                 seq: u64::from(word(8)),
                 pose,
-                // Arbitrary (NaN, ∞, huge) tangents from the same bytes.
-                tangent: (flags & 4 != 0).then_some([pose, pose.map(|v| -3.0 * v)]),
+                // Arbitrary (NaN, ∞, huge) tangents and dimensions from the same bytes.
+                tangent: (flags & 4 != 0).then_some(Tangent {
+                    dim: (word(8) % 5) as usize,
+                    columns: [pose, pose.map(|v| -3.0 * v), pose.map(|v| 0.5 * v)],
+                    axes: [
+                        [pose[0], pose[1], pose[2]],
+                        [pose[3], pose[4], pose[5]],
+                        tip,
+                    ],
+                }),
             }),
             feedback: (flags & 2 != 0).then_some(Feedback {
                 seq: now,

@@ -68,7 +68,7 @@ fn targets(c: &mut Criterion) {
             [0.015 * a.cos(), 0.015 * a.sin()]
         })
         .collect();
-    let mut lifter = Lifter::new(&statics);
+    let mut lifter = Lifter::new(&statics).unwrap();
     let mut next_point = circle.iter().cycle();
     c.bench_function("inverse/lift_path", |b| {
         b.iter(|| {

@@ -185,6 +185,7 @@ fn latency(samples: usize, mode: Mode) -> (Summary, Summary) {
     // A reachable pose in the quick net's box (tip 15 mm off axis).
     let statics = Statics::new(&robot(), SolverSettings::default());
     let pose = tendril::kinematics::Lifter::new(&statics)
+        .unwrap()
         .lift([0.015, 0.0])
         .unwrap();
     let pose = pose.map(|v| v as f32);
@@ -199,9 +200,10 @@ fn latency(samples: usize, mode: Mode) -> (Summary, Summary) {
                 },
                 pose,
                 velocity: [0.0; 7],
-                tangent: [[0.0; 7]; 2],
+                tangent: [[0.0; 7]; 3],
+                tangent_axes: [[0.0; 3]; 3],
+                tangent_dim: 0,
                 flags,
-                reserved: 0,
             },
         )
         .unwrap();

@@ -89,6 +89,7 @@ fn two_hundred_seconds_of_controller_periods_allocate_nothing() {
         center_m: [0.0, 0.0],
         radius_m: 0.015,
         freq_hz: 0.2,
+        height_m: None,
     };
     let traj = Trajectory::new(&shape, &statics).unwrap();
     let valid = WeightUpdate::from_bytes(
@@ -150,9 +151,12 @@ fn two_hundred_seconds_of_controller_periods_allocate_nothing() {
             velocity: point.velocity.map(|v| v as f32),
             tangent: point
                 .tangent
-                .map_or([[0.0; 7]; 2], |d| d.map(|r| r.map(|v| v as f32))),
+                .map_or([[0.0; 7]; 3], |d| d.columns.map(|r| r.map(|v| v as f32))),
+            tangent_axes: point.tangent.map_or([[0.0; 3]; 3], |d| {
+                d.family.axes_padded().map(|a| a.map(|v| v as f32))
+            }),
+            tangent_dim: point.tangent.map_or(0, |d| d.family.dim() as u32),
             flags: setpoint_flags::HAS_VELOCITY | setpoint_flags::HAS_TANGENT,
-            reserved: 0,
         };
         // A plant: healthy 20 ms motors, the tip 0.3 mm off the setpoint
         // (the IK error the integral removes), silent for 30 periods now and then.

@@ -64,16 +64,22 @@ pub struct Setpoint {
     /// Time derivative of `pose` (per second): lets the controller lead the
     /// motors by their lag instead of trailing the trajectory.
     pub velocity: [f32; 7],
-    /// `∂pose/∂px` and `∂pose/∂py` along the robot's reachable poses at this
-    /// setpoint (per metre). A bending continuum robot reaches a 2-D family
-    /// of poses, so a correction of the tip's lateral position must also
-    /// change height and orientation, the way the robot's own statics do;
-    /// the planner, which has the statics, says how (first order).
-    pub tangent: [[f32; 7]; 2],
+    /// `∂pose/∂u_j` along the robot's reachable poses at this setpoint (per
+    /// metre), u_j = `tangent_axes[j]` · p the tip's coordinate along axis
+    /// j; the first `tangent_dim` columns are valid, the rest zero. A
+    /// continuum robot reaches a k-dimensional family of poses (k = 3 for a
+    /// volume, 2 for a surface over the lateral plane, 1 for a curve), so a
+    /// correction of the tip's position must also change the rest of the
+    /// pose the way the robot's own statics do; the planner, which has the
+    /// statics, says how (first order).
+    pub tangent: [[f32; 7]; 3],
+    /// The unit axes a_j (base frame) of the columns of `tangent`; the
+    /// first `tangent_dim` are valid, the rest zero.
+    pub tangent_axes: [[f32; 3]; 3],
+    /// k, the number of valid tangent columns and axes (1..=3; 0 = none).
+    pub tangent_dim: u32,
     /// [`setpoint_flags`] bits.
     pub flags: u32,
-    /// Explicit padding (keeps the layout free of implicit holes); zero.
-    pub reserved: u32,
 }
 
 /// Bits of [`TensionCommand::status`]: what the controller did this period.
@@ -255,7 +261,10 @@ mod tests {
         // Size = sum of field sizes: no compiler-inserted holes whose bytes
         // would be undefined in shared memory.
         assert_eq!(size_of::<Header>(), 16);
-        assert_eq!(size_of::<Setpoint>(), 16 + 7 * 4 * 4 + 4 + 4);
+        assert_eq!(
+            size_of::<Setpoint>(),
+            16 + 7 * 4 * 2 + 7 * 4 * 3 + 3 * 4 * 3 + 4 + 4
+        );
         assert_eq!(
             size_of::<TensionCommand>(),
             16 + 8 + MAX_TENDONS * 4 + 4 + 4
@@ -267,6 +276,10 @@ mod tests {
         assert_eq!(size_of::<WeightUpdate>(), 16 + 8 + WEIGHT_UPDATE_CAPACITY);
         assert_eq!(size_of::<Control>(), 16 + 8);
         assert_eq!(offset_of!(Setpoint, pose), 16);
+        assert_eq!(offset_of!(Setpoint, tangent), 16 + 7 * 4 * 2);
+        assert_eq!(offset_of!(Setpoint, tangent_axes), 16 + 7 * 4 * 5);
+        assert_eq!(offset_of!(Setpoint, tangent_dim), 16 + 7 * 4 * 5 + 36);
+        assert_eq!(offset_of!(Setpoint, flags), 16 + 7 * 4 * 5 + 40);
         assert_eq!(offset_of!(TensionCommand, tensions), 24);
         assert_eq!(offset_of!(PlantState, tip_pose), 24 + MAX_TENDONS * 4);
         assert_eq!(align_of::<Setpoint>(), 8);

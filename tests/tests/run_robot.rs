@@ -12,8 +12,10 @@
 use std::path::Path;
 
 use serde_json::Value;
-use tendril::pipeline::loop_runs;
+use tendril::ipc::sim::default_loop_runs;
+use tendril::pipeline::run_dir;
 use tendril::robot::Robot;
+use tendril::statics::{SolverSettings, Statics};
 use tendril_tests::{robot, tendril};
 
 fn json(path: &Path) -> Value {

@@ -19,26 +19,39 @@ pub enum Kind {
     Circle,
     /// Figure eight of half-width `--radius-mm` at `--freq`.
     Figure8,
+    /// Circle whose height moves between `--heights-mm` over `--turns`
+    /// revolutions and back (a robot that reaches a volume).
+    Helix,
+    /// Sinusoid along the axis between the two coordinates of `--sweep-mm`
+    /// at `--freq` (a robot whose tip moves on a curve).
+    Sweep,
     /// Full poses from `--poses FILE` (t,px,py,pz,qw,qx,qy,qz).
     Csv,
 }
 
-/// What the planner follows (shared with `tendril sim`).
+/// What the planner follows (shared with `tendril sim`). Points are the
+/// tip's coordinates on the robot's family (`docs/design.md` §6): x,y for
+/// a one-segment robot, x,y,z (or x,y and `--height-mm`) for one that
+/// reaches a volume, the coordinate along the axis for a one-tendon robot.
 #[derive(Args, Clone, Debug)]
 pub struct TrajectoryOpts {
     /// Trajectory kind.
     #[arg(long, value_enum, default_value_t = Kind::Circle)]
     pub trajectory: Kind,
-    /// Centre of the path, lateral tip position x,y in mm.
+    /// Centre of the path (lateral x,y) or the held point, mm.
     #[arg(long, default_value = "0,0", allow_hyphen_values = true)]
     pub center_mm: String,
     /// Circle radius / figure-eight half-width, mm (a "30 mm circle" is radius 15).
     #[arg(long, default_value_t = 15.0)]
     pub radius_mm: f64,
-    /// Revolutions per second.
+    /// Height of a circle, figure eight, hold or lateral steps on a robot
+    /// that reaches a volume, mm (default: its mid height).
+    #[arg(long, allow_hyphen_values = true)]
+    pub height_mm: Option<f64>,
+    /// Revolutions (sweeps) per second.
     #[arg(long, default_value_t = 0.2)]
     pub freq: f64,
-    /// Step targets, "x,y;x,y;…" in mm.
+    /// Step targets, "x,y;x,y;…" (or x,y,z / one coordinate each) in mm.
     #[arg(
         long,
         default_value = "10,0;0,10;-10,0;0,-10",
@@ -48,6 +61,15 @@ pub struct TrajectoryOpts {
     /// Seconds per step target.
     #[arg(long, default_value_t = 2.0)]
     pub dwell: f64,
+    /// Helix start and top heights "from,to", mm.
+    #[arg(long, allow_hyphen_values = true)]
+    pub heights_mm: Option<String>,
+    /// Helix revolutions from one height to the other (a multiple of ½).
+    #[arg(long, default_value_t = 1.0)]
+    pub turns: f64,
+    /// Sweep coordinates "from,to" along the robot's axis, mm.
+    #[arg(long, allow_hyphen_values = true)]
+    pub sweep_mm: Option<String>,
     /// Pose table for `--trajectory csv`.
     #[arg(long)]
     pub poses: Option<PathBuf>,
@@ -59,44 +81,81 @@ pub struct TrajectoryOpts {
     pub settle: f64,
 }
 
-fn pair(s: &str, what: &str) -> anyhow::Result<[f64; 2]> {
+/// Comma-separated finite numbers in mm, as metres.
+fn metres(s: &str, what: &str) -> anyhow::Result<Vec<f64>> {
     let v: Vec<f64> = s
         .split(',')
         .map(|x| x.trim().parse::<f64>())
         .collect::<Result<_, _>>()
-        .with_context(|| format!("{what} {s:?}: expected two numbers x,y"))?;
-    if v.len() != 2 || v.iter().any(|x| !x.is_finite()) {
-        bail!("{what} {s:?}: expected two finite numbers x,y");
+        .with_context(|| format!("{what} {s:?}: expected comma-separated numbers"))?;
+    if v.iter().any(|x| !x.is_finite()) {
+        bail!("{what} {s:?}: expected finite numbers");
     }
-    Ok([v[0], v[1]])
+    Ok(v.into_iter().map(|x| x * 1e-3).collect())
+}
+
+fn pair(s: &str, what: &str) -> anyhow::Result<[f64; 2]> {
+    match metres(s, what)?[..] {
+        [a, b] => Ok([a, b]),
+        _ => bail!("{what} {s:?}: expected two numbers"),
+    }
 }
 
 impl TrajectoryOpts {
     /// The trajectory shape in SI units.
     pub fn shape(&self) -> anyhow::Result<Shape> {
-        let c = pair(&self.center_mm, "--center-mm")?;
-        let center = [c[0] * 1e-3, c[1] * 1e-3];
         let radius = self.radius_mm * 1e-3;
+        let height = self.height_mm.map(|h| h * 1e-3);
+        let lateral = || pair(&self.center_mm, "--center-mm");
         Ok(match self.trajectory {
-            Kind::Hold => Shape::Hold { center_m: center },
+            Kind::Hold => Shape::Hold {
+                center_m: metres(&self.center_mm, "--center-mm")?,
+                height_m: height,
+            },
             Kind::Steps => Shape::Steps {
                 targets_m: self
                     .targets_mm
                     .split(';')
-                    .map(|p| pair(p, "--targets-mm").map(|v| [v[0] * 1e-3, v[1] * 1e-3]))
+                    .map(|p| metres(p, "--targets-mm"))
                     .collect::<anyhow::Result<_>>()?,
                 dwell_s: self.dwell,
+                height_m: height,
             },
             Kind::Circle => Shape::Circle {
-                center_m: center,
+                center_m: lateral()?,
                 radius_m: radius,
                 freq_hz: self.freq,
+                height_m: height,
             },
             Kind::Figure8 => Shape::FigureEight {
-                center_m: center,
+                center_m: lateral()?,
                 radius_m: radius,
                 freq_hz: self.freq,
+                height_m: height,
             },
+            Kind::Helix => {
+                let Some(h) = &self.heights_mm else {
+                    bail!("--trajectory helix needs --heights-mm FROM,TO");
+                };
+                Shape::Helix {
+                    center_m: lateral()?,
+                    radius_m: radius,
+                    freq_hz: self.freq,
+                    heights_m: pair(h, "--heights-mm")?,
+                    turns: self.turns,
+                }
+            }
+            Kind::Sweep => {
+                let Some(range) = &self.sweep_mm else {
+                    bail!("--trajectory sweep needs --sweep-mm FROM,TO");
+                };
+                let [from_m, to_m] = pair(range, "--sweep-mm")?;
+                Shape::Sweep {
+                    from_m,
+                    to_m,
+                    freq_hz: self.freq,
+                }
+            }
             Kind::Csv => {
                 let Some(path) = &self.poses else {
                     bail!("--trajectory csv needs --poses FILE");

@@ -33,6 +33,10 @@ pub enum Target {
     /// orientation follow from the tensions (a bending robot's two degrees
     /// of freedom, `docs/design.md` §6).
     Lateral(Vector2<f64>),
+    /// The tip's coordinate `a · p` along the unit axis `a` (base frame, m);
+    /// the rest of the pose follows from the tensions (a robot whose tip
+    /// moves along a curve, e.g. one tendon, `docs/design.md` §6).
+    Along(Vector3<f64>, f64),
 }
 
 impl Target {
@@ -59,18 +63,20 @@ impl Target {
         Ok(Target::Pose(position, UnitQuaternion::from_quaternion(q)))
     }
 
-    /// The target position, m (`None` for a lateral target: its height is free).
+    /// The target position, m (`None` for a lateral or axis target: part
+    /// of the position is free).
     pub fn position(&self) -> Option<Vector3<f64>> {
         match self {
             Target::Position(p) | Target::Pose(p, _) => Some(*p),
-            Target::Lateral(_) => None,
+            Target::Lateral(_) | Target::Along(..) => None,
         }
     }
 
     /// How many leading components of the error are position (m): 2 for a
-    /// lateral target, else 3.
+    /// lateral target, 1 along an axis, else 3.
     pub(crate) fn position_rows(&self) -> usize {
         match self {
+            Target::Along(..) => 1,
             Target::Lateral(_) => 2,
             Target::Position(_) | Target::Pose(..) => 3,
         }
@@ -85,7 +91,7 @@ pub struct IkSolution {
     /// The pose these tensions reach: px, py, pz (m), qw, qx, qy, qz.
     pub pose: [f64; 7],
     /// Distance from the reached tip to the target position (for a lateral
-    /// target: the lateral distance), m.
+    /// target: the lateral distance; along an axis: the distance along it), m.
     pub position_error: f64,
     /// Angle between reached and target orientation, rad (pose targets only).
     pub orientation_error: Option<f64>,

@@ -211,7 +211,7 @@ impl ExactIk {
         })
     }
 
-    /// e = [p − p*], [p − p*; ℓ θ(R R*ᵀ)] or [px − x*, py − y*].
+    /// e = [p − p*], [p − p*; ℓ θ(R R*ᵀ)], [px − x*, py − y*] or [a · p − u*].
     fn error(&self, target: &Target, sol: &Solution) -> DVector<f64> {
         match target {
             Target::Position(p) => DVector::from_column_slice((sol.position - p).as_slice()),
@@ -224,6 +224,7 @@ impl ExactIk {
             Target::Lateral(xy) => {
                 DVector::from_vec(vec![sol.position.x - xy.x, sol.position.y - xy.y])
             }
+            Target::Along(axis, u) => DVector::from_element(1, axis.dot(&sol.position) - u),
         }
     }
 
@@ -293,6 +294,10 @@ impl ExactIk {
             p.jac = Some(match target {
                 Target::Position(_) => full.rows(0, 3).into_owned(),
                 Target::Lateral(_) => full.rows(0, 2).into_owned(),
+                Target::Along(axis, _) => {
+                    let row = axis.transpose() * full.rows(0, 3);
+                    DMatrix::from_iterator(1, full.ncols(), row.iter().copied())
+                }
                 Target::Pose(..) => {
                     let mut j = full.clone();
                     j.rows_mut(3, 3).scale_mut(self.weight);
@@ -309,7 +314,7 @@ impl ExactIk {
         let position_ok =
             p.err.rows(0, target.position_rows()).norm() <= self.settings.position_tol;
         match target {
-            Target::Position(_) | Target::Lateral(_) => position_ok,
+            Target::Position(_) | Target::Lateral(_) | Target::Along(..) => position_ok,
             Target::Pose(..) => {
                 position_ok
                     && p.err.rows(3, 3).norm() / self.weight <= self.settings.orientation_tol
@@ -615,7 +620,7 @@ impl ExactIk {
     fn answer(&self, target: &Target, p: &Point, solves: usize) -> IkSolution {
         let pose = p.sol.pose();
         let orientation_error = match target {
-            Target::Position(_) | Target::Lateral(_) => None,
+            Target::Position(_) | Target::Lateral(_) | Target::Along(..) => None,
             Target::Pose(_, q) => Some(angle_between(
                 &[pose[3], pose[4], pose[5], pose[6]],
                 &[q.w, q.i, q.j, q.k],

@@ -2,9 +2,11 @@
 //! at hand (HIL tests, benchmarks): random symmetric-sigmoid hidden units
 //! (an extreme-learning-machine layer, stored as a cascade net whose hidden
 //! units ignore each other) with ridge-fitted linear outputs, trained on
-//! statics samples from the same two-adjacent-tendon family the planner
-//! plans with. Under a second of work; millimetre-class accuracy, which is
-//! what the correction loop is there to remove. The real model comes from
+//! statics samples of the poses the planner plans: the two-adjacent-tendon
+//! bend family of a one-segment robot ([`quick_net`]), or lifted points of
+//! any robot's family around the main job's loop runs ([`quick_net_for`]).
+//! Seconds of work; millimetre-class accuracy, which is what the
+//! correction loop is there to remove. The real model comes from
 //! `tendril train`.
 
 use nalgebra::{DMatrix, Vector2};
@@ -12,12 +14,76 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tendril_shared::{encode_to_vec, Activation, Shape, TnetView};
 
+use super::trajectory::Trajectory;
 use super::IpcError;
-use crate::kinematics::bend_tensions;
+use crate::kinematics::{bend_tensions, Family};
 use crate::statics::Statics;
 
 /// Jittered copies of each training pose (see [`quick_net`]).
 const JITTER_COPIES: usize = 3;
+
+/// Largest perturbation of a pulling tendon around the loop runs'
+/// tensions ([`quick_net_for`]), as a fraction of its range.
+const PERTURBATION: f64 = 0.04;
+
+/// A quick net for any robot, fitted where its loop runs go: a one-segment
+/// robot's bend disc up to 6 N ([`quick_net`]); any other robot, `samples`
+/// tension sets around the exact IK's tensions along the main job's loop
+/// runs ([`super::sim::default_loop_runs`]): a random point of a random
+/// run, each tendon that pulls there moved by up to ± [`PERTURBATION`] of
+/// its range, the slack ones left slack (so the samples stay on the lift's
+/// branch: a two-segment robot reaches a point by several S shapes, and a
+/// fit across them averages tensions of different shapes). Deterministic
+/// for a given seed.
+pub fn quick_net_for(
+    statics: &Statics,
+    samples: usize,
+    hidden: usize,
+    seed: u64,
+) -> Result<Vec<u8>, IpcError> {
+    if Family::of(statics)?.dim() == 2 {
+        return quick_net(statics, samples, hidden, 6.0, seed);
+    }
+    let robot = statics.robot();
+    let (lo, hi) = (robot.min_tensions(), robot.max_tensions());
+    let paths = super::sim::default_loop_runs(statics)?
+        .iter()
+        .map(|run| Trajectory::new(&run.shape, statics))
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut poses = Vec::with_capacity(samples);
+    let mut tensions = Vec::with_capacity(samples);
+    let mut reference = Vec::new();
+    let mut warm = None;
+    for i in 0..samples {
+        let path = &paths[i % paths.len()];
+        // Along the path in order (short warm steps), a random offset each.
+        let t = path.duration().max(1.0) * (i / paths.len()) as f64
+            / (samples / paths.len()).max(1) as f64;
+        path.feedforward(t, &mut reference);
+        let tau: Vec<f64> = reference
+            .iter()
+            .enumerate()
+            .map(|(k, &r)| {
+                let pulls = r > lo[k] + 1e-6;
+                let d = PERTURBATION * (hi[k] - lo[k]) * (2.0 * rng.random::<f64>() - 1.0);
+                if pulls {
+                    (r + d).clamp(lo[k], hi[k])
+                } else {
+                    r
+                }
+            })
+            .collect();
+        let sol = statics
+            .solve(&tau, warm.as_ref())
+            .or_else(|_| statics.solve(&tau, None))
+            .map_err(|e| IpcError::Other(format!("fixture statics: {e}")))?;
+        warm = Some(sol.warm.clone());
+        poses.push(sol.pose());
+        tensions.push(tau);
+    }
+    fit(statics, &poses, &tensions, hidden, 0.1, &mut rng)
+}
 
 /// Fit a `.tnet` with `hidden` random units on `samples` poses whose bends
 /// cover a disc of `max_bend` newtons. Deterministic for a given seed.
@@ -28,11 +94,10 @@ pub fn quick_net(
     max_bend: f64,
     seed: u64,
 ) -> Result<Vec<u8>, IpcError> {
-    let n = statics.robot().n_tendons();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     // Samples on a spiral-ordered grid of bends so each solve warm-starts from a neighbour.
-    let mut xs: Vec<[f64; 7]> = Vec::with_capacity(samples * (1 + JITTER_COPIES));
-    let mut ys: Vec<Vec<f64>> = Vec::with_capacity(samples * (1 + JITTER_COPIES));
+    let mut poses = Vec::with_capacity(samples);
+    let mut tensions = Vec::with_capacity(samples);
     let mut warm = None;
     for i in 0..samples {
         let r = max_bend * ((i as f64 + 0.5) / samples as f64).sqrt();
@@ -44,19 +109,38 @@ pub fn quick_net(
             .or_else(|_| statics.solve(&tau, None))
             .map_err(|e| IpcError::Other(format!("fixture statics: {e}")))?;
         warm = Some(sol.warm.clone());
-        let pose = sol.pose();
-        // The pose has 7 numbers but the robot only 2 degrees of freedom, so
-        // the data lie on a surface and a plain fit is free to do anything
-        // off it — where the correction loop's shifted setpoints land (it
-        // moves the position and keeps the orientation). Jittered copies,
-        // with the orientation far noisier than the position, make the net
-        // vary smoothly off the surface and key on the position.
+        poses.push(sol.pose());
+        tensions.push(tau);
+    }
+    fit(statics, &poses, &tensions, hidden, 1.0, &mut rng)
+}
+
+/// The random-feature fit of `tensions` on `poses` (module docs), with
+/// jittered copies of each pose (`jitter` scales the jitter).
+fn fit(
+    statics: &Statics,
+    poses: &[[f64; 7]],
+    tensions: &[Vec<f64>],
+    hidden: usize,
+    jitter: f64,
+    rng: &mut ChaCha8Rng,
+) -> Result<Vec<u8>, IpcError> {
+    let n = statics.robot().n_tendons();
+    let mut xs: Vec<[f64; 7]> = Vec::with_capacity(poses.len() * (1 + JITTER_COPIES));
+    let mut ys: Vec<Vec<f64>> = Vec::with_capacity(poses.len() * (1 + JITTER_COPIES));
+    for (&pose, tau) in poses.iter().zip(tensions) {
+        // The pose has 7 numbers but the robot only k degrees of freedom, so
+        // the data lie on a k-dimensional set and a plain fit is free to do
+        // anything off it — where the correction loop's shifted setpoints
+        // land when the tangent is off. Jittered copies, with the
+        // orientation far noisier than the position, make the net vary
+        // smoothly off the set and key on the position.
         xs.push(pose);
         ys.push(tau.clone());
         for _ in 0..JITTER_COPIES {
             let mut p = pose;
             for (k, v) in p.iter_mut().enumerate() {
-                let sd = if k < 3 { 2e-4 } else { 1e-2 };
+                let sd = jitter * if k < 3 { 2e-4 } else { 1e-2 };
                 *v += sd * (rng.random::<f64>() * 2.0 - 1.0) * 3f64.sqrt();
             }
             xs.push(p);
@@ -146,6 +230,7 @@ pub fn quick_net(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::kinematics::Lifter;
     use crate::robot::Robot;
     use crate::statics::SolverSettings;
     use std::path::Path;
@@ -193,5 +278,62 @@ mod tests {
             "moved by {dx}, {}",
             tip.y - pose[1] as f64
         );
+    }
+
+    /// Task-space error of the net at lifted points off its training set:
+    /// predicted tensions, run forward through the statics, land within
+    /// `bound` m of the point.
+    fn check_quick_net_for(file: &str, points: &[Vec<f64>], bound: f64) {
+        let robot = Robot::load(
+            &Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../robots")
+                .join(file),
+        )
+        .unwrap();
+        let s = Statics::new(&robot, SolverSettings::default());
+        let n = robot.n_tendons();
+        let blob = quick_net_for(&s, 1000, 48, 5).unwrap();
+        let net = tendril_shared::IkNet::decode(&blob).unwrap();
+        let mut lifter = Lifter::new(&s).unwrap();
+        let mut worst: f64 = 0.0;
+        for u in points {
+            let pose = lifter.lift(u).unwrap().map(|v| v as f32);
+            let pred = tendril_firmware::infer(&net, &pose);
+            let pred: Vec<f64> = pred[..n]
+                .iter()
+                .zip(robot.max_tensions())
+                .map(|(&v, max)| (v as f64).clamp(0.0, max))
+                .collect();
+            let tip = s.solve(&pred, None).unwrap().position;
+            let err = (0..3)
+                .map(|k| (tip[k] - pose[k] as f64).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            worst = worst.max(err);
+        }
+        assert!(worst < bound, "{file}: worst task-space error {worst} m");
+    }
+
+    #[test]
+    fn quick_net_for_a_two_segment_robot_inverts_its_volume_to_millimetres() {
+        let robot =
+            Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/tdcr-2seg.toml"))
+                .unwrap();
+        let s = Statics::new(&robot, SolverSettings::default());
+        let z = Lifter::new(&s)
+            .unwrap()
+            .mid_height([0.0, 0.0], 0.01)
+            .unwrap();
+        let points = [
+            vec![0.01, 0.0, z],
+            vec![-0.006, 0.007, z + 0.002],
+            vec![0.0, -0.008, z - 0.002],
+        ];
+        check_quick_net_for("tdcr-2seg.toml", &points, 2e-3);
+    }
+
+    #[test]
+    fn quick_net_for_a_one_tendon_robot_inverts_its_curve_to_millimetres() {
+        check_quick_net_for("seed-1t.toml", &[vec![0.05], vec![0.07], vec![0.09]], 2e-3);
     }
 }

@@ -236,6 +236,7 @@ mod tests {
                 center_m: [0.0, 0.01],
                 radius_m: 0.015,
                 freq_hz: 0.2,
+                height_m: Some(0.3),
             },
             rate_hz: 1000.0,
             settle_s: 2.0,

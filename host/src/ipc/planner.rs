@@ -136,12 +136,16 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
         let miss = traj.feedforward(t_path, &mut feedforward);
         let mut pose = point.pose.map(|v| v as f32);
         let mut velocity = point.velocity.map(|v| v as f32);
-        let tangent = match point.tangent {
+        let (tangent, tangent_axes, tangent_dim) = match point.tangent {
             Some(d) => {
                 flags |= setpoint_flags::HAS_TANGENT;
-                d.map(|row| row.map(|v| v as f32))
+                (
+                    d.columns.map(|column| column.map(|v| v as f32)),
+                    d.family.axes_padded().map(|axis| axis.map(|v| v as f32)),
+                    d.family.dim() as u32,
+                )
             }
-            None => [[0.0; 7]; 2],
+            None => ([[0.0; 7]; 3], [[0.0; 3]; 3], 0),
         };
         let clean = pose;
         let mut injected = false;
@@ -177,8 +181,9 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
             pose,
             velocity,
             tangent,
+            tangent_axes,
+            tangent_dim,
             flags,
-            reserved: 0,
         };
         transport::send(&publisher, msg)?;
         // The log keeps the trajectory's pose (what the robot should do)

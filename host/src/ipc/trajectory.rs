@@ -1,10 +1,12 @@
-//! Planner trajectories. A continuum robot with bending tendons has fewer
-//! degrees of freedom than a 7-number pose, so an arbitrary pose is not
-//! reachable: the planner plans the tip's lateral position (x, y) and lifts
-//! each point to the full reachable pose with the exact IK
-//! ([`crate::kinematics::Lifter`], `docs/design.md` §4.1), tabulated once at
-//! start-up with the tensions as a feed-forward reference. A pose table's
-//! rows get theirs from the exact IK on the full pose.
+//! Planner trajectories. A continuum robot has fewer degrees of freedom than
+//! a 7-number pose, so an arbitrary pose is not reachable: the planner plans
+//! the tip's k coordinates on the robot's family ([`Family`]: x, y, z for a
+//! robot that reaches a volume, x, y for one that bends over a surface, the
+//! coordinate along its axis for one that moves on a curve) and lifts each
+//! point to the full reachable pose with the exact IK
+//! ([`crate::kinematics::Lifter`], `docs/design.md` §4.1, §6), tabulated
+//! once at start-up with the tensions as a feed-forward reference. A pose
+//! table's rows get theirs from the exact IK on the full pose.
 
 use std::path::Path;
 
@@ -12,7 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use super::IpcError;
 use crate::inverse::{ExactIk, InverseError, Target};
-use crate::kinematics::{Lifter, Tangent};
+use crate::kinematics::{Family, Lifter, Tangent};
 use crate::statics::{Statics, WarmStart};
 
 /// A desired tip pose and its time derivative at one instant.
@@ -23,42 +25,84 @@ pub struct PosePoint {
     /// d(pose)/dt (per second).
     pub velocity: [f64; 7],
     /// The reachable family's tangent at `pose`, if the trajectory knows it
-    /// (lifted paths do; a pose table does not).
+    /// (lifted paths do; a pose table does when every row is in reach).
     pub tangent: Option<Tangent>,
 }
 
 /// What the planner follows (serialised with a `kind` tag, units in the
-/// field names).
+/// field names). Points are the tip's coordinates on the robot's family
+/// (module docs): x, y (m) for a robot that bends over a surface; x, y, z,
+/// or x, y and a `height_m`, for one that reaches a volume (no height: the
+/// robot's mid height, [`Lifter::mid_height`]); the one coordinate along
+/// the axis for one that moves on a curve.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum Shape {
-    /// Hold one lateral position.
+    /// Hold one point.
     Hold {
-        /// Lateral tip position, m.
-        center_m: [f64; 2],
+        /// The point, m.
+        center_m: Vec<f64>,
+        /// Height for a lateral `center_m` on a robot that reaches a volume, m.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        height_m: Option<f64>,
     },
-    /// Visit lateral positions in turn, `dwell_s` seconds each.
+    /// Visit points in turn, `dwell_s` seconds each.
     Steps {
         /// Targets, m.
-        targets_m: Vec<[f64; 2]>,
+        targets_m: Vec<Vec<f64>>,
         /// Seconds per target.
         dwell_s: f64,
+        /// Height for lateral targets on a robot that reaches a volume, m.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        height_m: Option<f64>,
     },
-    /// Circle of `radius_m` about `center_m` at `freq_hz`, starting at +x.
+    /// Circle of `radius_m` about lateral `center_m` at `freq_hz`, starting at +x.
     Circle {
-        /// Centre, m.
+        /// Lateral centre, m.
         center_m: [f64; 2],
         /// Radius, m.
         radius_m: f64,
         /// Revolutions per second.
         freq_hz: f64,
+        /// Height on a robot that reaches a volume, m (default: its mid height).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        height_m: Option<f64>,
     },
     /// Lemniscate of Gerono (figure eight) of half-width `radius_m` about `center_m`.
     FigureEight {
-        /// Centre, m.
+        /// Lateral centre, m.
         center_m: [f64; 2],
         /// Half-width, m.
         radius_m: f64,
+        /// Periods per second.
+        freq_hz: f64,
+        /// Height on a robot that reaches a volume, m (default: its mid height).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        height_m: Option<f64>,
+    },
+    /// A circle whose height moves linearly from `heights_m[0]` to
+    /// `heights_m[1]` over `turns` revolutions and back over as many
+    /// (periodic; a robot that reaches a volume).
+    Helix {
+        /// Lateral centre, m.
+        center_m: [f64; 2],
+        /// Radius, m.
+        radius_m: f64,
+        /// Revolutions per second.
+        freq_hz: f64,
+        /// Start and top heights, m.
+        heights_m: [f64; 2],
+        /// Revolutions from one height to the other (a multiple of ½, so
+        /// the path closes).
+        turns: f64,
+    },
+    /// The tip's coordinate along the axis of a robot that moves on a
+    /// curve, `from_m + (to_m − from_m) (1 − cos 2π f t) / 2`.
+    Sweep {
+        /// Start (and end) coordinate, m.
+        from_m: f64,
+        /// Farthest coordinate, m.
+        to_m: f64,
         /// Periods per second.
         freq_hz: f64,
     },
@@ -67,6 +111,80 @@ pub enum Shape {
         /// The rows.
         rows: Vec<PoseRow>,
     },
+}
+
+impl Shape {
+    /// The shape's name as in its `kind` tag.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Shape::Hold { .. } => "hold",
+            Shape::Steps { .. } => "steps",
+            Shape::Circle { .. } => "circle",
+            Shape::FigureEight { .. } => "figure_eight",
+            Shape::Helix { .. } => "helix",
+            Shape::Sweep { .. } => "sweep",
+            Shape::Table { .. } => "table",
+        }
+    }
+
+    /// Whether a robot of `family` can follow the shape (its kind and the
+    /// number of coordinates of its points), before anything is lifted:
+    /// an [`IpcError::Config`] naming the shape and the family if not.
+    pub fn check(&self, family: &Family) -> Result<(), IpcError> {
+        let k = family.dim();
+        let points = |points: &[&Vec<f64>], height: &Option<f64>| {
+            for p in points {
+                let fits = p.len() == k || (k == 3 && p.len() == 2);
+                if !fits {
+                    let why = format!(
+                        "a point has {} coordinates, the robot's family {k}",
+                        p.len()
+                    );
+                    return Err(unfit(self, family, &why));
+                }
+                if height.is_some() && !(k == 3 && p.len() == 2) {
+                    return Err(unfit(
+                        self,
+                        family,
+                        "a height needs lateral (x, y) points on a robot that reaches a volume",
+                    ));
+                }
+            }
+            Ok(())
+        };
+        match self {
+            Shape::Hold { center_m, height_m } => points(&[center_m], height_m),
+            Shape::Steps {
+                targets_m,
+                height_m,
+                ..
+            } => points(&targets_m.iter().collect::<Vec<_>>(), height_m),
+            Shape::Circle { height_m, .. } | Shape::FigureEight { height_m, .. } => {
+                if k < 2 {
+                    Err(unfit(self, family, "a lateral path needs two coordinates"))
+                } else if height_m.is_some() && k != 3 {
+                    Err(unfit(
+                        self,
+                        family,
+                        "a height needs a robot that reaches a volume",
+                    ))
+                } else {
+                    Ok(())
+                }
+            }
+            Shape::Helix { .. } if k != 3 => Err(unfit(
+                self,
+                family,
+                "a helix needs a robot that reaches a volume",
+            )),
+            Shape::Sweep { .. } if k != 1 => Err(unfit(
+                self,
+                family,
+                "a sweep is for a robot whose tip moves on a curve (plan a circle or steps)",
+            )),
+            Shape::Helix { .. } | Shape::Sweep { .. } | Shape::Table { .. } => Ok(()),
+        }
+    }
 }
 
 /// One row of a pose table.
@@ -102,7 +220,7 @@ pub struct Trajectory {
 /// Table resolution for lifted continuous paths (s).
 const TABLE_DT: f64 = 0.01;
 
-/// Lifted lateral positions as trajectory columns.
+/// Lifted points as trajectory columns.
 #[derive(Default)]
 struct LiftedPath {
     poses: Vec<[f64; 7]>,
@@ -111,8 +229,8 @@ struct LiftedPath {
 }
 
 impl LiftedPath {
-    fn push(&mut self, lifter: &mut Lifter, xy: [f64; 2]) -> Result<(), IpcError> {
-        let lifted = lifter.lifted(xy)?;
+    fn push(&mut self, lifter: &mut Lifter, u: &[f64]) -> Result<(), IpcError> {
+        let lifted = lifter.lifted(u)?;
         self.poses.push(lifted.pose);
         self.tangents.push(lifted.tangent);
         self.tensions.push(lifted.tensions);
@@ -132,30 +250,140 @@ impl LiftedPath {
     }
 }
 
+/// The shape cannot be followed by a robot of this family.
+fn unfit(shape: &Shape, family: &Family, why: &str) -> IpcError {
+    IpcError::Config(format!(
+        "trajectory {}: {why}; this robot's tip reaches {}",
+        shape.name(),
+        family.describe()
+    ))
+}
+
+/// A point of `shape` on the family: `given` coordinates (k of them, or
+/// lateral x, y plus `height` / the mid height on a robot that reaches a
+/// volume).
+fn on_family(
+    shape: &Shape,
+    lifter: &Lifter,
+    given: &[f64],
+    height: Option<f64>,
+    default_height: &mut dyn FnMut(&Lifter) -> Result<f64, IpcError>,
+) -> Result<Vec<f64>, IpcError> {
+    let family = lifter.family();
+    let k = family.dim();
+    if given.iter().chain(&height).any(|v| !v.is_finite()) {
+        return Err(IpcError::Config(format!(
+            "trajectory {}: coordinates must be finite numbers",
+            shape.name()
+        )));
+    }
+    match (k, given.len(), height) {
+        (3, 2, h) => {
+            let z = match h {
+                Some(z) => z,
+                None => default_height(lifter)?,
+            };
+            Ok(vec![given[0], given[1], z])
+        }
+        (_, n, None) if n == k => Ok(given.to_vec()),
+        (_, n, Some(_)) if n == k || k != 3 => Err(unfit(
+            shape,
+            &family,
+            "a height needs lateral (x, y) points on a robot that reaches a volume",
+        )),
+        (_, n, _) => Err(unfit(
+            shape,
+            &family,
+            &format!("a point has {n} coordinates, the robot's family {k}"),
+        )),
+    }
+}
+
+/// The mid height for a lateral path of `radius` about `center`, computed once.
+fn mid_height_once(center: [f64; 2], radius: f64) -> impl FnMut(&Lifter) -> Result<f64, IpcError> {
+    let mut cached = None;
+    move |lifter: &Lifter| {
+        if let Some(z) = cached {
+            return Ok(z);
+        }
+        let z = lifter.mid_height(center, radius)?;
+        log::info!(
+            "trajectory: mid height {:.2} mm for radius {:.1} mm about ({:.1}, {:.1}) mm",
+            z * 1e3,
+            radius * 1e3,
+            center[0] * 1e3,
+            center[1] * 1e3
+        );
+        cached = Some(z);
+        Ok(z)
+    }
+}
+
+/// Times of one period of a closed path at `freq` Hz lasting `cycles`
+/// periods of the base frequency, tabulated at [`TABLE_DT`].
+fn periodic_times(freq: f64, cycles: f64) -> Vec<f64> {
+    let period = cycles / freq;
+    let n = ((period / TABLE_DT).ceil() as usize).max(16);
+    (0..=n).map(|i| period * i as f64 / n as f64).collect()
+}
+
 impl Trajectory {
-    /// Tabulate `shape` for `statics`' robot: lateral targets lifted to
-    /// reachable poses by the exact IK, each point warm-started from the
-    /// previous one ([`Lifter`]).
+    /// Tabulate `shape` for `statics`' robot: points on the robot's family
+    /// lifted to reachable poses by the exact IK, each point warm-started
+    /// from the previous one ([`Lifter`]). A shape the family cannot follow
+    /// (a circle for a robot whose tip moves on a curve, a sweep for one that
+    /// reaches a surface) is an [`IpcError::Config`] naming both.
     pub fn new(shape: &Shape, statics: &Statics) -> Result<Trajectory, IpcError> {
-        let mut lifter = Lifter::new(statics);
+        let mut lifter = Lifter::new(statics)?;
+        let family = lifter.family();
+        let k = family.dim();
+        shape.check(&family)?;
         match shape {
-            Shape::Hold { center_m } => {
+            Shape::Hold { center_m, height_m } => {
+                let mut z = mid_height_once([center_m[0], *center_m.get(1).unwrap_or(&0.0)], 0.0);
+                let u = on_family(shape, &lifter, center_m, *height_m, &mut z)?;
                 let mut path = LiftedPath::default();
-                path.push(&mut lifter, *center_m)?;
+                path.push(&mut lifter, &u)?;
                 Ok(path.into_trajectory(vec![0.0], false, true))
             }
             Shape::Steps {
                 targets_m: targets,
                 dwell_s: dwell,
+                height_m,
             } => {
-                if targets.is_empty() || *dwell <= 0.0 {
+                if targets.is_empty() || dwell.is_nan() || *dwell <= 0.0 {
                     return Err(IpcError::Config(
                         "steps need at least one target and a positive dwell".into(),
                     ));
                 }
+                // Lateral targets on a robot that reaches a volume: the mid
+                // height of the smallest circle about their centroid holding them.
+                let lateral = |t: &Vec<f64>| [t[0], *t.get(1).unwrap_or(&0.0)];
+                let n = targets.len() as f64;
+                let centroid = targets
+                    .iter()
+                    .map(lateral)
+                    .fold([0.0; 2], |c, t| [c[0] + t[0] / n, c[1] + t[1] / n]);
+                let radius = targets
+                    .iter()
+                    .map(|t| {
+                        let t = lateral(t);
+                        (t[0] - centroid[0]).hypot(t[1] - centroid[1])
+                    })
+                    .fold(0.0, f64::max);
+                let mut z = mid_height_once(centroid, radius);
+                let points = targets
+                    .iter()
+                    .map(|t| {
+                        if t.is_empty() {
+                            return Err(unfit(shape, &family, "an empty target"));
+                        }
+                        on_family(shape, &lifter, t, *height_m, &mut z)
+                    })
+                    .collect::<Result<Vec<_>, _>>()?;
                 let mut path = LiftedPath::default();
-                for xy in targets {
-                    path.push(&mut lifter, *xy)?;
+                for u in &points {
+                    path.push(&mut lifter, u)?;
                 }
                 let times = (0..targets.len()).map(|i| i as f64 * dwell).collect();
                 Ok(path.into_trajectory(times, false, true))
@@ -164,35 +392,123 @@ impl Trajectory {
                 center_m: center,
                 radius_m: radius,
                 freq_hz: freq,
+                height_m,
             }
             | Shape::FigureEight {
                 center_m: center,
                 radius_m: radius,
                 freq_hz: freq,
+                height_m,
             } => {
-                if *freq <= 0.0 || *radius < 0.0 {
+                if !(*freq > 0.0 && *radius >= 0.0) {
                     return Err(IpcError::Config(
                         "a path needs a positive frequency and radius".into(),
                     ));
                 }
+                if k < 2 {
+                    return Err(unfit(
+                        shape,
+                        &family,
+                        "a lateral path needs two coordinates",
+                    ));
+                }
+                let height = match (k, height_m) {
+                    (3, Some(z)) => Some(*z),
+                    (3, None) => Some(mid_height_once(*center, *radius)(&lifter)?),
+                    (_, None) => None,
+                    (_, Some(_)) => {
+                        return Err(unfit(
+                            shape,
+                            &family,
+                            "a height needs a robot that reaches a volume",
+                        ))
+                    }
+                };
                 let eight = matches!(shape, Shape::FigureEight { .. });
-                let period = 1.0 / freq;
-                let n = ((period / TABLE_DT).ceil() as usize).max(16);
-                let mut times = Vec::with_capacity(n + 1);
+                let times = periodic_times(*freq, 1.0);
                 let mut path = LiftedPath::default();
-                for i in 0..=n {
-                    let t = period * i as f64 / n as f64;
+                for &t in &times {
                     let a = std::f64::consts::TAU * freq * t;
-                    let xy = if eight {
-                        [
+                    let mut u = if eight {
+                        vec![
                             center[0] + radius * a.sin(),
                             center[1] + radius * a.sin() * a.cos(),
                         ]
                     } else {
-                        [center[0] + radius * a.cos(), center[1] + radius * a.sin()]
+                        vec![center[0] + radius * a.cos(), center[1] + radius * a.sin()]
                     };
-                    times.push(t);
-                    path.push(&mut lifter, xy)?;
+                    u.extend(height);
+                    path.push(&mut lifter, &u)?;
+                }
+                Ok(path.into_trajectory(times, true, false))
+            }
+            Shape::Helix {
+                center_m: center,
+                radius_m: radius,
+                freq_hz: freq,
+                heights_m: heights,
+                turns,
+            } => {
+                if k != 3 {
+                    return Err(unfit(
+                        shape,
+                        &family,
+                        "a helix needs a robot that reaches a volume",
+                    ));
+                }
+                let halves = 2.0 * turns;
+                let valid = *freq > 0.0
+                    && *radius >= 0.0
+                    && halves >= 1.0
+                    && halves.fract() == 0.0
+                    && heights.iter().all(|z| z.is_finite());
+                if !valid {
+                    return Err(IpcError::Config(
+                        "a helix needs a positive frequency and radius, finite heights and a \
+                         whole number of half turns (≥ ½)"
+                            .into(),
+                    ));
+                }
+                let times = periodic_times(*freq, 2.0 * turns);
+                let rise = turns / freq;
+                let mut path = LiftedPath::default();
+                for &t in &times {
+                    let a = std::f64::consts::TAU * freq * t;
+                    // Up over the first `turns` revolutions, down over the next.
+                    let f = if t <= rise { t / rise } else { 2.0 - t / rise };
+                    let z = heights[0] + f * (heights[1] - heights[0]);
+                    let u = [
+                        center[0] + radius * a.cos(),
+                        center[1] + radius * a.sin(),
+                        z,
+                    ];
+                    path.push(&mut lifter, &u)?;
+                }
+                Ok(path.into_trajectory(times, true, false))
+            }
+            Shape::Sweep {
+                from_m,
+                to_m,
+                freq_hz: freq,
+            } => {
+                if k != 1 {
+                    return Err(unfit(
+                        shape,
+                        &family,
+                        "a sweep is for a robot whose tip moves on a curve (plan a circle or steps)",
+                    ));
+                }
+                if !(*freq > 0.0 && from_m.is_finite() && to_m.is_finite()) {
+                    return Err(IpcError::Config(
+                        "a sweep needs finite coordinates and a positive frequency".into(),
+                    ));
+                }
+                let times = periodic_times(*freq, 1.0);
+                let mut path = LiftedPath::default();
+                for &t in &times {
+                    let a = std::f64::consts::TAU * freq * t;
+                    let u = from_m + (to_m - from_m) * 0.5 * (1.0 - a.cos());
+                    path.push(&mut lifter, &[u])?;
                 }
                 Ok(path.into_trajectory(times, true, false))
             }
@@ -203,15 +519,14 @@ impl Trajectory {
                     ));
                 }
                 // The table's poses are the user's; their tangents come from
-                // the reachable pose at the same lateral position. If some
-                // row's position is out of reach there are none, and the
+                // the reachable pose at the same coordinates on the family.
+                // If some row is out of reach there are none, and the
                 // firmware's correction moves the position alone.
                 let tangents: Result<Vec<Tangent>, _> = rows
                     .iter()
                     .map(|r| {
-                        lifter
-                            .lift_with_tangent([r.pose[0], r.pose[1]])
-                            .map(|(_, d)| d)
+                        let u = family.coordinates(&[r.pose[0], r.pose[1], r.pose[2]]);
+                        lifter.lift_with_tangent(&u[..k]).map(|(_, d)| d)
                     })
                     .collect();
                 let tangents = tangents.unwrap_or_else(|e| {
@@ -304,10 +619,11 @@ impl Trajectory {
         }
         let tangent = match (self.tangents.get(i), self.tangents.get(i + 1)) {
             (Some(a), Some(b)) => {
-                let mut d = [[0.0; 7]; 2];
-                for (j, row) in d.iter_mut().enumerate() {
-                    for (k, v) in row.iter_mut().enumerate() {
-                        *v = a[j][k] + f * (b[j][k] - a[j][k]);
+                let mut d = *a;
+                for (column, (ca, cb)) in d.columns.iter_mut().zip(a.columns.iter().zip(&b.columns))
+                {
+                    for (v, (x, y)) in column.iter_mut().zip(ca.iter().zip(cb)) {
+                        *v = x + f * (y - x);
                     }
                 }
                 Some(d)
@@ -428,6 +744,7 @@ mod tests {
             center_m: [0.0, 0.0],
             radius_m: 0.015,
             freq_hz: 0.2,
+            height_m: None,
         };
         let traj = Trajectory::new(&shape, &s).unwrap();
         for t in [0.0, 0.37, 1.3, 4.99, 6.1] {
@@ -449,7 +766,7 @@ mod tests {
     fn pose_tables_get_the_tangent_of_the_reachable_pose_at_each_row() {
         let s = statics();
         let xys = [[0.01, 0.0], [0.0, 0.02], [-0.015, -0.005]];
-        let mut lifter = Lifter::new(&s);
+        let mut lifter = Lifter::new(&s).unwrap();
         let lifted: Vec<([f64; 7], Tangent)> = xys
             .iter()
             .map(|&xy| lifter.lift_with_tangent(xy).unwrap())
@@ -468,7 +785,7 @@ mod tests {
             for j in 0..2 {
                 for k in 0..7 {
                     assert!(
-                        (got[j][k] - d[j][k]).abs() < 1e-4,
+                        (got.columns[j][k] - d.columns[j][k]).abs() < 1e-4,
                         "row {i}: {got:?} vs {d:?}"
                     );
                 }
@@ -522,5 +839,152 @@ mod tests {
             "{miss} vs {expected}"
         );
         assert_eq!(traj.feedforward(2.0, &mut ff), 0.0);
+    }
+
+    fn statics_of(file: &str) -> Statics {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../robots")
+            .join(file);
+        Statics::new(&Robot::load(&path).unwrap(), SolverSettings::default())
+    }
+
+    /// A helix on the two-segment robot: every sample's tip is on the
+    /// circle, and its height is the linear rise and fall between the two
+    /// heights (the lifted poses put the tip there, so the planner's poses
+    /// are the shape's points).
+    #[test]
+    fn helix_rises_and_falls_linearly_on_its_circle() {
+        let s = statics_of("tdcr-2seg.toml");
+        let z = Lifter::new(&s)
+            .unwrap()
+            .mid_height([0.0, 0.0], 0.01)
+            .unwrap();
+        let (z0, z1) = (z - 0.002, z + 0.002);
+        let shape = Shape::Helix {
+            center_m: [0.0, 0.0],
+            radius_m: 0.01,
+            freq_hz: 0.5,
+            heights_m: [z0, z1],
+            turns: 1.0,
+        };
+        let traj = Trajectory::new(&shape, &s).unwrap();
+        assert!((traj.duration() - 4.0).abs() < 1e-12);
+        for t in [0.0, 0.5, 1.0, 2.0, 3.0, 3.9] {
+            let p = traj.sample(t);
+            let r = p.pose[0].hypot(p.pose[1]);
+            assert!((r - 0.01).abs() < 2e-6, "t {t}: r = {r}");
+            let rise = if t <= 2.0 { t / 2.0 } else { 2.0 - t / 2.0 };
+            let want = z0 + rise * (z1 - z0);
+            assert!(
+                (p.pose[2] - want).abs() < 1e-6,
+                "t {t}: z {} vs {want}",
+                p.pose[2]
+            );
+            assert_eq!(p.tangent.unwrap().family.dim(), 3);
+        }
+    }
+
+    /// 3-D steps on the two-segment robot hold each target exactly.
+    #[test]
+    fn volume_steps_hold_their_3d_targets() {
+        let s = statics_of("tdcr-2seg.toml");
+        let z = 0.395;
+        let targets = vec![vec![0.008, 0.0, z], vec![0.0, 0.008, z + 0.002]];
+        let shape = Shape::Steps {
+            targets_m: targets.clone(),
+            dwell_s: 1.0,
+            height_m: None,
+        };
+        let traj = Trajectory::new(&shape, &s).unwrap();
+        for (i, target) in targets.iter().enumerate() {
+            let p = traj.sample(i as f64 + 0.5);
+            for (a, b) in p.pose.iter().zip(target) {
+                assert!((a - b).abs() < 1e-6, "target {i}: {:?}", p.pose);
+            }
+        }
+    }
+
+    /// A sweep on the one-tendon robot: the tip's coordinate along the
+    /// axis follows the raised cosine between the two coordinates.
+    #[test]
+    fn sweep_follows_its_raised_cosine_along_the_axis() {
+        let s = statics_of("seed-1t.toml");
+        let family = Family::of(&s).unwrap();
+        let (from, to) = (0.05, 0.09);
+        let shape = Shape::Sweep {
+            from_m: from,
+            to_m: to,
+            freq_hz: 0.25,
+        };
+        let traj = Trajectory::new(&shape, &s).unwrap();
+        for t in [0.0, 0.7, 2.0, 3.3] {
+            let p = traj.sample(t);
+            let u = family.coordinates(&[p.pose[0], p.pose[1], p.pose[2]])[0];
+            let want = from + (to - from) * 0.5 * (1.0 - (std::f64::consts::TAU * 0.25 * t).cos());
+            // Linear interpolation of a 10 ms table: within 1e-6 m.
+            assert!((u - want).abs() < 1e-6, "t {t}: {u} vs {want}");
+        }
+    }
+
+    /// Shapes a robot's family cannot follow are one clear error naming
+    /// the shape and the family.
+    #[test]
+    fn shapes_the_family_cannot_follow_are_clear_errors() {
+        let circle = Shape::Circle {
+            center_m: [0.0, 0.0],
+            radius_m: 0.01,
+            freq_hz: 0.2,
+            height_m: None,
+        };
+        let err = Trajectory::new(&circle, &statics_of("seed-1t.toml")).unwrap_err();
+        let text = err.to_string();
+        assert!(
+            text.contains("circle") && text.contains("curve (k = 1"),
+            "{text}"
+        );
+        let four = statics();
+        let sweep = Shape::Sweep {
+            from_m: 0.0,
+            to_m: 0.01,
+            freq_hz: 0.2,
+        };
+        let text = Trajectory::new(&sweep, &four).unwrap_err().to_string();
+        assert!(text.contains("sweep") && text.contains("surface"), "{text}");
+        let high = Shape::Circle {
+            center_m: [0.0, 0.0],
+            radius_m: 0.01,
+            freq_hz: 0.2,
+            height_m: Some(0.39),
+        };
+        let text = Trajectory::new(&high, &four).unwrap_err().to_string();
+        assert!(
+            text.contains("height") && text.contains("surface"),
+            "{text}"
+        );
+        let steps = Shape::Steps {
+            targets_m: vec![vec![0.01, 0.0, 0.39]],
+            dwell_s: 1.0,
+            height_m: None,
+        };
+        let text = Trajectory::new(&steps, &four).unwrap_err().to_string();
+        assert!(text.contains("3 coordinates"), "{text}");
+    }
+
+    /// Configurations written before heights existed still read.
+    #[test]
+    fn shapes_without_a_height_still_deserialise() {
+        let text = r#"{"kind":"circle","center_m":[0.0,0.0],"radius_m":0.015,"freq_hz":0.2}"#;
+        let shape: Shape = serde_json::from_str(text).unwrap();
+        assert_eq!(
+            shape,
+            Shape::Circle {
+                center_m: [0.0, 0.0],
+                radius_m: 0.015,
+                freq_hz: 0.2,
+                height_m: None
+            }
+        );
+        let text = r#"{"kind":"steps","targets_m":[[0.01,0.0]],"dwell_s":2.0}"#;
+        assert!(serde_json::from_str::<Shape>(text).is_ok());
     }
 }

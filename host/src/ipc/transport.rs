@@ -303,9 +303,10 @@ mod tests {
             header: Header { seq, stamp_ns: 0 },
             pose: [x, 0.0, 0.2, 1.0, 0.0, 0.0, 0.0],
             velocity: [0.0; 7],
-            tangent: [[0.0; 7]; 2],
+            tangent: [[0.0; 7]; 3],
+            tangent_axes: [[0.0; 3]; 3],
+            tangent_dim: 0,
             flags: 0,
-            reserved: 0,
         }
     }
 

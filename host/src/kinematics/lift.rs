@@ -1,24 +1,34 @@
-//! The planner's lift: a continuum robot bending on its tendons has two
-//! degrees of freedom, so the planner plans the tip's lateral position
-//! (x, y) and lifts it to the full reachable pose (z and orientation follow)
-//! with the exact IK (`docs/design.md` §4.1): a [`Target::Lateral`] solved
-//! by bounded Gauss–Newton on the tensions, the redundancy resolved to the
-//! least total tension, each point warm-started from the previous one along
-//! the path. The lift also gives the tangent `∂pose/∂(x, y)` of that family
-//! from the same tip Jacobian, along which the firmware's integral loop
-//! moves a setpoint (`docs/design.md` §6).
+//! The planner's lift (`docs/design.md` §4.1): the robot reaches a k-dimensional
+//! family of tip positions ([`Family`]: a volume, a surface over the
+//! lateral plane, or a curve), so the planner plans the tip's k coordinates
+//! u_j = a_j · p along the family's axes and lifts them to the full
+//! reachable pose (the rest of the position and the orientation follow)
+//! with the exact IK: a [`Target::Position`] (k = 3), [`Target::Lateral`]
+//! (k = 2) or [`Target::Along`] (k = 1) solved by bounded Gauss–Newton on
+//! the tensions, the redundancy resolved to the least total tension, each
+//! point warm-started from the previous one along the path. The lift also
+//! gives the tangent `∂pose/∂u_j` of that family from the same tip Jacobian,
+//! along which the firmware's integral loop moves a setpoint
+//! (`docs/design.md` §6).
 
-use nalgebra::{DMatrix, DVector, Vector2};
+use nalgebra::{DMatrix, DVector, Matrix3xX, Vector2, Vector3};
 
-use super::KinematicsError;
+use super::{Family, KinematicsError};
 use crate::inverse::{ExactIk, IkSettings, IkSolution, InverseError, Target};
 use crate::statics::{Statics, WarmStart};
 
-/// `[∂pose/∂px, ∂pose/∂py]`: how a reachable pose changes when its tip
-/// moves laterally (per metre).
-pub type Tangent = [[f64; 7]; 2];
+/// `∂pose/∂u_j` (per metre) along the family's axes: how a reachable pose
+/// changes when its tip moves along each axis, first `family.dim()`
+/// columns valid, the rest zero.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tangent {
+    /// The family (dimension and axes) the columns belong to.
+    pub family: Family,
+    /// The columns `∂pose/∂u_j`.
+    pub columns: [[f64; 7]; 3],
+}
 
-/// One lifted lateral position.
+/// One lifted target.
 #[derive(Clone, Debug)]
 pub struct Lifted {
     /// The reachable pose: px, py, pz (m), qw, qx, qy, qz.
@@ -29,39 +39,58 @@ pub struct Lifted {
     pub tensions: Vec<f64>,
 }
 
-/// Lifts lateral tip positions to reachable poses with the exact IK,
-/// warm-started along the path.
+/// Lifts tip coordinates on the robot's family to reachable poses with the
+/// exact IK, warm-started along the path.
 pub struct Lifter {
     ik: ExactIk,
+    settings: IkSettings,
+    family: Family,
     previous: Option<Previous>,
 }
 
 /// The last lift, the start of the next.
 struct Previous {
-    xy: [f64; 2],
+    u: [f64; 3],
     tensions: Vec<f64>,
     warm: WarmStart,
-    /// ∂τ/∂x, ∂τ/∂y there (the tangent's tension directions).
-    dtau: [DVector<f64>; 2],
+    /// ∂τ/∂u_j there (the tangent's tension directions).
+    dtau: Vec<DVector<f64>>,
 }
 
 /// Tensions strictly inside their limits by more than this count as free
 /// in the tangent (N; the IK's own "at a limit" is 1e-9 N).
 const FREE: f64 = 1e-9;
-/// Singular values of a lateral Jacobian below this fraction of its largest
-/// are dropped, and a tension direction must meet the asked lateral move to
+/// Singular values of a projected Jacobian below this fraction of its
+/// largest are dropped, and a tension direction must meet the asked move to
 /// this relative accuracy.
 const RANK_RATIO: f64 = 1e-6;
+/// Resolution of the height range search (m).
+const HEIGHT_TOLERANCE: f64 = 1e-4;
+/// Lateral directions at which [`Lifter::mid_height`] samples a circle.
+const HEIGHT_SAMPLES: usize = 8;
 
 impl Lifter {
-    /// A lifter for `statics`' robot, with its solver settings.
-    pub fn new(statics: &Statics) -> Lifter {
+    /// A lifter for `statics`' robot on its own family ([`Family::of`]).
+    pub fn new(statics: &Statics) -> Result<Lifter, KinematicsError> {
+        Ok(Lifter::on(statics, Family::of(statics)?))
+    }
+
+    /// A lifter for `statics`' robot planning in `family`'s coordinates.
+    pub fn on(statics: &Statics, family: Family) -> Lifter {
         let settings = IkSettings {
             statics: *statics.settings(),
             ..IkSettings::default()
         };
+        Lifter::with_settings(statics, family, settings)
+    }
+
+    /// As [`Lifter::on`] with the exact IK's `settings` (its statics
+    /// settings are taken as given).
+    pub fn with_settings(statics: &Statics, family: Family, settings: IkSettings) -> Lifter {
         Lifter {
             ik: ExactIk::new(statics.robot(), settings),
+            settings,
+            family,
             previous: None,
         }
     }
@@ -71,38 +100,62 @@ impl Lifter {
         &self.ik
     }
 
-    /// The reachable pose whose tip is at lateral position `xy` (m).
-    pub fn lift(&mut self, xy: [f64; 2]) -> Result<[f64; 7], KinematicsError> {
-        self.lifted(xy).map(|l| l.pose)
+    /// The family it plans in.
+    pub fn family(&self) -> Family {
+        self.family
     }
 
-    /// The reachable pose at lateral position `xy` (m) and its tangent.
+    /// The reachable pose whose tip has coordinates `u` (m) on the family.
+    pub fn lift(&mut self, u: impl AsRef<[f64]>) -> Result<[f64; 7], KinematicsError> {
+        self.lifted(u).map(|l| l.pose)
+    }
+
+    /// The reachable pose at coordinates `u` (m) and its tangent.
     pub fn lift_with_tangent(
         &mut self,
-        xy: [f64; 2],
+        u: impl AsRef<[f64]>,
     ) -> Result<([f64; 7], Tangent), KinematicsError> {
-        self.lifted(xy).map(|l| (l.pose, l.tangent))
+        self.lifted(u).map(|l| (l.pose, l.tangent))
     }
 
-    /// The reachable pose at lateral position `xy` (m), its tangent and
-    /// tensions: warm from the previous lift, cold from the floors if that
-    /// fails (a jump across the workspace can stall a warm start).
-    pub fn lifted(&mut self, xy: [f64; 2]) -> Result<Lifted, KinematicsError> {
-        if !(xy[0].is_finite() && xy[1].is_finite()) {
+    /// The IK target for coordinates `u` (already checked: k finite values).
+    fn target(&self, u: &[f64; 3]) -> Target {
+        match self.family.dim() {
+            3 => Target::Position(Vector3::from(*u)),
+            2 => Target::Lateral(Vector2::new(u[0], u[1])),
+            _ => Target::Along(Vector3::from(self.family.axes()[0]), u[0]),
+        }
+    }
+
+    /// The reachable pose at coordinates `u` (m, one per axis of the
+    /// family), its tangent and tensions: warm from the previous lift, cold
+    /// from the floors if that fails (a jump across the workspace can stall
+    /// a warm start).
+    pub fn lifted(&mut self, u: impl AsRef<[f64]>) -> Result<Lifted, KinematicsError> {
+        let given = u.as_ref();
+        let k = self.family.dim();
+        if given.len() != k {
+            return Err(KinematicsError::Dimension {
+                got: given.len(),
+                family: self.family.describe(),
+            });
+        }
+        if !given.iter().all(|v| v.is_finite()) {
             return Err(KinematicsError::NotFinite);
         }
-        let target = Target::Lateral(Vector2::new(xy[0], xy[1]));
+        let mut u = [0.0; 3];
+        u[..k].copy_from_slice(given);
+        let target = self.target(&u);
         // Warm: the previous tensions moved along its tangent (a first-order
         // predictor, so a path step of a fraction of a millimetre starts
         // within ~µm and the Gauss–Newton finishes in a step or two).
         let warm = match &self.previous {
             Some(p) => {
-                let (dx, dy) = (xy[0] - p.xy[0], xy[1] - p.xy[1]);
                 let start: Vec<f64> = p
                     .tensions
                     .iter()
                     .enumerate()
-                    .map(|(i, t)| t + p.dtau[0][i] * dx + p.dtau[1][i] * dy)
+                    .map(|(i, t)| t + (0..k).map(|j| p.dtau[j][i] * (u[j] - p.u[j])).sum::<f64>())
                     .collect();
                 self.ik.solve(&target, Some(&start), Some(&p.warm)).ok()
             }
@@ -112,19 +165,19 @@ impl Lifter {
             Some(s) => s,
             None => self.ik.solve(&target, None, None).map_err(|e| match e {
                 InverseError::Unreachable { closest } => KinematicsError::OutsideWorkspace {
-                    x_mm: xy[0] * 1e3,
-                    y_mm: xy[1] * 1e3,
+                    coordinates_m: given.to_vec(),
                     distance_mm: closest.position_error * 1e3,
                 },
                 e => KinematicsError::Inverse(e),
             })?,
         };
-        let (tangent, dtau) = self.tangent(&solution).ok_or(KinematicsError::Singular {
-            x_mm: xy[0] * 1e3,
-            y_mm: xy[1] * 1e3,
-        })?;
+        let (tangent, dtau) = self
+            .tangent(&solution)
+            .ok_or_else(|| KinematicsError::Singular {
+                coordinates_m: given.to_vec(),
+            })?;
         self.previous = Some(Previous {
-            xy,
+            u,
             tensions: solution.tensions.clone(),
             warm: solution.warm.clone(),
             dtau,
@@ -139,36 +192,40 @@ impl Lifter {
     /// The tangent of the lift at `s` from its tip Jacobian J = ∂pose/∂τ
     /// (`docs/design.md` §4.1, "The planner's lift"). The lift moves only the
     /// free tensions F (strictly inside their limits; the least-total-tension
-    /// rule leaves two of them on a four-tendon robot, one per antagonistic
-    /// pair), so with J_xy the rows of ∂(px, py)/∂τ_F
+    /// rule leaves k of them, e.g. two on a four-tendon robot, one per
+    /// antagonistic pair), so with A the k × 3 matrix of the family's axes
+    /// and J_u = A J_p,F the rows of ∂u/∂τ_F
     ///
     /// ```text
-    /// ∂τ_F/∂(x, y) = J_xy⁺ = J_xyᵀ (J_xy J_xyᵀ)⁻¹   (J_xy⁻¹ for two free tensions)
-    /// ∂p/∂(x, y)   = J_p,F J_xy⁺,   ∂θ/∂(x, y) = J_θ,F J_xy⁺,   ∂q = ½ [0; ∂θ] ⊗ q
+    /// ∂τ_F/∂u = J_u⁺ = J_uᵀ (J_u J_uᵀ)⁻¹   (J_u⁻¹ for k free tensions)
+    /// ∂p/∂u   = J_p,F J_u⁺,   ∂θ/∂u = J_θ,F J_u⁺,   ∂q = ½ [0; ∂θ] ⊗ q
     /// ```
     ///
-    /// (θ the base-frame rotation vector, δR = θ̂ R). Where fewer than two
+    /// (θ the base-frame rotation vector, δR = θ̂ R). Where fewer than k
     /// tensions are free (the tip at rest, every tendon at its floor) the
     /// lift has a corner; each direction then takes its one-sided
     /// derivative: the least-norm tension direction moving the tip along it,
     /// a tension at a limit joining only if the direction moves it inward.
-    /// `None` when no tension direction moves the tip laterally. Also
-    /// returns the tension directions ∂τ/∂x, ∂τ/∂y.
-    fn tangent(&self, s: &IkSolution) -> Option<(Tangent, [DVector<f64>; 2])> {
+    /// `None` when no tension direction moves the tip along some axis. Also
+    /// returns the tension directions ∂τ/∂u_j.
+    fn tangent(&self, s: &IkSolution) -> Option<(Tangent, Vec<DVector<f64>>)> {
         let jacobian = match &s.jacobian {
             Some(j) => j.clone(),
             None => self.ik.tip_jacobian_at(&s.tensions, &s.warm).ok()?,
         };
         let (lo, hi) = self.ik.limits();
+        let k = self.family.dim();
+        let axes = Matrix3xX::from_fn(k, |r, j| self.family.axes()[j][r]);
+        let projected = axes.transpose() * jacobian.rows(0, 3);
         let q = [s.pose[3], s.pose[4], s.pose[5], s.pose[6]];
-        let mut tangent = [[0.0; 7]; 2];
-        let n = s.tensions.len();
-        let mut dtaus = [DVector::zeros(n), DVector::zeros(n)];
-        for (k, row) in tangent.iter_mut().enumerate() {
-            let mut direction = Vector2::zeros();
-            direction[k] = 1.0;
-            dtaus[k] = tension_direction(&jacobian, &s.tensions, lo, hi, &direction)?;
-            let d = &jacobian * &dtaus[k];
+        let mut columns = [[0.0; 7]; 3];
+        let mut dtaus = Vec::with_capacity(k);
+        for (j, column) in columns.iter_mut().enumerate().take(k) {
+            let mut direction = DVector::zeros(k);
+            direction[j] = 1.0;
+            let dtau = tension_direction(&projected, &s.tensions, lo, hi, &direction)?;
+            let d = &jacobian * &dtau;
+            dtaus.push(dtau);
             let dtheta = [d[3], d[4], d[5]];
             // ½ [0; ω] ⊗ q with q = (w, v): (−ω·v, w ω + ω × v) / 2.
             let (w, v) = (q[0], [q[1], q[2], q[3]]);
@@ -178,33 +235,112 @@ impl Lifter {
                 w * dtheta[1] + dtheta[2] * v[0] - dtheta[0] * v[2],
                 w * dtheta[2] + dtheta[0] * v[1] - dtheta[1] * v[0],
             ];
-            row[..3].copy_from_slice(&[d[0], d[1], d[2]]);
-            for (out, dqk) in row[3..].iter_mut().zip(dq) {
+            column[..3].copy_from_slice(&[d[0], d[1], d[2]]);
+            for (out, dqk) in column[3..].iter_mut().zip(dq) {
                 *out = 0.5 * dqk;
             }
         }
+        let tangent = Tangent {
+            family: self.family,
+            columns,
+        };
         Some((tangent, dtaus))
+    }
+
+    /// The tip's reachable height range (m) at lateral position `xy` (m) on
+    /// a robot whose tip reaches a volume: from the least-total-tension
+    /// lateral lift there, the highest and lowest heights whose
+    /// [`Target::Position`] the exact IK still reaches, by bracketing and
+    /// bisection to [`HEIGHT_TOLERANCE`]. `None` when `xy` is out of reach.
+    pub fn height_range(&self, xy: [f64; 2]) -> Option<(f64, f64)> {
+        let reach = IkSettings {
+            least_tension: false,
+            ..self.settings
+        };
+        let ik = ExactIk::new(self.ik.robot(), reach);
+        let start = ik
+            .solve(&Target::Lateral(Vector2::new(xy[0], xy[1])), None, None)
+            .ok()?;
+        let z0 = start.pose[2];
+        let length = self.ik.robot().length;
+        let reaches = |z: f64, from: &IkSolution| {
+            ik.solve(
+                &Target::Position(Vector3::new(xy[0], xy[1], z)),
+                Some(&from.tensions),
+                Some(&from.warm),
+            )
+            .ok()
+        };
+        let mut ends = [0.0; 2];
+        for (end, sign) in ends.iter_mut().zip([1.0, -1.0]) {
+            let mut inside = (z0, start.clone());
+            let mut step = 1e-3;
+            let mut outside = loop {
+                let z = inside.0 + sign * step;
+                if z > 1.01 * length || z < -1.01 * length {
+                    break z;
+                }
+                match reaches(z, &inside.1) {
+                    Some(s) => inside = (z, s),
+                    None => break z,
+                }
+                step *= 2.0;
+            };
+            while (outside - inside.0).abs() > HEIGHT_TOLERANCE {
+                let z = 0.5 * (inside.0 + outside);
+                match reaches(z, &inside.1) {
+                    Some(s) => inside = (z, s),
+                    None => outside = z,
+                }
+            }
+            *end = inside.0;
+        }
+        Some((ends[1], ends[0]))
+    }
+
+    /// The robot's mid height for a circle of `radius` (m) about lateral
+    /// `center` (m): the middle of the heights reachable at every one of
+    /// [`HEIGHT_SAMPLES`] points around the circle (the intersection of
+    /// their [`Lifter::height_range`]s), so a circle at that height is
+    /// reachable with the most room above and below.
+    pub fn mid_height(&self, center: [f64; 2], radius: f64) -> Result<f64, KinematicsError> {
+        let no_height = || KinematicsError::NoHeight {
+            center_m: center.to_vec(),
+            radius_mm: radius * 1e3,
+        };
+        let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+        for i in 0..HEIGHT_SAMPLES {
+            let a = std::f64::consts::TAU * i as f64 / HEIGHT_SAMPLES as f64;
+            let xy = [center[0] + radius * a.cos(), center[1] + radius * a.sin()];
+            let (l, h) = self.height_range(xy).ok_or_else(no_height)?;
+            lo = lo.max(l);
+            hi = hi.min(h);
+        }
+        if lo > hi {
+            return Err(no_height());
+        }
+        Ok(0.5 * (lo + hi))
     }
 }
 
-/// The tension direction dτ moving the tip by `direction` in (x, y) (see
-/// [`Lifter::tangent`]): least-norm on the free tensions when they move the
-/// tip that way; else the free tensions plus one at a limit that the
-/// direction moves inward, the one costing the least total tension; else
-/// the free set grown by every tension at a limit, dropping those the
-/// direction pushes out until none is.
+/// The tension direction dτ moving the tip by `direction` in the family's
+/// coordinates (see [`Lifter::tangent`]; `projected` is ∂u/∂τ): least-norm
+/// on the free tensions when they move the tip that way; else the free
+/// tensions plus one at a limit that the direction moves inward, the one
+/// costing the least total tension; else the free set grown by every
+/// tension at a limit, dropping those the direction pushes out until none
+/// is.
 fn tension_direction(
-    jacobian: &DMatrix<f64>,
+    projected: &DMatrix<f64>,
     tau: &[f64],
     lo: &[f64],
     hi: &[f64],
-    direction: &Vector2<f64>,
+    direction: &DVector<f64>,
 ) -> Option<DVector<f64>> {
     let n = tau.len();
-    let lateral = jacobian.rows(0, 2).into_owned();
     let (inside, at_limit): (Vec<usize>, Vec<usize>) =
         (0..n).partition(|&i| tau[i] > lo[i] + FREE && tau[i] < hi[i] - FREE);
-    if let Some(d) = least_norm(&lateral, &inside, direction) {
+    if let Some(d) = least_norm(projected, &inside, direction) {
         return Some(d);
     }
     let inward = |d: &DVector<f64>, i: usize| {
@@ -215,7 +351,7 @@ fn tension_direction(
         .filter_map(|&c| {
             let mut set = inside.clone();
             set.push(c);
-            least_norm(&lateral, &set, direction).filter(|d| inward(d, c))
+            least_norm(projected, &set, direction).filter(|d| inward(d, c))
         })
         .min_by(|a, b| a.sum().total_cmp(&b.sum()));
     if one_more.is_some() {
@@ -223,7 +359,7 @@ fn tension_direction(
     }
     let mut set: Vec<usize> = (0..n).collect();
     loop {
-        let d = least_norm(&lateral, &set, direction)?;
+        let d = least_norm(projected, &set, direction)?;
         let before = set.len();
         set.retain(|&i| inward(&d, i));
         if set.len() == before {
@@ -235,40 +371,41 @@ fn tension_direction(
 /// The least-norm dτ on the tensions in `set` (zero elsewhere) with
 /// J_S dτ = direction, `None` when no dτ on them moves the tip so.
 fn least_norm(
-    lateral: &DMatrix<f64>,
+    projected: &DMatrix<f64>,
     set: &[usize],
-    direction: &Vector2<f64>,
+    direction: &DVector<f64>,
 ) -> Option<DVector<f64>> {
     if set.is_empty() {
         return None;
     }
-    let j = lateral.select_columns(set);
+    let j = projected.select_columns(set);
     let svd = j.clone().svd(true, true);
     let eps = RANK_RATIO * svd.singular_values.max();
-    let rhs = DVector::from_column_slice(direction.as_slice());
-    let d_set = svd.pseudo_inverse(eps).ok()? * &rhs;
-    if (&j * &d_set - &rhs).norm() > RANK_RATIO * rhs.norm() || !d_set.iter().all(|v| v.is_finite())
+    let d_set = svd.pseudo_inverse(eps).ok()? * direction;
+    if (&j * &d_set - direction).norm() > RANK_RATIO * direction.norm()
+        || !d_set.iter().all(|v| v.is_finite())
     {
         return None;
     }
-    let mut d = DVector::zeros(lateral.ncols());
+    let mut d = DVector::zeros(projected.ncols());
     for (k, &i) in set.iter().enumerate() {
         d[i] = d_set[k];
     }
     Some(d)
 }
 
-/// The pose `pose` moved laterally by `c = (cx, cy)` (m) along the robot's
-/// own reachable family, to first order: `pose + [∂pose/∂px ∂pose/∂py] c`,
-/// quaternion re-normalised with `w ≥ 0`. The tangent comes from the
-/// statics ([`Lifter::lift_with_tangent`]), so unlike
-/// [`super::arc::arc_shift`] it includes gravity and the real tendon
-/// routing. The firmware's integral loop applies the same first-order shift
-/// in f32 (`docs/design.md` §5).
-pub fn family_shift(pose: &[f64; 7], tangent: &[[f64; 7]; 2], c: [f64; 2]) -> [f64; 7] {
-    let mut out = [0.0; 7];
-    for (k, v) in out.iter_mut().enumerate() {
-        *v = pose[k] + tangent[0][k] * c[0] + tangent[1][k] * c[1];
+/// The pose `pose` moved by `c` (m, one per axis) along the robot's own
+/// reachable family, to first order: `pose + Σ_j ∂pose/∂u_j c_j`, quaternion
+/// re-normalised with `w ≥ 0`. The tangent comes from the statics
+/// ([`Lifter::lift_with_tangent`]), so unlike [`super::arc::arc_shift`] it
+/// includes gravity and the real tendon routing. The firmware's integral
+/// loop applies the same first-order shift in f32 (`docs/design.md` §6).
+pub fn family_shift(pose: &[f64; 7], tangent: &Tangent, c: &[f64]) -> [f64; 7] {
+    let mut out = *pose;
+    for (column, cj) in tangent.columns.iter().zip(c).take(tangent.family.dim()) {
+        for (v, d) in out.iter_mut().zip(column) {
+            *v += d * cj;
+        }
     }
     let n = out[3..].iter().map(|v| v * v).sum::<f64>().sqrt();
     let sign = if out[3] < 0.0 { -1.0 } else { 1.0 };
@@ -313,7 +450,7 @@ mod tests {
     #[test]
     fn lifted_circle_reproduces_its_targets_through_forward_statics() {
         let s = statics();
-        let mut lifter = Lifter::new(&s);
+        let mut lifter = Lifter::new(&s).unwrap();
         for xy in circle(24) {
             let lifted = lifter.lifted(xy).unwrap();
             let fresh = statics().solve(&lifted.tensions, None).unwrap();
@@ -363,7 +500,7 @@ mod tests {
     #[test]
     fn lift_equals_the_bend_family_lift_on_the_symmetric_robot() {
         let s = statics();
-        let mut lifter = Lifter::new(&s);
+        let mut lifter = Lifter::new(&s).unwrap();
         for xy in [[0.015, 0.0], [0.0, 0.015], [-0.012, 0.009], [0.004, -0.03]] {
             let exact = lifter.lift(xy).unwrap();
             let reference = bend_lift(&s, xy);
@@ -378,27 +515,47 @@ mod tests {
         }
     }
 
-    /// The tangent against central differences of lifts at ± 20 µm.
-    #[test]
-    fn tangent_matches_central_differences_of_lifts() {
-        let s = statics();
-        let h = 2e-5;
-        for xy in [[0.015, 0.0], [-0.01, 0.012], [0.004, -0.03]] {
-            let mut lifter = Lifter::new(&s);
-            let (_, tangent) = lifter.lift_with_tangent(xy).unwrap();
-            for k in 0..2 {
-                let (mut plus, mut minus) = (xy, xy);
+    /// The tangent against central differences of lifts at ± `h`, at each
+    /// of `points` (coordinates on the robot's family), to `relative` of
+    /// each column's largest entry. Each lift is cold (a fresh lifter): a
+    /// lift warm-started along a path may settle a hair away on the
+    /// least-tension set (on the two-segment robot ~1e-3·h in orientation,
+    /// which a difference over 2h would read as a 1e-3 tangent error), and
+    /// to 1e-12 m instead of the IK's default 1e-7 m (whose slack a
+    /// difference over 2h would read as up to 1e-7 / 2h).
+    fn tight(s: &Statics) -> Lifter {
+        let settings = IkSettings {
+            position_tol: 1e-12,
+            statics: *s.settings(),
+            ..IkSettings::default()
+        };
+        Lifter::with_settings(s, Family::of(s).unwrap(), settings)
+    }
+
+    fn check_tangent_against_central_differences(
+        s: &Statics,
+        points: &[Vec<f64>],
+        h: f64,
+        relative: f64,
+    ) {
+        for u in points {
+            let (_, tangent) = tight(s).lift_with_tangent(u).unwrap();
+            for k in 0..u.len() {
+                let (mut plus, mut minus) = (u.clone(), u.clone());
                 plus[k] += h;
                 minus[k] -= h;
-                let a = lifter.lift(plus).unwrap();
-                let b = lifter.lift(minus).unwrap();
+                let a = tight(s).lift(&plus).unwrap();
+                let b = tight(s).lift(&minus).unwrap();
+                let scale = tangent.columns[k]
+                    .iter()
+                    .map(|v| v.abs())
+                    .fold(0.0, f64::max);
                 for c in 0..7 {
                     let fd = (a[c] - b[c]) / (2.0 * h);
-                    let scale = tangent[k].iter().map(|v| v.abs()).fold(0.0, f64::max);
                     assert!(
-                        (fd - tangent[k][c]).abs() <= 1e-4 * scale,
-                        "xy {xy:?} ∂/∂{k} component {c}: {} vs {fd}",
-                        tangent[k][c]
+                        (fd - tangent.columns[k][c]).abs() <= relative * scale,
+                        "u {u:?} ∂/∂u{k} component {c}: {} vs {fd}",
+                        tangent.columns[k][c]
                     );
                 }
             }
@@ -406,11 +563,121 @@ mod tests {
     }
 
     #[test]
+    fn tangent_matches_central_differences_of_lifts() {
+        let points = [vec![0.015, 0.0], vec![-0.01, 0.012], vec![0.004, -0.03]];
+        check_tangent_against_central_differences(&statics(), &points, 2e-5, 1e-4);
+    }
+
+    fn statics_of(file: &str) -> Statics {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../robots")
+            .join(file);
+        Statics::new(&Robot::load(&path).unwrap(), SolverSettings::default())
+    }
+
+    /// Lifts reproduce their target coordinates through a fresh, cold
+    /// forward solve of the returned tensions (the fact a lift must
+    /// satisfy), on any family.
+    fn check_lifts_reproduce_targets(s: &Statics, points: &[Vec<f64>]) {
+        let mut lifter = Lifter::new(s).unwrap();
+        let family = lifter.family();
+        for u in points {
+            let lifted = lifter.lifted(u).unwrap();
+            let fresh = s.solve(&lifted.tensions, None).unwrap();
+            let reached = family.coordinates(&fresh.position.into());
+            let miss = u
+                .iter()
+                .zip(reached)
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            assert!(miss <= 1e-6, "u {u:?}: {miss:e} m");
+            let pose = fresh.pose();
+            for (k, (a, b)) in pose.iter().zip(&lifted.pose).take(3).enumerate() {
+                assert!((a - b).abs() < 1e-8, "u {u:?} p{k}");
+            }
+            let limits = s.robot().max_tensions();
+            assert!(
+                lifted
+                    .tensions
+                    .iter()
+                    .zip(&limits)
+                    .all(|(t, m)| (0.0..=*m).contains(t)),
+                "{:?}",
+                lifted.tensions
+            );
+        }
+    }
+
+    /// Points on and around a 20 mm circle of the two-segment robot at a
+    /// height it reaches all round.
+    fn two_segment_points(s: &Statics) -> Vec<Vec<f64>> {
+        let lifter = Lifter::new(s).unwrap();
+        let z = lifter.mid_height([0.0, 0.0], 0.01).unwrap();
+        vec![
+            vec![0.008, 0.006, z],
+            vec![-0.005, 0.008, z + 0.002],
+            vec![0.003, -0.0095, z - 0.002],
+            vec![0.003, 0.004, z],
+        ]
+    }
+
+    #[test]
+    fn two_segment_lifts_reproduce_3d_targets() {
+        let s = statics_of("tdcr-2seg.toml");
+        assert_eq!(Lifter::new(&s).unwrap().family().dim(), 3);
+        check_lifts_reproduce_targets(&s, &two_segment_points(&s));
+    }
+
+    #[test]
+    fn two_segment_tangent_matches_central_differences() {
+        let s = statics_of("tdcr-2seg.toml");
+        check_tangent_against_central_differences(&s, &two_segment_points(&s), 2e-5, 1e-4);
+    }
+
+    /// The mid height lies inside the height range at the circle's start,
+    /// and a circle point at it is liftable (checked above); the range has
+    /// room (a two-segment robot's S and C shapes differ by millimetres).
+    #[test]
+    fn two_segment_mid_height_is_inside_the_reachable_range() {
+        let s = statics_of("tdcr-2seg.toml");
+        let lifter = Lifter::new(&s).unwrap();
+        let (lo, hi) = lifter.height_range([0.01, 0.0]).unwrap();
+        let mid = lifter.mid_height([0.0, 0.0], 0.01).unwrap();
+        assert!(lo < mid && mid < hi && hi - lo > 1e-3, "{lo} {mid} {hi}");
+        assert!(hi <= s.robot().length);
+    }
+
+    /// One-tendon robot: the tip's coordinate along its axis, from a little
+    /// past where it hangs under gravity to well into the pull.
+    fn one_tendon_points(s: &Statics) -> Vec<Vec<f64>> {
+        let family = Lifter::new(s).unwrap().family();
+        let floors = s.robot().min_tensions();
+        let rest = s.solve(&floors, None).unwrap();
+        let u0 = family.coordinates(&rest.position.into())[0];
+        [0.002, 0.01, 0.03].iter().map(|d| vec![u0 + d]).collect()
+    }
+
+    #[test]
+    fn one_tendon_lifts_reproduce_their_coordinate() {
+        let s = statics_of("seed-1t.toml");
+        check_lifts_reproduce_targets(&s, &one_tendon_points(&s));
+    }
+
+    #[test]
+    fn one_tendon_tangent_matches_central_differences() {
+        let s = statics_of("seed-1t.toml");
+        check_tangent_against_central_differences(&s, &one_tendon_points(&s), 2e-5, 1e-4);
+    }
+
+    #[test]
     fn unreachable_target_is_a_clear_error() {
         let s = statics();
-        let err = Lifter::new(&s).lift([0.5, 0.0]).unwrap_err();
+        let err = Lifter::new(&s).unwrap().lift([0.5, 0.0]).unwrap_err();
         assert!(err.to_string().contains("outside"), "{err}");
-        let err = Lifter::new(&s).lift([f64::NAN, 0.0]).unwrap_err();
+        let err = Lifter::new(&s).unwrap().lift([f64::NAN, 0.0]).unwrap_err();
         assert!(err.to_string().contains("finite"), "{err}");
+        let err = Lifter::new(&s).unwrap().lift([0.0, 0.0, 0.3]).unwrap_err();
+        assert!(err.to_string().contains("3 coordinates"), "{err}");
     }
 }

@@ -5,60 +5,42 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use crate::ipc::sim::{ModelSource, SimConfig, SimError};
-use crate::ipc::trajectory::Shape as TrajectoryShape;
-use crate::robot::Robot;
+use crate::ipc::sim::{default_loop_runs, LoopRun, ModelSource, SimConfig, SimError};
+use crate::kinematics::Family;
+use crate::statics::Statics;
 
-/// One closed-loop run of the main job.
-#[derive(Clone, Debug)]
-pub struct LoopRun {
-    /// What the planner follows.
-    pub shape: TrajectoryShape,
-    /// Sub-directory of the output directory (with `-ik-only` appended for
-    /// the run without the correction).
-    pub dir: String,
-    /// What the report calls it.
-    pub label: String,
+/// The sub-directory of a run: `sim` for the circle (the name the main
+/// job has always used), else `sim-<name>`; `-ik-only` is appended for the
+/// run without the correction.
+pub fn run_dir(run: &LoopRun, correction: bool) -> String {
+    let base = if run.name == "circle" {
+        "sim".to_string()
+    } else {
+        format!("sim-{}", run.name)
+    };
+    if correction {
+        base
+    } else {
+        format!("{base}-ik-only")
+    }
 }
 
-/// The runs for `robot`: the 30 mm circle and 10 mm steps in the lateral
-/// plane (docs/design.md §6).
-pub fn loop_runs(_robot: &Robot) -> Vec<LoopRun> {
-    vec![
-        LoopRun {
-            shape: TrajectoryShape::Circle {
-                center_m: [0.0, 0.0],
-                radius_m: 0.015,
-                freq_hz: 0.2,
-            },
-            dir: "sim".into(),
-            label: "30 mm circle at 0.2 Hz".into(),
-        },
-        LoopRun {
-            shape: TrajectoryShape::Steps {
-                targets_m: vec![[0.01, 0.0], [0.0, 0.01], [-0.01, 0.0], [0.0, -0.01]],
-                dwell_s: 2.0,
-            },
-            dir: "sim-steps".into(),
-            label: "10 mm steps".into(),
-        },
-    ]
-}
-
-/// Run every [`loop_runs`] run with the net alone and with the correction,
-/// `seconds` of trajectory each, writing under `out`; returns the report
-/// section. A failed run is reported and the others go on; an interrupt
-/// stops the stage.
+/// Run every run of [`default_loop_runs`] for the robot (by its reachable
+/// family, `docs/design.md` §6.1) with the net alone and with the
+/// correction, writing under `out`; `quick_s` caps each run's seconds of
+/// trajectory. Returns the report section. A failed run is reported and the
+/// others go on; an interrupt stops the stage.
 pub fn closed_loop_section(
     robot_file: &Path,
-    robot: &Robot,
+    statics: &Statics,
     model: &Path,
     out: &Path,
-    seconds: f64,
+    quick_s: Option<f64>,
 ) -> anyhow::Result<String> {
     let exe = std::env::current_exe()
         .map_err(|e| anyhow::anyhow!("locating the tendril executable: {e}"))?;
-    let runs = loop_runs(robot);
+    let runs = default_loop_runs(statics)?;
+    let family = Family::of(statics)?;
     let mut summary = String::from(
         "## 5. Closed loop (planner → controller → plant over iceoryx2)\n\n\
          Tracking error from the plant's true tip against the planner's path; steady state is \
@@ -66,16 +48,17 @@ pub fn closed_loop_section(
          The steps' RMS and max include the jumps between targets.\n\n\
          | run | correction | RMS (mm) | max (mm) | steady state, worst target (mm) |\n|---|---|---|---|---|\n",
     );
+    let _ = writeln!(
+        summary,
+        "The robot's tip reaches {}; the runs are the ones that family can follow.\n",
+        family.describe()
+    );
     let mut sections = Vec::new();
     let letters = "abcdefghijklmnopqrstuvwxyz";
     let mut k = 0;
     for run in &runs {
         for correction in [false, true] {
-            let dir = if correction {
-                run.dir.clone()
-            } else {
-                format!("{}-ik-only", run.dir)
-            };
+            let dir = run_dir(run, correction);
             let what = format!(
                 "{}, {}",
                 run.label,
@@ -91,7 +74,7 @@ pub fn closed_loop_section(
                 ModelSource::File(model.to_path_buf()),
                 out.join(&dir),
             );
-            sim.duration_s = seconds;
+            sim.duration_s = quick_s.map_or(run.duration_s, |q| q.min(run.duration_s));
             sim.planner.shape = run.shape.clone();
             sim.set_correction(correction);
             sim.label = what.clone();

@@ -11,7 +11,7 @@
 
 mod closed_loop;
 
-pub use closed_loop::{loop_runs, LoopRun};
+pub use closed_loop::run_dir;
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -113,10 +113,8 @@ pub struct RunOptions {
 pub const QUICK_SAMPLES: usize = 2_000;
 /// Hidden units of a `--quick` run's net.
 pub const QUICK_HIDDEN: usize = 16;
-/// Seconds of trajectory per closed-loop run of a `--quick` run.
+/// Most seconds of trajectory per closed-loop run of a `--quick` run.
 pub const QUICK_LOOP_S: f64 = 4.0;
-/// Seconds of trajectory per closed-loop run.
-const LOOP_S: f64 = 10.0;
 
 /// Run the pipeline on the default robot, writing under `out/`.
 pub fn run_default() -> anyhow::Result<()> {
@@ -272,9 +270,12 @@ pub fn run(
     // iceoryx2, with the IK net alone and with the integral correction, on
     // the runs that suit the robot's reachable family. In-process calls of
     // the typed sim API; the sim starts the three processes itself.
-    let loop_s = if options.quick { QUICK_LOOP_S } else { LOOP_S };
     report.add(closed_loop::closed_loop_section(
-        robot_file, &robot, &model, out, loop_s,
+        robot_file,
+        &statics,
+        &model,
+        out,
+        options.quick.then_some(QUICK_LOOP_S),
     )?)?;
 
     log::info!(

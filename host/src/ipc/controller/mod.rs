@@ -18,7 +18,7 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 use tendril_firmware::control::{
     control_step, ControlConfig, ControlState, Feedback, IntegralConfig, SafeHold,
-    Setpoint as FwSetpoint, Status, StepInput,
+    Setpoint as FwSetpoint, Status, StepInput, Tangent as FwTangent,
 };
 use tendril_firmware::swap::NetSlots;
 use tendril_shared::messages::{

@@ -243,8 +243,13 @@ impl Controller {
         FwSetpoint {
             seq: self.local_sp_seq,
             pose,
-            // The planner's tangent, for the firmware's integral loop.
-            tangent: (s.flags & setpoint_flags::HAS_TANGENT != 0).then_some(s.tangent),
+            // The planner's tangent, for the firmware's integral loop (which
+            // checks its dimension and values).
+            tangent: (s.flags & setpoint_flags::HAS_TANGENT != 0).then_some(FwTangent {
+                dim: s.tangent_dim as usize,
+                columns: s.tangent,
+                axes: s.tangent_axes,
+            }),
         }
     }
 
