@@ -45,12 +45,13 @@ pub fn closed_loop_section(
         "## 5. Closed loop (planner → controller → plant over iceoryx2)\n\n\
          Tracking error from the plant's true tip against the planner's path; steady state is \
          the mean true error over the last 0.5 s of each ≥ 1 s stretch with one target. \
-         The steps' RMS and max include the jumps between targets.\n\n\
-         | run | correction | RMS (mm) | max (mm) | steady state, worst target (mm) |\n|---|---|---|---|---|\n",
+         The steps' RMS and max include the jumps between targets.\n\n",
     );
     let _ = writeln!(
         summary,
-        "The robot's tip reaches {}; the runs are the ones that family can follow.\n",
+        "The robot's tip reaches {}; the runs are the ones that family can follow.\n\n\
+         | run | correction | RMS (mm) | max (mm) | steady state, worst target (mm) |\n\
+         |---|---|---|---|---|",
         family.describe()
     );
     let mut sections = Vec::new();
