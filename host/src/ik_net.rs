@@ -3,13 +3,20 @@
 //! sign is normalised (w ≥ 0, as in the dataset), a non-unit or non-finite
 //! pose is refused, a pose outside the net's training ranges is refused (or
 //! flagged, when extrapolation is allowed), and the net's raw output is
-//! reported beside the tensions clamped to the robot's limits.
+//! reported beside the tensions the firmware's command stage makes of it
+//! (`command_stage::command_for`: each co-contraction set shifted into
+//! range, then the clip to the robot's limits). The stage is what turns the
+//! net's output into tensions at all: a net learns tensions only up to
+//! co-contraction (`docs/design.md` §4).
 //!
 //! The net is evaluated by the firmware's own f32 `infer`, so the raw output
 //! is bit-identical to what the MCU computes from the same file.
 
 use std::path::{Path, PathBuf};
 
+use tendril_shared::TendonLimits;
+
+use crate::command_stage::{clipped_by, command_for, limits_for};
 use crate::dataset::io::format_value;
 use crate::dataset::POSE_COLUMNS;
 use crate::learn::cascor::export::{infer, read_tnet, HostNet};
@@ -60,7 +67,7 @@ pub enum IkError {
     /// A pose value lies outside the range the net was trained on.
     #[error(
         "pose {column} = {} is outside the net's training range [{lo:.6}, {hi:.6}]: the net \
-         would extrapolate (pass --allow-extrapolation to get clamped tensions anyway)",
+         would extrapolate (pass --allow-extrapolation to get staged tensions anyway)",
         format_value(*value)
     )]
     OutsideTrainedRange {
@@ -104,32 +111,27 @@ pub enum IkError {
 /// The tensions for one pose.
 #[derive(Clone, Debug, PartialEq)]
 pub struct IkAnswer {
-    /// Tensions clamped to the robot's limits [τ_min, τ_max], N.
+    /// The command stage's tensions for the net's output, in the robot's
+    /// limits [τ_min, τ_max], N: what the MCU would command.
     pub tensions: Vec<f64>,
-    /// The net's output before clamping, N.
+    /// The net's output, N (tensions up to co-contraction).
     pub raw: Vec<f64>,
     /// Pose columns outside the trained range (only with extrapolation allowed).
     pub extrapolated: Vec<&'static str>,
-    /// Tendons whose raw output lay beyond their limits by more than
-    /// [`LIMIT_SLACK`] of the limit: the net asked for an impossible tension.
+    /// Tendons the stage had to clip by more than [`LIMIT_SLACK`] of their
+    /// limit after the co-contraction shift: the net asked for a bend the
+    /// limits do not allow.
     pub beyond_limits: Vec<usize>,
 }
 
-/// Overshoot of a tendon's range, as a fraction of its limit, that clamping
+/// Overshoot of a tendon's range, as a fraction of its limit, that the clip
 /// absorbs without flagging: the net's own error near a range end (a few mN).
 pub const LIMIT_SLACK: f64 = 0.01;
-
-impl IkAnswer {
-    /// Whether any tension had to be clamped, however little.
-    pub fn clamped(&self) -> bool {
-        self.tensions != self.raw
-    }
-}
 
 /// A `.tnet` net with the robot limits it answers within.
 pub struct IkNet {
     net: Box<HostNet>,
-    min_tension: Vec<f64>,
+    limits: TendonLimits,
     max_tension: Vec<f64>,
     allow_extrapolation: bool,
 }
@@ -157,9 +159,13 @@ impl IkNet {
                 robot_tendons: robot.n_tendons(),
             });
         }
+        let limits = limits_for(robot, 1.0).map_err(|e| IkError::Model(format!(
+            "tension limits of robot {}: {e}",
+            robot.name
+        )))?;
         Ok(IkNet {
             net,
-            min_tension: robot.min_tensions(),
+            limits,
             max_tension: robot.max_tensions(),
             allow_extrapolation,
         })
@@ -215,19 +221,13 @@ impl IkNet {
         if let Some((tendon, &value)) = raw.iter().enumerate().find(|(_, t)| !t.is_finite()) {
             return Err(IkError::NonFiniteOutput { tendon, value });
         }
-        let limits = self.min_tension.iter().zip(&self.max_tension);
-        let tensions = raw
+        let tensions = command_for(&self.limits, &raw);
+        // The shift keeps the bend; what the clip takes off after it changes it.
+        let beyond_limits = clipped_by(&self.limits, &raw)
             .iter()
-            .zip(limits.clone())
-            .map(|(&t, (&min, &max))| t.clamp(min, max))
-            .collect();
-        let beyond_limits = raw
-            .iter()
-            .zip(limits)
+            .zip(&self.max_tension)
             .enumerate()
-            .filter(|(_, (&t, (&min, &max)))| {
-                t < min - LIMIT_SLACK * max || t > (1.0 + LIMIT_SLACK) * max
-            })
+            .filter(|(_, (&cut, &max))| cut > LIMIT_SLACK * max)
             .map(|(k, _)| k)
             .collect();
         Ok(IkAnswer {
@@ -244,7 +244,7 @@ impl IkNet {
 pub struct BatchSummary {
     /// Rows answered.
     pub rows: usize,
-    /// Rows where the net asked for a tension beyond a limit (clamped).
+    /// Rows where the net asked for a tension beyond a limit (clipped after the co-contraction shift).
     pub beyond_limits: usize,
     /// Rows outside the trained ranges (answered: extrapolation allowed).
     pub extrapolated: usize,
@@ -300,7 +300,7 @@ pub fn read_poses(input: &Path) -> Result<Vec<[f64; 7]>, IkError> {
 }
 
 /// Answer every pose of the CSV at `input` ([`read_poses`]) and write
-/// `output` atomically: `t0..` (clamped, N) then `raw_t0..` (the net's
+/// `output` atomically: `t0..` (the command stage's, N) then `raw_t0..` (the net's
 /// output, N), one row per input row. A refused row fails the whole batch,
 /// naming its line; nothing is written then.
 pub fn solve_csv(ik: &IkNet, input: &Path, output: &Path) -> Result<BatchSummary, IkError> {

@@ -24,6 +24,7 @@ use crate::ipc::sim::{ModelSource, SimConfig, SimError};
 use crate::ipc::trajectory::Shape as TrajectoryShape;
 use crate::learn::cascor::export::read_tnet;
 use crate::learn::cascor::job::{self as train_job, SplitSpec, TrainJob, TrainOutputs};
+use crate::learn::targets::Targets;
 use crate::learn::cascor::{Cascor, CascorOptions};
 use crate::learn::learner::{Learner, Prefitted, Split};
 use crate::plot::workspace::{draw_workspace, Shape};
@@ -150,6 +151,7 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
             data: &data,
             data_file: Some(data_path.clone()),
             options: CascorOptions::default(),
+            targets: Targets::for_robot(&robot),
             split,
             outputs: TrainOutputs {
                 model: model.clone(),
@@ -192,7 +194,8 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
     // Cascade correlation enters already trained: same data, split and seed
     // (`Prefitted` checks the split and would retrain on any other).
     let opts = CompareOptions::default();
-    let p = prepare(&data, opts.test_fraction, opts.valid_fraction, opts.seed);
+    let learned = Targets::for_robot(&robot).learning_data(&data);
+    let p = prepare(&learned, opts.test_fraction, opts.valid_fraction, opts.seed);
     let split = |x, y| Split { x, y };
     let prefitted = Prefitted::new(
         Cascor::from_trained(

@@ -7,6 +7,7 @@ use super::common::stop_flag;
 use crate::dataset::Dataset;
 use crate::learn::cascor::job::{self, SplitSpec, TrainJob, TrainOutputs};
 use crate::learn::cascor::{self, CascorOptions, ObjectiveChoice, OutputKind, OutputSolver};
+use crate::learn::targets::Targets;
 
 /// Candidate objective on the command line.
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
@@ -57,7 +58,12 @@ pub struct TrainArgs {
     /// Learning-curve PNG; default: <out>.curve.png.
     #[arg(long, value_name = "PNG")]
     pub plot: Option<PathBuf>,
-    /// Training report JSON (choices made, learning curve, test RMSE); default: <out>.train.json.
+    /// Robot the dataset is for: its co-contraction sets centre the targets
+    /// (docs/design.md §4). Default: the robot file the dataset's sidecar
+    /// records, else robots/seed-4t.toml.
+    #[arg(long, value_name = "FILE")]
+    pub robot: Option<PathBuf>,
+    /// Training report JSON (choices made, targets, learning curve, test RMSE); default: <out>.train.json.
     #[arg(long, value_name = "JSON")]
     pub report: Option<PathBuf>,
     /// Seed of the split and of every candidate's initial weights.
@@ -192,7 +198,13 @@ impl TrainArgs {
 
 impl TrainArgs {
     /// The training job these arguments describe, on `data` read from `--data`.
-    pub fn job<'a>(&self, data: &'a Dataset) -> TrainJob<'a> {
+    pub fn job<'a>(&self, data: &'a Dataset) -> anyhow::Result<TrainJob<'a>> {
+        let (targets, robot) = job::targets_for_data(data, &self.data, self.robot.as_deref())?;
+        log::info!(
+            "targets: {} (robot {})",
+            if targets == Targets::Tensions { "the tensions" } else { "centred on the co-contraction sets" },
+            robot.display()
+        );
         let mut outputs = TrainOutputs::beside(&self.out);
         if let Some(p) = &self.log {
             outputs.log = p.clone();
@@ -203,10 +215,11 @@ impl TrainArgs {
         if let Some(p) = &self.report {
             outputs.report = p.clone();
         }
-        TrainJob {
+        Ok(TrainJob {
             data,
             data_file: Some(self.data.clone()),
             options: self.options(),
+            targets,
             split: SplitSpec {
                 seed: self.seed,
                 test_fraction: self.test_fraction,
@@ -214,14 +227,14 @@ impl TrainArgs {
             },
             outputs,
             threads: self.threads,
-        }
+        })
     }
 }
 
 /// Run `tendril train`.
 pub fn run(a: TrainArgs) -> anyhow::Result<()> {
     let data = Dataset::read_csv(&a.data)?;
-    let job = a.job(&data);
+    let job = a.job(&data)?;
     let t = job::run(&job, stop_flag())?;
     let o = &job.outputs;
     log::info!(
