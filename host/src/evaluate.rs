@@ -173,7 +173,10 @@ pub fn staged_tensions(
 ) -> Result<DMatrix<f64>, EvalError> {
     let limits = crate::command_stage::limits_for(statics.robot(), 1.0)
         .map_err(|e| EvalError::Shape(format!("tension limits: {e}")))?;
-    Ok(crate::command_stage::command_rows(&limits, predicted_tensions))
+    Ok(crate::command_stage::command_rows(
+        &limits,
+        predicted_tensions,
+    ))
 }
 
 /// [`task_space_errors`] through the plain per-tendon clip to

@@ -159,10 +159,8 @@ impl IkNet {
                 robot_tendons: robot.n_tendons(),
             });
         }
-        let limits = limits_for(robot, 1.0).map_err(|e| IkError::Model(format!(
-            "tension limits of robot {}: {e}",
-            robot.name
-        )))?;
+        let limits = limits_for(robot, 1.0)
+            .map_err(|e| IkError::Model(format!("tension limits of robot {}: {e}", robot.name)))?;
         Ok(IkNet {
             net,
             limits,

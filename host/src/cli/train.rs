@@ -202,7 +202,11 @@ impl TrainArgs {
         let (targets, robot) = job::targets_for_data(data, &self.data, self.robot.as_deref())?;
         log::info!(
             "targets: {} (robot {})",
-            if targets == Targets::Tensions { "the tensions" } else { "centred on the co-contraction sets" },
+            if targets == Targets::Tensions {
+                "the tensions"
+            } else {
+                "centred on the co-contraction sets"
+            },
             robot.display()
         );
         let mut outputs = TrainOutputs::beside(&self.out);

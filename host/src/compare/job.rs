@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 use super::{all_learners, compare, CompareError, CompareOptions, Comparison};
 use crate::dataset::Dataset;
 use crate::fsutil::check_distinct;
-use crate::learn::targets::Targets;
 use crate::learn::cascor::job::MAX_HELD_OUT_FRACTION;
+use crate::learn::targets::Targets;
 use crate::robot::Robot;
 
 /// A comparison run: which data and robot, how, and into which directory.

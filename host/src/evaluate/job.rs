@@ -309,7 +309,10 @@ pub fn evaluate_net(
     // Normalised by each tendon's range [min, max], not by the net's output
     // ranges: those are the ranges of its targets, centred on the
     // co-contraction sets (docs/design.md §4), not of the tensions.
-    let (lo, hi) = (statics.robot().min_tensions(), statics.robot().max_tensions());
+    let (lo, hi) = (
+        statics.robot().min_tensions(),
+        statics.robot().max_tensions(),
+    );
     Ok(SplitMetrics::compute(
         statics,
         &pred,

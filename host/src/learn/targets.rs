@@ -236,7 +236,10 @@ mod tests {
 
     #[test]
     fn a_robot_without_sets_and_uniform_data_keep_the_tensions() {
-        assert_eq!(Targets::for_robot(&robot("seed-1t.toml")), Targets::Tensions);
+        assert_eq!(
+            Targets::for_robot(&robot("seed-1t.toml")),
+            Targets::Tensions
+        );
         let r = robot("seed-4t.toml");
         assert_eq!(Targets::for_sampler(&r, Some("uniform")), Targets::Tensions);
         assert!(Targets::for_sampler(&r, Some("adjacent")).summary().centred);

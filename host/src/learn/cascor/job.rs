@@ -192,8 +192,7 @@ pub fn targets_for_data(
     data_file: &Path,
     given: Option<&Path>,
 ) -> Result<(Targets, PathBuf), TrainError> {
-    let sidecar =
-        crate::dataset::Sidecar::read(&crate::dataset::Sidecar::path_for(data_file)).ok();
+    let sidecar = crate::dataset::Sidecar::read(&crate::dataset::Sidecar::path_for(data_file)).ok();
     let recorded = sidecar
         .as_ref()
         .map(|s| PathBuf::from(&s.robot_file))
