@@ -352,6 +352,46 @@ mod tests {
     use super::*;
 
     #[test]
+    fn answers_are_the_command_stage_of_the_raw_output_and_in_range() {
+        // The firmware's built-in net for the seed robot, asked for poses over
+        // its training box and 30 % beyond (extrapolation allowed), where
+        // the raw output leaves [min, max] and the stage must shift and clip.
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let robot = Robot::load(&root.join("robots/seed-4t.toml")).unwrap();
+        let ik = IkNet::load(&root.join("firmware/vectors/default.tnet"), &robot, true).unwrap();
+        let limits = limits_for(&robot, 1.0).unwrap();
+        let (min, max) = (robot.min_tensions(), robot.max_tensions());
+        let (lo, hi) = (ik.net.input_lo().to_vec(), ik.net.input_hi().to_vec());
+        let (mut out_of_range, mut clipped) = (0, 0);
+        for i in 0..400 {
+            let at = |c: usize, k: usize| {
+                let f = ((i * (2 * c + 3) + k) % 23) as f64 / 22.0 * 1.6 - 0.3;
+                f64::from(lo[c]) + f * f64::from(hi[c] - lo[c])
+            };
+            let mut pose: [f64; 7] = std::array::from_fn(|c| at(c, i / 23));
+            let norm = pose[3..].iter().map(|q| q * q).sum::<f64>().sqrt();
+            pose[3..].iter_mut().for_each(|q| *q /= norm);
+            let a = ik.solve(&pose).unwrap();
+            assert_eq!(a.tensions, command_for(&limits, &a.raw), "{pose:?}");
+            for (k, t) in a.tensions.iter().enumerate() {
+                assert!((min[k]..=max[k]).contains(t), "tendon {k}: {t} N");
+            }
+            out_of_range += usize::from(
+                a.raw
+                    .iter()
+                    .zip(&min)
+                    .zip(&max)
+                    .any(|((r, lo), hi)| r < lo || r > hi),
+            );
+            clipped += usize::from(!a.beyond_limits.is_empty());
+        }
+        assert!(
+            out_of_range > 20 && clipped > 0,
+            "{out_of_range} rows out of range, {clipped} clipped"
+        );
+    }
+
+    #[test]
     fn quaternion_sign_and_length_are_normalised_or_refused() {
         let p = IkNet::normalise(&[0.0, 0.0, 0.4, -0.6, 0.0, -0.8, 0.0]).unwrap();
         assert_eq!(&p[3..], &[0.6, 0.0, 0.8, 0.0]);
