@@ -150,7 +150,7 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
         &TrainJob {
             data: &data,
             data_file: Some(data_path.clone()),
-            options: CascorOptions::default(),
+            options: CascorOptions::for_robot(&robot),
             targets: Targets::for_robot(&robot),
             split,
             outputs: TrainOutputs {
@@ -199,7 +199,7 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
     let split = |x, y| Split { x, y };
     let prefitted = Prefitted::new(
         Cascor::from_trained(
-            CascorOptions::default(),
+            CascorOptions::for_robot(&robot),
             trained.net,
             trained.report.clone(),
         ),

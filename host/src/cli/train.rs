@@ -8,6 +8,7 @@ use crate::dataset::Dataset;
 use crate::learn::cascor::job::{self, SplitSpec, TrainJob, TrainOutputs};
 use crate::learn::cascor::{self, CascorOptions, ObjectiveChoice, OutputKind, OutputSolver};
 use crate::learn::targets::Targets;
+use crate::robot::Robot;
 
 /// Candidate objective on the command line.
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
@@ -78,9 +79,10 @@ pub struct TrainArgs {
     /// Hidden-unit cap (at most the controllers' capacity, tendril_shared::MAX_HIDDEN = 64).
     #[arg(long, default_value_t = tendril_shared::MAX_HIDDEN)]
     pub max_hidden: usize,
-    /// Candidates trained per installed unit (in parallel).
-    #[arg(long, default_value_t = 8)]
-    pub pool: usize,
+    /// Candidates trained per installed unit (in parallel) [default: 8; 16 for a robot with
+    /// more than two bending degrees of freedom].
+    #[arg(long)]
+    pub pool: Option<usize>,
     /// Candidate objective.
     #[arg(long, value_enum, default_value_t = ObjectiveArg::Cascade2)]
     pub objective: ObjectiveArg,
@@ -139,21 +141,22 @@ pub struct TrainArgs {
     /// Units each output configuration grows before validation picks one (auto modes).
     #[arg(long, default_value_t = 3)]
     pub pilot_units: usize,
-    /// Candidates train on a seeded random subset of this many training rows per unit (0 = all).
-    #[arg(long, default_value_t = 3000)]
-    pub cand_patterns: usize,
+    /// Candidates train on a seeded random subset of this many training rows per unit (0 = all)
+    /// [default: 3000; 10000 for a robot with more than two bending degrees of freedom].
+    #[arg(long)]
+    pub cand_patterns: Option<usize>,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
 }
 
 impl TrainArgs {
-    /// The trainer options these arguments describe.
-    pub fn options(&self) -> CascorOptions {
-        let d = CascorOptions::default();
+    /// The trainer options these arguments describe, for `robot`.
+    pub fn options(&self, robot: &Robot) -> CascorOptions {
+        let d = CascorOptions::for_robot(robot);
         CascorOptions {
             max_hidden: self.max_hidden,
-            pool: self.pool,
+            pool: self.pool.unwrap_or(d.pool),
             objective: match self.objective {
                 ObjectiveArg::Covariance => ObjectiveChoice::Covariance,
                 ObjectiveArg::Cascade2 => ObjectiveChoice::Cascade2,
@@ -190,7 +193,7 @@ impl TrainArgs {
             valid_patience: self.valid_patience,
             target_rmse: self.target_rmse,
             pilot_units: self.pilot_units,
-            candidate_patterns: self.cand_patterns,
+            candidate_patterns: self.cand_patterns.unwrap_or(d.candidate_patterns),
             ..d
         }
     }
@@ -199,15 +202,15 @@ impl TrainArgs {
 impl TrainArgs {
     /// The training job these arguments describe, on `data` read from `--data`.
     pub fn job<'a>(&self, data: &'a Dataset) -> anyhow::Result<TrainJob<'a>> {
-        let (targets, robot) = job::targets_for_data(data, &self.data, self.robot.as_deref())?;
+        let r = job::robot_for_data(data, &self.data, self.robot.as_deref())?;
         log::info!(
             "targets: {} (robot {})",
-            if targets == Targets::Tensions {
+            if r.targets == Targets::Tensions {
                 "the tensions"
             } else {
                 "centred on the co-contraction sets"
             },
-            robot.display()
+            r.path.display()
         );
         let mut outputs = TrainOutputs::beside(&self.out);
         if let Some(p) = &self.log {
@@ -222,8 +225,8 @@ impl TrainArgs {
         Ok(TrainJob {
             data,
             data_file: Some(self.data.clone()),
-            options: self.options(),
-            targets,
+            options: self.options(&r.robot),
+            targets: r.targets,
             split: SplitSpec {
                 seed: self.seed,
                 test_fraction: self.test_fraction,

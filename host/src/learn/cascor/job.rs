@@ -183,15 +183,25 @@ impl TrainError {
     }
 }
 
-/// The targets of a training run on `data`, read from the file `data_file`
-/// ([`Targets::for_dataset`]), and the robot file they come from: `given`
-/// (`--robot`) when there is one, else the robot file the dataset's sidecar
-/// records (if that file is still there), else the default robot.
-pub fn targets_for_data(
+/// The robot a training run on `data` (read from the file `data_file`) is
+/// for, and the targets it implies.
+#[derive(Clone, Debug)]
+pub struct DataRobot {
+    /// The robot.
+    pub robot: crate::robot::Robot,
+    /// Its file: `--robot` when given, else the robot file the dataset's
+    /// sidecar records (if that file is still there), else the default robot.
+    pub path: PathBuf,
+    /// [`Targets::for_dataset`] of the robot and the dataset's sidecar.
+    pub targets: Targets,
+}
+
+/// See [`DataRobot`]; the robot's tendon count must be the dataset's.
+pub fn robot_for_data(
     data: &Dataset,
     data_file: &Path,
     given: Option<&Path>,
-) -> Result<(Targets, PathBuf), TrainError> {
+) -> Result<DataRobot, TrainError> {
     let sidecar = crate::dataset::Sidecar::read(&crate::dataset::Sidecar::path_for(data_file)).ok();
     let recorded = sidecar
         .as_ref()
@@ -212,7 +222,12 @@ pub fn targets_for_data(
             data.n_tendons
         )));
     }
-    Ok((Targets::for_dataset(&robot, sidecar.as_ref()), path))
+    let targets = Targets::for_dataset(&robot, sidecar.as_ref());
+    Ok(DataRobot {
+        robot,
+        path,
+        targets,
+    })
 }
 
 /// The report JSON written beside the weight file.
