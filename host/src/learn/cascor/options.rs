@@ -164,6 +164,6 @@ mod tests {
             CascorOptions::default()
         );
         let two = CascorOptions::for_robot(&robot("tdcr-2seg.toml"));
-        assert!(two.pool > CascorOptions::default().pool);
+        assert_eq!((two.pool, two.candidate_patterns), (16, 10_000));
     }
 }
