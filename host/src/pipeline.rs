@@ -151,7 +151,7 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
             data: &data,
             data_file: Some(data_path.clone()),
             options: CascorOptions::for_robot(&robot),
-            targets: Targets::for_robot(&robot),
+            targets: Targets::for_dataset(&robot, Some(&sidecar)),
             split,
             outputs: TrainOutputs {
                 model: model.clone(),
@@ -193,8 +193,11 @@ pub fn run(robot_file: &Path, out: &Path) -> anyhow::Result<()> {
     // 4. The comparison with the six baselines (the paper's Table II, Figure 3).
     // Cascade correlation enters already trained: same data, split and seed
     // (`Prefitted` checks the split and would retrain on any other).
-    let opts = CompareOptions::default();
-    let learned = Targets::for_robot(&robot).learning_data(&data);
+    let opts = CompareOptions {
+        targets: Some(Targets::for_dataset(&robot, Some(&sidecar))),
+        ..CompareOptions::default()
+    };
+    let learned = Targets::for_dataset(&robot, Some(&sidecar)).learning_data(&data);
     let p = prepare(&learned, opts.test_fraction, opts.valid_fraction, opts.seed);
     let split = |x, y| Split { x, y };
     let prefitted = Prefitted::new(
