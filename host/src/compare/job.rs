@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use super::{all_learners, compare, CompareError, CompareOptions, Comparison};
+use super::{all_learners_for, compare, CompareError, CompareOptions, Comparison};
 use crate::dataset::Dataset;
 use crate::fsutil::check_distinct;
 use crate::learn::cascor::job::MAX_HELD_OUT_FRACTION;
@@ -56,7 +56,7 @@ pub fn run(job: &CompareJob) -> Result<CompareResult, CompareError> {
         targets: Some(Targets::for_dataset(&robot, sidecar.as_ref())),
         ..o.clone()
     };
-    let comparison = compare(&data, &robot, all_learners(), &options)?;
+    let comparison = compare(&data, &robot, all_learners_for(&robot), &options)?;
     let files = comparison.write(&job.out_dir)?;
     Ok(CompareResult { comparison, files })
 }

@@ -23,7 +23,7 @@ pub mod registry;
 pub mod report;
 pub mod runner;
 
-pub use registry::{all_learners, baselines, REFERENCE};
+pub use registry::{all_learners, all_learners_for, baselines, REFERENCE};
 pub use runner::{compare, dump_splits};
 
 /// Why the comparison failed.
