@@ -6,6 +6,8 @@
 
 use std::f64::consts::PI;
 
+use nalgebra::DMatrix;
+
 use tendril_firmware::command::co_contract;
 use tendril_shared::{CoContraction, LimitsError, TendonLimits, MAX_TENDONS};
 
@@ -92,15 +94,51 @@ pub fn limits_for(robot: &Robot, slew_n_per_s: f64) -> Result<TendonLimits, Limi
 /// What the MCU would command for a net's `target` tensions in steady state
 /// (no slew): the co-contraction shift, then the clip to `[min, max]`.
 pub fn command_for(limits: &TendonLimits, target: &[f64]) -> Vec<f64> {
+    let shifted = shifted(limits, target);
+    shifted
+        .iter()
+        .zip(limits.min_tension().iter().zip(limits.max_tension()))
+        .map(|(&v, (&lo, &hi))| tendril_firmware::control::clamp(v, lo, hi) as f64)
+        .collect()
+}
+
+/// The stage's co-contraction shift alone (f32, as on the MCU): what
+/// [`command_for`] clips.
+fn shifted(limits: &TendonLimits, target: &[f64]) -> [f32; MAX_TENDONS] {
     let mut t = [0.0f32; MAX_TENDONS];
     for (slot, &v) in t.iter_mut().zip(target) {
         *slot = v as f32;
     }
     co_contract(&mut t, limits);
-    t.iter()
-        .zip(limits.min_tension().iter().zip(limits.max_tension()))
-        .map(|(&v, (&lo, &hi))| tendril_firmware::control::clamp(v, lo, hi) as f64)
+    t
+}
+
+/// How far [`command_for`]'s clip moved each tendon after the shift, N: a
+/// tension the limits do not allow even with co-contraction.
+pub fn clipped_by(limits: &TendonLimits, target: &[f64]) -> Vec<f64> {
+    let shifted = shifted(limits, target);
+    command_for(limits, target)
+        .iter()
+        .zip(&shifted)
+        .map(|(&c, &s)| (c - f64::from(s)).abs())
         .collect()
+}
+
+/// [`command_for`] on every row of `tensions` (`n × T`, N); a NaN entry
+/// counts as 0 N (the stage then lifts it to its floor).
+pub fn command_rows(limits: &TendonLimits, tensions: &DMatrix<f64>) -> DMatrix<f64> {
+    let mut out = tensions.clone();
+    let mut row = vec![0.0; tensions.ncols()];
+    for r in 0..tensions.nrows() {
+        for (c, v) in row.iter_mut().enumerate() {
+            let t = tensions[(r, c)];
+            *v = if t.is_nan() { 0.0 } else { t };
+        }
+        for (c, v) in command_for(limits, &row).into_iter().enumerate() {
+            out[(r, c)] = v;
+        }
+    }
+    out
 }
 
 /// The plain per-tendon clip to `[min, max]` (what the stage replaces).

@@ -1,6 +1,7 @@
 //! Metrics of `docs/design.md` §4, shared by every learner: tension RMSE (normalised
 //! ×100 and in newtons) and the **task-space error** — predicted tensions,
-//! clamped to the robot's limits, go through the Cosserat statics and the
+//! through the firmware's command stage (what the MCU would command; also
+//! what the tension RMSE is taken on), go through the Cosserat statics and the
 //! resulting tip is compared with the pose that was asked for. Tension RMSE
 //! alone hides what a robot user cares about: where the tip lands.
 
@@ -155,18 +156,27 @@ pub fn task_space_errors(
             n
         )));
     }
-    let limits = crate::command_stage::limits_for(statics.robot(), 1.0)
-        .map_err(|e| EvalError::Shape(format!("tension limits: {e}")))?;
+    let staged = staged_tensions(statics, predicted_tensions)?;
     let commanded: Vec<Vec<f64>> = (0..n)
-        .map(|r| {
-            let row: Vec<f64> = (0..t)
-                .map(|c| predicted_tensions[(r, c)])
-                .map(|v| if v.is_nan() { 0.0 } else { v })
-                .collect();
-            crate::command_stage::command_for(&limits, &row)
-        })
+        .map(|r| staged.row(r).iter().copied().collect())
         .collect();
     Ok(errors_of_commands(statics, &commanded, true_poses))
+}
+
+/// Predicted tensions (`n × T`, N) through the firmware's command stage for
+/// `statics.robot()`: what the MCU would command, and what tension errors
+/// are measured on (a net trained on centred targets, `docs/design.md` §4,
+/// gives tensions only up to co-contraction; the stage makes them a command).
+pub fn staged_tensions(
+    statics: &Statics,
+    predicted_tensions: &DMatrix<f64>,
+) -> Result<DMatrix<f64>, EvalError> {
+    let limits = crate::command_stage::limits_for(statics.robot(), 1.0)
+        .map_err(|e| EvalError::Shape(format!("tension limits: {e}")))?;
+    Ok(crate::command_stage::command_rows(
+        &limits,
+        predicted_tensions,
+    ))
 }
 
 /// [`task_space_errors`] through the plain per-tendon clip to
@@ -301,9 +311,10 @@ fn same_shape(a: &DMatrix<f64>, b: &DMatrix<f64>) -> Result<(), EvalError> {
 pub struct SplitMetrics {
     /// Number of samples evaluated.
     pub samples: usize,
-    /// Tension RMSE, normalised by the training ranges, ×100 (the paper's scale).
+    /// Tension RMSE of the staged predictions against the dataset's tensions,
+    /// normalised by the tension ranges, ×100 (the paper's scale).
     pub tension_rmse_norm100: f64,
-    /// Tension RMSE in newtons.
+    /// Tension RMSE of the staged predictions in newtons.
     pub tension_rmse_newton: f64,
     /// Task-space tip position error, mm.
     pub position_mm: ErrorStats,
@@ -348,7 +359,9 @@ pub fn plain_clip_position_if_different(
 }
 
 impl SplitMetrics {
-    /// Assemble metrics from predictions (newtons) and the truth.
+    /// Assemble metrics from a learner's predictions (newtons) and the
+    /// truth: tension errors and tip errors of the staged predictions
+    /// ([`staged_tensions`]); `lo`/`hi` are the dataset's tension ranges.
     pub fn compute(
         statics: &Statics,
         predicted_tensions: &DMatrix<f64>,
@@ -359,15 +372,11 @@ impl SplitMetrics {
         inference_ns_per_query: f64,
     ) -> Result<SplitMetrics, EvalError> {
         let task = task_space_errors(statics, predicted_tensions, true_poses)?;
+        let staged = staged_tensions(statics, predicted_tensions)?;
         Ok(SplitMetrics {
             samples: predicted_tensions.nrows(),
-            tension_rmse_norm100: tension_rmse_normalised(
-                predicted_tensions,
-                true_tensions,
-                lo,
-                hi,
-            )?,
-            tension_rmse_newton: tension_rmse(predicted_tensions, true_tensions)?,
+            tension_rmse_norm100: tension_rmse_normalised(&staged, true_tensions, lo, hi)?,
+            tension_rmse_newton: tension_rmse(&staged, true_tensions)?,
             position_mm: task.position_stats(),
             orientation_deg: task.orientation_stats(),
             failed_solves: task.failed,

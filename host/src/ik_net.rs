@@ -3,13 +3,20 @@
 //! sign is normalised (w ≥ 0, as in the dataset), a non-unit or non-finite
 //! pose is refused, a pose outside the net's training ranges is refused (or
 //! flagged, when extrapolation is allowed), and the net's raw output is
-//! reported beside the tensions clamped to the robot's limits.
+//! reported beside the tensions the firmware's command stage makes of it
+//! (`command_stage::command_for`: each co-contraction set shifted into
+//! range, then the clip to the robot's limits). The stage is what turns the
+//! net's output into tensions at all: a net learns tensions only up to
+//! co-contraction (`docs/design.md` §4).
 //!
 //! The net is evaluated by the firmware's own f32 `infer`, so the raw output
 //! is bit-identical to what the MCU computes from the same file.
 
 use std::path::{Path, PathBuf};
 
+use tendril_shared::TendonLimits;
+
+use crate::command_stage::{clipped_by, command_for, limits_for};
 use crate::dataset::io::format_value;
 use crate::dataset::POSE_COLUMNS;
 use crate::learn::cascor::export::{infer, read_tnet, HostNet};
@@ -60,7 +67,7 @@ pub enum IkError {
     /// A pose value lies outside the range the net was trained on.
     #[error(
         "pose {column} = {} is outside the net's training range [{lo:.6}, {hi:.6}]: the net \
-         would extrapolate (pass --allow-extrapolation to get clamped tensions anyway)",
+         would extrapolate (pass --allow-extrapolation to get staged tensions anyway)",
         format_value(*value)
     )]
     OutsideTrainedRange {
@@ -104,32 +111,27 @@ pub enum IkError {
 /// The tensions for one pose.
 #[derive(Clone, Debug, PartialEq)]
 pub struct IkAnswer {
-    /// Tensions clamped to the robot's limits [τ_min, τ_max], N.
+    /// The command stage's tensions for the net's output, in the robot's
+    /// limits [τ_min, τ_max], N: what the MCU would command.
     pub tensions: Vec<f64>,
-    /// The net's output before clamping, N.
+    /// The net's output, N (tensions up to co-contraction).
     pub raw: Vec<f64>,
     /// Pose columns outside the trained range (only with extrapolation allowed).
     pub extrapolated: Vec<&'static str>,
-    /// Tendons whose raw output lay beyond their limits by more than
-    /// [`LIMIT_SLACK`] of the limit: the net asked for an impossible tension.
+    /// Tendons the stage had to clip by more than [`LIMIT_SLACK`] of their
+    /// limit after the co-contraction shift: the net asked for a bend the
+    /// limits do not allow.
     pub beyond_limits: Vec<usize>,
 }
 
-/// Overshoot of a tendon's range, as a fraction of its limit, that clamping
+/// Overshoot of a tendon's range, as a fraction of its limit, that the clip
 /// absorbs without flagging: the net's own error near a range end (a few mN).
 pub const LIMIT_SLACK: f64 = 0.01;
-
-impl IkAnswer {
-    /// Whether any tension had to be clamped, however little.
-    pub fn clamped(&self) -> bool {
-        self.tensions != self.raw
-    }
-}
 
 /// A `.tnet` net with the robot limits it answers within.
 pub struct IkNet {
     net: Box<HostNet>,
-    min_tension: Vec<f64>,
+    limits: TendonLimits,
     max_tension: Vec<f64>,
     allow_extrapolation: bool,
 }
@@ -157,9 +159,11 @@ impl IkNet {
                 robot_tendons: robot.n_tendons(),
             });
         }
+        let limits = limits_for(robot, 1.0)
+            .map_err(|e| IkError::Model(format!("tension limits of robot {}: {e}", robot.name)))?;
         Ok(IkNet {
             net,
-            min_tension: robot.min_tensions(),
+            limits,
             max_tension: robot.max_tensions(),
             allow_extrapolation,
         })
@@ -215,19 +219,13 @@ impl IkNet {
         if let Some((tendon, &value)) = raw.iter().enumerate().find(|(_, t)| !t.is_finite()) {
             return Err(IkError::NonFiniteOutput { tendon, value });
         }
-        let limits = self.min_tension.iter().zip(&self.max_tension);
-        let tensions = raw
+        let tensions = command_for(&self.limits, &raw);
+        // The shift keeps the bend; what the clip takes off after it changes it.
+        let beyond_limits = clipped_by(&self.limits, &raw)
             .iter()
-            .zip(limits.clone())
-            .map(|(&t, (&min, &max))| t.clamp(min, max))
-            .collect();
-        let beyond_limits = raw
-            .iter()
-            .zip(limits)
+            .zip(&self.max_tension)
             .enumerate()
-            .filter(|(_, (&t, (&min, &max)))| {
-                t < min - LIMIT_SLACK * max || t > (1.0 + LIMIT_SLACK) * max
-            })
+            .filter(|(_, (&cut, &max))| cut > LIMIT_SLACK * max)
             .map(|(k, _)| k)
             .collect();
         Ok(IkAnswer {
@@ -244,7 +242,7 @@ impl IkNet {
 pub struct BatchSummary {
     /// Rows answered.
     pub rows: usize,
-    /// Rows where the net asked for a tension beyond a limit (clamped).
+    /// Rows where the net asked for a tension beyond a limit (clipped after the co-contraction shift).
     pub beyond_limits: usize,
     /// Rows outside the trained ranges (answered: extrapolation allowed).
     pub extrapolated: usize,
@@ -300,7 +298,7 @@ pub fn read_poses(input: &Path) -> Result<Vec<[f64; 7]>, IkError> {
 }
 
 /// Answer every pose of the CSV at `input` ([`read_poses`]) and write
-/// `output` atomically: `t0..` (clamped, N) then `raw_t0..` (the net's
+/// `output` atomically: `t0..` (the command stage's, N) then `raw_t0..` (the net's
 /// output, N), one row per input row. A refused row fails the whole batch,
 /// naming its line; nothing is written then.
 pub fn solve_csv(ik: &IkNet, input: &Path, output: &Path) -> Result<BatchSummary, IkError> {
@@ -352,6 +350,46 @@ pub fn solve_csv(ik: &IkNet, input: &Path, output: &Path) -> Result<BatchSummary
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn answers_are_the_command_stage_of_the_raw_output_and_in_range() {
+        // The firmware's built-in net for the seed robot, asked for poses over
+        // its training box and 30 % beyond (extrapolation allowed), where
+        // the raw output leaves [min, max] and the stage must shift and clip.
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let robot = Robot::load(&root.join("robots/seed-4t.toml")).unwrap();
+        let ik = IkNet::load(&root.join("firmware/vectors/default.tnet"), &robot, true).unwrap();
+        let limits = limits_for(&robot, 1.0).unwrap();
+        let (min, max) = (robot.min_tensions(), robot.max_tensions());
+        let (lo, hi) = (ik.net.input_lo().to_vec(), ik.net.input_hi().to_vec());
+        let (mut out_of_range, mut clipped) = (0, 0);
+        for i in 0..400 {
+            let at = |c: usize, k: usize| {
+                let f = ((i * (2 * c + 3) + k) % 23) as f64 / 22.0 * 1.6 - 0.3;
+                f64::from(lo[c]) + f * f64::from(hi[c] - lo[c])
+            };
+            let mut pose: [f64; 7] = std::array::from_fn(|c| at(c, i / 23));
+            let norm = pose[3..].iter().map(|q| q * q).sum::<f64>().sqrt();
+            pose[3..].iter_mut().for_each(|q| *q /= norm);
+            let a = ik.solve(&pose).unwrap();
+            assert_eq!(a.tensions, command_for(&limits, &a.raw), "{pose:?}");
+            for (k, t) in a.tensions.iter().enumerate() {
+                assert!((min[k]..=max[k]).contains(t), "tendon {k}: {t} N");
+            }
+            out_of_range += usize::from(
+                a.raw
+                    .iter()
+                    .zip(&min)
+                    .zip(&max)
+                    .any(|((r, lo), hi)| r < lo || r > hi),
+            );
+            clipped += usize::from(!a.beyond_limits.is_empty());
+        }
+        assert!(
+            out_of_range > 20 && clipped > 0,
+            "{out_of_range} rows out of range, {clipped} clipped"
+        );
+    }
 
     #[test]
     fn quaternion_sign_and_length_are_normalised_or_refused() {

@@ -25,8 +25,9 @@ pub struct Net {
 #[pymethods]
 impl Net {
     /// Load a ``.tnet`` file written by ``tendril train``. robot: the robot
-    /// it drives (default: ``Robot.default()``); tensions are clamped to its
-    /// limits. allow_extrapolation: answer poses outside the net's training
+    /// it drives (default: ``Robot.default()``); the firmware's command stage
+    /// for it turns the net's output into tensions in its limits.
+    /// allow_extrapolation: answer poses outside the net's training
     /// ranges instead of refusing them.
     #[staticmethod]
     #[pyo3(signature = (path, robot=None, allow_extrapolation=false))]
@@ -59,8 +60,11 @@ impl Net {
     /// unit quaternion; its sign is normalised to w >= 0).
     ///
     /// Returns ``(tensions, raw)``, each ``(n, k)`` in N (``(k,)`` for one
-    /// pose): the net's output clamped to ``[0, max_tension]``, and as the
-    /// net gave it — the ``t*`` and ``raw_t*`` columns of ``tendril ik``.
+    /// pose): what the firmware's command stage commands for the net's
+    /// output (each co-contraction set shifted into range, then clipped to
+    /// ``[min_tension, max_tension]``), and the output as the net gave it
+    /// (tensions up to co-contraction) — the ``t*`` and ``raw_t*`` columns
+    /// of ``tendril ik``.
     /// A non-finite value, a non-unit quaternion or (unless extrapolation is
     /// allowed) a pose outside the training ranges raises ``ValueError``
     /// naming the row.

@@ -84,7 +84,8 @@ class Net:
     @property
     def n_tendons(self) -> int: ...
     def predict(self, poses: _ArrayLike) -> Tuple[_Array, _Array]:
-        """Poses (n, 7) -> (clamped tensions (n, k), raw net output (n, k)), N."""
+        """Poses (n, 7) -> (tensions (n, k) the firmware's command stage commands,
+        raw net output (n, k): tensions up to co-contraction), N."""
 
 def generate(
     robot: Robot,

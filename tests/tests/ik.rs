@@ -38,6 +38,20 @@ fn ik(pose: &[f64], extra: &[&str]) -> (bool, Option<serde_json::Value>, String)
     )
 }
 
+/// What the firmware's command stage commands for the net's `raw` output on
+/// the seed robot (co-contraction shift, then the clip).
+fn staged(raw: &[f64]) -> Vec<f64> {
+    let robot = tendril::robot::Robot::load(&workspace_root().join("robots/seed-4t.toml")).unwrap();
+    let limits = tendril::command_stage::limits_for(&robot, 1.0).unwrap();
+    tendril::command_stage::command_for(&limits, raw)
+}
+
+/// `a` and `b` agree to 1e-9 N (serde_json's float parsing may miss the
+/// last bit).
+fn same(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-9)
+}
+
 fn numbers(v: &serde_json::Value) -> Vec<f64> {
     v.as_array()
         .expect("an array")
@@ -53,10 +67,8 @@ fn a_reachable_pose_gets_tensions_within_the_limits_and_the_raw_output() {
     let json = json.unwrap();
     let (t, raw) = (numbers(&json["tensions"]), numbers(&json["raw"]));
     assert_eq!((t.len(), raw.len()), (4, 4));
-    for (a, b) in t.iter().zip(&raw) {
-        assert!((0.0..=MAX_TENSION).contains(a), "{t:?}");
-        assert_eq!(*a, b.clamp(0.0, MAX_TENSION));
-    }
+    assert!(t.iter().all(|a| (0.0..=MAX_TENSION).contains(a)), "{t:?}");
+    assert!(same(&t, &staged(&raw)), "{t:?} vs {raw:?}");
     // The row was made by pulling tendons 2 and 3 (2.19 N, 2.84 N).
     assert!(
         (t[2] - 2.19).abs() < 0.5 && (t[3] - 2.84).abs() < 0.5,
@@ -114,8 +126,10 @@ fn a_pose_far_outside_the_training_range_is_refused_or_clamped_when_allowed() {
 }
 
 #[test]
-fn outputs_beyond_the_tendon_limit_are_clamped_beside_the_raw_value() {
-    // Just past the training range in px: the net asks for ~31 N of a 10 N tendon.
+fn outputs_beyond_the_tendon_limit_are_shifted_into_range_beside_the_raw_value() {
+    // Just past the training range in px: the net asks for ~31 N of a 10 N
+    // tendon and ~22 N of its opposite; the command stage lowers the pair
+    // together (keeping its bend) instead of clipping one.
     let pose = [
         0.17,
         -0.08,
@@ -131,8 +145,13 @@ fn outputs_beyond_the_tendon_limit_are_clamped_beside_the_raw_value() {
     let (t, raw) = (numbers(&json["tensions"]), numbers(&json["raw"]));
     assert!(raw.iter().any(|&x| x > MAX_TENSION), "{raw:?}");
     assert!(t.iter().all(|x| (0.0..=MAX_TENSION).contains(x)), "{t:?}");
-    assert!(err.contains("beyond the robot's limits: clamped"), "{err}");
-    // Plain output prints the clamped tensions.
+    assert!(same(&t, &staged(&raw)), "{t:?} vs {raw:?}");
+    assert!(
+        ((t[0] - t[2]) - (raw[0] - raw[2])).abs() < 1e-5 && t[0] == MAX_TENSION,
+        "{t:?} vs {raw:?}"
+    );
+    assert!(!err.contains("clipped"), "{err}");
+    // Plain output prints the staged tensions.
     let arg = pose_arg(&pose);
     let out = tendril(&["ik", "--model", MODEL, "--allow-extrapolation", &arg]);
     let plain: Vec<f64> = String::from_utf8_lossy(&out.stdout)
@@ -192,9 +211,7 @@ fn batch_output_has_clamped_and_raw_columns_and_refuses_bad_rows() {
         .split(',')
         .map(|s| s.parse().unwrap())
         .collect();
-    for k in 0..4 {
-        assert_eq!(cells[k], cells[4 + k].clamp(0.0, MAX_TENSION));
-    }
+    assert_eq!(cells[..4], staged(&cells[4..]));
     // A zero quaternion on line 3 fails the batch and keeps the old output.
     std::fs::write(
         &input,

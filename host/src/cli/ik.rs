@@ -1,5 +1,5 @@
 //! `tendril ik`: tensions for tip poses through a `.tnet` net, checked and
-//! clamped to the robot's limits by [`crate::ik_net`]; with `--exact`, the
+//! through the firmware's command stage by [`crate::ik_net`]; with `--exact`, the
 //! model-based IK of [`crate::inverse`] (the net's guess as its start).
 
 use std::path::PathBuf;
@@ -23,7 +23,7 @@ pub struct IkArgs {
     /// With --exact: reach the tip position only (the quaternion is checked, not targeted).
     #[arg(long, requires = "exact")]
     pub position_only: bool,
-    /// The robot the net drives: tensions are clamped to its limits.
+    /// The robot the net drives: the command stage keeps tensions in its limits.
     #[command(flatten)]
     pub robot: RobotArg,
     /// One pose: px,py,pz,qw,qx,qy,qz (m, unit quaternion w first).
@@ -34,7 +34,7 @@ pub struct IkArgs {
         conflicts_with = "input"
     )]
     pub pose: Option<String>,
-    /// Print `{"tensions":[...],"raw":[...]}` (clamped, unclamped) instead of plain numbers.
+    /// Print `{"tensions":[...],"raw":[...]}` (staged, net output) instead of plain numbers.
     #[arg(long)]
     pub json: bool,
     /// Answer poses outside the net's training ranges (with a warning) instead of refusing them.
@@ -43,7 +43,7 @@ pub struct IkArgs {
     /// Batch input CSV with columns px,py,pz,qw,qx,qy,qz (others ignored).
     #[arg(long, value_name = "CSV", requires = "output")]
     pub input: Option<PathBuf>,
-    /// Batch output CSV: t0.. (clamped) and raw_t0.. (net output), N; with --exact t0..,
+    /// Batch output CSV: t0.. (command stage) and raw_t0.. (net output), N; with --exact t0..,
     /// the reached pose, its errors and `reachable`. Written atomically.
     #[arg(long, value_name = "CSV", requires = "input")]
     pub output: Option<PathBuf>,
@@ -126,7 +126,7 @@ pub fn run(a: IkArgs) -> anyhow::Result<()> {
         }
         if !answer.beyond_limits.is_empty() {
             log::warn!(
-                "net output {:?} N is beyond the robot's limits: clamped",
+                "net output {:?} N is beyond the robot's limits even after the co-contraction shift: clipped",
                 answer.raw
             );
         }
@@ -146,7 +146,7 @@ pub fn run(a: IkArgs) -> anyhow::Result<()> {
     };
     let s = solve_csv(&ik, input, output)?;
     eprintln!(
-        "wrote {} ({} {}, {} beyond the limits and clamped, {} extrapolated)",
+        "wrote {} ({} {}, {} beyond the limits and clipped, {} extrapolated)",
         output.display(),
         s.rows,
         if s.rows == 1 { "row" } else { "rows" },

@@ -7,6 +7,8 @@ use super::common::stop_flag;
 use crate::dataset::Dataset;
 use crate::learn::cascor::job::{self, SplitSpec, TrainJob, TrainOutputs};
 use crate::learn::cascor::{self, CascorOptions, ObjectiveChoice, OutputKind, OutputSolver};
+use crate::learn::targets::Targets;
+use crate::robot::Robot;
 
 /// Candidate objective on the command line.
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
@@ -57,7 +59,12 @@ pub struct TrainArgs {
     /// Learning-curve PNG; default: <out>.curve.png.
     #[arg(long, value_name = "PNG")]
     pub plot: Option<PathBuf>,
-    /// Training report JSON (choices made, learning curve, test RMSE); default: <out>.train.json.
+    /// Robot the dataset is for: its co-contraction sets centre the targets
+    /// (docs/design.md §4). Default: the robot file the dataset's sidecar
+    /// records, else robots/seed-4t.toml.
+    #[arg(long, value_name = "FILE")]
+    pub robot: Option<PathBuf>,
+    /// Training report JSON (choices made, targets, learning curve, test RMSE); default: <out>.train.json.
     #[arg(long, value_name = "JSON")]
     pub report: Option<PathBuf>,
     /// Seed of the split and of every candidate's initial weights.
@@ -72,9 +79,10 @@ pub struct TrainArgs {
     /// Hidden-unit cap (at most the controllers' capacity, tendril_shared::MAX_HIDDEN = 64).
     #[arg(long, default_value_t = tendril_shared::MAX_HIDDEN)]
     pub max_hidden: usize,
-    /// Candidates trained per installed unit (in parallel).
-    #[arg(long, default_value_t = 8)]
-    pub pool: usize,
+    /// Candidates trained per installed unit (in parallel) [default: 8; 16 for a robot with
+    /// more than two bending degrees of freedom].
+    #[arg(long)]
+    pub pool: Option<usize>,
     /// Candidate objective.
     #[arg(long, value_enum, default_value_t = ObjectiveArg::Cascade2)]
     pub objective: ObjectiveArg,
@@ -133,21 +141,22 @@ pub struct TrainArgs {
     /// Units each output configuration grows before validation picks one (auto modes).
     #[arg(long, default_value_t = 3)]
     pub pilot_units: usize,
-    /// Candidates train on a seeded random subset of this many training rows per unit (0 = all).
-    #[arg(long, default_value_t = 3000)]
-    pub cand_patterns: usize,
+    /// Candidates train on a seeded random subset of this many training rows per unit (0 = all)
+    /// [default: 3000; 10000 for a robot with more than two bending degrees of freedom].
+    #[arg(long)]
+    pub cand_patterns: Option<usize>,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
 }
 
 impl TrainArgs {
-    /// The trainer options these arguments describe.
-    pub fn options(&self) -> CascorOptions {
-        let d = CascorOptions::default();
+    /// The trainer options these arguments describe, for `robot`.
+    pub fn options(&self, robot: &Robot) -> CascorOptions {
+        let d = CascorOptions::for_robot(robot);
         CascorOptions {
             max_hidden: self.max_hidden,
-            pool: self.pool,
+            pool: self.pool.unwrap_or(d.pool),
             objective: match self.objective {
                 ObjectiveArg::Covariance => ObjectiveChoice::Covariance,
                 ObjectiveArg::Cascade2 => ObjectiveChoice::Cascade2,
@@ -184,7 +193,7 @@ impl TrainArgs {
             valid_patience: self.valid_patience,
             target_rmse: self.target_rmse,
             pilot_units: self.pilot_units,
-            candidate_patterns: self.cand_patterns,
+            candidate_patterns: self.cand_patterns.unwrap_or(d.candidate_patterns),
             ..d
         }
     }
@@ -192,7 +201,17 @@ impl TrainArgs {
 
 impl TrainArgs {
     /// The training job these arguments describe, on `data` read from `--data`.
-    pub fn job<'a>(&self, data: &'a Dataset) -> TrainJob<'a> {
+    pub fn job<'a>(&self, data: &'a Dataset) -> anyhow::Result<TrainJob<'a>> {
+        let r = job::robot_for_data(data, &self.data, self.robot.as_deref())?;
+        log::info!(
+            "targets: {} (robot {})",
+            if r.targets == Targets::Tensions {
+                "the tensions"
+            } else {
+                "centred on the co-contraction sets"
+            },
+            r.path.display()
+        );
         let mut outputs = TrainOutputs::beside(&self.out);
         if let Some(p) = &self.log {
             outputs.log = p.clone();
@@ -203,10 +222,11 @@ impl TrainArgs {
         if let Some(p) = &self.report {
             outputs.report = p.clone();
         }
-        TrainJob {
+        Ok(TrainJob {
             data,
             data_file: Some(self.data.clone()),
-            options: self.options(),
+            options: self.options(&r.robot),
+            targets: r.targets,
             split: SplitSpec {
                 seed: self.seed,
                 test_fraction: self.test_fraction,
@@ -214,14 +234,14 @@ impl TrainArgs {
             },
             outputs,
             threads: self.threads,
-        }
+        })
     }
 }
 
 /// Run `tendril train`.
 pub fn run(a: TrainArgs) -> anyhow::Result<()> {
     let data = Dataset::read_csv(&a.data)?;
-    let job = a.job(&data);
+    let job = a.job(&data)?;
     let t = job::run(&job, stop_flag())?;
     let o = &job.outputs;
     log::info!(

@@ -4,10 +4,11 @@
 
 use std::path::{Path, PathBuf};
 
-use super::{all_learners, compare, CompareError, CompareOptions, Comparison};
+use super::{all_learners_for, compare, CompareError, CompareOptions, Comparison};
 use crate::dataset::Dataset;
 use crate::fsutil::check_distinct;
 use crate::learn::cascor::job::MAX_HELD_OUT_FRACTION;
+use crate::learn::targets::Targets;
 use crate::robot::Robot;
 
 /// A comparison run: which data and robot, how, and into which directory.
@@ -50,7 +51,12 @@ pub fn run(job: &CompareJob) -> Result<CompareResult, CompareError> {
     check_distinct(&[("--data", &job.data), ("--robot", &job.robot)], &outputs)?;
     let data = Dataset::read_csv(&job.data).map_err(|e| CompareError::BadInput(e.to_string()))?;
     let robot = Robot::load(&job.robot).map_err(|e| CompareError::BadInput(e.to_string()))?;
-    let comparison = compare(&data, &robot, all_learners(), o)?;
+    let sidecar = crate::dataset::Sidecar::read(&crate::dataset::Sidecar::path_for(&job.data)).ok();
+    let options = CompareOptions {
+        targets: Some(Targets::for_dataset(&robot, sidecar.as_ref())),
+        ..o.clone()
+    };
+    let comparison = compare(&data, &robot, all_learners_for(&robot), &options)?;
     let files = comparison.write(&job.out_dir)?;
     Ok(CompareResult { comparison, files })
 }

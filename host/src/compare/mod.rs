@@ -15,6 +15,7 @@ use std::path::PathBuf;
 
 use crate::dataset::split::{SPLIT_SEED, TEST_FRACTION, VALID_FRACTION};
 use crate::evaluate::{EvalError, SplitMetrics};
+use crate::learn::targets::Targets;
 use crate::learn::LearnError;
 
 pub mod job;
@@ -22,7 +23,7 @@ pub mod registry;
 pub mod report;
 pub mod runner;
 
-pub use registry::{all_learners, baselines, REFERENCE};
+pub use registry::{all_learners, all_learners_for, baselines, REFERENCE};
 pub use runner::{compare, dump_splits};
 
 /// Why the comparison failed.
@@ -80,6 +81,8 @@ pub struct CompareOptions {
     /// Also write the normalised fit / valid / test splits as CSV into this
     /// directory (for the scikit-learn reference in `scripts/python/`).
     pub dump_splits: Option<PathBuf>,
+    /// What every learner learns; `None`: [`Targets::for_robot`] the robot.
+    pub targets: Option<Targets>,
 }
 
 impl Default for CompareOptions {
@@ -92,6 +95,7 @@ impl Default for CompareOptions {
             timing_queries: 300,
             progress: true,
             dump_splits: None,
+            targets: None,
         }
     }
 }

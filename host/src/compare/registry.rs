@@ -26,9 +26,17 @@ pub fn baselines() -> Vec<Box<dyn Learner>> {
 
 /// Every learner of the comparison: cascade correlation first, then the baselines.
 pub fn all_learners() -> Vec<Box<dyn Learner>> {
-    let mut v: Vec<Box<dyn Learner>> = vec![Box::new(crate::learn::cascor::Cascor::new(
-        crate::learn::cascor::CascorOptions::default(),
-    ))];
+    learners_with(crate::learn::cascor::CascorOptions::default())
+}
+
+/// [`all_learners`] with cascade correlation trained as `tendril train`
+/// trains it for `robot` (`CascorOptions::for_robot`).
+pub fn all_learners_for(robot: &crate::robot::Robot) -> Vec<Box<dyn Learner>> {
+    learners_with(crate::learn::cascor::CascorOptions::for_robot(robot))
+}
+
+fn learners_with(cascor: crate::learn::cascor::CascorOptions) -> Vec<Box<dyn Learner>> {
+    let mut v: Vec<Box<dyn Learner>> = vec![Box::new(crate::learn::cascor::Cascor::new(cascor))];
     v.extend(baselines());
     v
 }

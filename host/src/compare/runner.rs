@@ -8,11 +8,12 @@ use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::DMatrix;
 
 use super::{CompareError, CompareOptions, Comparison, Entry};
-use crate::dataset::{prepare, Dataset, Prepared};
+use crate::dataset::{prepare, Dataset, MinMax, Prepared};
 use crate::evaluate::{
-    plain_clip_position_if_different, task_space_errors, tension_rmse, tension_rmse_normalised,
-    EvalError, SplitMetrics,
+    plain_clip_position_if_different, staged_tensions, task_space_errors, tension_rmse,
+    tension_rmse_normalised, EvalError, SplitMetrics,
 };
+use crate::learn::targets::Targets;
 use crate::learn::{Learner, Split};
 use crate::robot::Robot;
 use crate::statics::{SolverSettings, Statics};
@@ -45,10 +46,12 @@ fn subsample(n: usize, k: usize, seed: u64) -> Vec<usize> {
 }
 
 /// The `docs/design.md` §4 metrics of predicted tensions (newtons): tension RMSE
-/// over every row, task-space error over the rows `task_idx`.
+/// of the staged predictions over every row (normalised by the dataset's
+/// training tension ranges `truth_ranges`), task-space error over the rows
+/// `task_idx`.
 fn split_metrics(
     statics: &Statics,
-    p: &Prepared,
+    truth_ranges: &MinMax,
     pred: &DMatrix<f64>,
     truth: &DMatrix<f64>,
     poses: &DMatrix<f64>,
@@ -58,10 +61,12 @@ fn split_metrics(
     let (pred_task, poses_task) = (pred.select_rows(task_idx), poses.select_rows(task_idx));
     let task = task_space_errors(statics, &pred_task, &poses_task)?;
     let plain_clip = plain_clip_position_if_different(statics, &pred_task, &poses_task)?;
+    let staged = staged_tensions(statics, pred)?;
+    let (lo, hi) = (&truth_ranges.lo, &truth_ranges.hi);
     Ok(SplitMetrics {
         samples: pred.nrows(),
-        tension_rmse_norm100: tension_rmse_normalised(pred, truth, &p.y_range.lo, &p.y_range.hi)?,
-        tension_rmse_newton: tension_rmse(pred, truth)?,
+        tension_rmse_norm100: tension_rmse_normalised(&staged, truth, lo, hi)?,
+        tension_rmse_newton: tension_rmse(&staged, truth)?,
         position_mm: task.position_stats(),
         orientation_deg: task.orientation_stats(),
         failed_solves: task.failed,
@@ -91,14 +96,27 @@ pub fn compare(
             data.len()
         )));
     }
-    let p = prepare(data, opts.test_fraction, opts.valid_fraction, opts.seed);
+    // Every learner learns the same targets (centred on the robot's
+    // co-contraction sets, docs/design.md §4) and is judged on the dataset's
+    // tensions, the same rows split the same way.
+    let targets = opts
+        .targets
+        .clone()
+        .unwrap_or_else(|| Targets::for_robot(robot));
+    let p = prepare(
+        &targets.learning_data(data),
+        opts.test_fraction,
+        opts.valid_fraction,
+        opts.seed,
+    );
+    let truth = prepare(data, opts.test_fraction, opts.valid_fraction, opts.seed);
     if let Some(dir) = &opts.dump_splits {
         dump_splits(&p, dir)?;
     }
     let statics = Statics::new(robot, SolverSettings::default());
     // Physical-unit truth of the fit split (validation rows excluded) and of the test split.
     let fit_poses = p.x_range.denormalise(&p.train_x);
-    let fit_tensions = p.y_range.denormalise(&p.train_y);
+    let fit_tensions = truth.y_range.denormalise(&truth.train_y);
     let task_idx = subsample(p.train_x.nrows(), opts.train_task_rows, opts.seed);
     let bar = if opts.progress && log::log_enabled!(log::Level::Info) {
         ProgressBar::new(learners.len() as u64)
@@ -142,7 +160,7 @@ pub fn compare(
         let pred_fit = p.y_range.denormalise(&l.predict(&p.train_x));
         let train = split_metrics(
             &statics,
-            &p,
+            &truth.y_range,
             &pred_fit,
             &fit_tensions,
             &fit_poses,
@@ -154,10 +172,10 @@ pub fn compare(
         let all_test: Vec<usize> = (0..p.test.len()).collect();
         let test = split_metrics(
             &statics,
-            &p,
+            &truth.y_range,
             &pred_test,
-            &p.test.tensions,
-            &p.test.poses,
+            &truth.test.tensions,
+            &truth.test.poses,
             &all_test,
             infer_us,
         )

@@ -306,8 +306,13 @@ pub fn evaluate_net(
         return Err(EvaluateError::BadInput("no rows to evaluate".into()));
     };
     let pred = infer_batch(net, &data.poses);
-    let lo: Vec<f64> = net.output_lo().iter().map(|&x| f64::from(x)).collect();
-    let hi: Vec<f64> = net.output_hi().iter().map(|&x| f64::from(x)).collect();
+    // Normalised by each tendon's range [min, max], not by the net's output
+    // ranges: those are the ranges of its targets, centred on the
+    // co-contraction sets (docs/design.md §4), not of the tensions.
+    let (lo, hi) = (
+        statics.robot().min_tensions(),
+        statics.robot().max_tensions(),
+    );
     Ok(SplitMetrics::compute(
         statics,
         &pred,

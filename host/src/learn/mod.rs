@@ -11,6 +11,7 @@ pub mod learner;
 pub mod linalg;
 pub mod mlp;
 pub mod rbf;
+pub mod targets;
 pub mod tree;
 
 pub use learner::{LearnError, Learner, Split};

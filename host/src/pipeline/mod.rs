@@ -30,6 +30,7 @@ use crate::learn::cascor::export::read_tnet;
 use crate::learn::cascor::job::{self as train_job, SplitSpec, TrainJob, TrainOutputs};
 use crate::learn::cascor::{Cascor, CascorOptions};
 use crate::learn::learner::{Learner, Prefitted, Split};
+use crate::learn::targets::Targets;
 use crate::plot::workspace::{draw_workspace, Shape};
 use crate::robot::{Robot, DEFAULT_ROBOT};
 use crate::statics::{SolverSettings, Statics};
@@ -181,7 +182,7 @@ pub fn run(
     // 3. Cascade-correlation training, export and task-space evaluation.
     let model = out.join("model.tnet");
     let split = SplitSpec::default();
-    let mut cascor = CascorOptions::default();
+    let mut cascor = CascorOptions::for_robot(&robot);
     if options.quick {
         cascor.max_hidden = cascor.max_hidden.min(QUICK_HIDDEN);
     }
@@ -195,6 +196,7 @@ pub fn run(
             data: &data,
             data_file: Some(data_path.clone()),
             options: cascor.clone(),
+            targets: Targets::for_dataset(&robot, Some(&sidecar)),
             split,
             outputs: TrainOutputs {
                 model: model.clone(),
@@ -236,8 +238,12 @@ pub fn run(
     // 4. The comparison with the six baselines (the paper's Table II, Figure 3).
     // Cascade correlation enters already trained: same data, split and seed
     // (`Prefitted` checks the split and would retrain on any other).
-    let opts = CompareOptions::default();
-    let p = prepare(&data, opts.test_fraction, opts.valid_fraction, opts.seed);
+    let opts = CompareOptions {
+        targets: Some(Targets::for_dataset(&robot, Some(&sidecar))),
+        ..CompareOptions::default()
+    };
+    let learned = Targets::for_dataset(&robot, Some(&sidecar)).learning_data(&data);
+    let p = prepare(&learned, opts.test_fraction, opts.valid_fraction, opts.seed);
     let split = |x, y| Split { x, y };
     let prefitted = Prefitted::new(
         Cascor::from_trained(cascor, trained.net, trained.report.clone()),

@@ -17,6 +17,7 @@ use super::{train_with_stop, CascadeNet, CascorOptions, TrainReport};
 use crate::dataset::split::{SPLIT_SEED, TEST_FRACTION, VALID_FRACTION};
 use crate::dataset::{prepare, Dataset};
 use crate::fsutil::{check_distinct, write_atomic, write_atomic_with, PathCollision};
+use crate::learn::targets::{Targets, TargetsSummary};
 use crate::learn::LearnError;
 
 /// Fewest dataset rows a training run accepts: enough that the default
@@ -110,6 +111,9 @@ pub struct TrainJob<'a> {
     pub data_file: Option<PathBuf>,
     /// Trainer hyper-parameters.
     pub options: CascorOptions,
+    /// What the net learns from the tensions (centred on the robot's
+    /// co-contraction sets, [`Targets::for_robot`]).
+    pub targets: Targets,
     /// The split.
     pub split: SplitSpec,
     /// Output files.
@@ -140,7 +144,7 @@ pub struct TrainResult {
     pub ranges: Ranges,
     /// Rows per split.
     pub sizes: SplitSizes,
-    /// Test tension RMSE, normalised ×100 (f64 net).
+    /// Test RMSE of the targets ([`TrainJob::targets`]), normalised ×100 (f64 net).
     pub test_rmse_norm100: f64,
 }
 
@@ -179,6 +183,53 @@ impl TrainError {
     }
 }
 
+/// The robot a training run on `data` (read from the file `data_file`) is
+/// for, and the targets it implies.
+#[derive(Clone, Debug)]
+pub struct DataRobot {
+    /// The robot.
+    pub robot: crate::robot::Robot,
+    /// Its file: `--robot` when given, else the robot file the dataset's
+    /// sidecar records (if that file is still there), else the default robot.
+    pub path: PathBuf,
+    /// [`Targets::for_dataset`] of the robot and the dataset's sidecar.
+    pub targets: Targets,
+}
+
+/// See [`DataRobot`]; the robot's tendon count must be the dataset's.
+pub fn robot_for_data(
+    data: &Dataset,
+    data_file: &Path,
+    given: Option<&Path>,
+) -> Result<DataRobot, TrainError> {
+    let sidecar = crate::dataset::Sidecar::read(&crate::dataset::Sidecar::path_for(data_file)).ok();
+    let recorded = sidecar
+        .as_ref()
+        .map(|s| PathBuf::from(&s.robot_file))
+        .filter(|p| p.is_file());
+    let path = given
+        .map(Path::to_path_buf)
+        .or(recorded)
+        .unwrap_or_else(|| PathBuf::from(crate::robot::DEFAULT_ROBOT));
+    let robot = crate::robot::Robot::load(&path)
+        .map_err(|e| TrainError::BadInput(format!("robot for the targets: {e}")))?;
+    if robot.n_tendons() != data.n_tendons {
+        return Err(TrainError::BadInput(format!(
+            "robot {} ({}) has {} tendons but the dataset has {}: give its robot with --robot",
+            robot.name,
+            path.display(),
+            robot.n_tendons(),
+            data.n_tendons
+        )));
+    }
+    let targets = Targets::for_dataset(&robot, sidecar.as_ref());
+    Ok(DataRobot {
+        robot,
+        path,
+        targets,
+    })
+}
+
 /// The report JSON written beside the weight file.
 #[derive(Serialize)]
 struct ReportFile<'a> {
@@ -188,6 +239,7 @@ struct ReportFile<'a> {
     test_rows: usize,
     seed: u64,
     options: &'a CascorOptions,
+    targets: TargetsSummary,
     report: &'a TrainReport,
     hidden_units: usize,
     parameters: usize,
@@ -248,7 +300,8 @@ fn check(job: &TrainJob<'_>) -> Result<(), TrainError> {
 fn train_and_write(job: &TrainJob<'_>, stop: &AtomicBool) -> Result<TrainResult, TrainError> {
     let data = job.data;
     let s = job.split;
-    let p = prepare(data, s.test_fraction, s.valid_fraction, s.seed);
+    let learned = job.targets.learning_data(data);
+    let p = prepare(&learned, s.test_fraction, s.valid_fraction, s.seed);
     let sizes = SplitSizes {
         train: p.train_x.nrows(),
         valid: p.valid_x.nrows(),
@@ -308,6 +361,7 @@ fn train_and_write(job: &TrainJob<'_>, stop: &AtomicBool) -> Result<TrainResult,
         test_rows: sizes.test,
         seed: s.seed,
         options: &job.options,
+        targets: job.targets.summary(),
         report: &report,
         hidden_units: net.n_hidden(),
         parameters: net.parameter_count(),
@@ -382,6 +436,7 @@ mod tests {
         TrainJob {
             data,
             data_file: None,
+            targets: Targets::Tensions,
             options: CascorOptions {
                 max_hidden: 2,
                 progress: false,

@@ -5,6 +5,8 @@ use serde::{Deserialize, Serialize};
 
 use super::net::OutputKind;
 use super::quickprop::QuickpropParams;
+use crate::dataset::sample::anchor_groups;
+use crate::robot::Robot;
 
 /// How the output weights are trained.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -110,5 +112,58 @@ impl Default for CascorOptions {
             candidate_patterns: 3000,
             progress: true,
         }
+    }
+}
+
+/// Bending degrees of freedom of `robot`: each anchor group (segment)
+/// bends in as many directions as it has tendons, at most two.
+pub fn bending_dof(robot: &Robot) -> usize {
+    anchor_groups(robot).iter().map(|g| g.len().min(2)).sum()
+}
+
+impl CascorOptions {
+    /// The defaults for `robot` (`docs/design.md` §4): past two bending
+    /// degrees of freedom (a two-segment robot) the inverse map is harder
+    /// and the 64 units are the limit, so each unit gets a better pick —
+    /// twice the pool, candidates trained on 10,000 rows instead of 3,000.
+    /// One and two (the single-segment robots) keep the defaults.
+    pub fn for_robot(robot: &Robot) -> CascorOptions {
+        let mut o = CascorOptions::default();
+        if bending_dof(robot) > 2 {
+            o.pool = 16;
+            o.candidate_patterns = 10_000;
+        }
+        o
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn robot(name: &str) -> Robot {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../robots")
+            .join(name);
+        Robot::load(&path).unwrap()
+    }
+
+    #[test]
+    fn two_segments_bend_four_ways_and_get_the_larger_candidate_budget() {
+        let dof = |n| bending_dof(&robot(n));
+        assert_eq!(
+            (
+                dof("seed-1t.toml"),
+                dof("seed-4t.toml"),
+                dof("tdcr-2seg.toml")
+            ),
+            (1, 2, 4)
+        );
+        assert_eq!(
+            CascorOptions::for_robot(&robot("seed-4t.toml")),
+            CascorOptions::default()
+        );
+        let two = CascorOptions::for_robot(&robot("tdcr-2seg.toml"));
+        assert_eq!((two.pool, two.candidate_patterns), (16, 10_000));
     }
 }
