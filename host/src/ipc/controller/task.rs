@@ -3,6 +3,10 @@
 
 use super::*;
 
+/// A watchdog hold this long (periods) is reported on the console; shorter
+/// ones, a planner late by a few periods, only in the report.
+const LONG_HOLD_PERIODS: u64 = 20;
+
 /// Messages that arrived since the last period (the newest of each kind).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Inbox<'a> {
@@ -34,7 +38,6 @@ pub struct Controller {
     lead_s: f32,
     period_ns: u64,
     start_ns: u64,
-    watchdog_periods: f64,
     stuck: StuckDetector,
     stats: ControllerStats,
     lateness: Histogram,
@@ -48,6 +51,10 @@ pub struct Controller {
     last_state_ns: u64,
     stale: bool,
     in_hold: bool,
+    /// When the current watchdog hold began (monotonic ns).
+    hold_started_ns: u64,
+    /// A lasting hold was reported on the console (once per run).
+    hold_warned: bool,
     outside: bool,
     tracking_started: bool,
     stuck_hold: bool,
@@ -114,7 +121,6 @@ impl Controller {
             lead_s: cfg.lead_s as f32,
             period_ns,
             start_ns,
-            watchdog_periods: cfg.watchdog_periods,
             stuck: StuckDetector::new(cfg.stuck_motor, period_ns),
             stats,
             lateness: Histogram::default(),
@@ -128,6 +134,8 @@ impl Controller {
             last_state_ns: start_ns,
             stale: false,
             in_hold: false,
+            hold_started_ns: 0,
+            hold_warned: false,
             outside: false,
             tracking_started: false,
             stuck_hold: false,
@@ -390,17 +398,8 @@ impl Controller {
             } else if !self.in_hold {
                 self.stats.watchdog_trips += 1;
                 self.hold_after_seq = self.last_sp.map(|s| s.header.seq);
-                // Once on the console; every trip is in the statistics and
-                // the fault list (a starved machine can trip it often).
-                if self.stats.watchdog_trips == 1 {
-                    log::warn!(
-                        "controller: no setpoint for {:.1} periods: safe hold (further trips \
-                         are counted in the report, not logged)",
-                        self.watchdog_periods
-                    );
-                } else {
-                    log::debug!("controller: watchdog trip {}", self.stats.watchdog_trips);
-                }
+                self.hold_started_ns = t_wake;
+                log::debug!("controller: watchdog trip {}", self.stats.watchdog_trips);
                 let periods = self
                     .last_sp
                     .map_or(0.0, |s| t_wake.saturating_sub(s.header.stamp_ns) as f64)
@@ -412,6 +411,18 @@ impl Controller {
                     periods,
                     "no acceptable setpoint within the watchdog time: safe hold",
                 );
+            } else if !self.stuck_hold && !self.hold_warned {
+                // A planner a few periods late (a loaded machine) trips the
+                // watchdog for a period or two: counted in the report, not
+                // worth a console line. A hold that lasts is, once per run.
+                let held = t_wake.saturating_sub(self.hold_started_ns) / self.period_ns.max(1);
+                if held >= LONG_HOLD_PERIODS {
+                    self.hold_warned = true;
+                    log::warn!(
+                        "controller: no setpoint for {held} periods: safe hold (later holds \
+                         are counted in the report, not logged)"
+                    );
+                }
             }
         } else if self.in_hold {
             log::info!("controller: setpoints back, tracking resumed");
