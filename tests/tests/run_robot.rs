@@ -89,19 +89,16 @@ fn the_pipeline_runs_end_to_end_on_the_one_tendon_robot() {
 
     // The closed loop with the correction tracks the robot's runs to 0.1 mm.
     let robot = Robot::load(&file).expect("robot");
-    let runs = loop_runs(&robot);
+    let statics = Statics::new(&robot, SolverSettings::default());
+    let runs = default_loop_runs(&statics).expect("loop runs");
     assert!(
         !runs.is_empty(),
         "no closed-loop run for the one-tendon robot"
     );
     for run in runs {
-        let sim = json(&dir.join(&run.dir).join("report.json"));
-        assert_eq!(
-            sim["verdict"]["clean"],
-            Value::Bool(true),
-            "{}: {sim}",
-            run.dir
-        );
+        let sub = run_dir(&run, true);
+        let sim = json(&dir.join(&sub).join("report.json"));
+        assert_eq!(sim["verdict"]["clean"], Value::Bool(true), "{sub}: {sim}");
         let rms = number(&sim, &["rms_tracking_error_mm"]);
         assert!(rms <= 0.1, "{} with correction: RMS {rms} mm", run.label);
     }
