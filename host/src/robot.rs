@@ -695,6 +695,22 @@ impl fmt::Display for Robot {
     }
 }
 
+/// A robot file of the repository's `robots/` (tests only): one loader for
+/// every module's tests.
+#[cfg(test)]
+pub(crate) fn repo_robot(file: &str) -> Robot {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../robots")
+        .join(file);
+    Robot::load(&path).unwrap_or_else(|e| panic!("{file}: {e}"))
+}
+
+/// [`repo_robot`]'s statics with the default solver settings (tests only).
+#[cfg(test)]
+pub(crate) fn repo_statics(file: &str) -> crate::statics::Statics {
+    crate::statics::Statics::new(&repo_robot(file), crate::statics::SolverSettings::default())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

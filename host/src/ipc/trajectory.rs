@@ -842,10 +842,7 @@ mod tests {
     }
 
     fn statics_of(file: &str) -> Statics {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../robots")
-            .join(file);
-        Statics::new(&Robot::load(&path).unwrap(), SolverSettings::default())
+        crate::robot::repo_statics(file)
     }
 
     /// A helix on the two-segment robot: every sample's tip is on the

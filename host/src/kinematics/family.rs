@@ -148,16 +148,9 @@ impl Family {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::robot::Robot;
-    use crate::statics::SolverSettings;
-    use std::path::Path;
 
     fn family(file: &str) -> Family {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../robots")
-            .join(file);
-        let robot = Robot::load(&path).unwrap();
-        Family::of(&Statics::new(&robot, SolverSettings::default())).unwrap()
+        Family::of(&crate::robot::repo_statics(file)).unwrap()
     }
 
     /// The dimension follows the anchor groups: two bending segments reach a

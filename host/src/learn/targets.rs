@@ -151,10 +151,7 @@ mod tests {
     use crate::dataset::sample::anchor_groups;
 
     fn robot(name: &str) -> Robot {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../robots")
-            .join(name);
-        Robot::load(&path).unwrap()
+        crate::robot::repo_robot(name)
     }
 
     /// The co-contraction shift in f64: each set moved along `w` by the

@@ -667,14 +667,9 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
 mod tests {
     use super::*;
     use crate::ipc::trajectory::Trajectory;
-    use crate::robot::Robot;
-    use crate::statics::SolverSettings;
 
     fn statics_of(file: &str) -> Statics {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../robots")
-            .join(file);
-        Statics::new(&Robot::load(&path).unwrap(), SolverSettings::default())
+        crate::robot::repo_statics(file)
     }
 
     /// Each robot gets the runs of its family (the default robot the two it

@@ -142,10 +142,7 @@ mod tests {
     use super::*;
 
     fn robot(name: &str) -> Robot {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../robots")
-            .join(name);
-        Robot::load(&path).unwrap()
+        crate::robot::repo_robot(name)
     }
 
     #[test]
