@@ -17,7 +17,7 @@ use tendril_shared::{encode_to_vec, Activation, Shape, TnetView};
 use super::trajectory::Trajectory;
 use super::IpcError;
 use crate::kinematics::{bend_tensions, Family};
-use crate::statics::Statics;
+use crate::statics::{Statics, WarmStart};
 
 /// Jittered copies of each training pose (see [`quick_net`]).
 const JITTER_COPIES: usize = 3;
@@ -51,10 +51,8 @@ pub fn quick_net_for(
         .map(|run| Trajectory::new(&run.shape, statics))
         .collect::<Result<Vec<_>, _>>()?;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut poses = Vec::with_capacity(samples);
-    let mut tensions = Vec::with_capacity(samples);
+    let mut set = TrainingSet::with_capacity(samples);
     let mut reference = Vec::new();
-    let mut warm = None;
     for i in 0..samples {
         let path = &paths[i % paths.len()];
         // Along the path in order (short warm steps), a random offset each.
@@ -74,15 +72,9 @@ pub fn quick_net_for(
                 }
             })
             .collect();
-        let sol = statics
-            .solve(&tau, warm.as_ref())
-            .or_else(|_| statics.solve(&tau, None))
-            .map_err(|e| IpcError::Other(format!("fixture statics: {e}")))?;
-        warm = Some(sol.warm.clone());
-        poses.push(sol.pose());
-        tensions.push(tau);
+        set.push(statics, tau)?;
     }
-    fit(statics, &poses, &tensions, hidden, 0.1, &mut rng)
+    fit(statics, &set.poses, &set.tensions, hidden, 0.1, &mut rng)
 }
 
 /// Fit a `.tnet` with `hidden` random units on `samples` poses whose bends
@@ -96,23 +88,45 @@ pub fn quick_net(
 ) -> Result<Vec<u8>, IpcError> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     // Samples on a spiral-ordered grid of bends so each solve warm-starts from a neighbour.
-    let mut poses = Vec::with_capacity(samples);
-    let mut tensions = Vec::with_capacity(samples);
-    let mut warm = None;
+    let mut set = TrainingSet::with_capacity(samples);
     for i in 0..samples {
         let r = max_bend * ((i as f64 + 0.5) / samples as f64).sqrt();
         let a = i as f64 * 2.399_963_229_728_653; // golden angle: even coverage of the disc
         let bend = Vector2::new(r * a.cos(), r * a.sin());
         let tau = bend_tensions(statics, &bend);
+        set.push(statics, tau)?;
+    }
+    fit(statics, &set.poses, &set.tensions, hidden, 1.0, &mut rng)
+}
+
+/// Solved training samples, each warm-started from the one before (cold
+/// when that fails).
+struct TrainingSet {
+    poses: Vec<[f64; 7]>,
+    tensions: Vec<Vec<f64>>,
+    warm: Option<WarmStart>,
+}
+
+impl TrainingSet {
+    fn with_capacity(n: usize) -> TrainingSet {
+        TrainingSet {
+            poses: Vec::with_capacity(n),
+            tensions: Vec::with_capacity(n),
+            warm: None,
+        }
+    }
+
+    /// Solve the statics of `tau` and keep the pose and tensions.
+    fn push(&mut self, statics: &Statics, tau: Vec<f64>) -> Result<(), IpcError> {
         let sol = statics
-            .solve(&tau, warm.as_ref())
+            .solve(&tau, self.warm.as_ref())
             .or_else(|_| statics.solve(&tau, None))
             .map_err(|e| IpcError::Other(format!("fixture statics: {e}")))?;
-        warm = Some(sol.warm.clone());
-        poses.push(sol.pose());
-        tensions.push(tau);
+        self.warm = Some(sol.warm.clone());
+        self.poses.push(sol.pose());
+        self.tensions.push(tau);
+        Ok(())
     }
-    fit(statics, &poses, &tensions, hidden, 1.0, &mut rng)
 }
 
 /// The random-feature fit of `tensions` on `poses` (module docs), with
