@@ -1,9 +1,11 @@
 //! Helpers for the process-level tests in `tests/tests/`: locating the
-//! `tendril` binary that `cargo test` built, running it, and reading the
-//! numeric CSV logs its processes write.
+//! `tendril` binary that `cargo test` built, running it (and `tendril sim`,
+//! one closed loop at a time), and reading the numeric CSV logs its
+//! processes write.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
+use std::sync::{Mutex, MutexGuard};
 
 /// Root of the workspace (where `robots/` lives).
 pub fn workspace_root() -> PathBuf {
@@ -75,4 +77,42 @@ pub fn col(header: &[String], name: &str) -> usize {
         .iter()
         .position(|h| h == name)
         .unwrap_or_else(|| panic!("no column {name}"))
+}
+
+/// One closed loop at a time: each sim is three real-time processes pinned
+/// to one CPU, and the timing assertions (periods kept, watchdog within
+/// three periods) measure the loop, not how many other loops share the
+/// machine.
+static ONE_LOOP_AT_A_TIME: Mutex<()> = Mutex::new(());
+
+/// Hold while running a closed loop (see [`run_sim`]).
+pub fn one_loop_at_a_time() -> MutexGuard<'static, ()> {
+    ONE_LOOP_AT_A_TIME
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// Run `tendril sim ARGS --out <fresh temp dir>` from the workspace root,
+/// one loop at a time; panics with its stderr if it fails. Returns the
+/// directory (kept alive while held) and the stderr.
+pub fn run_sim(args: &[&str]) -> (tempfile::TempDir, String) {
+    let _one = one_loop_at_a_time();
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = Command::new(tendril_bin())
+        .arg("sim")
+        .args(args)
+        .arg("--out")
+        .arg(dir.path())
+        .current_dir(workspace_root())
+        .output()
+        .expect("spawn tendril sim");
+    let stderr = String::from_utf8_lossy(&out.stderr).to_string();
+    assert!(out.status.success(), "tendril sim failed: {stderr}");
+    (dir, stderr)
+}
+
+/// The `report.json` a sim wrote into `dir`.
+pub fn sim_report(dir: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(dir.join("report.json")).expect("report.json");
+    serde_json::from_str(&text).expect("report is JSON")
 }

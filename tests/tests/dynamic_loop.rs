@@ -15,11 +15,10 @@
 //! and limit-cycles at the first mode.
 
 use std::path::Path;
-use std::process::Command;
 
 use tendril::dynamics::Damping;
 use tendril::robot::Robot;
-use tendril_tests::{col, csv, robot, tendril_bin, workspace_root};
+use tendril_tests::{col, csv, robot, run_sim};
 
 /// The default exported net (what the MCU build embeds).
 const DEFAULT_NET: &str = "firmware/vectors/default.tnet";
@@ -28,31 +27,18 @@ const KI_INSIDE_BOUND: &str = "2";
 /// The plant's motor time constant (`PlantParams::default`), s.
 const MOTOR_TAU_S: f64 = 0.02;
 
-/// One closed loop at a time: each is three real-time processes pinned to
-/// one CPU, and a second loop on the same CPU would be a timing fault.
-static ONE_LOOP_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
 /// Run `tendril sim --plant dynamic` with `args`; the output directory.
 fn dynamic_sim(args: &[&str]) -> tempfile::TempDir {
-    let _one = ONE_LOOP_AT_A_TIME
-        .lock()
-        .unwrap_or_else(|poisoned| poisoned.into_inner());
-    let dir = tempfile::tempdir().expect("temp dir");
-    let out = Command::new(tendril_bin())
-        .args(["sim", "--plant", "dynamic", "--model", DEFAULT_NET])
-        .args(["--ki", KI_INSIDE_BOUND])
-        .arg("--out")
-        .arg(dir.path())
-        .args(args)
-        .current_dir(workspace_root())
-        .output()
-        .expect("spawn tendril sim");
-    assert!(
-        out.status.success(),
-        "tendril sim failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    dir
+    let mut all = vec![
+        "--plant",
+        "dynamic",
+        "--model",
+        DEFAULT_NET,
+        "--ki",
+        KI_INSIDE_BOUND,
+    ];
+    all.extend_from_slice(args);
+    run_sim(&all).0
 }
 
 /// The true tip (plant log: x, y, m) against the planner's desired tip at

@@ -15,14 +15,10 @@ use tendril::kinematics::Lifter;
 use tendril::robot::Robot;
 use tendril::statics::{SolverSettings, Statics};
 use tendril_shared::messages::command_status;
-use tendril_tests::{col, csv, robot, tendril_bin, workspace_root};
+use tendril_tests::{col, csv, robot, run_sim, sim_report, tendril_bin, workspace_root};
 
 const TWO_SEGMENT: &str = "robots/tdcr-2seg.toml";
 const ONE_TENDON: &str = "robots/seed-1t.toml";
-
-/// One closed loop at a time (three real-time processes pinned to one CPU;
-/// see `hil_loop.rs`).
-static ONE_LOOP_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 /// Run `tendril sim` on `robot_file` with the quick net and `args`; return
 /// the report and the directory (kept alive).
@@ -32,23 +28,14 @@ fn sim(robot_file: &str, args: &[&str]) -> (Value, tempfile::TempDir) {
 
 /// [`sim`] with explicit model arguments.
 fn sim_with(robot_file: &str, model: &[&str], args: &[&str]) -> (Value, tempfile::TempDir) {
-    let _one = ONE_LOOP_AT_A_TIME
-        .lock()
-        .unwrap_or_else(|poisoned| poisoned.into_inner());
-    let dir = tempfile::tempdir().expect("temp dir");
-    let out = Command::new(tendril_bin())
-        .args(["sim", "--robot", robot_file])
-        .args(model)
-        .arg("--out")
-        .arg(dir.path())
-        .args(args)
-        .current_dir(workspace_root())
-        .output()
-        .expect("spawn tendril sim");
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "tendril sim failed: {stderr}");
-    let text = std::fs::read_to_string(dir.path().join("report.json")).expect("report.json");
-    (serde_json::from_str(&text).expect("report is JSON"), dir)
+    let all: Vec<&str> = ["--robot", robot_file]
+        .iter()
+        .chain(model)
+        .chain(args)
+        .copied()
+        .collect();
+    let (dir, _) = run_sim(&all);
+    (sim_report(dir.path()), dir)
 }
 
 fn f(v: &Value) -> f64 {

@@ -14,7 +14,9 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
-use tendril_tests::{col, csv, tendril_bin, workspace_root};
+use tendril_tests::{
+    col, csv, one_loop_at_a_time, run_sim, sim_report, tendril_bin, workspace_root,
+};
 
 /// The default exported net, relative to the workspace root.
 const DEFAULT_NET: &str = "firmware/vectors/default.tnet";
@@ -25,35 +27,11 @@ fn sim(args: &[&str]) -> (Value, tempfile::TempDir, String) {
     sim_with(&["--model", DEFAULT_NET], args)
 }
 
-/// One closed loop at a time: each sim is three real-time processes pinned
-/// to one CPU, and the timing assertions (periods kept, watchdog within three
-/// periods) measure the loop, not how many other loops share the machine.
-static ONE_LOOP_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-fn one_loop_at_a_time() -> std::sync::MutexGuard<'static, ()> {
-    ONE_LOOP_AT_A_TIME
-        .lock()
-        .unwrap_or_else(|poisoned| poisoned.into_inner())
-}
-
 /// [`sim`] with explicit model arguments.
 fn sim_with(model: &[&str], args: &[&str]) -> (Value, tempfile::TempDir, String) {
-    let _one = one_loop_at_a_time();
-    let dir = tempfile::tempdir().expect("temp dir");
-    let out = Command::new(tendril_bin())
-        .arg("sim")
-        .args(model)
-        .arg("--out")
-        .arg(dir.path())
-        .args(args)
-        .current_dir(workspace_root())
-        .output()
-        .expect("spawn tendril sim");
-    let stderr = String::from_utf8_lossy(&out.stderr).to_string();
-    assert!(out.status.success(), "tendril sim failed: {stderr}");
-    let text = std::fs::read_to_string(dir.path().join("report.json")).expect("report.json");
-    let report: Value = serde_json::from_str(&text).expect("report is JSON");
-    (report, dir, stderr)
+    let all: Vec<&str> = model.iter().chain(args).copied().collect();
+    let (dir, stderr) = run_sim(&all);
+    (sim_report(dir.path()), dir, stderr)
 }
 
 fn f(v: &Value) -> f64 {
