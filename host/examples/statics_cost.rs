@@ -37,16 +37,16 @@ fn main() -> anyhow::Result<()> {
         let results = pool
             .install(|| solve_all(&statics, &loads, &stop, &|_| {}))
             .unwrap_or_default();
-        let passes: usize = results.iter().flatten().map(|s| s.integrations).sum();
+        let passes: f64 = results.iter().flatten().map(|s| s.integrations).sum();
         println!(
             "batch: {} rows, {:.2} integrations per row",
             results.len(),
-            passes as f64 / 600.0
+            passes / 600.0
         );
         return Ok(());
     }
     let cases = Sampler::Adjacent.draw(100, &robot.max_tensions(), 3);
-    let (mut solves, mut integrations) = (0usize, 0usize);
+    let (mut solves, mut integrations) = (0usize, 0.0);
     for t in &cases {
         let first = statics.solve(t, None)?;
         if mode == "warm" {
@@ -62,7 +62,7 @@ fn main() -> anyhow::Result<()> {
     }
     println!(
         "{mode}: {solves} solves, {:.2} integrations per solve",
-        integrations as f64 / solves as f64
+        integrations / solves as f64
     );
     Ok(())
 }

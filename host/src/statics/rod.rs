@@ -112,7 +112,7 @@ pub(super) struct TendonTerms {
 /// The factored 6×6 strain-rate matrix.
 #[derive(Clone, Debug)]
 pub(super) enum Factor {
-    Cholesky(Cholesky6),
+    Ldlt(Ldlt6),
     Lu(LU<f64, U6, U6>),
 }
 
@@ -139,7 +139,7 @@ impl System {
     /// Solve K X = B in place; false when the factor cannot.
     pub fn solve_mut(&self, b: &mut Matrix6<f64>) -> bool {
         match &self.factor {
-            Factor::Cholesky(c) => {
+            Factor::Ldlt(c) => {
                 for column in b.as_mut_slice().chunks_exact_mut(6) {
                     let mut x = [0.0; 6];
                     x.copy_from_slice(column);
@@ -153,61 +153,65 @@ impl System {
     }
 }
 
-/// Cholesky factor L (K = L Lᵀ) of a 6×6 symmetric positive definite
-/// matrix, in fixed arrays: the strain-rate system is solved four times per
-/// RK4 step, and at this size fully unrolled loops beat a general
-/// decomposition (measured, see BENCHMARKS.md "Statics").
+/// Square-root-free Cholesky factor K = L D Lᵀ (L unit lower triangular,
+/// D diagonal) of a 6×6 symmetric positive definite matrix, in fixed arrays:
+/// the strain-rate system is factored four times per RK4 step, and at this
+/// size fully unrolled loops beat a general decomposition (measured, see
+/// BENCHMARKS.md "Statics"). LDLᵀ rather than LLᵀ: the six square roots of
+/// LLᵀ sit on the factor's critical path, the divisions of both do too.
 #[derive(Clone, Copy, Debug)]
-pub(super) struct Cholesky6 {
-    /// L, row-major; entries above the diagonal unused.
+pub(super) struct Ldlt6 {
+    /// L, row-major, below the diagonal; entries on and above it unused.
     l: [[f64; 6]; 6],
-    /// 1 / L_jj.
-    inv_diag: [f64; 6],
+    /// 1 / D_jj.
+    inv_d: [f64; 6],
 }
 
 // Index loops on purpose: the triangular recurrences read as in the textbook,
 // and the constant bounds are what makes them unroll.
 #[allow(clippy::needless_range_loop)]
-impl Cholesky6 {
+impl Ldlt6 {
     /// Factor the matrix whose lower triangle is `k` (row-major); `None`
     /// when a pivot is not positive (or not finite).
     #[inline(always)]
-    fn new(k: &[[f64; 6]; 6]) -> Option<Cholesky6> {
-        let mut c = Cholesky6 {
+    fn new(k: &[[f64; 6]; 6]) -> Option<Ldlt6> {
+        let mut f = Ldlt6 {
             l: [[0.0; 6]; 6],
-            inv_diag: [0.0; 6],
+            inv_d: [0.0; 6],
         };
+        // dl[i][p] = L_ip D_pp, kept so each entry costs one product.
+        let mut dl = [[0.0; 6]; 6];
         // One call per column with the column as a constant, so that every
         // loop has constant bounds and unrolls.
-        let ok = c.column::<0>(k)
-            && c.column::<1>(k)
-            && c.column::<2>(k)
-            && c.column::<3>(k)
-            && c.column::<4>(k)
-            && c.column::<5>(k);
-        ok.then_some(c)
+        let ok = f.column::<0>(k, &mut dl)
+            && f.column::<1>(k, &mut dl)
+            && f.column::<2>(k, &mut dl)
+            && f.column::<3>(k, &mut dl)
+            && f.column::<4>(k, &mut dl)
+            && f.column::<5>(k, &mut dl);
+        ok.then_some(f)
     }
 
-    /// Column J of L; false when its pivot is not positive and finite.
+    /// Column J of L and D_JJ; false when the pivot is not positive and finite.
     #[inline(always)]
-    fn column<const J: usize>(&mut self, k: &[[f64; 6]; 6]) -> bool {
+    fn column<const J: usize>(&mut self, k: &[[f64; 6]; 6], dl: &mut [[f64; 6]; 6]) -> bool {
         let l = &mut self.l;
         let mut d = k[J][J];
         for p in 0..J {
-            d -= l[J][p] * l[J][p];
+            d -= l[J][p] * dl[J][p];
         }
-        if !(d > 0.0 && d.is_finite()) {
+        if !(d > 0.0 && d < f64::INFINITY) {
             return false;
         }
-        let ljj = d.sqrt();
-        l[J][J] = ljj;
-        self.inv_diag[J] = 1.0 / ljj;
+        let inv = 1.0 / d;
+        self.inv_d[J] = inv;
         for i in J + 1..6 {
             let mut x = k[i][J];
             for p in 0..J {
-                x -= l[i][p] * l[J][p];
+                x -= dl[i][p] * l[J][p];
             }
-            l[i][J] = x * self.inv_diag[J];
+            dl[i][J] = x;
+            l[i][J] = x * inv;
         }
         true
     }
@@ -223,13 +227,14 @@ impl Cholesky6 {
     /// Solve K x = b in place.
     #[inline(always)]
     fn solve(&self, b: &mut [f64; 6]) {
-        self.forward::<0>(b);
         self.forward::<1>(b);
         self.forward::<2>(b);
         self.forward::<3>(b);
         self.forward::<4>(b);
         self.forward::<5>(b);
-        self.backward::<5>(b);
+        for (x, inv) in b.iter_mut().zip(&self.inv_d) {
+            *x *= inv;
+        }
         self.backward::<4>(b);
         self.backward::<3>(b);
         self.backward::<2>(b);
@@ -237,25 +242,38 @@ impl Cholesky6 {
         self.backward::<0>(b);
     }
 
-    /// Row I of L y = b.
+    /// Row I of L y = b (unit diagonal).
     #[inline(always)]
     fn forward<const I: usize>(&self, b: &mut [f64; 6]) {
         let mut x = b[I];
         for p in 0..I {
             x -= self.l[I][p] * b[p];
         }
-        b[I] = x * self.inv_diag[I];
+        b[I] = x;
     }
 
-    /// Row I of Lᵀ x = y.
+    /// Row I of Lᵀ x = y (unit diagonal).
     #[inline(always)]
     fn backward<const I: usize>(&self, b: &mut [f64; 6]) {
         let mut x = b[I];
         for p in I + 1..6 {
             x -= self.l[p][I] * b[p];
         }
-        b[I] = x * self.inv_diag[I];
+        b[I] = x;
     }
+}
+
+/// R û, column by column: column k is R (u × e_k), a difference of two of
+/// R's columns scaled by components of u (half the products of a full 3×3
+/// product with the hat matrix; it is evaluated at every RK4 stage).
+#[inline(always)]
+pub(super) fn rot_times_hat(rot: &Matrix3<f64>, u: &Vector3<f64>) -> Matrix3<f64> {
+    let (c0, c1, c2) = (rot.column(0), rot.column(1), rot.column(2));
+    Matrix3::from_columns(&[
+        c1 * u.z - c2 * u.y,
+        c2 * u.x - c0 * u.z,
+        c0 * u.y - c1 * u.x,
+    ])
 }
 
 /// Factor K (lower triangle `k`) and solve K x = rhs. K is SPD by
@@ -268,11 +286,11 @@ fn factor_and_solve(
     rhs: [f64; 6],
     s: f64,
 ) -> Result<(Factor, [f64; 6]), SingularSystem> {
-    let (factor, x) = match Cholesky6::new(k) {
+    let (factor, x) = match Ldlt6::new(k) {
         Some(c) => {
             let mut x = rhs;
             c.solve(&mut x);
-            (Factor::Cholesky(c), x)
+            (Factor::Ldlt(c), x)
         }
         None => {
             let full = Matrix6::from_fn(|i, j| if j <= i { k[i][j] } else { k[j][i] });
@@ -575,7 +593,7 @@ impl Rod {
         let (dw, du) = self.strain_rates(s, state, running)?;
         Ok(RodRates {
             dp: state.rot * state.v(),
-            dr: state.rot * hat(&state.u),
+            dr: rot_times_hat(&state.rot, &state.u),
             dw,
             du,
         })

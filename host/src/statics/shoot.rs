@@ -75,8 +75,8 @@ pub struct Solution {
     pub iterations: usize,
     /// Rod passes used, in plain-pass equivalents: a pass with
     /// sensitivities, which gives the Jacobian, counts as
-    /// [`SENSITIVITY_PASS_COST`].
-    pub integrations: usize,
+    /// [`SENSITIVITY_PASS_COST`] times its share of the solver's steps.
+    pub integrations: f64,
     /// Warm start for a neighbouring solve.
     pub warm: WarmStart,
     tensions: Vec<f64>,
@@ -176,6 +176,7 @@ impl Statics {
         let problem = Shooting {
             rod: &rod,
             steps: self.settings.steps,
+            jacobian_steps: jacobian_steps(self.settings.steps),
             f_ext: tip_force,
             m_ext: tip_moment,
             track_rotation: rod.f_e != Vector3::zeros()
@@ -188,7 +189,7 @@ impl Statics {
         let guess = rod.initial_guess(&tip_force, &tip_moment);
         let result = match warm_ok {
             Some(w) => problem.newton(w.x + (guess - w.guess), Some(w.jacobian), &self.settings),
-            None => Err((f64::INFINITY, 0, 0)),
+            None => Err((f64::INFINITY, 0, 0.0)),
         };
         // A warm start that fails (a far neighbour) falls back to a cold start
         // from the analytic guess rather than reporting failure.
@@ -266,27 +267,52 @@ fn base_state(rod: &Rod, x: &Vector6<f64>) -> RodState {
 struct Shooting<'a> {
     rod: &'a Rod,
     steps: usize,
+    /// RK4 steps of the pass that gives the Jacobian ([`jacobian_steps`]).
+    jacobian_steps: usize,
     f_ext: Vector3<f64>,
     m_ext: Vector3<f64>,
     /// Whether the residual depends on the rotation (gravity or a tip load).
     track_rotation: bool,
 }
 
-/// What a rod pass with sensitivities costs in plain passes (callgrind
-/// instruction counts on the default robot; see BENCHMARKS.md).
-pub const SENSITIVITY_PASS_COST: usize = 3;
+/// What a rod pass with sensitivities costs in plain passes of the same
+/// steps (callgrind instruction counts on the default robot, 2026-12-02:
+/// ≈ 400 k against ≈ 90 k instructions for 16 steps; BENCHMARKS.md).
+pub const SENSITIVITY_PASS_COST: f64 = 4.5;
+
+/// The Jacobian is integrated on a grid this many times coarser than the
+/// solve's. Newton needs the Jacobian only to pick its steps: the residual,
+/// and so the answer, is always the fine grid's. A Jacobian from a grid 8×
+/// coarser differs from the fine one by about the coarse grid's relative
+/// discretisation error (RK4: 8⁴ ≈ 4000× the fine grid's, ~1e-3 on the
+/// default robot), so every step still cuts the residual ~1000-fold, at an
+/// eighth of the cost (BENCHMARKS.md "Statics": −37 % instructions per cold
+/// solve against the fine-grid Jacobian).
+const JACOBIAN_COARSENING: usize = 8;
+
+/// RK4 steps of the pass that gives Newton its Jacobian in a solve with
+/// `steps` steps: [`JACOBIAN_COARSENING`] times fewer, at least 2.
+pub fn jacobian_steps(steps: usize) -> usize {
+    (steps / JACOBIAN_COARSENING).max(2).min(steps.max(1))
+}
 
 /// Halvings of a step along a fresh Newton direction before giving up.
 const MAX_HALVINGS: usize = 8;
 /// A step that cuts the residual to less than this fraction keeps its
 /// Jacobian for the next step (a chord step, one plain pass); otherwise the
-/// next step gets a fresh Jacobian (one pass with sensitivities).
-const CHORD_CONTRACTION: f64 = 0.1;
+/// next step gets a fresh Jacobian (a coarse pass with sensitivities, cheaper
+/// than the several chord steps a weaker contraction would need).
+const CHORD_CONTRACTION: f64 = 0.01;
+/// How much a step with a warm start's Jacobian cuts the residual when the
+/// tensions moved (measured 0.01–0.07 for a 0.1 N change on the default
+/// robot). A warm start whose residual this would not bring under the
+/// tolerance in one step gets a fresh Jacobian first.
+const STALE_CONTRACTION: f64 = 0.05;
 
 /// (unknowns, tip state there, Jacobian, residual norm, iterations, integrations)
-type NewtonOk = (Vector6<f64>, RodState, Matrix6<f64>, f64, usize, usize);
+type NewtonOk = (Vector6<f64>, RodState, Matrix6<f64>, f64, usize, f64);
 /// (best residual norm, iterations, integrations)
-type NewtonErr = (f64, usize, usize);
+type NewtonErr = (f64, usize, f64);
 
 impl Shooting<'_> {
     fn tip(&self, x: &Vector6<f64>) -> Result<RodState, SingularSystem> {
@@ -306,33 +332,42 @@ impl Shooting<'_> {
         }
     }
 
-    /// The residual and its exact Jacobian at `x`, from one pass of the rod
-    /// with its sensitivities (`tangent`). The residual is bit-identical to
-    /// [`Shooting::residual`]'s.
-    fn residual_and_jacobian(
-        &self,
-        x: &Vector6<f64>,
-    ) -> Option<(Vector6<f64>, Matrix6<f64>, RodState)> {
+    /// The Jacobian of the residual at `x`, exact for the grid of `steps`
+    /// steps: one pass of the rod with its sensitivities (`tangent`).
+    /// `None` when that pass meets a singular system.
+    fn jacobian(&self, x: &Vector6<f64>, grid: Grid) -> Option<Matrix6<f64>> {
+        let steps = match grid {
+            Grid::Coarse => self.jacobian_steps,
+            Grid::Fine => self.steps,
+        };
         let (tip, t) = integrate_with_tangent(
             self.rod,
             base_state(self.rod, x),
-            self.steps,
+            steps,
             self.track_rotation,
         )
         .ok()?;
-        let r = self.rod.tip_residual(&tip, &self.f_ext, &self.m_ext);
-        let j = self
-            .rod
-            .tip_residual_jacobian(&tip, &t, &self.f_ext, &self.m_ext);
-        Some((r, j, tip))
+        Some(
+            self.rod
+                .tip_residual_jacobian(&tip, &t, &self.f_ext, &self.m_ext),
+        )
     }
 
-    /// Newton's method from `x0` with the exact Jacobian, kept while it keeps
-    /// contracting the residual fast (a chord step costs one plain rod pass,
-    /// a fresh Jacobian one pass with sensitivities) and refreshed when it
-    /// does not; backtracking when a step does not reduce the residual.
-    /// `j0`: a Jacobian from a nearby solution (warm start), used until it
-    /// stops contracting.
+    /// What a [`Shooting::jacobian`] pass costs in plain passes.
+    fn jacobian_cost(&self, grid: Grid) -> f64 {
+        match grid {
+            Grid::Coarse => SENSITIVITY_PASS_COST * self.jacobian_steps as f64 / self.steps as f64,
+            Grid::Fine => SENSITIVITY_PASS_COST,
+        }
+    }
+
+    /// Newton's method from `x0`: steps from a Jacobian of the coarse grid
+    /// ([`jacobian_steps`]), kept while it keeps contracting the residual
+    /// fast (a chord step costs one plain rod pass) and refreshed when it does
+    /// not; backtracking when a step does not reduce the residual. A fresh
+    /// coarse Jacobian that gives no descent at all is replaced by the fine
+    /// grid's before the solve gives up. `j0`: a Jacobian from a nearby
+    /// solution (warm start), used while it contracts.
     fn newton(
         &self,
         x0: Vector6<f64>,
@@ -340,22 +375,21 @@ impl Shooting<'_> {
         settings: &SolverSettings,
     ) -> Result<NewtonOk, NewtonErr> {
         let mut x = x0;
-        let mut integrations = if j0.is_some() {
-            1
-        } else {
-            SENSITIVITY_PASS_COST
-        };
-        let (mut r, mut tip, mut jac, mut fresh) = match j0 {
-            Some(j) => {
-                let (r, tip) = self.residual(&x);
-                (r, tip, j, false)
-            }
-            None => match self.residual_and_jacobian(&x) {
-                Some((r, j, tip)) => (r, Some(tip), j, true),
-                None => return Err((f64::INFINITY, 0, integrations)),
-            },
-        };
+        let (mut r, mut tip) = self.residual(&x);
+        let mut integrations = 1.0;
         let mut norm = r.norm();
+        // The Jacobian in use and, when it was computed at the current x and
+        // not updated since, on which grid.
+        let (mut jac, mut fresh) = match j0 {
+            Some(j) if norm * STALE_CONTRACTION < settings.tol || !norm.is_finite() => (j, None),
+            _ => {
+                integrations += self.jacobian_cost(Grid::Coarse);
+                match self.jacobian(&x, Grid::Coarse) {
+                    Some(j) => (j, Some(Grid::Coarse)),
+                    None => return Err((f64::INFINITY, 0, integrations)),
+                }
+            }
+        };
         for iter in 0..settings.max_iter {
             if !norm.is_finite() {
                 return Err((norm, iter, integrations));
@@ -369,16 +403,17 @@ impl Shooting<'_> {
                 .lu()
                 .solve(&(-r))
                 .filter(|d| d.iter().all(|v| v.is_finite()));
+            let mut refresh = None;
             let mut accepted = false;
             if let Some(dx) = step {
                 // Backtracking on the residual norm; near the solution the
                 // full step is taken. A stale Jacobian gets one try only.
-                let tries = if fresh { MAX_HALVINGS } else { 1 };
+                let tries = if fresh.is_some() { MAX_HALVINGS } else { 1 };
                 let mut alpha = 1.0;
                 for _ in 0..tries {
                     let x_try = x + dx * alpha;
                     let (r_try, tip_try) = self.residual(&x_try);
-                    integrations += 1;
+                    integrations += 1.0;
                     let n_try = r_try.norm();
                     if n_try.is_finite() && n_try < (1.0 - 1e-4 * alpha) * norm {
                         let contraction = n_try / norm;
@@ -397,17 +432,7 @@ impl Shooting<'_> {
                         // next step gets a fresh one.
                         if (alpha < 1.0 || contraction > CHORD_CONTRACTION) && norm >= settings.tol
                         {
-                            match self.residual_and_jacobian(&x) {
-                                Some((r_new, j_new, _)) => {
-                                    r = r_new;
-                                    jac = j_new;
-                                    fresh = true;
-                                    integrations += SENSITIVITY_PASS_COST;
-                                }
-                                None => return Err((f64::INFINITY, iter + 1, integrations)),
-                            }
-                        } else {
-                            fresh = false;
+                            refresh = Some(Grid::Coarse);
                         }
                         break;
                     }
@@ -415,15 +440,19 @@ impl Shooting<'_> {
                 }
             }
             if !accepted {
-                if fresh {
-                    return Err((norm, iter + 1, integrations));
-                }
-                match self.residual_and_jacobian(&x) {
-                    Some((r_new, j_new, _)) => {
-                        r = r_new;
-                        jac = j_new;
-                        fresh = true;
-                        integrations += SENSITIVITY_PASS_COST;
+                refresh = match fresh {
+                    None => Some(Grid::Coarse),
+                    Some(Grid::Coarse) => Some(Grid::Fine),
+                    Some(Grid::Fine) => return Err((norm, iter + 1, integrations)),
+                };
+            }
+            fresh = None;
+            if let Some(grid) = refresh {
+                integrations += self.jacobian_cost(grid);
+                match self.jacobian(&x, grid) {
+                    Some(j) => {
+                        jac = j;
+                        fresh = Some(grid);
                     }
                     None => return Err((f64::INFINITY, iter + 1, integrations)),
                 }
@@ -436,4 +465,13 @@ impl Shooting<'_> {
             _ => Err((norm, settings.max_iter, integrations)),
         }
     }
+}
+
+/// Which grid a Jacobian is integrated on.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Grid {
+    /// [`jacobian_steps`] steps.
+    Coarse,
+    /// The solve's own steps.
+    Fine,
 }

@@ -18,8 +18,8 @@
 use nalgebra::{Matrix3, Matrix3x6, Matrix6, SMatrix, Vector3, Vector6};
 
 use super::integrate::pieces;
-use super::rod::{Factor, Rod, RodRates, RodState, SingularSystem, TendonSet};
-use crate::robot::{hat, MAX_TENDONS};
+use super::rod::{rot_times_hat, Factor, Rod, RodRates, RodState, SingularSystem, TendonSet};
+use crate::robot::MAX_TENDONS;
 
 /// ∂(R, w, u)/∂x of a rod state: one column per unknown of x = [n(0); u(0)].
 /// (∂p/∂x is not carried: nothing in the residual depends on p.)
@@ -77,7 +77,7 @@ impl Rod {
         let sys = self.system(s, y, running)?;
         let rates = RodRates {
             dp: y.rot * y.v(),
-            dr: y.rot * hat(&y.u),
+            dr: rot_times_hat(&y.rot, &y.u),
             dw: sys.dw,
             du: sys.du,
         };
@@ -122,10 +122,9 @@ impl Rod {
         }
         let mut rot = [Matrix3::zeros(); 6];
         if track_rotation {
-            let u_hat = hat(&y.u);
             for (j, r) in rot.iter_mut().enumerate() {
                 let du = Vector3::new(t.u[(0, j)], t.u[(1, j)], t.u[(2, j)]);
-                *r = t.rot[j] * u_hat + y.rot * hat(&du);
+                *r = rot_times_hat(&t.rot[j], &y.u) + rot_times_hat(&y.rot, &du);
             }
         }
         let tangent = Tangent {
@@ -383,12 +382,11 @@ impl Rod {
         let sys = self.system(s, y, running)?;
         let rates = RodRates {
             dp: y.rot * y.v(),
-            dr: y.rot * hat(&y.u),
+            dr: rot_times_hat(&y.rot, &y.u),
             dw: sys.dw,
             du: sys.du,
         };
         let v = y.v();
-        let u_hat = hat(&y.u);
         let terms = &sys.terms[..sys.n_terms];
         let mut psi = [Vector3::zeros(); MAX_TENDONS];
         for (p, term) in psi.iter_mut().zip(terms) {
@@ -435,7 +433,7 @@ impl Rod {
                 dz -= per_tension[j - 6];
             }
             let solved = match &sys.factor {
-                Factor::Cholesky(c) => {
+                Factor::Ldlt(c) => {
                     c.solve_vector(&mut dz);
                     true
                 }
@@ -447,7 +445,7 @@ impl Rod {
             out.w[j] = dz.fixed_rows::<3>(0).into();
             out.u[j] = dz.fixed_rows::<3>(3).into();
             out.p[j] = t.rot[j] * v + y.rot * dw;
-            out.rot[j] = t.rot[j] * u_hat + y.rot * hat(&du);
+            out.rot[j] = rot_times_hat(&t.rot[j], &y.u) + rot_times_hat(&y.rot, &du);
         }
         Ok((rates, out))
     }

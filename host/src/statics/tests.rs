@@ -5,6 +5,7 @@ use std::path::Path;
 
 use nalgebra::{Vector3, Vector6};
 
+use super::shoot::jacobian_steps;
 use super::*;
 use crate::robot::Robot;
 
@@ -316,11 +317,60 @@ fn warm_start_moves_with_the_analytic_guess() {
     let warm = statics.solve(&to, Some(&from.warm)).unwrap();
     let cold = statics.solve(&to, None).unwrap();
     assert_eq!(
-        warm.integrations, 1,
+        warm.integrations, 1.0,
         "warm solve took {}",
         warm.integrations
     );
     assert!((warm.position - cold.position).norm() < 1e-12);
+}
+
+/// Newton's Jacobian comes from a coarser grid ([`jacobian_steps`]); the
+/// answer must still be the fine grid's: the returned base unknowns,
+/// integrated with the solver's own steps, give back the returned tip bit
+/// for bit and a residual under the tolerance — for cold and warm solves,
+/// under gravity and a tip wrench, from slack to the tension limits.
+#[test]
+fn the_answer_is_the_fine_grids_whatever_grid_gave_the_jacobian() {
+    let robot = seed();
+    let settings = SolverSettings::default();
+    assert!(jacobian_steps(settings.steps) < settings.steps);
+    let statics = Statics::new(&robot, settings);
+    let rod = {
+        let mut rod = super::rod::Rod::new(&robot);
+        rod.set_tensions(&[0.0; 4]);
+        rod
+    };
+    let f = Vector3::new(0.05, -0.02, 0.01);
+    let m = Vector3::new(0.0, 0.002, -0.001);
+    let mut warm = None;
+    for tau in [
+        [0.0, 0.0, 0.0, 0.0],
+        [4.0, 3.0, 0.0, 0.0],
+        [10.0, 10.0, 0.0, 0.0],
+        [0.0, 0.0, 9.9, 0.1],
+        [6.0, 0.0, 0.0, 10.0],
+    ] {
+        for load in [false, true] {
+            let (f, m) = if load {
+                (f, m)
+            } else {
+                (Vector3::zeros(), Vector3::zeros())
+            };
+            for use_warm in [false, true] {
+                let start = warm.clone().filter(|_| use_warm);
+                let sol = statics.solve_loaded(&tau, f, m, start.as_ref()).unwrap();
+                let tip = statics
+                    .tip_state(&tau, &sol.warm.x, settings.steps)
+                    .unwrap();
+                assert_eq!(tip.p, sol.position, "{tau:?} load {load}");
+                let mut loaded = rod.clone();
+                loaded.set_tensions(&tau);
+                let r = loaded.tip_residual(&tip, &f, &m).norm();
+                assert!(r < settings.tol, "{tau:?} load {load}: residual {r:e}");
+                warm = Some(sol.warm);
+            }
+        }
+    }
 }
 
 #[test]
