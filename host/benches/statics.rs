@@ -5,7 +5,8 @@
 //! tension changed by 0.1 N; multi: the two-segment tdcr-2seg robot and the
 //! same robot with every tendon anchored at the tip (equal steps per metre);
 //! batch: 600 uniformly random rows through `tendril fk --input`'s library
-//! call on one thread, per row.
+//! call on one thread, per row; till-4t: the robot of the public C++
+//! reference at 20 steps (bench/cpp-reference/run times both in one run).
 //! Run: `cargo bench -p tendril --bench statics`.
 
 use std::hint::black_box;
@@ -64,6 +65,25 @@ fn solves(c: &mut Criterion) {
         "tdcr-tip-anchored",
         &Statics::new(&one, SolverSettings::default()),
         &tau,
+    );
+
+    // John Till's public C++ example robot with its tensions, at the 20 RK4
+    // steps bench/cpp-reference/run times the C++ code with (same run).
+    let till = Robot::load(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("../bench/cpp-reference/till-4t.toml"),
+    )
+    .unwrap();
+    cold_and_warm(
+        c,
+        "till-4t",
+        &Statics::new(
+            &till,
+            SolverSettings {
+                steps: 20,
+                ..SolverSettings::default()
+            },
+        ),
+        &[15.0, 0.0, 0.0, 0.0],
     );
 
     // One RK4 pass alone: the unit of cost of everything above.

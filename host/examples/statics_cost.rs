@@ -1,9 +1,11 @@
 //! A fixed workload of cold and warm statics solves, for instruction counts
 //! under `valgrind --tool=callgrind` (deterministic, unlike wall time on a
 //! shared machine): `cargo build --release -p tendril --example statics_cost`
-//! then `valgrind --tool=callgrind target/release/examples/statics_cost cold|warm|multi|batch`
+//! then `valgrind --tool=callgrind target/release/examples/statics_cost cold|warm|multi|batch|uniform`
 //! (multi: cold solves of the two-segment tdcr-2seg robot; batch: 600 uniform
-//! rows through the batch fk call, one thread).
+//! rows through the batch fk call, one thread; uniform: the same rows solved
+//! cold one by one, without the batch machinery). Optional further arguments:
+//! a robot file and a step count, e.g. `cold bench/cpp-reference/till-4t.toml 20`.
 
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
@@ -15,17 +17,20 @@ use tendril::statics::{SolverSettings, Statics};
 
 fn main() -> anyhow::Result<()> {
     let mode = std::env::args().nth(1).unwrap_or_else(|| "cold".into());
-    let file = if mode == "multi" {
-        "tdcr-2seg.toml"
-    } else {
-        "seed-4t.toml"
+    // Optional: another robot file and step count (cold/warm modes).
+    let file = std::env::args().nth(2);
+    let steps = std::env::args().nth(3).map(|s| s.parse()).transpose()?;
+    let robots = Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots");
+    let robot = match (&file, mode.as_str()) {
+        (Some(path), _) => Robot::load(Path::new(path))?,
+        (None, "multi") => Robot::load(&robots.join("tdcr-2seg.toml"))?,
+        (None, _) => Robot::load(&robots.join("seed-4t.toml"))?,
     };
-    let robot = Robot::load(
-        &Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../robots")
-            .join(file),
-    )?;
-    let statics = Statics::new(&robot, SolverSettings::default());
+    let settings = SolverSettings {
+        steps: steps.unwrap_or(SolverSettings::default().steps),
+        ..SolverSettings::default()
+    };
+    let statics = Statics::new(&robot, settings);
     if mode == "batch" {
         let loads: Vec<Load> = Sampler::Uniform
             .draw(600, &robot.max_tensions(), 5)
@@ -45,14 +50,28 @@ fn main() -> anyhow::Result<()> {
         );
         return Ok(());
     }
-    let cases = Sampler::Adjacent.draw(100, &robot.max_tensions(), 3);
+    if mode == "uniform" {
+        // The batch's rows, each solved cold on its own: the yardstick of
+        // "batch fk costs at most 1.3x a cold solve per row".
+        let mut passes = 0.0;
+        for tau in Sampler::Uniform.draw(600, &robot.max_tensions(), 5) {
+            passes += statics.solve(&tau, None)?.integrations;
+        }
+        println!(
+            "uniform: 600 cold solves, {:.2} integrations per solve",
+            passes / 600.0
+        );
+        return Ok(());
+    }
+    let max = robot.max_tensions();
+    let cases = Sampler::Adjacent.draw(100, &max, 3);
     let (mut solves, mut integrations) = (0usize, 0.0);
     for t in &cases {
         let first = statics.solve(t, None)?;
         if mode == "warm" {
             let mut next = t.clone();
             let i = next.iter().position(|&x| x > 0.0).unwrap_or(0);
-            next[i] += if next[i] + 0.1 <= 10.0 { 0.1 } else { -0.1 };
+            next[i] += if next[i] + 0.1 <= max[i] { 0.1 } else { -0.1 };
             let sol = statics.solve(&next, Some(&first.warm))?;
             integrations += sol.integrations;
         } else {

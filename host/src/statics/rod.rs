@@ -728,24 +728,52 @@ impl Rod {
         Vector6::new(force.x, force.y, force.z, moment.x, moment.y, moment.z)
     }
 
-    /// Rough base wrench (n(0), u(0)) for a cold start: the tendons' tip loads
-    /// and the weight of a straight rod carried to the base. Exact for
-    /// straight tip-anchored tendons without gravity; a good Newton start
-    /// otherwise (wherever a tendon is anchored, its net load on the rod is
-    /// its pull where it leaves the base).
+    /// Rough base wrench (n(0), u(0)) for a cold start: the tendons' tip
+    /// loads, and the weight and tip load carried to the base along the arc
+    /// the tendons alone would bend the rod into (constant curvature
+    /// u_t = m_t ⊘ Kbt). Exact for straight tip-anchored tendons without
+    /// gravity or tip load; a good Newton start otherwise (wherever a tendon
+    /// is anchored, its net load on the rod is its pull where it leaves the
+    /// base), and better than the straight rod's moments once the rod bends.
     pub fn initial_guess(&self, f_ext: &Vector3<f64>, m_ext: &Vector3<f64>) -> Vector6<f64> {
         let mut n0 = self.f_e * self.length + f_ext;
-        let mut m0 = (Vector3::z() * (0.5 * self.length * self.length)).cross(&self.f_e)
-            + m_ext
-            + (Vector3::z() * self.length).cross(f_ext);
+        let mut m_t = Vector3::zeros();
         for i in 0..self.n_tendons {
             let f_i = Vector3::new(0.0, 0.0, -self.tension[i]);
             n0 += f_i;
-            m0 += self.routing(i, self.length).r.cross(&f_i);
+            m_t += self.routing(i, self.length).r.cross(&f_i);
         }
+        let (p_mean, p_tip) = arc_moments(&m_t.component_div(&self.kbt), self.length);
+        let m0 = m_t + p_mean.cross(&self.f_e) + p_tip.cross(f_ext) + m_ext;
         let u0 = m0.component_div(&self.kbt);
         Vector6::new(n0.x, n0.y, n0.z, u0.x, u0.y, u0.z)
     }
+}
+
+/// For an inextensible arc from the base along e3 with constant body-frame
+/// curvature `u` (no torsion) and length `l`: (∫₀ˡ p ds, p(l)), the first
+/// moment of the arc (what a uniform load's moment about the base needs) and
+/// its tip. With κ = |u| and w = u × e3 (the direction the arc bends, times κ):
+/// p(s) = sin(κs)/κ e3 + (1 − cos κs)/κ² w.
+fn arc_moments(u: &Vector3<f64>, l: f64) -> (Vector3<f64>, Vector3<f64>) {
+    let e3 = Vector3::z();
+    let w = u.cross(&e3);
+    let k2 = w.norm_squared();
+    let x2 = k2 * l * l;
+    // (1 − cos κl)/κ², (l − sin(κl)/κ)/κ², sin(κl)/κ; series below κl = 1e-3,
+    // where the closed forms lose their digits to cancellation.
+    let (c1, c2, c3) = if x2 < 1e-6 {
+        (
+            l * l * (0.5 - x2 / 24.0),
+            l * l * l * (1.0 / 6.0 - x2 / 120.0),
+            l * (1.0 - x2 / 6.0),
+        )
+    } else {
+        let k = k2.sqrt();
+        let (sn, cs) = (k * l).sin_cos();
+        ((1.0 - cs) / k2, (l - sn / k) / k2, sn / k)
+    };
+    (e3 * c1 + w * c2, e3 * c3 + w * c1)
 }
 
 #[cfg(test)]
@@ -796,6 +824,33 @@ mod tests {
         let expected = -robot.weight_per_length().x / robot.kse().x;
         assert!((dv.x - expected).abs() < 1e-15);
         assert!(du.norm() < 1e-15);
+    }
+
+    /// The cold guess's arc moments against the arc itself: R(s) = exp(s û)
+    /// for constant u, p' = R e3, integrated by the trapezoidal rule on a
+    /// fine grid — for a bent arc (closed form) and a nearly straight one
+    /// (the series branch).
+    #[test]
+    fn arc_moments_match_the_integrated_arc() {
+        for u in [Vector3::new(0.3, -1.2, 0.0), Vector3::new(1e-4, 2e-4, 0.0)] {
+            let l = 0.4;
+            let n = 20_000;
+            let h = l / n as f64;
+            let tangent = |s: f64| nalgebra::Rotation3::from_scaled_axis(u * s) * Vector3::z();
+            let (mut p, mut first_moment) = (Vector3::zeros(), Vector3::zeros());
+            for k in 0..n {
+                let s = k as f64 * h;
+                let next = p + (tangent(s) + tangent(s + h)) * (0.5 * h);
+                first_moment += (p + next) * (0.5 * h);
+                p = next;
+            }
+            let (mean, tip) = arc_moments(&u, l);
+            assert!((tip - p).norm() < 1e-9, "{u}: tip {tip} vs {p}");
+            assert!(
+                (mean - first_moment).norm() < 1e-9,
+                "{u}: first moment {mean} vs {first_moment}"
+            );
+        }
     }
 
     #[test]
