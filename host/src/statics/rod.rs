@@ -329,6 +329,8 @@ pub struct Rod {
     straight: [Option<Vector3<f64>>; MAX_TENDONS],
     /// Tendon tensions τ_i, N.
     pub(super) tension: [f64; MAX_TENDONS],
+    /// The tendons with a non-zero tension.
+    pulled: TendonSet,
     /// Per tendon: arc length of its anchor, m.
     pub(super) end: [f64; MAX_TENDONS],
     /// Anchor positions strictly inside (0, L), ascending, distinct: the
@@ -377,6 +379,7 @@ impl Rod {
             geometry,
             straight,
             tension: [0.0; MAX_TENDONS],
+            pulled: 0,
             end,
             knots,
             n_knots,
@@ -407,8 +410,12 @@ impl Rod {
     /// the caller ([`crate::statics::shoot`]) validates it.
     pub fn set_tensions(&mut self, tau: &[f64]) {
         self.tension = [0.0; MAX_TENDONS];
-        for (t, &x) in self.tension.iter_mut().zip(tau) {
+        self.pulled = 0;
+        for (i, (t, &x)) in self.tension.iter_mut().zip(tau).enumerate() {
             *t = x;
+            if x != 0.0 {
+                self.pulled |= 1 << i;
+            }
         }
     }
 
@@ -524,11 +531,12 @@ impl Rod {
         }
         let mut a_sum = Vector3::zeros();
         let mut b_sum = Vector3::zeros();
-        for i in 0..self.n_tendons {
+        // Only the pulled tendons that run here load the rod: visit their bits.
+        let mut active = running & self.pulled;
+        while active != 0 {
+            let i = active.trailing_zeros() as usize;
+            active &= active - 1;
             let tau = self.tension[i];
-            if tau == 0.0 || running & (1 << i) == 0 {
-                continue;
-            }
             let g = self.routing(i, s);
             let q = Self::tendon_tangent(state, &g);
             let q2 = q.norm_squared();
@@ -563,7 +571,11 @@ impl Rod {
                 }
             }
             // a_i = A_i (û q + û r' + r''), b_i = r̂ a_i.
-            let alpha = state.u.cross(&q) + state.u.cross(&g.dr) + g.ddr;
+            let alpha = if self.straight[i].is_some() {
+                state.u.cross(&q) // r' = r'' = 0
+            } else {
+                state.u.cross(&q) + state.u.cross(&g.dr) + g.ddr
+            };
             let a_i = (alpha * q2 - q * q.dot(&alpha)) * c;
             a_sum += a_i;
             b_sum += r.cross(&a_i);
