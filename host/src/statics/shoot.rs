@@ -284,10 +284,10 @@ pub const SENSITIVITY_PASS_COST: f64 = 4.5;
 /// solve's. Newton needs the Jacobian only to pick its steps: the residual,
 /// and so the answer, is always the fine grid's. A Jacobian from a grid 8×
 /// coarser differs from the fine one by about the coarse grid's relative
-/// discretisation error (RK4: 8⁴ ≈ 4000× the fine grid's, ~1e-3 on the
-/// default robot), so every step still cuts the residual ~1000-fold, at an
-/// eighth of the cost (BENCHMARKS.md "Statics": −37 % instructions per cold
-/// solve against the fine-grid Jacobian).
+/// discretisation error (RK4: 8⁴ ≈ 4000× the fine grid's), so a step still
+/// cuts the residual 20- to 1000-fold (measured on the default robot), at an
+/// eighth of the cost: −37 % instructions per cold solve against the
+/// fine-grid Jacobian (callgrind, 2026-12-02; 4× coarser gave −32 %).
 const JACOBIAN_COARSENING: usize = 8;
 
 /// RK4 steps of the pass that gives Newton its Jacobian in a solve with
