@@ -154,9 +154,7 @@ pub fn plain_clip(robot: &Robot, target: &[f64]) -> Vec<f64> {
 mod tests {
     use super::*;
 
-    fn robot(name: &str) -> Robot {
-        crate::robot::repo_robot(name)
-    }
+    use crate::robot::repo_robot as robot;
 
     #[test]
     fn seed_robots_pair_opposite_tendons() {

@@ -150,9 +150,7 @@ mod tests {
     use crate::command_stage::{command_for, limits_for};
     use crate::dataset::sample::anchor_groups;
 
-    fn robot(name: &str) -> Robot {
-        crate::robot::repo_robot(name)
-    }
+    use crate::robot::repo_robot as robot;
 
     /// The co-contraction shift in f64: each set moved along `w` by the
     /// smallest α that brings every member to or above its floor — the

@@ -141,9 +141,7 @@ impl CascorOptions {
 mod tests {
     use super::*;
 
-    fn robot(name: &str) -> Robot {
-        crate::robot::repo_robot(name)
-    }
+    use crate::robot::repo_robot as robot;
 
     #[test]
     fn two_segments_bend_four_ways_and_get_the_larger_candidate_budget() {
