@@ -695,20 +695,19 @@ impl fmt::Display for Robot {
     }
 }
 
-/// A robot file of the repository's `robots/` (tests only): one loader for
-/// every module's tests.
-#[cfg(test)]
-pub(crate) fn repo_robot(file: &str) -> Robot {
+/// A robot file of this repository's `robots/` directory, by file name
+/// (`"seed-4t.toml"`): the one loader of the repository's robots for the
+/// workspace's unit tests, integration tests, benches and examples. It reads
+/// from the source tree the crate was built from, so it is for development
+/// only; users load robots with [`Robot::load`].
+///
+/// # Panics
+/// When the file is missing or invalid (a test or bench cannot go on).
+pub fn repo_robot(file: &str) -> Robot {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../robots")
         .join(file);
     Robot::load(&path).unwrap_or_else(|e| panic!("{file}: {e}"))
-}
-
-/// [`repo_robot`]'s statics with the default solver settings (tests only).
-#[cfg(test)]
-pub(crate) fn repo_statics(file: &str) -> crate::statics::Statics {
-    crate::statics::Statics::new(&repo_robot(file), crate::statics::SolverSettings::default())
 }
 
 #[cfg(test)]

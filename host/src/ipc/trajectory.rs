@@ -841,7 +841,7 @@ mod tests {
         assert_eq!(traj.feedforward(2.0, &mut ff), 0.0);
     }
 
-    use crate::robot::repo_statics as statics_of;
+    use crate::statics::repo_statics as statics_of;
 
     /// A helix on the two-segment robot: every sample's tip is on the
     /// circle, and its height is the linear rise and fall between the two

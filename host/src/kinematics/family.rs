@@ -150,7 +150,7 @@ mod tests {
     use super::*;
 
     fn family(file: &str) -> Family {
-        Family::of(&crate::robot::repo_statics(file)).unwrap()
+        Family::of(&crate::statics::repo_statics(file)).unwrap()
     }
 
     /// The dimension follows the anchor groups: two bending segments reach a

@@ -568,7 +568,7 @@ mod tests {
         check_tangent_against_central_differences(&statics(), &points, 2e-5, 1e-4);
     }
 
-    use crate::robot::repo_statics as statics_of;
+    use crate::statics::repo_statics as statics_of;
 
     /// Lifts reproduce their target coordinates through a fresh, cold
     /// forward solve of the returned tensions (the fact a lift must

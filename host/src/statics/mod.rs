@@ -23,3 +23,9 @@ pub use shoot::{Solution, SolveError, SolverSettings, Statics, WarmStart, MAX_ST
 mod tests;
 #[cfg(test)]
 mod tests_general;
+
+/// [`crate::robot::repo_robot`]'s statics with the default solver settings:
+/// the repository's robot files for tests, benches and examples.
+pub fn repo_statics(file: &str) -> Statics {
+    Statics::new(&crate::robot::repo_robot(file), SolverSettings::default())
+}

@@ -668,7 +668,7 @@ mod tests {
     use super::*;
     use crate::ipc::trajectory::Trajectory;
 
-    use crate::robot::repo_statics as statics_of;
+    use crate::statics::repo_statics as statics_of;
 
     /// Each robot gets the runs of its family (the default robot the two it
     /// always had), and every run's trajectory lifts on that robot.
