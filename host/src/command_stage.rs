@@ -1,85 +1,15 @@
 //! The host side of the firmware's command stage (`docs/design.md` §5.2):
-//! the co-contraction sets of a robot, derived from its geometry, and the
-//! full tension limits the control step runs with. The stage itself is the
+//! the full tension limits the control step runs with (the co-contraction
+//! sets come from [`crate::robot::groups`]). The stage itself is the
 //! firmware's (`tendril_firmware::command`), so the numbers a user gets from
 //! `evaluate` / `compare` are the ones the MCU would command.
-
-use std::f64::consts::PI;
 
 use nalgebra::DMatrix;
 
 use tendril_firmware::command::co_contract;
-use tendril_shared::{CoContraction, LimitsError, TendonLimits, MAX_TENDONS};
+use tendril_shared::{LimitsError, TendonLimits, MAX_TENDONS};
 
-use crate::robot::Robot;
-
-/// Two anchors or angles closer than this are the same (m, rad).
-const SAME: f64 = 1e-9;
-
-/// Co-contraction sets of `robot`: tendons anchored at the same arc length
-/// with the same routing that cancel each other's bending moment.
-///
-/// - An opposite pair (position angles π apart) is a set with weights
-///   `w_i ∝ d_j` (so `w_i d_i = w_j d_j`: no net moment);
-/// - three or more tendons of such a group that are left unpaired, with equal
-///   offsets and unit vectors summing to zero (equally spaced), form one set
-///   with equal weights.
-///
-/// Other tendons belong to no set and are clipped on their own.
-pub fn cocontraction_sets(robot: &Robot) -> CoContraction {
-    let n = robot.tendons.len().min(MAX_TENDONS);
-    let t = &robot.tendons[..n];
-    let mut set = [CoContraction::NONE; MAX_TENDONS];
-    let mut weight = [0.0f32; MAX_TENDONS];
-    let mut next = 0u8;
-    let same_group =
-        |a: usize, b: usize| (t[a].end - t[b].end).abs() < SAME && t[a].routing == t[b].routing;
-    for i in 0..n {
-        if set[i] != CoContraction::NONE {
-            continue;
-        }
-        let partner = (i + 1..n).find(|&j| {
-            set[j] == CoContraction::NONE && same_group(i, j) && {
-                let d = (t[j].angle - t[i].angle).rem_euclid(2.0 * PI);
-                (d - PI).abs() < 1e-6
-            }
-        });
-        if let Some(j) = partner {
-            let top = t[i].offset.max(t[j].offset);
-            set[i] = next;
-            set[j] = next;
-            weight[i] = (t[j].offset / top) as f32;
-            weight[j] = (t[i].offset / top) as f32;
-            next += 1;
-        }
-    }
-    // Equally spaced leftovers of one group.
-    for i in 0..n {
-        if set[i] != CoContraction::NONE {
-            continue;
-        }
-        let members: Vec<usize> = (i..n)
-            .filter(|&j| {
-                set[j] == CoContraction::NONE
-                    && same_group(i, j)
-                    && (t[j].offset - t[i].offset).abs() < SAME
-            })
-            .collect();
-        let (sx, sy) = members.iter().fold((0.0, 0.0), |(x, y), &j| {
-            (x + t[j].angle.cos(), y + t[j].angle.sin())
-        });
-        if members.len() >= 3 && sx.hypot(sy) < 1e-6 {
-            for &j in &members {
-                set[j] = next;
-                weight[j] = 1.0;
-            }
-            next += 1;
-        }
-    }
-    // Every set has ≥ 2 members and unit-or-less positive weights by
-    // construction; `new` checks it again.
-    CoContraction::new(&set[..n], &weight[..n]).unwrap_or_else(|_| CoContraction::none())
-}
+use crate::robot::{cocontraction_sets, Robot};
 
 /// The limits the control step enforces on `robot`: `[min_tension,
 /// max_tension]` per tendon, one slew rate (N/s), its co-contraction sets.
@@ -155,33 +85,6 @@ mod tests {
     use super::*;
 
     use crate::robot::repo_robot as robot;
-
-    #[test]
-    fn seed_robots_pair_opposite_tendons() {
-        let sets = cocontraction_sets(&robot("seed-paper.toml"));
-        let s = sets.sets();
-        assert_eq!((s[0], s[2]), (s[0], s[0]));
-        assert_eq!(s[1], s[3]);
-        assert_ne!(s[0], s[1]);
-        assert_eq!(&sets.weights()[..4], &[1.0; 4]);
-        assert!(cocontraction_sets(&robot("seed-1t.toml")).is_empty());
-    }
-
-    #[test]
-    fn two_segment_robot_groups_by_anchor() {
-        // Six tendons, three per segment at 120°: no opposite pairs, but each
-        // segment's three are equally spaced → one set per segment.
-        let r = robot("tdcr-2seg.toml");
-        let sets = cocontraction_sets(&r);
-        let s = &sets.sets()[..6];
-        for i in 0..6 {
-            for j in 0..6 {
-                let same_anchor = (r.tendons[i].end - r.tendons[j].end).abs() < 1e-12;
-                assert_eq!(s[i] == s[j], same_anchor, "tendons {i}, {j}: {s:?}");
-            }
-        }
-        assert!(s.iter().all(|&x| x != CoContraction::NONE));
-    }
 
     #[test]
     fn on_generated_seed_paper_rows_the_stage_recovers_the_tip_the_clip_loses() {

@@ -17,8 +17,9 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 
 use super::io::ColumnRange;
-use super::sample::{anchor_groups, snake_order, Sampler};
+use super::sample::{snake_order, Sampler};
 use super::Dataset;
+use crate::robot::anchor_groups;
 use crate::statics::{Solution, SolveError, Statics, WarmStart};
 
 /// Samples per warm-started chain. Small enough to balance two cores, large

@@ -18,9 +18,9 @@ use sha2::{Digest, Sha256};
 use super::disk::{free_bytes, parent_dir, same_file};
 use super::generate::{column_ranges, generate_rows, GenerateOptions, StreamError};
 use super::io::{RowWriter, MAX_VALUE_BYTES};
-use super::sample::anchor_groups;
 use super::split::{test_mask, MinMax, Ranges, SPLIT_SEED, TEST_FRACTION};
 use super::{DatasetError, Sampler, Sidecar};
+use crate::robot::anchor_groups;
 use crate::robot::{Robot, RobotError};
 use crate::statics::{SolverSettings, Statics};
 

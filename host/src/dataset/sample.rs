@@ -1,39 +1,8 @@
 //! Tension samplers (`docs/design.md` §3).
 
-use std::f64::consts::TAU;
-
 use rand::Rng;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-
-use crate::robot::Robot;
-
-/// Anchors closer than this (m) are one anchor.
-const SAME_ANCHOR_M: f64 = 1e-9;
-
-/// The robot's tendons grouped by anchor (`end`), the group nearest the base
-/// first; within a group, counter-clockwise by angle from +x, so that
-/// neighbours in the list (and the last and the first) are neighbours on
-/// the disk. Tendons with equal angles keep their file order.
-pub fn anchor_groups(robot: &Robot) -> Vec<Vec<usize>> {
-    let tendons = &robot.tendons;
-    let mut order: Vec<usize> = (0..tendons.len()).collect();
-    order.sort_by(|&a, &b| tendons[a].end.total_cmp(&tendons[b].end).then(a.cmp(&b)));
-    let mut groups: Vec<Vec<usize>> = Vec::new();
-    for i in order {
-        match groups.last_mut() {
-            Some(g) if (tendons[g[0]].end - tendons[i].end).abs() < SAME_ANCHOR_M => g.push(i),
-            _ => groups.push(vec![i]),
-        }
-    }
-    for g in &mut groups {
-        g.sort_by(|&a, &b| {
-            let angle = |i: usize| tendons[i].angle.rem_euclid(TAU);
-            angle(a).total_cmp(&angle(b)).then(a.cmp(&b))
-        });
-    }
-    groups
-}
 
 /// How tension vectors are drawn.
 #[derive(
@@ -41,7 +10,7 @@ pub fn anchor_groups(robot: &Robot) -> Vec<Vec<usize>> {
 )]
 #[serde(rename_all = "lowercase")]
 pub enum Sampler {
-    /// In each anchor group ([`anchor_groups`]) exactly two neighbouring
+    /// In each anchor group ([`crate::robot::anchor_groups`]) exactly two neighbouring
     /// tendons pull (a group of one: that tendon), each uniform in
     /// [τ_min, τ_max]; the rest stay at their floor. Keeps IK a function for
     /// antagonistic tendon sets; the default for robots with more than two
@@ -89,7 +58,7 @@ impl Sampler {
 
     /// As [`Sampler::draw_between`], the adjacent sampler pulling two
     /// neighbours in each of `groups` (tendon indices, each group in ring
-    /// order, as [`anchor_groups`] gives them). A robot with one anchor whose
+    /// order, as [`crate::robot::anchor_groups`] gives them). A robot with one anchor whose
     /// tendons are listed counter-clockwise draws exactly what
     /// [`Sampler::draw_between`] draws.
     pub fn draw_grouped(
@@ -158,6 +127,9 @@ pub fn snake_order(samples: &[Vec<f64>], max: &[f64], cells: usize) -> Vec<usize
 mod tests {
     use super::*;
 
+    use crate::robot::anchor_groups;
+    use crate::robot::groups::tests::three_segments;
+
     #[test]
     fn adjacent_sampler_pulls_exactly_two_neighbours_within_limits() {
         let max = [10.0, 8.0, 10.0, 6.0];
@@ -193,47 +165,6 @@ mod tests {
             let at_floor = (0..4).filter(|&i| t[i] == min[i]).count();
             assert!(at_floor >= 2, "{t:?}");
         }
-    }
-
-    /// Three segments of 0.1 m with four, three and one tendons (eight, the
-    /// most a robot may have), listed out of angle order and interleaved.
-    fn three_segments() -> Robot {
-        let mut text = String::from(
-            "name = \"three-seg\"\n[backbone]\nlength = 0.3\nradius = 0.0007\n\
-             youngs_modulus = 54e9\nshear_modulus = 20.8e9\ndensity = 0.0\n\
-             [environment]\ngravity = [0.0, 0.0, 0.0]\n",
-        );
-        for (angle, end) in [
-            (270.0, 0.2),
-            (90.0, 0.1),
-            (0.0, 0.1),
-            (45.0, 0.3),
-            (30.0, 0.2),
-            (270.0, 0.1),
-            (180.0, 0.1),
-            (150.0, 0.2),
-        ] {
-            text += &format!(
-                "[[tendon]]\noffset = 0.008\nangle_deg = {angle}\nmax_tension = 4.0\n\
-                 end = {end}\nrouting = \"straight\"\n"
-            );
-        }
-        Robot::from_toml(&text, std::path::Path::new("three-seg.toml")).unwrap()
-    }
-
-    #[test]
-    fn anchor_groups_follow_the_segments_and_the_ring() {
-        let robot = three_segments();
-        assert_eq!(
-            anchor_groups(&robot),
-            vec![vec![2, 1, 6, 5], vec![4, 7, 0], vec![3]]
-        );
-        let seed = Robot::from_toml(
-            include_str!("../../../robots/seed-4t.toml"),
-            std::path::Path::new("seed-4t.toml"),
-        )
-        .unwrap();
-        assert_eq!(anchor_groups(&seed), vec![vec![0, 1, 2, 3]]);
     }
 
     #[test]

@@ -15,7 +15,7 @@
 use nalgebra::Vector3;
 
 use super::KinematicsError;
-use crate::dataset::sample::anchor_groups;
+use crate::robot::anchor_groups;
 use crate::statics::Statics;
 
 /// Tendon directions whose cross product is below this span one line.

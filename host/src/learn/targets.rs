@@ -15,8 +15,8 @@ use nalgebra::DMatrix;
 use serde::Serialize;
 use tendril_shared::CoContraction;
 
-use crate::command_stage::cocontraction_sets;
 use crate::dataset::{Dataset, Sampler, Sidecar};
+use crate::robot::cocontraction_sets;
 use crate::robot::Robot;
 
 /// How the learners' targets are formed from a dataset's tensions.
@@ -148,7 +148,7 @@ impl Targets {
 mod tests {
     use super::*;
     use crate::command_stage::{command_for, limits_for};
-    use crate::dataset::sample::anchor_groups;
+    use crate::robot::anchor_groups;
 
     use crate::robot::repo_robot as robot;
 

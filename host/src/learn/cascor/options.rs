@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use super::net::OutputKind;
 use super::quickprop::QuickpropParams;
-use crate::dataset::sample::anchor_groups;
+use crate::robot::anchor_groups;
 use crate::robot::Robot;
 
 /// How the output weights are trained.
