@@ -31,7 +31,7 @@ use crate::learn::cascor::job::{self as train_job, SplitSpec, TrainJob, TrainOut
 use crate::learn::cascor::{Cascor, CascorOptions};
 use crate::learn::learner::{Learner, Prefitted, Split};
 use crate::learn::targets::Targets;
-use crate::plot::workspace::{draw_workspace, Shape};
+use crate::plot::workspace::{draw_workspace, BackboneCurve};
 use crate::robot::{Robot, DEFAULT_ROBOT};
 use crate::statics::{SolverSettings, Statics};
 
@@ -380,7 +380,7 @@ fn firmware_parity_section(model: &Path, json: &Path) -> String {
 
 /// Backbone shapes for the workspace figure: unloaded, and half / full pull
 /// of tendon 0 and of the opposite tendon.
-pub fn example_shapes(statics: &Statics) -> anyhow::Result<Vec<Shape>> {
+pub fn example_shapes(statics: &Statics) -> anyhow::Result<Vec<BackboneCurve>> {
     let robot = statics.robot();
     let n = robot.n_tendons();
     let mut cases: Vec<(String, Vec<f64>)> = vec![("no tension".into(), vec![0.0; n])];
@@ -402,7 +402,7 @@ pub fn example_shapes(statics: &Statics) -> anyhow::Result<Vec<Shape>> {
             let sol = statics
                 .solve(&t, None)
                 .with_context(|| format!("shape for {label}"))?;
-            Ok(Shape {
+            Ok(BackboneCurve {
                 label,
                 points: statics.shape(&sol, 41),
             })

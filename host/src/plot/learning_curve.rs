@@ -6,7 +6,18 @@ use std::path::Path;
 use plotters::prelude::*;
 
 use super::{draw_atomically, log_bounds, DrawResult};
-use crate::learn::cascor::UnitLog;
+
+/// One point of a learning curve: the RMSE of both splits (normalised, as a
+/// fraction) after `hidden` hidden units were installed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CurvePoint {
+    /// Installed hidden units.
+    pub hidden: usize,
+    /// Normalised RMSE on the training split.
+    pub train_rmse: f64,
+    /// Normalised RMSE on the validation split.
+    pub valid_rmse: f64,
+}
 
 /// Draw the learning curve in `history` into a PNG at `out` (written
 /// atomically: drawn to a temporary file beside it, then renamed); `best`
@@ -14,7 +25,7 @@ use crate::learn::cascor::UnitLog;
 /// show (zero, NaN) are left out; when none is left the axes are drawn with a
 /// note saying so. An empty history is an error.
 pub fn draw_learning_curve(
-    history: &[UnitLog],
+    history: &[CurvePoint],
     best: usize,
     title: &str,
     out: &Path,
@@ -102,19 +113,13 @@ pub fn draw_learning_curve(
 mod tests {
     use super::*;
 
-    fn history(rmse: &[(f64, f64)]) -> Vec<UnitLog> {
+    fn history(rmse: &[(f64, f64)]) -> Vec<CurvePoint> {
         rmse.iter()
             .enumerate()
-            .map(|(hidden, &(train_rmse, valid_rmse))| UnitLog {
+            .map(|(hidden, &(train_rmse, valid_rmse))| CurvePoint {
                 hidden,
                 train_rmse,
                 valid_rmse,
-                score: f64::NAN,
-                reduction: 0.0,
-                objective: None,
-                candidate_epochs: 0,
-                output_epochs: 0,
-                seconds: 0.0,
             })
             .collect()
     }

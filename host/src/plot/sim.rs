@@ -5,30 +5,44 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
-use crate::ipc::sim::report::SimReport;
+/// What the sim figure shows, in plain numbers.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimFigure<'a> {
+    /// Desired tip path, top view (x, y), mm.
+    pub desired_mm: Vec<(f64, f64)>,
+    /// Actual tip path, top view (x, y), mm.
+    pub actual_mm: Vec<(f64, f64)>,
+    /// Tension samples in time order.
+    pub tensions: Vec<TensionSample<'a>>,
+    /// Tendons to draw a pair of lines for.
+    pub tendons: usize,
+}
 
-/// Draw the report's series into a PNG at `path`.
-pub fn draw(path: &Path, report: &SimReport) -> Result<(), Box<dyn std::error::Error>> {
+/// The tensions at one instant, N, tendon 0 first; a missing entry is not drawn.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TensionSample<'a> {
+    /// Time, s.
+    pub t_s: f64,
+    /// Tensions the controller commanded, N.
+    pub commanded: &'a [f64],
+    /// Tensions the plant reported, N.
+    pub actual: &'a [f64],
+}
+
+/// Draw `figure` into a PNG at `path`.
+pub fn draw(path: &Path, figure: &SimFigure<'_>) -> Result<(), Box<dyn std::error::Error>> {
     super::init_fonts();
-    let path_pts = &report.series.path;
-    let tensions = &report.series.tensions;
+    let tensions = &figure.tensions;
 
     let root = BitMapBackend::new(path, (1400, 600)).into_drawing_area();
     root.fill(&WHITE)?;
     let (left, right) = root.split_horizontally(600);
 
     // Top view of the tip path.
-    let des: Vec<(f64, f64)> = path_pts
-        .iter()
-        .map(|p| (p.desired_mm[0], p.desired_mm[1]))
-        .collect();
-    let act: Vec<(f64, f64)> = path_pts
-        .iter()
-        .map(|p| (p.actual_mm[0], p.actual_mm[1]))
-        .collect();
+    let (des, act) = (&figure.desired_mm, &figure.actual_mm);
     let pts = des
         .iter()
-        .chain(&act)
+        .chain(act)
         .filter(|p| p.0.is_finite() && p.1.is_finite());
     let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
     for p in pts {
@@ -69,7 +83,7 @@ pub fn draw(path: &Path, report: &SimReport) -> Result<(), Box<dyn std::error::E
         .draw()?;
 
     // Tensions over time: commanded (thin) and actual (thick) per tendon.
-    let n = report.tendons;
+    let n = figure.tendons;
     let t_max = tensions
         .last()
         .map(|r| r.t_s)
@@ -82,7 +96,7 @@ pub fn draw(path: &Path, report: &SimReport) -> Result<(), Box<dyn std::error::E
         .unwrap_or(0.0);
     let mut f_max: f64 = 1.0;
     for r in tensions {
-        for v in r.commanded.iter().chain(&r.actual) {
+        for v in r.commanded.iter().chain(r.actual) {
             if v.is_finite() {
                 f_max = f_max.max(*v);
             }
@@ -106,12 +120,12 @@ pub fn draw(path: &Path, report: &SimReport) -> Result<(), Box<dyn std::error::E
     for k in 0..n {
         let color = Palette99::pick(k).to_rgba();
         chart.draw_series(LineSeries::new(
-            tensions.iter().map(|r| (r.t_s, at(&r.commanded, k))),
+            tensions.iter().map(|r| (r.t_s, at(r.commanded, k))),
             color.stroke_width(1),
         ))?;
         chart
             .draw_series(LineSeries::new(
-                tensions.iter().map(|r| (r.t_s, at(&r.actual, k))),
+                tensions.iter().map(|r| (r.t_s, at(r.actual, k))),
                 color.stroke_width(3),
             ))?
             .label(format!("tendon {k}"))

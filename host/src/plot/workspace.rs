@@ -7,7 +7,7 @@ use nalgebra::{DMatrix, Vector3};
 use plotters::prelude::*;
 
 /// A labelled backbone shape (base frame, m).
-pub struct Shape {
+pub struct BackboneCurve {
     /// Legend text, e.g. "t0 = 10 N".
     pub label: String,
     /// Points from base to tip.
@@ -28,7 +28,7 @@ fn range_mm(v: impl Iterator<Item = f64>) -> (f64, f64) {
 /// panels. `poses` with fewer than 3 columns is an error.
 pub fn draw_workspace(
     poses: &DMatrix<f64>,
-    shapes: &[Shape],
+    shapes: &[BackboneCurve],
     title: &str,
     out: &Path,
 ) -> DrawResult {
@@ -137,11 +137,11 @@ mod tests {
         let mut mixed = constant.clone();
         mixed[(0, 0)] = f64::INFINITY;
         mixed[(1, 2)] = f64::NAN;
-        let line = Shape {
+        let line = BackboneCurve {
             label: "flat".into(),
             points: vec![Vector3::zeros(); 3],
         };
-        let broken = Shape {
+        let broken = BackboneCurve {
             label: "nan".into(),
             points: vec![Vector3::new(f64::NAN, 0.0, f64::NAN)],
         };

@@ -658,7 +658,23 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
             source,
         },
     )?;
-    crate::plot::sim::draw(&dir.file("sim.png"), &report)
+    let figure = crate::plot::sim::SimFigure {
+        desired_mm: (report.series.path.iter())
+            .map(|p| (p.desired_mm[0], p.desired_mm[1]))
+            .collect(),
+        actual_mm: (report.series.path.iter())
+            .map(|p| (p.actual_mm[0], p.actual_mm[1]))
+            .collect(),
+        tensions: (report.series.tensions.iter())
+            .map(|r| crate::plot::sim::TensionSample {
+                t_s: r.t_s,
+                commanded: &r.commanded,
+                actual: &r.actual,
+            })
+            .collect(),
+        tendons: report.tendons,
+    };
+    crate::plot::sim::draw(&dir.file("sim.png"), &figure)
         .map_err(|e| SimError::Config(format!("sim figure: {e}")))?;
     Ok(report)
 }

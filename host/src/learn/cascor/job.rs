@@ -339,8 +339,18 @@ fn train_and_write(job: &TrainJob<'_>, stop: &AtomicBool) -> Result<TrainResult,
     let o = &job.outputs;
     // The plot first: it is the output most likely to fail, and a failure
     // then leaves the other files as they were.
+    use crate::plot::learning_curve::CurvePoint;
+    let curve: Vec<CurvePoint> = report
+        .history
+        .iter()
+        .map(|u| CurvePoint {
+            hidden: u.hidden,
+            train_rmse: u.train_rmse,
+            valid_rmse: u.valid_rmse,
+        })
+        .collect();
     crate::plot::learning_curve::draw_learning_curve(
-        &report.history,
+        &curve,
         report.best_hidden,
         &format!(
             "Cascade correlation learning curve ({} outputs, {})",
