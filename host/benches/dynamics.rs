@@ -6,18 +6,15 @@
 //!
 //! `cargo bench -p tendril --bench dynamics`
 
-use std::path::Path;
-
 use criterion::{criterion_group, criterion_main, Criterion};
 use nalgebra::{Vector2, Vector3};
 use tendril::dynamics::{Damping, Dynamics, DynamicsSettings};
 use tendril::kinematics::bend_tensions;
-use tendril::robot::Robot;
+use tendril::robot::repo_robot;
 use tendril::statics::{SolverSettings, Statics};
 
 fn dynamics_step(c: &mut Criterion) {
-    let robot =
-        Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml")).unwrap();
+    let robot = repo_robot("seed-4t.toml");
     let statics = Statics::new(&robot, SolverSettings::default());
     let path: Vec<Vec<f64>> = (0..5000)
         .map(|k| {

@@ -17,7 +17,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use tendril::ik_net::IkNet;
 use tendril::inverse::{ExactIk, IkSettings, Target};
 use tendril::kinematics::Lifter;
-use tendril::robot::Robot;
+use tendril::robot::repo_robot;
 use tendril::statics::{SolverSettings, Statics};
 
 fn root() -> &'static Path {
@@ -25,7 +25,7 @@ fn root() -> &'static Path {
 }
 
 fn targets(c: &mut Criterion) {
-    let robot = Robot::load(&root().join("robots/seed-4t.toml")).unwrap();
+    let robot = repo_robot("seed-4t.toml");
     let statics = Statics::new(&robot, SolverSettings::default());
     let ik = ExactIk::new(&robot, IkSettings::default());
     let truth = [4.0, 3.0, 0.0, 0.0];

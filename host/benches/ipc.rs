@@ -28,7 +28,7 @@ use tendril::ipc::controller::Slots;
 use tendril::ipc::fixture::quick_net;
 use tendril::ipc::stats::Summary;
 use tendril::ipc::transport::{self, Services, Svc};
-use tendril::robot::Robot;
+use tendril::robot::{repo_robot, Robot};
 use tendril::statics::{SolverSettings, Statics};
 use tendril_firmware::control::{
     control_step, ControlConfig, ControlState, Setpoint as FwSetpoint, StepInput,
@@ -39,7 +39,7 @@ use tendril_shared::TendonLimits;
 const CHILD_ENV: &str = "TENDRIL_IPC_BENCH_CHILD";
 
 fn robot() -> Robot {
-    Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml")).unwrap()
+    repo_robot("seed-4t.toml")
 }
 
 fn sp_event(

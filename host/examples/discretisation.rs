@@ -2,14 +2,12 @@
 //! spread of tensions of the default robot: picks `SolverSettings::steps`.
 //! Run: `cargo run --release -p tendril --example discretisation`.
 
-use std::path::Path;
-
 use tendril::dataset::Sampler;
-use tendril::robot::Robot;
+use tendril::robot::repo_robot;
 use tendril::statics::{SolverSettings, Statics};
 
 fn main() -> anyhow::Result<()> {
-    let robot = Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml"))?;
+    let robot = repo_robot("seed-4t.toml");
     let mut cases = Sampler::Adjacent.draw(200, &robot.max_tensions(), 7);
     cases.push(vec![10.0, 10.0, 0.0, 0.0]);
     let fine = Statics::new(

@@ -11,13 +11,18 @@
 //! runs it on the committed default net. It needs the source checkout (to
 //! build the MCU binary), `qemu-system-arm` and the `thumbv7em-none-eabihf`
 //! target; without them it says which is missing ([`ParityError::Unavailable`]).
+//! The host half needs the firmware's test harness, compiled only with this
+//! crate's feature `parity` (a default); built without it, every entry point
+//! reports [`ParityError::Unavailable`].
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use serde::Serialize;
+#[cfg(feature = "parity")]
 use tendril_firmware::vectors::{self, SwapBlobs};
+#[cfg(feature = "parity")]
 use tendril_firmware::{McuNet, McuSlots};
 
 /// The MCU target triple.
@@ -70,6 +75,9 @@ pub fn workspace_root() -> Option<PathBuf> {
 
 /// `qemu-system-arm` runs and the MCU target is installed, or which is not.
 pub fn prerequisites() -> Result<(), ParityError> {
+    if !cfg!(feature = "parity") {
+        return Err(without_harness());
+    }
     let qemu = Command::new("qemu-system-arm")
         .arg("--version")
         .stdout(Stdio::null())
@@ -201,6 +209,7 @@ pub fn run_qemu(elf: &Path, limit: Duration) -> Result<(bool, String), ParityErr
 /// The host build of the firmware core on the same files: `flash_net` as
 /// the running net, the vectors and swap blobs in `vectors_dir` (the
 /// committed ones are `firmware/vectors/` of the checkout).
+#[cfg(feature = "parity")]
 pub fn host_run(vectors_dir: &Path, flash_net: &Path) -> Result<String, ParityError> {
     let dir = vectors_dir;
     let read =
@@ -225,6 +234,21 @@ pub fn host_run(vectors_dir: &Path, flash_net: &Path) -> Result<String, ParityEr
     vectors::run(&mut store, &blobs, &vecs, &mut out)
         .map_err(|e| ParityError::Run(format!("host run of the vectors: {e}")))?;
     Ok(out)
+}
+
+/// [`host_run`] of a build without the feature `parity`.
+#[cfg(not(feature = "parity"))]
+pub fn host_run(_vectors_dir: &Path, _flash_net: &Path) -> Result<String, ParityError> {
+    Err(without_harness())
+}
+
+/// Why a build without the feature `parity` cannot check parity.
+fn without_harness() -> ParityError {
+    ParityError::Unavailable(
+        "this tendril was built without the firmware's test harness \
+         (cargo feature `parity`, on by default)"
+            .into(),
+    )
 }
 
 /// The comparable lines: `net`, `infer`, `step`, `done` (measurements and
@@ -309,6 +333,7 @@ fn bench_field(out: &str, key: &str) -> Option<f64> {
 
 /// Vector files made for `net` (any tendon count; `tendril_firmware::vector_gen`)
 /// in `dir`, written atomically; returns `dir` made absolute.
+#[cfg(feature = "parity")]
 pub fn write_vectors(net: &Path, dir: &Path) -> Result<PathBuf, ParityError> {
     let blob =
         std::fs::read(net).map_err(|e| ParityError::Run(format!("{}: {e}", net.display())))?;
@@ -326,6 +351,12 @@ pub fn write_vectors(net: &Path, dir: &Path) -> Result<PathBuf, ParityError> {
             .map_err(|e| ParityError::Run(format!("{}: {e}", path.display())))?;
     }
     std::fs::canonicalize(dir).map_err(|e| ParityError::Run(format!("{}: {e}", dir.display())))
+}
+
+/// [`write_vectors`] of a build without the feature `parity`.
+#[cfg(not(feature = "parity"))]
+pub fn write_vectors(_net: &Path, _dir: &Path) -> Result<PathBuf, ParityError> {
+    Err(without_harness())
 }
 
 /// Build, run and compare for `net` (see the module doc): the vectors are

@@ -1,4 +1,4 @@
-//! Helpers for the process-level tests in `tests/tests/`: locating the
+//! Helpers for the integration tests in `tests/tests/`: locating the
 //! `tendril` binary that `cargo test` built, running it (and `tendril sim`,
 //! one closed loop at a time), and reading the numeric CSV logs its
 //! processes write.
@@ -18,8 +18,9 @@ pub fn workspace_root() -> PathBuf {
 /// Path of the `tendril` binary built by the same `cargo test` invocation.
 ///
 /// Cargo builds a package's binaries whenever that package's integration
-/// tests are built (`host/tests/` guarantees this for `cargo test --workspace`),
-/// and puts them next to the `deps/` directory holding this test executable.
+/// tests are built (host/Cargo.toml's empty test target `binary-for-tests`
+/// guarantees this for `cargo test --workspace`), and puts them next to the
+/// `deps/` directory holding this test executable.
 pub fn tendril_bin() -> PathBuf {
     let exe = std::env::current_exe().expect("current test executable");
     let dir = exe
@@ -29,7 +30,7 @@ pub fn tendril_bin() -> PathBuf {
     let bin = dir.join(format!("tendril{}", std::env::consts::EXE_SUFFIX));
     assert!(
         bin.exists(),
-        "{} not built: run `cargo test --workspace` (or `cargo build -p tendril`) first",
+        "{} not built: run `cargo test --workspace` (or `cargo build -p tendril --bin tendril`) first",
         bin.display()
     );
     bin
@@ -44,7 +45,8 @@ pub fn tendril(args: &[&str]) -> Output {
         .expect("spawn tendril")
 }
 
-/// Path of a robot file in `robots/`.
+/// Path of a robot file in `robots/`, for a command-line argument (to load
+/// one: `tendril::robot::repo_robot`).
 pub fn robot(name: &str) -> PathBuf {
     workspace_root().join("robots").join(name)
 }

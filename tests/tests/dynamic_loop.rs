@@ -17,8 +17,8 @@
 use std::path::Path;
 
 use tendril::dynamics::Damping;
-use tendril::robot::Robot;
-use tendril_tests::{col, csv, robot, run_sim};
+use tendril::robot::repo_robot;
+use tendril_tests::{col, csv, run_sim};
 
 /// The default exported net (what the MCU build embeds).
 const DEFAULT_NET: &str = "firmware/vectors/default.tnet";
@@ -69,7 +69,7 @@ fn tip_against_desired(dir: &Path, from_s: f64) -> Vec<(f64, [f64; 2], [f64; 2])
 /// independent facts: the Euler–Bernoulli cantilever's ω₁ = 1.8751²
 /// √(EI / ρA L⁴) and ζ₁ = ω₁ t_r / 2 of the default damping B = t_r K.
 fn first_mode() -> (f64, f64) {
-    let seed = Robot::load(&robot("seed-4t.toml")).expect("seed robot");
+    let seed = repo_robot("seed-4t.toml");
     let ei = seed.youngs_modulus * seed.second_moment();
     let rho_a = seed.density * seed.area();
     let omega1 = 1.8751f64.powi(2) * (ei / (rho_a * seed.length.powi(4))).sqrt();

@@ -13,7 +13,7 @@ use tendril::ipc::sim::default_loop_runs;
 use tendril::ipc::trajectory::Shape;
 use tendril::kinematics::Lifter;
 use tendril::robot::Robot;
-use tendril::statics::{SolverSettings, Statics};
+use tendril::statics::{repo_statics, SolverSettings, Statics};
 use tendril_shared::messages::command_status;
 use tendril_tests::{col, csv, robot, run_sim, sim_report, tendril_bin, workspace_root};
 
@@ -44,10 +44,7 @@ fn f(v: &Value) -> f64 {
 
 fn statics(file: &str) -> Statics {
     let name = file.trim_start_matches("robots/");
-    Statics::new(
-        &Robot::load(&robot(name)).unwrap(),
-        SolverSettings::default(),
-    )
+    repo_statics(name)
 }
 
 /// The two-segment robot's mid height for a circle of radius 10 mm, mm.

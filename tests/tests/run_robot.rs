@@ -14,8 +14,7 @@ use std::path::Path;
 use serde_json::Value;
 use tendril::ipc::sim::default_loop_runs;
 use tendril::pipeline::run_dir;
-use tendril::robot::Robot;
-use tendril::statics::{SolverSettings, Statics};
+use tendril::statics::repo_statics;
 use tendril_tests::{robot, tendril};
 
 fn json(path: &Path) -> Value {
@@ -88,8 +87,7 @@ fn the_pipeline_runs_end_to_end_on_the_one_tendon_robot() {
     assert_eq!(parity["lines"], parity["bit_identical"], "{parity}");
 
     // The closed loop with the correction tracks the robot's runs to 0.1 mm.
-    let robot = Robot::load(&file).expect("robot");
-    let statics = Statics::new(&robot, SolverSettings::default());
+    let statics = repo_statics("seed-1t.toml");
     let runs = default_loop_runs(&statics).expect("loop runs");
     assert!(
         !runs.is_empty(),

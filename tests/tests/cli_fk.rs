@@ -1,20 +1,10 @@
 //! The `tendril fk` command-line contract of docs/design.md §7, driven through the
 //! real binary.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn tendril(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_tendril"))
-        .args(args)
-        .current_dir(root())
-        .output()
-        .expect("run tendril")
-}
+use tendril_tests::{tendril, tendril_bin, workspace_root as root};
 
 #[test]
 fn fk_json_has_the_contract_keys_and_bends_toward_the_pulled_tendon() {
@@ -268,7 +258,7 @@ fn run_batch(dir: &Path, input_text: &str, threads: &str) -> (bool, String, Stri
     let input = dir.join(format!("in-{threads}.csv"));
     let output = dir.join(format!("out-{threads}.csv"));
     std::fs::write(&input, input_text).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_tendril"))
+    let out = Command::new(tendril_bin())
         .args([
             "fk",
             "--input",

@@ -15,12 +15,11 @@ use tendril::learn::mlp::{Mlp, Training};
 use tendril::learn::rbf::Rbf;
 use tendril::learn::tree::RegressionTree;
 use tendril::learn::Learner;
-use tendril::robot::Robot;
+use tendril::robot::{repo_robot, Robot};
 use tendril::statics::{SolverSettings, Statics};
 
 fn robot() -> Robot {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml");
-    Robot::load(&path).expect("seed robot")
+    repo_robot("seed-4t.toml")
 }
 
 /// `n` rows: two adjacent tendons pulled (the default sampler's shape), solved by the statics.

@@ -3,16 +3,18 @@
 //! Ctrl-C stops a training run without touching its existing outputs.
 
 use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+use tendril_tests::tendril_bin;
+
 fn robot() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml")
+    tendril_tests::robot("seed-4t.toml")
 }
 
 fn tendril() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_tendril"))
+    Command::new(tendril_bin())
 }
 
 /// `tendril fk … | head`: the reader leaves after one byte of a long
@@ -22,7 +24,7 @@ fn tendril() -> Command {
 fn fk_piped_into_head_exits_without_a_panic() {
     let script = format!(
         "{} fk --robot {} --tensions 2,0,0,0 --json --shape 5000 | head -c 1 >/dev/null; exit ${{PIPESTATUS[0]}}",
-        env!("CARGO_BIN_EXE_tendril"),
+        tendril_bin().display(),
         robot().display()
     );
     let out = Command::new("bash")

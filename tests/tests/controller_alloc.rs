@@ -10,13 +10,12 @@
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
-use std::path::Path;
 
 use tendril::ipc::clock::{Tick, Ticker};
 use tendril::ipc::controller::{log_header, Controller, ControllerConfig, FaultKind, Inbox};
 use tendril::ipc::stats::CsvLog;
 use tendril::ipc::trajectory::{Shape, Trajectory};
-use tendril::robot::Robot;
+use tendril::robot::repo_robot;
 use tendril::statics::{SolverSettings, Statics};
 use tendril_shared::messages::{setpoint_flags, Header, PlantState, Setpoint, WeightUpdate};
 
@@ -77,10 +76,9 @@ fn counting_allocator_sees_an_allocation() {
 
 #[test]
 fn two_hundred_seconds_of_controller_periods_allocate_nothing() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let robot_path = root.join("robots/seed-4t.toml");
-    let model_path = root.join("firmware/vectors/default.tnet");
-    let robot = Robot::load(&robot_path).unwrap();
+    let robot_path = tendril_tests::robot("seed-4t.toml");
+    let model_path = tendril_tests::workspace_root().join("firmware/vectors/default.tnet");
+    let robot = repo_robot("seed-4t.toml");
     let model = std::fs::read(&model_path).unwrap();
     let mut cfg = ControllerConfig::new(robot_path, model_path);
     cfg.ki_per_s = 10.0;

@@ -32,16 +32,12 @@ fn staged(t: &[f64; 4]) -> Vec<f64> {
     }
     out.iter().map(|v| v.clamp(0.0, 10.0)).collect()
 }
-use tendril::robot::Robot;
+use tendril::robot::repo_robot;
 use tendril::statics::{SolverSettings, Statics};
 
 #[test]
 fn task_space_error_matches_independent_solves() {
-    let robot = Robot::load(std::path::Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../robots/seed-4t.toml"
-    )))
-    .unwrap();
+    let robot = repo_robot("seed-4t.toml");
     let statics = Statics::new(&robot, SolverSettings::default());
     let truth_t = [
         [2.0, 1.0, 0.0, 0.0],

@@ -37,7 +37,7 @@ static ALLOCATOR: Counting = Counting;
 
 /// Peak heap above the starting level while generating `samples` rows.
 fn peak_bytes(dir: &Path, samples: usize) -> usize {
-    let robot = Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml");
+    let robot = tendril_tests::robot("seed-4t.toml");
     let req = GenerateRequest {
         samples,
         // Coarse integration: this test is about memory, not accuracy.

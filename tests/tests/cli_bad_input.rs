@@ -5,12 +5,14 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use tendril_tests::tendril_bin;
+
 fn robot() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml")
+    tendril_tests::robot("seed-4t.toml")
 }
 
 fn tendril(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tendril"))
+    Command::new(tendril_bin())
         .args(args)
         .current_dir(dir)
         .output()
