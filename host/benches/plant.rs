@@ -11,7 +11,7 @@ use std::path::Path;
 use criterion::{criterion_group, criterion_main, Criterion};
 use nalgebra::Vector2;
 use tendril::ipc::plant::{PlantModel, PlantParams};
-use tendril::kinematics::bend_tensions;
+use tendril::plan::bend_tensions;
 use tendril::robot::Robot;
 use tendril::statics::{SolverSettings, Statics};
 

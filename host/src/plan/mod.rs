@@ -1,18 +1,43 @@
-//! Robot kinematics beside the statics (`docs/design.md` §2, §4.1, §6): the
-//! robot's family of reachable tip positions ([`family`]), the planner's
-//! lift of tip coordinates on it to a reachable pose with its tangent on the
-//! exact IK ([`lift`]), the bend family of tensions ([`bend`]) and the
-//! constant-curvature arc ([`arc`]). The planner and the loop use them; they
-//! know nothing of IPC.
+//! Planning (`docs/design.md` §4.1, §6): what the planner follows and how it
+//! becomes reachable poses, with no IPC in it.
+//!
+//! - [`shape`]: the path schema ([`PathShape`], a pose table's [`PoseRow`])
+//!   and whether a robot's family can follow it;
+//! - [`family`]: the robot's family of reachable tip positions ([`Family`]);
+//! - [`path`]: pure path geometry (points on the family over time);
+//! - [`lift`]: lifting tip coordinates on the family to a reachable pose with
+//!   its tangent on the exact IK ([`Lifter`], [`FamilyTangent`]);
+//! - [`trajectory`]: the lifted path tabulated once with its feed-forward
+//!   tensions ([`Trajectory`]);
+//! - [`table`]: pose tables (feed-forward by the exact IK, the CSV reader);
+//! - [`runs`]: the closed-loop runs the main job does on a robot;
+//! - [`stand_in`]: the samples of the quick stand-in net (fitted by
+//!   [`crate::learn::quick`]);
+//! - [`bend`]: the bend family of tensions, sweeping a tip around the
+//!   workspace for fixtures and benchmarks.
+//!
+//! `ipc` uses this module (the planner process, the sim); it uses nothing of
+//! `ipc`.
 
-pub mod arc;
 pub mod bend;
 pub mod family;
 pub mod lift;
+pub mod path;
+pub mod runs;
+pub mod shape;
+pub mod stand_in;
+pub mod table;
+pub mod trajectory;
 
 pub use bend::bend_tensions;
 pub use family::Family;
-pub use lift::{family_shift, Lifted, Lifter, Tangent};
+pub use lift::{FamilyTangent, Lifted, Lifter};
+pub use runs::{default_loop_runs, LoopRun};
+pub use shape::{PathShape, PoseRow};
+pub use table::read_pose_csv;
+pub use trajectory::{PosePoint, Trajectory};
+
+use std::path::PathBuf;
 
 use crate::inverse::InverseError;
 
@@ -22,9 +47,27 @@ fn in_mm(u: &[f64]) -> String {
     format!("({})", parts.join(", "))
 }
 
-/// What can go wrong lifting tip coordinates to a pose.
+/// What can go wrong planning: a shape the robot cannot follow, a point it
+/// cannot reach, a pose table that cannot be read.
 #[derive(Debug, thiserror::Error)]
-pub enum KinematicsError {
+pub enum PlanError {
+    /// A shape's parameters are out of range, or its robot cannot follow it.
+    #[error("{0}")]
+    Shape(String),
+    /// A pose table could not be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The quick stand-in net could not be fitted.
+    #[error(transparent)]
+    Learn(#[from] crate::learn::LearnError),
+    /// The forward statics failed where a plan needed it.
+    #[error("{0}")]
+    Statics(String),
     /// A coordinate is NaN or infinite.
     #[error("tip coordinates are not all finite numbers")]
     NotFinite,
