@@ -1,7 +1,7 @@
 //! A quickly fitted stand-in IK net for exercising the loop when no trained
 //! model is at hand (`tendril sim --quick-model`, HIL tests, benchmarks): an
-//! extreme learning machine ([`Elm`], one fixed width, ridge and weight
-//! scale) on given pose → tension samples with jittered copies of each
+//! extreme learning machine ([`Elm`], one fixed width, its ridge and weight
+//! scale chosen from a few) on given pose → tension samples with jittered copies of each
 //! pose, exported as a `.tnet`. Seconds of work; millimetre-class accuracy,
 //! which is what the correction loop is there to remove. The real model
 //! comes from `tendril train`; where the samples come from is the caller's
@@ -17,11 +17,14 @@ use super::{LearnError, Learner, Split};
 /// Jittered copies of each training pose.
 pub const JITTER_COPIES: usize = 3;
 
-/// Ridge factor of the fit (relative to the Gram matrix's mean diagonal).
-const RIDGE: f64 = 1e-6;
+/// Candidate ridge factors of the fit (relative to the Gram matrix's mean
+/// diagonal).
+const RIDGES: [f64; 3] = [1e-10, 1e-8, 1e-6];
 
-/// Input-weight scale of the random layer (on inputs normalised to [0, 1]).
-const SCALE: f64 = 4.0;
+/// Candidate input-weight scales of the random layer (on inputs normalised
+/// to [0, 1]): the small ones keep units near their linear range, which the
+/// map from position to tension mostly is.
+const SCALES: [f64; 4] = [1.0, 2.0, 4.0, 8.0];
 
 /// Fit a `.tnet` of `hidden` random units mapping `poses` to `tensions`
 /// (N, outputs scaled by `max_tensions`), with [`JITTER_COPIES`] jittered
@@ -77,7 +80,10 @@ pub fn quick_net(
     });
     let y = DMatrix::from_fn(xs.len(), n, |i, o| ys[i][o] / max_tensions[o]);
     let split = Split { x: &x, y: &y };
-    let mut elm = Elm::fixed(hidden, RIDGE, SCALE);
+    // One width, a few ridges and scales chosen on the samples themselves:
+    // `hidden` units on thousands of rows can hardly over-fit, so the
+    // training error is a fair judge.
+    let mut elm = Elm::with_grid(vec![hidden], RIDGES.to_vec(), SCALES.to_vec());
     elm.fit(split, split, rng.random())?;
     elm.to_tnet(&lo, &hi, &vec![0.0; n], max_tensions)
 }
