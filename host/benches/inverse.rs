@@ -16,7 +16,7 @@ use std::path::Path;
 use criterion::{criterion_group, criterion_main, Criterion};
 use tendril::ik_net::IkNet;
 use tendril::inverse::{ExactIk, IkSettings, Target};
-use tendril::kinematics::Lifter;
+use tendril::plan::Lifter;
 use tendril::robot::repo_robot;
 use tendril::statics::{SolverSettings, Statics};
 

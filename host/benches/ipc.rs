@@ -25,9 +25,9 @@ use tendril::ipc::clock::{
     try_realtime,
 };
 use tendril::ipc::controller::Slots;
-use tendril::ipc::fixture::quick_net;
 use tendril::ipc::stats::Summary;
 use tendril::ipc::transport::{self, Services, Svc};
+use tendril::plan::stand_in::quick_net;
 use tendril::robot::{repo_robot, Robot};
 use tendril::statics::{SolverSettings, Statics};
 use tendril_firmware::control::{
@@ -184,7 +184,7 @@ fn latency(samples: usize, mode: Mode) -> (Summary, Summary) {
 
     // A reachable pose in the quick net's box (tip 15 mm off axis).
     let statics = Statics::new(&robot(), SolverSettings::default());
-    let pose = tendril::kinematics::Lifter::new(&statics)
+    let pose = tendril::plan::Lifter::new(&statics)
         .unwrap()
         .lift([0.015, 0.0])
         .unwrap();

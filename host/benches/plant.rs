@@ -9,7 +9,7 @@
 use criterion::{criterion_group, criterion_main, Criterion};
 use nalgebra::Vector2;
 use tendril::ipc::plant::{PlantModel, PlantParams};
-use tendril::kinematics::bend_tensions;
+use tendril::plan::bend_tensions;
 use tendril::robot::repo_robot;
 use tendril::statics::{SolverSettings, Statics};
 

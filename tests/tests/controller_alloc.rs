@@ -14,7 +14,7 @@ use std::cell::Cell;
 use tendril::ipc::clock::{Tick, Ticker};
 use tendril::ipc::controller::{log_header, Controller, ControllerConfig, FaultKind, Inbox};
 use tendril::ipc::stats::CsvLog;
-use tendril::ipc::trajectory::{Shape, Trajectory};
+use tendril::plan::{PathShape, Trajectory};
 use tendril::robot::repo_robot;
 use tendril::statics::{SolverSettings, Statics};
 use tendril_shared::messages::{setpoint_flags, Header, PlantState, Setpoint, WeightUpdate};
@@ -83,7 +83,7 @@ fn two_hundred_seconds_of_controller_periods_allocate_nothing() {
     let mut cfg = ControllerConfig::new(robot_path, model_path);
     cfg.ki_per_s = 10.0;
     let statics = Statics::new(&robot, SolverSettings::default());
-    let shape = Shape::Circle {
+    let shape = PathShape::Circle {
         center_m: [0.0, 0.0],
         radius_m: 0.015,
         freq_hz: 0.2,

@@ -9,9 +9,9 @@
 use std::process::Command;
 
 use serde_json::Value;
-use tendril::ipc::sim::default_loop_runs;
-use tendril::ipc::trajectory::Shape;
-use tendril::kinematics::Lifter;
+use tendril::plan::default_loop_runs;
+use tendril::plan::Lifter;
+use tendril::plan::PathShape;
 use tendril::robot::Robot;
 use tendril::statics::{repo_statics, SolverSettings, Statics};
 use tendril_shared::messages::command_status;
@@ -114,7 +114,7 @@ fn two_segment_correction_removes_a_model_error() {
     let file = dir.path().join("stiffer.toml");
     std::fs::write(&file, stiffer).unwrap();
     let s = Statics::new(&Robot::load(&file).unwrap(), SolverSettings::default());
-    let blob = tendril::ipc::fixture::quick_net_for(&s, 2000, 48, 7).unwrap();
+    let blob = tendril::plan::stand_in::quick_net_for(&s, 2000, 48, 7).unwrap();
     let net = dir.path().join("stiffer.tnet");
     std::fs::write(&net, blob).unwrap();
     let net = net.to_str().unwrap();
@@ -227,7 +227,7 @@ fn two_segment_planner_kill_holds_then_resumes_tracking() {
 #[test]
 fn one_tendon_sweep_tracks_to_a_tenth_of_a_millimetre() {
     let runs = default_loop_runs(&statics(ONE_TENDON)).unwrap();
-    let Some(Shape::Sweep { from_m, to_m, .. }) = runs.first().map(|r| &r.shape) else {
+    let Some(PathShape::Sweep { from_m, to_m, .. }) = runs.first().map(|r| &r.shape) else {
         panic!("a one-tendon robot's loop run is a sweep: {runs:?}");
     };
     let range = format!("{},{}", from_m * 1e3, to_m * 1e3);

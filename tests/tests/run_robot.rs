@@ -12,8 +12,8 @@
 use std::path::Path;
 
 use serde_json::Value;
-use tendril::ipc::sim::default_loop_runs;
 use tendril::pipeline::run_dir;
+use tendril::plan::default_loop_runs;
 use tendril::statics::repo_statics;
 use tendril_tests::{robot, tendril};
 

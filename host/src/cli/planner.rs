@@ -6,7 +6,7 @@ use anyhow::{bail, Context};
 use clap::{Args, ValueEnum};
 
 use crate::ipc::planner::{Injections, PlannerConfig};
-use crate::ipc::trajectory::{read_pose_csv, Shape};
+use crate::plan::{read_pose_csv, PathShape};
 
 /// Trajectory kinds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -103,16 +103,16 @@ fn pair(s: &str, what: &str) -> anyhow::Result<[f64; 2]> {
 
 impl TrajectoryOpts {
     /// The trajectory shape in SI units.
-    pub fn shape(&self) -> anyhow::Result<Shape> {
+    pub fn shape(&self) -> anyhow::Result<PathShape> {
         let radius = self.radius_mm * 1e-3;
         let height = self.height_mm.map(|h| h * 1e-3);
         let lateral = || pair(&self.center_mm, "--center-mm");
         Ok(match self.trajectory {
-            Kind::Hold => Shape::Hold {
+            Kind::Hold => PathShape::Hold {
                 center_m: metres(&self.center_mm, "--center-mm")?,
                 height_m: height,
             },
-            Kind::Steps => Shape::Steps {
+            Kind::Steps => PathShape::Steps {
                 targets_m: self
                     .targets_mm
                     .split(';')
@@ -121,13 +121,13 @@ impl TrajectoryOpts {
                 dwell_s: self.dwell,
                 height_m: height,
             },
-            Kind::Circle => Shape::Circle {
+            Kind::Circle => PathShape::Circle {
                 center_m: lateral()?,
                 radius_m: radius,
                 freq_hz: self.freq,
                 height_m: height,
             },
-            Kind::Figure8 => Shape::FigureEight {
+            Kind::Figure8 => PathShape::FigureEight {
                 center_m: lateral()?,
                 radius_m: radius,
                 freq_hz: self.freq,
@@ -137,7 +137,7 @@ impl TrajectoryOpts {
                 let Some(h) = &self.heights_mm else {
                     bail!("--trajectory helix needs --heights-mm FROM,TO");
                 };
-                Shape::Helix {
+                PathShape::Helix {
                     center_m: lateral()?,
                     radius_m: radius,
                     freq_hz: self.freq,
@@ -150,7 +150,7 @@ impl TrajectoryOpts {
                     bail!("--trajectory sweep needs --sweep-mm FROM,TO");
                 };
                 let [from_m, to_m] = pair(range, "--sweep-mm")?;
-                Shape::Sweep {
+                PathShape::Sweep {
                     from_m,
                     to_m,
                     freq_hz: self.freq,
@@ -160,7 +160,7 @@ impl TrajectoryOpts {
                 let Some(path) = &self.poses else {
                     bail!("--trajectory csv needs --poses FILE");
                 };
-                Shape::Table {
+                PathShape::Table {
                     rows: read_pose_csv(path)?,
                 }
             }

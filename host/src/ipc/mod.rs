@@ -14,12 +14,10 @@
 
 pub mod clock;
 pub mod controller;
-pub mod fixture;
 pub mod planner;
 pub mod plant;
 pub mod sim;
 pub mod stats;
-pub mod trajectory;
 pub mod transport;
 
 use iceoryx2_bb_posix::signal::SignalHandler;
@@ -56,9 +54,9 @@ pub enum IpcError {
         /// The cause.
         source: std::io::Error,
     },
-    /// A trajectory point the robot cannot take.
+    /// A trajectory the robot cannot follow, or a point it cannot take.
     #[error(transparent)]
-    Kinematics(#[from] crate::kinematics::KinematicsError),
+    Plan(#[from] crate::plan::PlanError),
     /// Anything from the layers below (robot file, statics, model file).
     #[error("{0}")]
     Other(String),
@@ -232,7 +230,7 @@ mod tests {
         let planner = planner::PlannerConfig {
             robot: "r.toml".into(),
             prefix: "p".into(),
-            shape: trajectory::Shape::Circle {
+            shape: crate::plan::PathShape::Circle {
                 center_m: [0.0, 0.01],
                 radius_m: 0.015,
                 freq_hz: 0.2,

@@ -10,9 +10,9 @@ use tendril_shared::messages::{setpoint_flags, Header, Setpoint, TensionCommand}
 
 use super::clock::{now_ns, tighten_timer_slack, Ticker};
 use super::stats::CsvLog;
-use super::trajectory::{Shape, Trajectory};
 use super::transport::{self, Services};
 use super::{IpcError, StopWatch};
+use crate::plan::{PathShape, Trajectory};
 use crate::robot::Robot;
 use crate::statics::{SolverSettings, Statics};
 
@@ -39,7 +39,7 @@ pub struct PlannerConfig {
     /// Service-name prefix.
     pub prefix: String,
     /// What to follow.
-    pub shape: Shape,
+    pub shape: PathShape,
     /// Setpoint rate, Hz.
     pub rate_hz: f64,
     /// Initial hold at the first pose, s.

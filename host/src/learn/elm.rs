@@ -110,6 +110,68 @@ impl Elm {
     pub fn chosen(&self) -> (usize, f64, f64) {
         (self.hidden, self.ridge, self.scale)
     }
+
+    /// The fitted machine as `.tnet` bytes: a cascade net whose hidden units
+    /// (logistic sigmoid) ignore each other and whose linear outputs skip
+    /// the inputs, with the min–max ranges its splits were normalised by
+    /// (`input_lo`/`input_hi` per input, `output_lo`/`output_hi` per output).
+    pub fn to_tnet(
+        &self,
+        input_lo: &[f64],
+        input_hi: &[f64],
+        output_lo: &[f64],
+        output_hi: &[f64],
+    ) -> Result<Vec<u8>, LearnError> {
+        let layer = self
+            .layer
+            .as_ref()
+            .ok_or_else(|| LearnError::Numerical("ELM: no fit to export".into()))?;
+        let (inputs, hidden, outputs) = (layer.w.nrows(), layer.b.len(), self.out.ncols());
+        let shape = tendril_shared::Shape {
+            inputs,
+            hidden,
+            outputs,
+        };
+        // Hidden row k: bias, inputs, then k earlier units (zero).
+        let mut hidden_w = vec![0.0f32; shape.hidden_weight_count()];
+        for k in 0..hidden {
+            let off = shape.hidden_row_offset(k);
+            hidden_w[off] = layer.b[k] as f32;
+            for i in 0..inputs {
+                hidden_w[off + 1 + i] = layer.w[(i, k)] as f32;
+            }
+        }
+        // Output row: bias (the features' trailing ones column), inputs
+        // (zero), hidden units.
+        let row = shape.output_row_len();
+        let mut output_w = vec![0.0f32; shape.output_weight_count()];
+        for o in 0..outputs {
+            output_w[o * row] = self.out[(hidden, o)] as f32;
+            for k in 0..hidden {
+                output_w[o * row + 1 + inputs + k] = self.out[(k, o)] as f32;
+            }
+        }
+        let f32s = |v: &[f64]| v.iter().map(|&x| x as f32).collect::<Vec<f32>>();
+        let (ilo, ihi, olo, ohi) = (
+            f32s(input_lo),
+            f32s(input_hi),
+            f32s(output_lo),
+            f32s(output_hi),
+        );
+        let view = tendril_shared::TnetView {
+            shape,
+            hidden_activation: tendril_shared::Activation::Sigmoid,
+            output_activation: tendril_shared::Activation::Linear,
+            input_lo: &ilo,
+            input_hi: &ihi,
+            output_lo: &olo,
+            output_hi: &ohi,
+            hidden_weights: &hidden_w,
+            output_weights: &output_w,
+        };
+        tendril_shared::encode_to_vec(&view)
+            .map_err(|e| LearnError::Numerical(format!("ELM: encoding the net: {e:?}")))
+    }
 }
 
 impl Learner for Elm {

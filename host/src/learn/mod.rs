@@ -10,6 +10,7 @@ pub mod knn;
 pub mod learner;
 pub mod linalg;
 pub mod mlp;
+pub mod quick;
 pub mod rbf;
 pub mod targets;
 pub mod tree;

@@ -5,8 +5,9 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use crate::ipc::sim::{default_loop_runs, LoopRun, ModelSource, SimConfig, SimError};
-use crate::kinematics::Family;
+use crate::ipc::sim::{ModelSource, SimConfig, SimError};
+use crate::plan::Family;
+use crate::plan::{default_loop_runs, LoopRun};
 use crate::statics::Statics;
 
 /// The sub-directory of a run: `sim` for the circle (the name the main

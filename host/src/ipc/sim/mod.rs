@@ -34,10 +34,9 @@ use super::clock::now_ns;
 use super::controller::ControllerConfig;
 use super::planner::{Injections, PlannerConfig};
 use super::plant::PlantConfig;
-use super::trajectory::Shape;
 use super::transport::{self, Services};
 use super::IpcError;
-use crate::kinematics::Lifter;
+use crate::plan::PathShape;
 use crate::statics::Statics;
 
 /// The firmware's built-in net: what `tendril sim` runs when no model is
@@ -151,152 +150,6 @@ pub struct SimConfig {
     pub label: String,
 }
 
-/// One closed-loop run the main job does on a robot ([`default_loop_runs`]).
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct LoopRun {
-    /// Short name, fit for a directory (`circle`, `steps`, `helix`, `sweep`).
-    pub name: &'static str,
-    /// What it is, for the report ("20 mm circle at 395.5 mm height, 0.2 Hz").
-    pub label: String,
-    /// The trajectory.
-    pub shape: Shape,
-    /// Seconds of trajectory after the settle hold.
-    pub duration_s: f64,
-}
-
-/// The closed-loop runs the main job does for `statics`' robot, by its
-/// family ([`crate::kinematics::Family`], `docs/design.md` §6):
-///
-/// - k = 2 (one bending segment): the 30 mm circle (radius 15 mm) at
-///   0.2 Hz and 10 mm steps, as always;
-/// - k = 3 (a volume): a 20 mm circle (radius 10 mm) at the robot's mid
-///   height ([`Lifter::mid_height`]), 3-D steps of ± 8 mm sideways and
-///   ± 2 mm in height about it, and a helix of radius 10 mm rising 4 mm
-///   about it in one turn and back;
-/// - k = 1 (a curve): a sweep along the axis between where 10 % and 50 %
-///   of every tendon's maximum tension puts the tip.
-///
-/// Each run is meant with and without the correction (the caller sets
-/// [`SimConfig::set_correction`]).
-pub fn default_loop_runs(statics: &Statics) -> Result<Vec<LoopRun>, IpcError> {
-    let mut lifter = Lifter::new(statics)?;
-    let family = lifter.family();
-    let mm = |v: f64| v * 1e3;
-    Ok(match family.dim() {
-        2 => vec![
-            LoopRun {
-                name: "circle",
-                label: "30 mm circle at 0.2 Hz".into(),
-                shape: Shape::Circle {
-                    center_m: [0.0, 0.0],
-                    radius_m: 0.015,
-                    freq_hz: 0.2,
-                    height_m: None,
-                },
-                duration_s: 10.0,
-            },
-            LoopRun {
-                name: "steps",
-                label: "10 mm steps".into(),
-                shape: Shape::Steps {
-                    targets_m: vec![
-                        vec![0.01, 0.0],
-                        vec![0.0, 0.01],
-                        vec![-0.01, 0.0],
-                        vec![0.0, -0.01],
-                    ],
-                    dwell_s: 2.0,
-                    height_m: None,
-                },
-                duration_s: 10.0,
-            },
-        ],
-        3 => {
-            let z = lifter.mid_height([0.0, 0.0], 0.01)?;
-            vec![
-                LoopRun {
-                    name: "circle",
-                    label: format!("20 mm circle at the mid height {:.1} mm, 0.2 Hz", mm(z)),
-                    shape: Shape::Circle {
-                        center_m: [0.0, 0.0],
-                        radius_m: 0.01,
-                        freq_hz: 0.2,
-                        height_m: Some(z),
-                    },
-                    duration_s: 10.0,
-                },
-                LoopRun {
-                    name: "steps",
-                    label: format!(
-                        "3-D steps, ± 8 mm sideways and ± 2 mm about {:.1} mm height",
-                        mm(z)
-                    ),
-                    shape: Shape::Steps {
-                        targets_m: vec![
-                            vec![0.008, 0.0, z],
-                            vec![0.0, 0.008, z + 0.002],
-                            vec![-0.008, 0.0, z - 0.002],
-                            vec![0.0, -0.008, z],
-                        ],
-                        dwell_s: 2.0,
-                        height_m: None,
-                    },
-                    duration_s: 8.0,
-                },
-                LoopRun {
-                    name: "helix",
-                    label: format!(
-                        "helix of radius 10 mm between {:.1} and {:.1} mm height, 0.2 Hz",
-                        mm(z - 0.002),
-                        mm(z + 0.002)
-                    ),
-                    shape: Shape::Helix {
-                        center_m: [0.0, 0.0],
-                        radius_m: 0.01,
-                        freq_hz: 0.2,
-                        heights_m: [z - 0.002, z + 0.002],
-                        turns: 1.0,
-                    },
-                    duration_s: 10.0,
-                },
-            ]
-        }
-        _ => {
-            let robot = statics.robot();
-            let floors = robot.min_tensions();
-            let at = |fraction: f64| -> Result<f64, IpcError> {
-                let tau: Vec<f64> = floors
-                    .iter()
-                    .zip(robot.max_tensions())
-                    .map(|(lo, hi)| lo + fraction * (hi - lo))
-                    .collect();
-                let sol = statics
-                    .solve(&tau, None)
-                    .map_err(|e| IpcError::Other(format!("sweep range: {e}")))?;
-                Ok(family.coordinates(&sol.position.into())[0])
-            };
-            let (from, to) = (at(0.1)?, at(0.5)?);
-            // Both ends must lift (a robot whose pull saturates early).
-            lifter.lift([from])?;
-            lifter.lift([to])?;
-            vec![LoopRun {
-                name: "sweep",
-                label: format!(
-                    "sweep along the axis from {:.1} to {:.1} mm, 0.2 Hz",
-                    mm(from),
-                    mm(to)
-                ),
-                shape: Shape::Sweep {
-                    from_m: from,
-                    to_m: to,
-                    freq_hz: 0.2,
-                },
-                duration_s: 10.0,
-            }]
-        }
-    })
-}
-
 /// A unique service prefix for one run: parallel sims and tests never share services.
 pub fn unique_prefix() -> String {
     format!(
@@ -324,7 +177,7 @@ impl SimConfig {
             planner: PlannerConfig {
                 robot: robot.clone(),
                 prefix: String::new(),
-                shape: Shape::Circle {
+                shape: PathShape::Circle {
                     center_m: [0.0, 0.0],
                     radius_m: 0.015,
                     freq_hz: 0.2,
@@ -443,8 +296,8 @@ pub fn run(cfg: &SimConfig) -> Result<SimReport, SimError> {
     let robot =
         crate::robot::Robot::load(&cfg.robot).map_err(|e| SimError::Config(e.to_string()))?;
     let statics = Statics::new(&robot, crate::statics::SolverSettings::default());
-    let family = crate::kinematics::Family::of(&statics).map_err(IpcError::from)?;
-    cfg.planner.shape.check(&family)?;
+    let family = crate::plan::Family::of(&statics).map_err(IpcError::from)?;
+    cfg.planner.shape.check(&family).map_err(IpcError::from)?;
     install_interrupt_latch();
     let dir = RunDir::create(&cfg.out)?;
     let result = run_in(cfg, &dir);
@@ -494,7 +347,8 @@ fn model_file(cfg: &SimConfig, dir: &RunDir) -> Result<(PathBuf, Vec<u8>, ModelU
                 .map_err(|e| SimError::Config(e.to_string()))?;
             let statics =
                 crate::statics::Statics::new(&robot, crate::statics::SolverSettings::default());
-            let blob = super::fixture::quick_net_for(&statics, 2000, 48, 7)?;
+            let blob = crate::plan::stand_in::quick_net_for(&statics, 2000, 48, 7)
+                .map_err(|e| SimError::Config(e.to_string()))?;
             let path = write("quick.tnet", &blob)?;
             let used = ModelUsed {
                 path: cfg.out.join("quick.tnet"),
@@ -677,43 +531,4 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
     crate::plot::sim::draw(&dir.file("sim.png"), &figure)
         .map_err(|e| SimError::Config(format!("sim figure: {e}")))?;
     Ok(report)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::ipc::trajectory::Trajectory;
-
-    use crate::statics::repo_statics as statics_of;
-
-    /// Each robot gets the runs of its family (the default robot the two it
-    /// always had), and every run's trajectory lifts on that robot.
-    #[test]
-    fn default_loop_runs_follow_the_family_and_all_lift() {
-        for (file, names) in [
-            ("seed-4t.toml", vec!["circle", "steps"]),
-            ("tdcr-2seg.toml", vec!["circle", "steps", "helix"]),
-            ("seed-1t.toml", vec!["sweep"]),
-        ] {
-            let s = statics_of(file);
-            let runs = default_loop_runs(&s).unwrap();
-            let got: Vec<&str> = runs.iter().map(|r| r.name).collect();
-            assert_eq!(got, names, "{file}");
-            for run in &runs {
-                let traj = Trajectory::new(&run.shape, &s)
-                    .unwrap_or_else(|e| panic!("{file} {}: {e}", run.name));
-                assert!(traj.duration() > 0.0 && run.duration_s > 0.0);
-            }
-        }
-        let four = default_loop_runs(&statics_of("seed-4t.toml")).unwrap();
-        assert_eq!(
-            four[0].shape,
-            Shape::Circle {
-                center_m: [0.0, 0.0],
-                radius_m: 0.015,
-                freq_hz: 0.2,
-                height_m: None
-            }
-        );
-    }
 }

@@ -1,26 +1,15 @@
-//! A quickly fitted IK net for exercising the loop when no trained model is
-//! at hand (HIL tests, benchmarks): random symmetric-sigmoid hidden units
-//! (an extreme-learning-machine layer, stored as a cascade net whose hidden
-//! units ignore each other) with ridge-fitted linear outputs, trained on
-//! statics samples of the poses the planner plans: the two-adjacent-tendon
-//! bend family of a one-segment robot ([`quick_net`]), or lifted points of
-//! any robot's family around the main job's loop runs ([`quick_net_for`]).
-//! Seconds of work; millimetre-class accuracy, which is what the
-//! correction loop is there to remove. The real model comes from
-//! `tendril train`.
+//! Where the quick stand-in net's samples come from: statics samples of
+//! the poses the planner plans, the two-adjacent-tendon bend family of a
+//! one-segment robot ([`quick_net`]) or tensions around the exact IK's along
+//! the main job's loop runs of any robot ([`quick_net_for`]); the net is
+//! fitted by [`crate::learn::quick`] on the ELM.
 
-use nalgebra::{DMatrix, Vector2};
+use nalgebra::Vector2;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use tendril_shared::{encode_to_vec, Activation, Shape, TnetView};
 
-use super::trajectory::Trajectory;
-use super::IpcError;
-use crate::kinematics::{bend_tensions, Family};
+use super::{bend_tensions, default_loop_runs, Family, PlanError, Trajectory};
 use crate::statics::{Statics, WarmStart};
-
-/// Jittered copies of each training pose (see [`quick_net`]).
-const JITTER_COPIES: usize = 3;
 
 /// Largest perturbation of a pulling tendon around the loop runs'
 /// tensions ([`quick_net_for`]), as a fraction of its range.
@@ -29,7 +18,7 @@ const PERTURBATION: f64 = 0.04;
 /// A quick net for any robot, fitted where its loop runs go: a one-segment
 /// robot's bend disc up to 6 N ([`quick_net`]); any other robot, `samples`
 /// tension sets around the exact IK's tensions along the main job's loop
-/// runs ([`super::sim::default_loop_runs`]): a random point of a random
+/// runs ([`default_loop_runs`]): a random point of a random
 /// run, each tendon that pulls there moved by up to ± [`PERTURBATION`] of
 /// its range, the slack ones left slack (so the samples stay on the lift's
 /// branch: a two-segment robot reaches a point by several S shapes, and a
@@ -40,13 +29,13 @@ pub fn quick_net_for(
     samples: usize,
     hidden: usize,
     seed: u64,
-) -> Result<Vec<u8>, IpcError> {
+) -> Result<Vec<u8>, PlanError> {
     if Family::of(statics)?.dim() == 2 {
         return quick_net(statics, samples, hidden, 6.0, seed);
     }
     let robot = statics.robot();
     let (lo, hi) = (robot.min_tensions(), robot.max_tensions());
-    let paths = super::sim::default_loop_runs(statics)?
+    let paths = default_loop_runs(statics)?
         .iter()
         .map(|run| Trajectory::new(&run.shape, statics))
         .collect::<Result<Vec<_>, _>>()?;
@@ -74,7 +63,7 @@ pub fn quick_net_for(
             .collect();
         set.push(statics, tau)?;
     }
-    fit(statics, &set.poses, &set.tensions, hidden, 0.1, &mut rng)
+    set.fit(statics, hidden, 0.1, rng.random())
 }
 
 /// Fit a `.tnet` with `hidden` random units on `samples` poses whose bends
@@ -85,8 +74,7 @@ pub fn quick_net(
     hidden: usize,
     max_bend: f64,
     seed: u64,
-) -> Result<Vec<u8>, IpcError> {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+) -> Result<Vec<u8>, PlanError> {
     // Samples on a spiral-ordered grid of bends so each solve warm-starts from a neighbour.
     let mut set = TrainingSet::with_capacity(samples);
     for i in 0..samples {
@@ -96,7 +84,7 @@ pub fn quick_net(
         let tau = bend_tensions(statics, &bend);
         set.push(statics, tau)?;
     }
-    fit(statics, &set.poses, &set.tensions, hidden, 1.0, &mut rng)
+    set.fit(statics, hidden, 1.0, seed)
 }
 
 /// Solved training samples, each warm-started from the one before (cold
@@ -117,144 +105,47 @@ impl TrainingSet {
     }
 
     /// Solve the statics of `tau` and keep the pose and tensions.
-    fn push(&mut self, statics: &Statics, tau: Vec<f64>) -> Result<(), IpcError> {
+    fn push(&mut self, statics: &Statics, tau: Vec<f64>) -> Result<(), PlanError> {
         let sol = statics
             .solve(&tau, self.warm.as_ref())
             .or_else(|_| statics.solve(&tau, None))
-            .map_err(|e| IpcError::Other(format!("fixture statics: {e}")))?;
+            .map_err(|e| PlanError::Statics(format!("fixture statics: {e}")))?;
         self.warm = Some(sol.warm.clone());
         self.poses.push(sol.pose());
         self.tensions.push(tau);
         Ok(())
     }
-}
 
-/// The random-feature fit of `tensions` on `poses` (module docs), with
-/// jittered copies of each pose (`jitter` scales the jitter).
-fn fit(
-    statics: &Statics,
-    poses: &[[f64; 7]],
-    tensions: &[Vec<f64>],
-    hidden: usize,
-    jitter: f64,
-    rng: &mut ChaCha8Rng,
-) -> Result<Vec<u8>, IpcError> {
-    let n = statics.robot().n_tendons();
-    let mut xs: Vec<[f64; 7]> = Vec::with_capacity(poses.len() * (1 + JITTER_COPIES));
-    let mut ys: Vec<Vec<f64>> = Vec::with_capacity(poses.len() * (1 + JITTER_COPIES));
-    for (&pose, tau) in poses.iter().zip(tensions) {
-        // The pose has 7 numbers but the robot only k degrees of freedom, so
-        // the data lie on a k-dimensional set and a plain fit is free to do
-        // anything off it — where the correction loop's shifted setpoints
-        // land when the tangent is off. Jittered copies, with the
-        // orientation far noisier than the position, make the net vary
-        // smoothly off the set and key on the position.
-        xs.push(pose);
-        ys.push(tau.clone());
-        for _ in 0..JITTER_COPIES {
-            let mut p = pose;
-            for (k, v) in p.iter_mut().enumerate() {
-                let sd = jitter * if k < 3 { 2e-4 } else { 1e-2 };
-                *v += sd * (rng.random::<f64>() * 2.0 - 1.0) * 3f64.sqrt();
-            }
-            xs.push(p);
-            ys.push(tau.clone());
-        }
+    /// The stand-in net on these samples ([`crate::learn::quick::quick_net`]).
+    fn fit(
+        &self,
+        statics: &Statics,
+        hidden: usize,
+        jitter: f64,
+        seed: u64,
+    ) -> Result<Vec<u8>, PlanError> {
+        let max = statics.robot().max_tensions();
+        Ok(crate::learn::quick::quick_net(
+            &self.poses,
+            &self.tensions,
+            &max,
+            hidden,
+            jitter,
+            seed,
+        )?)
     }
-    let samples = xs.len();
-    let lo: Vec<f64> = (0..7)
-        .map(|k| xs.iter().map(|x| x[k]).fold(f64::INFINITY, f64::min))
-        .collect();
-    let hi: Vec<f64> = (0..7)
-        .map(|k| {
-            let h = xs.iter().map(|x| x[k]).fold(f64::NEG_INFINITY, f64::max);
-            if h - lo[k] < 1e-9 {
-                lo[k] + 1.0
-            } else {
-                h
-            }
-        })
-        .collect();
-    let out_hi: Vec<f64> = statics.robot().max_tensions();
-    let shape = Shape {
-        inputs: 7,
-        hidden,
-        outputs: n,
-    };
-    // Hidden rows: bias + 7 inputs + (k earlier units, zero).
-    let mut hidden_w = vec![0.0f32; shape.hidden_weight_count()];
-    let mut w_in = DMatrix::<f64>::zeros(hidden, 8);
-    for k in 0..hidden {
-        for j in 0..8 {
-            w_in[(k, j)] = rng.random_range(-4.0..4.0);
-        }
-        let off = shape.hidden_row_offset(k);
-        for j in 0..8 {
-            hidden_w[off + j] = w_in[(k, j)] as f32;
-        }
-    }
-    // Features: [1, x̂, h(x̂)] as the f32 inference will see them.
-    let cols = 1 + 7 + hidden;
-    let mut f = DMatrix::<f64>::zeros(samples, cols);
-    for (i, x) in xs.iter().enumerate() {
-        let xn: Vec<f64> = (0..7)
-            .map(|k| ((x[k] - lo[k]) / (hi[k] - lo[k])) as f32 as f64)
-            .collect();
-        f[(i, 0)] = 1.0;
-        for k in 0..7 {
-            f[(i, 1 + k)] = xn[k];
-        }
-        for k in 0..hidden {
-            let s = w_in[(k, 0)] + (0..7).map(|j| w_in[(k, 1 + j)] * xn[j]).sum::<f64>();
-            f[(i, 8 + k)] = Activation::SymmetricSigmoid.apply(s as f32) as f64;
-        }
-    }
-    let y = DMatrix::from_fn(samples, n, |i, o| ys[i][o] / out_hi[o]);
-    let mut gram = f.transpose() * &f;
-    for d in 0..cols {
-        gram[(d, d)] += 1e-6 * samples as f64;
-    }
-    let rhs = f.transpose() * y;
-    let w = gram
-        .cholesky()
-        .ok_or_else(|| IpcError::Other("fixture: singular ridge system".into()))?
-        .solve(&rhs);
-    let mut output_w = vec![0.0f32; shape.output_weight_count()];
-    for o in 0..n {
-        for c in 0..cols {
-            output_w[o * cols + c] = w[(c, o)] as f32;
-        }
-    }
-    let f32s = |v: &[f64]| v.iter().map(|&x| x as f32).collect::<Vec<f32>>();
-    let (ilo, ihi, olo, ohi) = (f32s(&lo), f32s(&hi), vec![0.0f32; n], f32s(&out_hi));
-    let view = TnetView {
-        shape,
-        hidden_activation: Activation::SymmetricSigmoid,
-        output_activation: Activation::Linear,
-        input_lo: &ilo,
-        input_hi: &ihi,
-        output_lo: &olo,
-        output_hi: &ohi,
-        hidden_weights: &hidden_w,
-        output_weights: &output_w,
-    };
-    encode_to_vec(&view).map_err(|e| IpcError::Other(format!("fixture: encoding the net: {e:?}")))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kinematics::Lifter;
-    use crate::robot::Robot;
-    use crate::statics::SolverSettings;
-    use std::path::Path;
+    use crate::plan::Lifter;
+    use crate::robot::repo_robot;
+    use crate::statics::repo_statics;
 
     #[test]
     fn quick_net_inverts_held_out_statics_to_a_few_millimetres() {
-        let robot =
-            Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml"))
-                .unwrap();
-        let s = Statics::new(&robot, SolverSettings::default());
+        let s = repo_statics("seed-4t.toml");
         let blob = quick_net(&s, 1500, 48, 6.0, 3).unwrap();
         let net = tendril_shared::IkNet::decode(&blob).unwrap();
         // Held-out bends (not on the training spiral): predicted tensions,
@@ -298,13 +189,8 @@ mod tests {
     /// predicted tensions, run forward through the statics, land within
     /// `bound` m of the point.
     fn check_quick_net_for(file: &str, points: &[Vec<f64>], bound: f64) {
-        let robot = Robot::load(
-            &Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("../robots")
-                .join(file),
-        )
-        .unwrap();
-        let s = Statics::new(&robot, SolverSettings::default());
+        let robot = repo_robot(file);
+        let s = repo_statics(file);
         let n = robot.n_tendons();
         let blob = quick_net_for(&s, 1000, 48, 5).unwrap();
         let net = tendril_shared::IkNet::decode(&blob).unwrap();
@@ -330,10 +216,7 @@ mod tests {
 
     #[test]
     fn quick_net_for_a_two_segment_robot_inverts_its_volume_to_millimetres() {
-        let robot =
-            Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/tdcr-2seg.toml"))
-                .unwrap();
-        let s = Statics::new(&robot, SolverSettings::default());
+        let s = repo_statics("tdcr-2seg.toml");
         let z = Lifter::new(&s)
             .unwrap()
             .mid_height([0.0, 0.0], 0.01)

@@ -14,7 +14,7 @@
 
 use nalgebra::Vector3;
 
-use super::KinematicsError;
+use super::PlanError;
 use crate::robot::anchor_groups;
 use crate::statics::Statics;
 
@@ -54,7 +54,7 @@ impl Family {
 
     /// The family of `statics`' robot (module docs). Errors when no tension
     /// moves the tip sideways.
-    pub fn of(statics: &Statics) -> Result<Family, KinematicsError> {
+    pub fn of(statics: &Statics) -> Result<Family, PlanError> {
         let robot = statics.robot();
         let direction = |i: usize| {
             let t = &robot.tendons[i];
@@ -81,7 +81,7 @@ impl Family {
         }
         // One line: pull every tendon on the first one's side.
         let Some(&first) = bending.first() else {
-            return Err(KinematicsError::Immobile);
+            return Err(PlanError::Immobile);
         };
         let d0 = direction(first);
         let floors = robot.min_tensions();
@@ -97,12 +97,12 @@ impl Family {
             .collect();
         let rest = statics
             .solve(&floors, None)
-            .map_err(|e| KinematicsError::Inverse(e.into()))?;
+            .map_err(|e| PlanError::Inverse(e.into()))?;
         let full = statics
             .solve(&pulled, None)
-            .map_err(|e| KinematicsError::Inverse(e.into()))?;
+            .map_err(|e| PlanError::Inverse(e.into()))?;
         let d = full.position - rest.position;
-        Family::curve([d.x, d.y, 0.0]).ok_or(KinematicsError::Immobile)
+        Family::curve([d.x, d.y, 0.0]).ok_or(PlanError::Immobile)
     }
 
     /// k: 1, 2 or 3.

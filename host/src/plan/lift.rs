@@ -13,7 +13,7 @@
 
 use nalgebra::{DMatrix, DVector, Matrix3xX, Vector2, Vector3};
 
-use super::{Family, KinematicsError};
+use super::{Family, PlanError};
 use crate::inverse::{ExactIk, IkSettings, IkSolution, InverseError, Target};
 use crate::statics::{Statics, WarmStart};
 
@@ -21,7 +21,7 @@ use crate::statics::{Statics, WarmStart};
 /// changes when its tip moves along each axis, first `family.dim()`
 /// columns valid, the rest zero.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Tangent {
+pub struct FamilyTangent {
     /// The family (dimension and axes) the columns belong to.
     pub family: Family,
     /// The columns `∂pose/∂u_j`.
@@ -34,7 +34,7 @@ pub struct Lifted {
     /// The reachable pose: px, py, pz (m), qw, qx, qy, qz.
     pub pose: [f64; 7],
     /// Its tangent along the reachable family.
-    pub tangent: Tangent,
+    pub tangent: FamilyTangent,
     /// The least-total-tension tensions that reach it, N.
     pub tensions: Vec<f64>,
 }
@@ -71,7 +71,7 @@ const HEIGHT_SAMPLES: usize = 8;
 
 impl Lifter {
     /// A lifter for `statics`' robot on its own family ([`Family::of`]).
-    pub fn new(statics: &Statics) -> Result<Lifter, KinematicsError> {
+    pub fn new(statics: &Statics) -> Result<Lifter, PlanError> {
         Ok(Lifter::on(statics, Family::of(statics)?))
     }
 
@@ -106,7 +106,7 @@ impl Lifter {
     }
 
     /// The reachable pose whose tip has coordinates `u` (m) on the family.
-    pub fn lift(&mut self, u: impl AsRef<[f64]>) -> Result<[f64; 7], KinematicsError> {
+    pub fn lift(&mut self, u: impl AsRef<[f64]>) -> Result<[f64; 7], PlanError> {
         self.lifted(u).map(|l| l.pose)
     }
 
@@ -114,7 +114,7 @@ impl Lifter {
     pub fn lift_with_tangent(
         &mut self,
         u: impl AsRef<[f64]>,
-    ) -> Result<([f64; 7], Tangent), KinematicsError> {
+    ) -> Result<([f64; 7], FamilyTangent), PlanError> {
         self.lifted(u).map(|l| (l.pose, l.tangent))
     }
 
@@ -131,17 +131,17 @@ impl Lifter {
     /// family), its tangent and tensions: warm from the previous lift, cold
     /// from the floors if that fails (a jump across the workspace can stall
     /// a warm start).
-    pub fn lifted(&mut self, u: impl AsRef<[f64]>) -> Result<Lifted, KinematicsError> {
+    pub fn lifted(&mut self, u: impl AsRef<[f64]>) -> Result<Lifted, PlanError> {
         let given = u.as_ref();
         let k = self.family.dim();
         if given.len() != k {
-            return Err(KinematicsError::Dimension {
+            return Err(PlanError::Dimension {
                 got: given.len(),
                 family: self.family.describe(),
             });
         }
         if !given.iter().all(|v| v.is_finite()) {
-            return Err(KinematicsError::NotFinite);
+            return Err(PlanError::NotFinite);
         }
         let mut u = [0.0; 3];
         u[..k].copy_from_slice(given);
@@ -164,18 +164,16 @@ impl Lifter {
         let solution = match warm {
             Some(s) => s,
             None => self.ik.solve(&target, None, None).map_err(|e| match e {
-                InverseError::Unreachable { closest } => KinematicsError::OutsideWorkspace {
+                InverseError::Unreachable { closest } => PlanError::OutsideWorkspace {
                     coordinates_m: given.to_vec(),
                     distance_mm: closest.position_error * 1e3,
                 },
-                e => KinematicsError::Inverse(e),
+                e => PlanError::Inverse(e),
             })?,
         };
-        let (tangent, dtau) = self
-            .tangent(&solution)
-            .ok_or_else(|| KinematicsError::Singular {
-                coordinates_m: given.to_vec(),
-            })?;
+        let (tangent, dtau) = self.tangent(&solution).ok_or_else(|| PlanError::Singular {
+            coordinates_m: given.to_vec(),
+        })?;
         self.previous = Some(Previous {
             u,
             tensions: solution.tensions.clone(),
@@ -208,7 +206,7 @@ impl Lifter {
     /// a tension at a limit joining only if the direction moves it inward.
     /// `None` when no tension direction moves the tip along some axis. Also
     /// returns the tension directions ∂τ/∂u_j.
-    fn tangent(&self, s: &IkSolution) -> Option<(Tangent, Vec<DVector<f64>>)> {
+    fn tangent(&self, s: &IkSolution) -> Option<(FamilyTangent, Vec<DVector<f64>>)> {
         let jacobian = match &s.jacobian {
             Some(j) => j.clone(),
             None => self.ik.tip_jacobian_at(&s.tensions, &s.warm).ok()?,
@@ -240,7 +238,7 @@ impl Lifter {
                 *out = 0.5 * dqk;
             }
         }
-        let tangent = Tangent {
+        let tangent = FamilyTangent {
             family: self.family,
             columns,
         };
@@ -303,8 +301,8 @@ impl Lifter {
     /// [`HEIGHT_SAMPLES`] points around the circle (the intersection of
     /// their [`Lifter::height_range`]s), so a circle at that height is
     /// reachable with the most room above and below.
-    pub fn mid_height(&self, center: [f64; 2], radius: f64) -> Result<f64, KinematicsError> {
-        let no_height = || KinematicsError::NoHeight {
+    pub fn mid_height(&self, center: [f64; 2], radius: f64) -> Result<f64, PlanError> {
+        let no_height = || PlanError::NoHeight {
             center_m: center.to_vec(),
             radius_mm: radius * 1e3,
         };
@@ -394,45 +392,14 @@ fn least_norm(
     Some(d)
 }
 
-/// The pose `pose` moved by `c` (m, one per axis) along the robot's own
-/// reachable family, to first order: `pose + Σ_j ∂pose/∂u_j c_j`, quaternion
-/// re-normalised with `w ≥ 0`. The tangent comes from the statics
-/// ([`Lifter::lift_with_tangent`]), so unlike [`super::arc::arc_shift`] it
-/// includes gravity and the real tendon routing. The firmware's integral
-/// loop applies the same first-order shift in f32 (`docs/design.md` §6).
-pub fn family_shift(pose: &[f64; 7], tangent: &Tangent, c: &[f64]) -> [f64; 7] {
-    let mut out = *pose;
-    for (column, cj) in tangent.columns.iter().zip(c).take(tangent.family.dim()) {
-        for (v, d) in out.iter_mut().zip(column) {
-            *v += d * cj;
-        }
-    }
-    let n = out[3..].iter().map(|v| v * v).sum::<f64>().sqrt();
-    let sign = if out[3] < 0.0 { -1.0 } else { 1.0 };
-    if n > 0.0 && n.is_finite() {
-        for v in &mut out[3..] {
-            *v *= sign / n;
-        }
-    }
-    out
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kinematics::bend_tensions;
-    use crate::robot::Robot;
-    use crate::statics::SolverSettings;
+    use crate::plan::bend_tensions;
     use nalgebra::Matrix2;
-    use std::path::Path;
-
-    fn robot() -> Robot {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml");
-        Robot::load(&path).unwrap()
-    }
 
     fn statics() -> Statics {
-        Statics::new(&robot(), SolverSettings::default())
+        crate::statics::repo_statics("seed-4t.toml")
     }
 
     /// A 30 mm circle about the axis, `n` points.
