@@ -22,3 +22,4 @@ pub mod pipeline;
 pub mod plot;
 pub mod robot;
 pub mod statics;
+pub mod units;
