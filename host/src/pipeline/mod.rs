@@ -34,6 +34,7 @@ use crate::learn::targets::Targets;
 use crate::plot::workspace::{draw_workspace, Shape};
 use crate::robot::{Robot, DEFAULT_ROBOT};
 use crate::statics::{SolverSettings, Statics};
+use crate::units::length_mm;
 
 /// Where the main job writes.
 pub const OUT_DIR: &str = "out";
@@ -215,7 +216,8 @@ pub fn run(
     let (hidden_units, test_tip_mean_mm) = (net.shape().hidden, metrics.position_mm.mean);
     log::info!(
         "trained {hidden_units} hidden units in {train_seconds:.1} s; \
-         test tip error mean {test_tip_mean_mm:.3} mm"
+         test tip error mean {}",
+        length_mm(test_tip_mean_mm)
     );
     write_atomic(
         &out.join("evaluation.json"),
@@ -285,10 +287,10 @@ pub fn run(
     )?)?;
 
     log::info!(
-        "done in {:.0} s: {} hidden units, test tip error mean {:.3} mm; report {}",
+        "done in {:.0} s: {} hidden units, test tip error mean {}; report {}",
         report.started.elapsed().as_secs_f64(),
         hidden_units,
-        test_tip_mean_mm,
+        length_mm(test_tip_mean_mm),
         report.path.display()
     );
     Ok(())
