@@ -157,7 +157,12 @@ impl Comparison {
                 .filter_map(|c| {
                     let (ev, rv) = ((c.get)(e), (c.get)(r));
                     c.shown.below(ev, rv).then(|| {
-                        format!("{} ({} vs {})", c.header, c.shown.text(ev), c.shown.text(rv))
+                        format!(
+                            "{} ({} vs {})",
+                            c.header,
+                            c.shown.text(ev),
+                            c.shown.text(rv)
+                        )
                     })
                 })
                 .collect();

@@ -363,10 +363,12 @@ fn firmware_parity_section(model: &Path, json: &Path) -> String {
         model.display()
     );
     let t = Instant::now();
-    let checked = crate::firmware_parity::check(&root, model, &target_dir);
-    log::info!("firmware parity: done in {:.1} s", t.elapsed().as_secs_f64());
-    match checked {
+    match crate::firmware_parity::check(&root, model, &target_dir) {
         Ok(r) => {
+            log::info!(
+                "firmware parity: done in {:.1} s",
+                t.elapsed().as_secs_f64()
+            );
             let written = serde_json::to_string_pretty(&r)
                 .map_err(anyhow::Error::from)
                 .and_then(|text| write_atomic(json, text.as_bytes()).map_err(Into::into));
