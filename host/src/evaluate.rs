@@ -389,34 +389,36 @@ impl SplitMetrics {
         })
     }
 
-    /// A small fixed-width table (one metric per line) for stdout; the tip
-    /// errors are through the command stage. The plain clip's errors stay in
-    /// the JSON only: for a net trained on centred targets (every net the
-    /// trainer makes now, docs/design.md §4) they are meaningless, and on
-    /// the console they read like a failure.
+    /// A small table (one metric per line) for stdout; the tip errors are
+    /// through the command stage, each in the unit that fits its size
+    /// ([`crate::units`]). The plain clip's errors stay in the JSON only:
+    /// for a net trained on centred targets (every net the trainer makes
+    /// now, docs/design.md §4) they are meaningless, and on the console they
+    /// read like a failure.
     pub fn table(&self, title: &str) -> String {
+        use crate::units::{degrees, length_mm, number};
         let p = &self.position_mm;
         let o = &self.orientation_deg;
         format!(
             "{title} ({} samples)\n\
-             \x20 tension RMSE          {:>10.4} (normalised ×100)   {:>10.6} N\n\
-             \x20 tip position error mm  mean {:>8.4}  rms {:>8.4}  p95 {:>8.4}  max {:>8.4}\n\
-             \x20 tip orientation deg    mean {:>8.4}  rms {:>8.4}  p95 {:>8.4}  max {:>8.4}\n\
+             \x20 tension RMSE          {:>10} (normalised ×100)   {:>10} N\n\
+             \x20 tip position error     mean {:>9}  rms {:>9}  p95 {:>9}  max {:>9}\n\
+             \x20 tip orientation error  mean {:>9}  rms {:>9}  p95 {:>9}  max {:>9}\n\
              \x20 failed solves          {}\n\
-             \x20 inference              {:.1} ns/query\n",
+             \x20 inference              {} ns/query\n",
             self.samples,
-            self.tension_rmse_norm100,
-            self.tension_rmse_newton,
-            p.mean,
-            p.rms,
-            p.p95,
-            p.max,
-            o.mean,
-            o.rms,
-            o.p95,
-            o.max,
+            number(self.tension_rmse_norm100, 4),
+            number(self.tension_rmse_newton, 6),
+            length_mm(p.mean),
+            length_mm(p.rms),
+            length_mm(p.p95),
+            length_mm(p.max),
+            degrees(o.mean),
+            degrees(o.rms),
+            degrees(o.p95),
+            degrees(o.max),
             self.failed_solves,
-            self.inference_ns_per_query
+            number(self.inference_ns_per_query, 1)
         )
     }
 }

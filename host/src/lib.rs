@@ -22,3 +22,4 @@ pub mod plan;
 pub mod plot;
 pub mod robot;
 pub mod statics;
+pub mod units;

@@ -75,19 +75,21 @@ pub fn run(a: EvaluateArgs) -> anyhow::Result<()> {
         ))
     );
     let r = &e.refinement;
+    let (net, refined) = (&r.net_tip_error_mm, &r.refined_tip_error_mm);
+    let mm = crate::units::length_mm;
     println!(
         "net alone vs net + exact IK ({} rows, pose targets): tip error mean / p95 / max \
-         {:.4} / {:.4} / {:.4} mm in {:.1} µs vs {:.2e} / {:.2e} / {:.2e} mm in {:.0} µs per query \
+         {} / {} / {} in {} µs vs {} / {} / {} in {} µs per query \
          ({} out of reach, {} not converged)",
         r.rows,
-        r.net_tip_error_mm.mean,
-        r.net_tip_error_mm.p95,
-        r.net_tip_error_mm.max,
-        r.net_us_per_query,
-        r.refined_tip_error_mm.mean,
-        r.refined_tip_error_mm.p95,
-        r.refined_tip_error_mm.max,
-        r.refined_us_per_query,
+        mm(net.mean),
+        mm(net.p95),
+        mm(net.max),
+        crate::units::number(r.net_us_per_query, 1),
+        mm(refined.mean),
+        mm(refined.p95),
+        mm(refined.max),
+        crate::units::number(r.refined_us_per_query, 0),
         r.unreachable,
         r.failed
     );

@@ -5,14 +5,52 @@ use std::path::{Path, PathBuf};
 
 use super::{CompareError, Comparison, Entry, REFERENCE};
 use crate::plot::compare::{draw_comparison, LearnerBars};
+use crate::units;
 
-/// A metric column: header, how to read it from an entry, and whether
-/// smaller is better (every column here is "smaller is better" except none).
+/// A metric column: header, CSV name, how to read it from an entry and how
+/// to print it (smaller is better in every column).
 struct Column {
     header: &'static str,
     csv: &'static str,
     get: fn(&Entry) -> f64,
-    digits: usize,
+    shown: Shown,
+}
+
+/// How a column's numbers are printed: every number keeps at least two
+/// significant digits ([`crate::units`]), so the best learners' errors do
+/// not print as 0.000.
+#[derive(Clone, Copy)]
+enum Shown {
+    /// A plain number with at least this many decimals.
+    Number(usize),
+    /// A count.
+    Count,
+    /// A length kept in millimetres, printed in the unit that fits it.
+    LengthMm,
+    /// An angle in degrees.
+    Degrees,
+}
+
+impl Shown {
+    fn text(self, v: f64) -> String {
+        match self {
+            Shown::Number(d) => units::number(v, d),
+            Shown::Count => format!("{v:.0}"),
+            Shown::LengthMm => units::length_mm(v),
+            Shown::Degrees => units::degrees(v),
+        }
+    }
+
+    /// `a` is strictly below `b` at the precision the table shows.
+    fn below(self, a: f64, b: f64) -> bool {
+        match self {
+            Shown::Number(d) => units::shown_below(a, b, d),
+            Shown::Count => units::shown_below(a.round(), b.round(), 0),
+            // Lengths and angles keep two significant digits of the larger.
+            Shown::LengthMm => units::shown_below(a, b, 0),
+            Shown::Degrees => units::shown_below(a, b, 3),
+        }
+    }
 }
 
 fn columns() -> Vec<Column> {
@@ -21,79 +59,79 @@ fn columns() -> Vec<Column> {
             header: "RMSE×100 train",
             csv: "rmse_norm100_train",
             get: |e| e.train.tension_rmse_norm100,
-            digits: 3,
+            shown: Shown::Number(3),
         },
         Column {
             header: "RMSE×100 test",
             csv: "rmse_norm100_test",
             get: |e| e.test.tension_rmse_norm100,
-            digits: 3,
+            shown: Shown::Number(3),
         },
         Column {
             header: "RMSE N train",
             csv: "rmse_newton_train",
             get: |e| e.train.tension_rmse_newton,
-            digits: 4,
+            shown: Shown::Number(4),
         },
         Column {
             header: "RMSE N test",
             csv: "rmse_newton_test",
             get: |e| e.test.tension_rmse_newton,
-            digits: 4,
+            shown: Shown::Number(4),
         },
         Column {
-            header: "tip mean mm (train)",
+            header: "tip mean (train)",
             csv: "tip_mean_mm_train",
             get: |e| e.train.position_mm.mean,
-            digits: 3,
+            shown: Shown::LengthMm,
         },
         Column {
-            header: "tip mean mm",
+            header: "tip mean",
             csv: "tip_mean_mm_test",
             get: |e| e.test.position_mm.mean,
-            digits: 3,
+            shown: Shown::LengthMm,
         },
         Column {
-            header: "tip p95 mm",
+            header: "tip p95",
             csv: "tip_p95_mm_test",
             get: |e| e.test.position_mm.p95,
-            digits: 3,
+            shown: Shown::LengthMm,
         },
         Column {
-            header: "tip max mm",
+            header: "tip max",
             csv: "tip_max_mm_test",
             get: |e| e.test.position_mm.max,
-            digits: 3,
+            shown: Shown::LengthMm,
         },
         Column {
-            header: "angle mean °",
+            header: "angle mean",
             csv: "angle_mean_deg_test",
             get: |e| e.test.orientation_deg.mean,
-            digits: 3,
+            shown: Shown::Degrees,
         },
         Column {
             header: "solve failures",
             csv: "failed_solves_test",
             get: |e| e.test.failed_solves as f64,
-            digits: 0,
+            shown: Shown::Count,
         },
         Column {
             header: "train s",
             csv: "train_seconds",
             get: |e| e.train_seconds,
-            digits: 2,
+            shown: Shown::Number(2),
         },
         Column {
             header: "µs/query",
             csv: "infer_us_per_query",
             get: |e| e.infer_us,
-            digits: 1,
+            shown: Shown::Number(1),
         },
         Column {
             header: "parameters",
             csv: "parameters",
             get: |e| e.parameters as f64,
-            digits: 0,
+            shown: Shown::Count,
         },
     ]
 }
@@ -112,17 +150,19 @@ impl Comparison {
             return Vec::new();
         };
         let cols = columns();
-        let round = |v: f64, d: usize| (v * 10f64.powi(d as i32)).round();
         let mut v = Vec::new();
         for e in self.entries.iter().filter(|e| e.name != REFERENCE) {
             let wins: Vec<String> = cols
                 .iter()
                 .filter_map(|c| {
                     let (ev, rv) = ((c.get)(e), (c.get)(r));
-                    let better = ev.is_finite()
-                        && (!rv.is_finite() || round(ev, c.digits) < round(rv, c.digits));
-                    better.then(|| {
-                        format!("{} ({:.*} vs {:.*})", c.header, c.digits, ev, c.digits, rv)
+                    c.shown.below(ev, rv).then(|| {
+                        format!(
+                            "{} ({} vs {})",
+                            c.header,
+                            c.shown.text(ev),
+                            c.shown.text(rv)
+                        )
                     })
                 })
                 .collect();
@@ -183,7 +223,7 @@ impl Comparison {
             s.push_str(&format!("| {} |", e.name));
             for (c, b) in cols.iter().zip(&best) {
                 let v = (c.get)(e);
-                let txt = format!("{:.*}", c.digits, v);
+                let txt = c.shown.text(v);
                 if v == *b && self.entries.len() > 1 {
                     s.push_str(&format!(" **{txt}** |"));
                 } else {
@@ -331,7 +371,7 @@ mod tests {
             beats[0].contains("RMSE×100 test (0.200 vs 0.500)"),
             "{beats:?}"
         );
-        assert!(!beats[0].contains("tip mean mm ("), "{beats:?}");
+        assert!(!beats[0].contains("tip mean ("), "{beats:?}");
         let md = c.to_markdown();
         assert!(md.contains("## Where a baseline beats Cascade correlation"));
         assert!(md.contains("| ELM | **0.200** | **0.200** |"), "{md}");

@@ -9,6 +9,7 @@ use crate::ipc::sim::{ModelSource, SimConfig, SimError};
 use crate::plan::Family;
 use crate::plan::{default_loop_runs, LoopRun};
 use crate::statics::Statics;
+use crate::units::length_mm_or_dash;
 
 /// The sub-directory of a run: `sim` for the circle (the name the main
 /// job has always used), else `sim-<name>`; `-ik-only` is appended for the
@@ -51,7 +52,7 @@ pub fn closed_loop_section(
     let _ = writeln!(
         summary,
         "The robot's tip reaches {}; the runs are the ones that family can follow.\n\n\
-         | run | correction | RMS (mm) | max (mm) | steady state, worst target (mm) |\n\
+         | run | correction | RMS | max | steady state, worst target |\n\
          |---|---|---|---|---|",
         family.describe()
     );
@@ -86,7 +87,7 @@ pub fn closed_loop_section(
             let on_off = if correction { "on" } else { "off" };
             match crate::ipc::sim::run(&sim) {
                 Ok(r) => {
-                    let num = |v: Option<f64>| v.map_or("–".into(), |v| format!("{v:.3}"));
+                    let num = length_mm_or_dash;
                     let verdict = if r.verdict.clean {
                         String::new()
                     } else {

@@ -34,6 +34,7 @@ use crate::learn::targets::Targets;
 use crate::plot::workspace::{draw_workspace, BackboneCurve};
 use crate::robot::{Robot, DEFAULT_ROBOT};
 use crate::statics::{SolverSettings, Statics};
+use crate::units::length_mm;
 
 /// Where the main job writes.
 pub const OUT_DIR: &str = "out";
@@ -215,7 +216,8 @@ pub fn run(
     let (hidden_units, test_tip_mean_mm) = (net.shape().hidden, metrics.position_mm.mean);
     log::info!(
         "trained {hidden_units} hidden units in {train_seconds:.1} s; \
-         test tip error mean {test_tip_mean_mm:.3} mm"
+         test tip error mean {}",
+        length_mm(test_tip_mean_mm)
     );
     write_atomic(
         &out.join("evaluation.json"),
@@ -255,40 +257,69 @@ pub fn run(
     if let Some(slot) = learners.iter_mut().find(|l| l.name() == prefitted.name()) {
         *slot = Box::new(prefitted);
     }
-    log::info!("comparing with six baselines");
-    let comparison = compare(&data, &robot, learners, &opts)?;
-    let written = comparison.write(&out.join("compare"))?;
-    report.add(format!(
-        "## 4. Comparison with six baselines\n\n{}\n\nFiles: {}\n\n![comparison](compare/compare.png)\n",
-        comparison.to_markdown(),
-        written
-            .iter()
-            .map(|p| format!("`{}`", p.display()))
-            .collect::<Vec<_>>()
-            .join(", ")
-    ))?;
-
-    // 4b. Firmware parity: the exported net in the MCU binary's flash,
-    // under QEMU, against the host build of the same core.
-    report.add(firmware_parity_section(&model, &out.join("parity.json")))?;
 
     // 5. Closed loop: planner, controller and plant as real processes over
     // iceoryx2, with the IK net alone and with the integral correction, on
     // the runs that suit the robot's reachable family. In-process calls of
     // the typed sim API; the sim starts the three processes itself.
-    report.add(closed_loop::closed_loop_section(
-        robot_file,
-        &statics,
-        &model,
-        out,
-        options.quick.then_some(QUICK_LOOP_S),
-    )?)?;
+    //
+    // It needs only the net, and it runs in real time: about a minute of
+    // wall clock for a few percent of one core (the default robot's four
+    // runs: ≈ 9 CPU-seconds in 50 s). So when its processes get SCHED_FIFO,
+    // which the CPU-bound stages 4 and 4b then cannot disturb, it runs
+    // beside them; without real-time scheduling it runs after them, as it
+    // always did, so that its timing is not shared with the training.
+    let closed_loop = || -> anyhow::Result<String> {
+        let t = Instant::now();
+        let section = closed_loop::closed_loop_section(
+            robot_file,
+            &statics,
+            &model,
+            out,
+            options.quick.then_some(QUICK_LOOP_S),
+        )?;
+        log::info!("closed loop: done in {:.1} s", t.elapsed().as_secs_f64());
+        Ok(section)
+    };
+    let beside = realtime_available();
+    std::thread::scope(|scope| -> anyhow::Result<()> {
+        let background = beside.then(|| {
+            log::info!("closed loop: running beside the comparison (real-time scheduling)");
+            scope.spawn(closed_loop)
+        });
+        let t = Instant::now();
+        log::info!("comparing with six baselines");
+        let comparison = compare(&data, &robot, learners, &opts)?;
+        let written = comparison.write(&out.join("compare"))?;
+        log::info!("comparison: done in {:.1} s", t.elapsed().as_secs_f64());
+        report.add(format!(
+            "## 4. Comparison with six baselines\n\n{}\n\nFiles: {}\n\n![comparison](compare/compare.png)\n",
+            comparison.to_markdown(),
+            written
+                .iter()
+                .map(|p| format!("`{}`", p.display()))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ))?;
+
+        // 4b. Firmware parity: the exported net in the MCU binary's flash,
+        // under QEMU, against the host build of the same core.
+        report.add(firmware_parity_section(&model, &out.join("parity.json")))?;
+
+        let section = match background {
+            Some(handle) => handle
+                .join()
+                .map_err(|_| anyhow::anyhow!("the closed-loop stage panicked"))??,
+            None => closed_loop()?,
+        };
+        report.add(section)
+    })?;
 
     log::info!(
-        "done in {:.0} s: {} hidden units, test tip error mean {:.3} mm; report {}",
+        "done in {:.0} s: {} hidden units, test tip error mean {}; report {}",
         report.started.elapsed().as_secs_f64(),
         hidden_units,
-        test_tip_mean_mm,
+        length_mm(test_tip_mean_mm),
         report.path.display()
     );
     Ok(())
@@ -331,15 +362,13 @@ fn firmware_parity_section(model: &Path, json: &Path) -> String {
         "firmware parity: building the MCU binary with {}",
         model.display()
     );
-    // The host run replays the firmware's test vectors, corrupt weight blobs
-    // included: the core's own "blob rejected" warnings are expected there and
-    // would only alarm a reader of the console.
-    let level = log::max_level();
-    log::set_max_level(level.min(log::LevelFilter::Error));
-    let checked = crate::firmware_parity::check(&root, model, &target_dir);
-    log::set_max_level(level);
-    match checked {
+    let t = Instant::now();
+    match crate::firmware_parity::check(&root, model, &target_dir) {
         Ok(r) => {
+            log::info!(
+                "firmware parity: done in {:.1} s",
+                t.elapsed().as_secs_f64()
+            );
             let written = serde_json::to_string_pretty(&r)
                 .map_err(anyhow::Error::from)
                 .and_then(|text| write_atomic(json, text.as_bytes()).map_err(Into::into));
@@ -376,6 +405,15 @@ fn firmware_parity_section(model: &Path, json: &Path) -> String {
             format!("{title}\n\n**{e}**\n")
         }
     }
+}
+
+/// Whether this process may run threads under `SCHED_FIFO` (root or
+/// CAP_SYS_NICE): asked in a throwaway thread, so that no thread of ours
+/// keeps the real-time policy.
+fn realtime_available() -> bool {
+    std::thread::spawn(|| crate::ipc::clock::try_realtime(1))
+        .join()
+        .unwrap_or(false)
 }
 
 /// Backbone shapes for the workspace figure: unloaded, and half / full pull
