@@ -12,7 +12,7 @@
 use nalgebra::{DMatrix, Vector2};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use tendril_shared::{encode_to_vec, Activation, Shape, TnetView};
+use tendril_shared::{encode_to_vec, Activation, NetShape, TnetView};
 
 use super::trajectory::Trajectory;
 use super::IpcError;
@@ -176,7 +176,7 @@ fn fit(
         })
         .collect();
     let out_hi: Vec<f64> = statics.robot().max_tensions();
-    let shape = Shape {
+    let shape = NetShape {
         inputs: 7,
         hidden,
         outputs: n,
@@ -256,7 +256,7 @@ mod tests {
                 .unwrap();
         let s = Statics::new(&robot, SolverSettings::default());
         let blob = quick_net(&s, 1500, 48, 6.0, 3).unwrap();
-        let net = tendril_shared::IkNet::decode(&blob).unwrap();
+        let net = tendril_shared::McuNet::decode(&blob).unwrap();
         // Held-out bends (not on the training spiral): predicted tensions,
         // run forward through the statics, must land near the pose's tip.
         let mut worst: f64 = 0.0;
@@ -307,7 +307,7 @@ mod tests {
         let s = Statics::new(&robot, SolverSettings::default());
         let n = robot.n_tendons();
         let blob = quick_net_for(&s, 1000, 48, 5).unwrap();
-        let net = tendril_shared::IkNet::decode(&blob).unwrap();
+        let net = tendril_shared::McuNet::decode(&blob).unwrap();
         let mut lifter = Lifter::new(&s).unwrap();
         let mut worst: f64 = 0.0;
         for u in points {
