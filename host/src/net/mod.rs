@@ -1,8 +1,10 @@
 //! A trained `.tnet` net on the host (`docs/design.md` §5, §7): the one
 //! place that reads `.tnet` files and runs them. Every consumer — `tendril
-//! ik`, `evaluate`, the pipeline, the exact IK's net guess, the IPC
-//! controllers and the Python package — goes through here; the trainer
-//! only writes (`learn::cascor::export`, through the shared encoder).
+//! ik`, `evaluate`, the pipeline, the exact IK's net guess and the Python
+//! package — goes through here; the trainer only writes
+//! (`learn::cascor::export`, through the shared encoder). The IPC
+//! controller alone loads its bytes through the firmware's hot swap
+//! (`tendril_firmware::swap`), as the MCU does.
 //!
 //! - [`read`]: file → the firmware's fixed-capacity [`McuNet`], through the
 //!   decoder the MCU uses.
