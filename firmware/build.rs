@@ -82,7 +82,7 @@ fn default_net_source(path: &Path) -> Result<String, String> {
     );
     let _ = writeln!(
         src,
-        "    shape: tendril_shared::Shape {{ inputs: {}, hidden: {}, outputs: {} }},",
+        "    shape: tendril_shared::NetShape {{ inputs: {}, hidden: {}, outputs: {} }},",
         s.inputs, s.hidden, s.outputs
     );
     let _ = writeln!(
@@ -105,7 +105,7 @@ fn default_net_source(path: &Path) -> Result<String, String> {
         src,
         "}}) {{\n    Ok(net) => net,\n    Err(_) => panic!({:?}),\n}};",
         format!(
-            "the embedded net {display} ({}-{}-{}) does not fit McuNet (7 inputs, MCU_MAX_HIDDEN hidden units, 8 outputs)",
+            "the embedded net {display} ({}-{}-{}) does not fit McuNet (7 inputs, MAX_HIDDEN hidden units, 8 outputs)",
             s.inputs, s.hidden, s.outputs
         )
     );

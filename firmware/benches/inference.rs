@@ -11,7 +11,8 @@ use std::hint::black_box;
 use criterion::{criterion_group, criterion_main, Criterion};
 use tendril_firmware::control::{control_step, ControlState, Setpoint, StepInput};
 use tendril_firmware::vectors::{self, HAS_SETPOINT};
-use tendril_firmware::{infer, McuNet, DEFAULT_NET, MCU_MAX_HIDDEN};
+use tendril_firmware::{infer, McuNet, DEFAULT_NET};
+use tendril_shared::MAX_HIDDEN;
 use tendril_shared::MAX_TENDONS;
 
 static NET: &[u8] = include_bytes!("../vectors/default.tnet");
@@ -30,7 +31,7 @@ fn bench(c: &mut Criterion) {
     let poses = poses();
     let s = net.shape();
     let name = format!(
-        "infer {}-{}-{} ({} MACs, cap {MCU_MAX_HIDDEN})",
+        "infer {}-{}-{} ({} MACs, cap {MAX_HIDDEN})",
         s.inputs,
         s.hidden,
         s.outputs,

@@ -58,28 +58,19 @@ pub use control::{
 };
 pub use infer::infer;
 pub use swap::{FlashSlot, IncrementalSwap, NetSlots, NetStore, SwapError, SwapEvent};
-
-/// Capacity the MCU binary is built with: at most this many hidden units
-/// (`tendril_shared::MAX_HIDDEN`, the trainer's cap, so every exported net fits).
-pub const MCU_MAX_HIDDEN: usize = tendril_shared::MAX_HIDDEN;
-
-/// Packed weight storage of an [`McuNet`] (`tendril_shared::MAX_WEIGHTS`):
-/// [`tendril_shared::weight_capacity`]`(7, 64, 8)` = 3,111 `f32` (12.2 KiB).
-pub const MCU_WEIGHTS: usize = tendril_shared::MAX_WEIGHTS;
-
-/// The MCU binary's net type, `tendril_shared::IkNet`: 7 pose inputs,
-/// [`MCU_MAX_HIDDEN`] hidden units, up to 8 tendons.
-pub type McuNet = tendril_shared::IkNet;
+/// The MCU binary's net type: 7 pose inputs, up to
+/// [`tendril_shared::MAX_HIDDEN`] hidden units and 8 tendons, defined once
+/// in `tendril_shared` so the host's controllers and parity runs use it too.
+pub use tendril_shared::McuNet;
+use tendril_shared::{MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS};
 
 /// The MCU binary's net store: [`DEFAULT_NET`] in flash plus one RAM slot
 /// for hot-swapped updates.
-pub type McuSlots<'a> =
-    FlashSlot<'a, POSE_DIM, MCU_MAX_HIDDEN, { tendril_shared::MAX_TENDONS }, MCU_WEIGHTS>;
+pub type McuSlots<'a> = FlashSlot<'a, POSE_DIM, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS>;
 
 /// The MCU loop's hot swap: one bounded slice per control period
 /// (docs/design.md §5.3), for [`McuSlots`].
-pub type McuSwap<'b> =
-    IncrementalSwap<'b, POSE_DIM, MCU_MAX_HIDDEN, { tendril_shared::MAX_TENDONS }, MCU_WEIGHTS>;
+pub type McuSwap<'b> = IncrementalSwap<'b, POSE_DIM, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS>;
 
 /// Bytes of hashing or value scanning per swap slice in the MCU loop: at
 /// ≈ 4.75 M4 instructions per hashed byte, ≈ 20,000 instructions, so a

@@ -62,7 +62,7 @@ fn check_want(h: &NetHeader, want: (usize, usize)) -> Result<(), SwapError> {
     }
 }
 
-fn log_result(result: &Result<(), SwapError>, shape: tendril_shared::Shape) {
+fn log_result(result: &Result<(), SwapError>, shape: tendril_shared::NetShape) {
     match result {
         Ok(()) => log::info!(
             "weights swapped: net {}-{}-{}",

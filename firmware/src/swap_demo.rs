@@ -5,12 +5,12 @@
 //! (7 inputs, 64 hidden units, 8 tendons), so the test rebuilds every one of
 //! them on the host from the same seeds.
 
-use tendril_shared::{CoContraction, LimitsError, Shape, TendonLimits, TnetError, POSE_DIM};
+use tendril_shared::{CoContraction, LimitsError, NetShape, TendonLimits, TnetError, POSE_DIM};
 
 use crate::synth::synthetic_blob;
 
 /// Hidden units of every net of the run: the MCU's capacity.
-pub const HIDDEN: usize = crate::MCU_MAX_HIDDEN;
+pub const HIDDEN: usize = tendril_shared::MAX_HIDDEN;
 /// Outputs (tendons) of every net of the run: the most a robot has.
 pub const OUTPUTS: usize = tendril_shared::MAX_TENDONS;
 /// Upper end of every output range and of the tension limits, N.
@@ -18,7 +18,7 @@ pub const MAX_TENSION: f32 = 20.0;
 /// Slew limit of the run's robot, N/s.
 pub const SLEW_RATE: f32 = 500.0;
 /// Bytes of each blob of the run: a 7-64-8 `.tnet`.
-pub const BLOB_LEN: usize = Shape {
+pub const BLOB_LEN: usize = NetShape {
     inputs: POSE_DIM,
     hidden: HIDDEN,
     outputs: OUTPUTS,

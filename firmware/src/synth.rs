@@ -2,7 +2,7 @@
 //! vectors offer, and a fixture for tests and benches. Weights come from
 //! SplitMix64, so a seed fixes the blob exactly.
 
-use tendril_shared::{encode, Activation, Shape, TnetError, TnetView};
+use tendril_shared::{encode, Activation, NetShape, TnetError, TnetView};
 
 /// Most weights [`synthetic_blob`] can produce (7 inputs, 64 hidden, 8
 /// outputs needs 3,104).
@@ -78,7 +78,7 @@ pub fn synthetic_blob_with(
     ranges: &Ranges<'_>,
     buf: &mut [u8],
 ) -> Result<usize, TnetError> {
-    let shape = Shape {
+    let shape = NetShape {
         inputs: ranges.input_lo.len(),
         hidden,
         outputs: ranges.output_lo.len(),

@@ -676,7 +676,7 @@ fn the_flash_default_net_is_its_file_decoded_at_run_time() {
     let file = include_bytes!(env!("TENDRIL_FW_NET_FILE"));
     let decoded = crate::McuNet::decode(file).unwrap();
     assert_eq!(crate::DEFAULT_NET, decoded);
-    assert!(crate::DEFAULT_NET.shape().hidden <= crate::MCU_MAX_HIDDEN);
+    assert!(crate::DEFAULT_NET.shape().hidden <= tendril_shared::MAX_HIDDEN);
 }
 
 #[test]

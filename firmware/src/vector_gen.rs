@@ -25,14 +25,13 @@ use std::string::String;
 use std::vec;
 use std::vec::Vec;
 
-use tendril_shared::{weight_capacity, CascadeNet, MAX_TENDONS};
+use tendril_shared::{weight_capacity, CascadeNet, MAX_HIDDEN, MAX_TENDONS};
 
 use crate::synth::{synthetic_blob_with, Ranges};
 use crate::vectors::{
     Record, VecHeader, HAS_FEEDBACK, HAS_SETPOINT, HEADER_LEN, RECORD_LEN, SWAP_BAD, SWAP_GOOD,
     SWAP_NAN, SWAP_REVERT,
 };
-use crate::MCU_MAX_HIDDEN;
 
 /// Decode capacity for reading any trained net (checked against the MCU's after).
 type BigNet = CascadeNet<7, 256, MAX_TENDONS, { weight_capacity(7, 256, MAX_TENDONS) }>;
@@ -81,9 +80,9 @@ pub fn generate(blob: &[u8]) -> Result<Generated, String> {
             shape.inputs
         ));
     }
-    if shape.hidden > MCU_MAX_HIDDEN {
+    if shape.hidden > MAX_HIDDEN {
         return Err(format!(
-            "net has {} hidden units, the MCU build holds at most {MCU_MAX_HIDDEN}: raise MCU_MAX_HIDDEN in firmware/src/lib.rs (flash and RAM grow quadratically)",
+            "net has {} hidden units, the MCU build holds at most {MAX_HIDDEN}: raise MAX_HIDDEN in shared/src/capacity.rs (flash and RAM grow quadratically)",
             shape.hidden
         ));
     }

@@ -7,12 +7,13 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use nalgebra::DMatrix;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use tendril::learn::cascor::export::{decode, infer, to_bytes, Ranges};
-use tendril::learn::cascor::{train, CascadeNet, CascorOptions, OutputKind};
+use tendril::learn::cascor::export::{to_bytes, Ranges};
+use tendril::learn::cascor::{train, CascorOptions, GrowingNet, OutputKind};
+use tendril::net::{decode, infer};
 
-fn random_net(hidden: usize) -> CascadeNet {
+fn random_net(hidden: usize) -> GrowingNet {
     let mut rng = ChaCha8Rng::seed_from_u64(1);
-    CascadeNet {
+    GrowingNet {
         n_inputs: 7,
         n_outputs: 4,
         hidden: (0..hidden)

@@ -14,8 +14,8 @@ use std::hint::black_box;
 use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use tendril::ik_net::IkNet;
 use tendril::inverse::{ExactIk, IkSettings, Target};
+use tendril::net::GuardedNet;
 use tendril::plan::Lifter;
 use tendril::robot::repo_robot;
 use tendril::statics::{SolverSettings, Statics};
@@ -54,7 +54,8 @@ fn targets(c: &mut Criterion) {
         })
     });
 
-    let net = IkNet::load(&root().join("firmware/vectors/default.tnet"), &robot, true).unwrap();
+    let net =
+        GuardedNet::load(&root().join("firmware/vectors/default.tnet"), &robot, true).unwrap();
     c.bench_function("inverse/net", |b| {
         b.iter(|| {
             let guess = net.solve(black_box(&pose)).unwrap();

@@ -8,8 +8,7 @@ use numpy::ndarray::Array2;
 use numpy::{AllowTypeChange, IntoPyArray, PyArrayLikeDyn};
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
-use tendril::ik_net::IkNet;
-use tendril::learn::cascor::export::{read_tnet, ExportError};
+use tendril::net::{read_tnet, GuardedNet, ReadError};
 
 use crate::arrays::rows;
 use crate::detach::detached;
@@ -19,7 +18,7 @@ use crate::robot::Robot;
 /// A trained inverse-kinematics net (a ``.tnet`` file) for one robot.
 #[pyclass(frozen, module = "tendril._tendril")]
 pub struct Net {
-    pub(crate) ik: IkNet,
+    pub(crate) ik: GuardedNet,
 }
 
 #[pymethods]
@@ -41,10 +40,11 @@ impl Net {
             }
         };
         let net = read_tnet(&path).map_err(|e| match &e {
-            ExportError::Io { .. } => os_error(&e),
+            ReadError::Io { .. } => os_error(&e),
             _ => invalid(&e),
         })?;
-        let ik = IkNet::new(net, &robot.model, allow_extrapolation).map_err(|e| invalid(&e))?;
+        let ik =
+            GuardedNet::new(net, &robot.model, allow_extrapolation).map_err(|e| invalid(&e))?;
         Ok(Net { ik })
     }
 

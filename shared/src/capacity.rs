@@ -17,10 +17,10 @@ pub const MAX_TENDONS: usize = 8;
 /// capacity of both controllers (host and MCU).
 pub const MAX_HIDDEN: usize = 64;
 
-/// Packed weight storage of an [`IkNet`]: `weight_capacity(7, 64, 8)` =
+/// Packed weight storage of an [`McuNet`]: `weight_capacity(7, 64, 8)` =
 /// 3,111 `f32` (12.2 KiB).
 pub const MAX_WEIGHTS: usize = weight_capacity(POSE_DIM, MAX_HIDDEN, MAX_TENDONS);
 
 /// The net type every component decodes `.tnet` files into: [`POSE_DIM`]
 /// inputs, up to [`MAX_HIDDEN`] hidden units and [`MAX_TENDONS`] outputs.
-pub type IkNet = CascadeNet<POSE_DIM, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS>;
+pub type McuNet = CascadeNet<POSE_DIM, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS>;

@@ -8,11 +8,11 @@ use proptest::prelude::*;
 use crate::crc32::crc32;
 use crate::net::ROW_PAD;
 use crate::tnet::{self, Field, TnetError, MAGIC};
-use crate::{encode, encoded_len, weight_capacity, Activation, CascadeNet, Shape, TnetView};
+use crate::{encode, encoded_len, weight_capacity, Activation, CascadeNet, NetShape, TnetView};
 
 /// An owned net description with distinct, deterministic values.
 struct Owned {
-    shape: Shape,
+    shape: NetShape,
     input_lo: Vec<f32>,
     input_hi: Vec<f32>,
     output_lo: Vec<f32>,
@@ -23,7 +23,7 @@ struct Owned {
 
 impl Owned {
     fn new(inputs: usize, hidden: usize, outputs: usize) -> Owned {
-        let shape = Shape {
+        let shape = NetShape {
             inputs,
             hidden,
             outputs,
@@ -145,7 +145,7 @@ fn shape_encoded_len_is_the_encoders_length() {
         assert_eq!(shape.encoded_len(), owned.blob().len(), "{shape:?}");
     }
     // The bound `messages` checks at compile time: the largest net fits.
-    let max = Shape {
+    let max = NetShape {
         inputs: crate::POSE_DIM,
         hidden: crate::MAX_HIDDEN,
         outputs: crate::MAX_TENDONS,
@@ -159,7 +159,7 @@ fn shape_encoded_len_is_the_encoders_length() {
 
 #[test]
 fn row_offsets_sum_the_row_lengths() {
-    let s = Shape {
+    let s = NetShape {
         inputs: 7,
         hidden: 5,
         outputs: 4,
@@ -512,7 +512,7 @@ fn from_view_builds_the_net_the_decoder_builds() {
 /// A net built in const context: what the firmware's build script emits.
 static CONST_NET: CascadeNet<2, 1, 1, { weight_capacity(2, 1, 1) }> =
     match CascadeNet::from_view(&TnetView {
-        shape: Shape {
+        shape: NetShape {
             inputs: 2,
             hidden: 1,
             outputs: 1,

@@ -32,12 +32,12 @@ pub mod tnet;
 mod format_tests;
 
 pub use activation::Activation;
-pub use capacity::{IkNet, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS, POSE_DIM};
+pub use capacity::{McuNet, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS, POSE_DIM};
 pub use limits::{CoContraction, LimitsError, TendonLimits};
-pub use net::{weight_capacity, CascadeNet, CheckJob, Checked, NetHeader, Row};
+pub use net::{weight_capacity, CascadeNet, CheckJob, Checked, Row};
 #[cfg(feature = "std")]
 pub use tnet::encode_to_vec;
-pub use tnet::{encode, encoded_len, Shape, TnetError, TnetView};
+pub use tnet::{encode, encoded_len, NetHeader, NetShape, TnetError, TnetView};
 
 /// `encode` into a fresh vector, for this crate's tests (no `std` feature needed).
 #[cfg(test)]

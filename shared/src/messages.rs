@@ -13,14 +13,14 @@
 
 pub use crate::capacity::MAX_TENDONS;
 use crate::capacity::{MAX_HIDDEN, POSE_DIM};
-use crate::tnet::Shape;
+use crate::tnet::NetShape;
 
 /// Bytes a [`WeightUpdate`] can carry: more than twice the largest net a
 /// controller accepts (12.5 KiB for 7-64-8; checked at compile time).
 pub const WEIGHT_UPDATE_CAPACITY: usize = 32 * 1024;
 
 const _: () = assert!(
-    Shape {
+    NetShape {
         inputs: POSE_DIM,
         hidden: MAX_HIDDEN,
         outputs: MAX_TENDONS,

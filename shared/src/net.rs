@@ -1,5 +1,9 @@
 //! The decoded, fixed-capacity cascade net: what the firmware runs.
 //!
+//! This module is the *decoded net*: its storage, the checks and writes of
+//! a decode into it, and its accessors. The bytes themselves — layout,
+//! header, parser, CRC — are the *wire format*, [`crate::tnet`].
+//!
 //! # Storage
 //! All weights live in one flat `[f32; W]`, packed like the file itself
 //! (triangular, not one `1 + IN + MAX_HIDDEN` row per unit): hidden row `k`
@@ -15,7 +19,9 @@
 //! A 7-input, 64-hidden, 8-output net needs 3,111 `f32` (12.2 KiB) this way
 //! instead of 5,184 (20.3 KiB) with rectangular rows.
 
-use crate::tnet::{self, Activation, Field, Reader, Shape, TnetError, TnetView};
+use crate::tnet::{
+    self, Activation, Field, NetHeader, NetShape, Run, TnetError, TnetView, Trailer,
+};
 
 mod sliced;
 pub use sliced::CheckJob;
@@ -82,7 +88,7 @@ impl<'a> Row<'a> {
 /// build one.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CascadeNet<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize> {
-    shape: Shape,
+    shape: NetShape,
     hidden_activation: Activation,
     output_activation: Activation,
     input_lo: [f32; IN],
@@ -151,17 +157,6 @@ const fn copy_ranges(
     Ok(())
 }
 
-/// What the decoder learnt from a `.tnet` it has fully validated.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct NetHeader {
-    /// Dimensions.
-    pub shape: Shape,
-    /// Activation of the hidden units.
-    pub hidden_activation: Activation,
-    /// Activation of the outputs.
-    pub output_activation: Activation,
-}
-
 /// A `.tnet` byte string that passed [`CascadeNet::check`]: every check
 /// the decoder makes, CRC included. Only `check` makes one (private fields),
 /// so [`CascadeNet::decode_checked`] can write it without checking again.
@@ -189,22 +184,49 @@ enum Dest {
     Weights(usize),
 }
 
-/// The little-endian word in a 4-byte chunk (`chunks_exact(4)` gives only
-/// those; the pattern keeps the code free of panicking indexing).
-#[inline]
-fn word(c: &[u8]) -> u32 {
-    match c {
-        [a, b, c, d] => u32::from_le_bytes([*a, *b, *c, *d]),
-        _ => 0,
-    }
-}
-
-/// Index of the first NaN or ±∞ in a byte run of `f32`s: exponent bits all
-/// ones (a bit test instead of a float compare; same answer as `is_finite`).
-fn first_non_finite(bytes: &[u8]) -> Option<usize> {
-    bytes
-        .chunks_exact(4)
-        .position(|c| word(c) & 0x7f80_0000 == 0x7f80_0000)
+/// [`tnet::walk`] for a net of capacity `IN`, `H`, `OUT`, `W`: refuses a
+/// shape over capacity as soon as the header is read, and hands the
+/// visitor each run's place in the packed storage (a row's inputs occupy
+/// `IN` columns there; the columns past the file's inputs stay 0).
+fn walk<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
+    bytes: &[u8],
+    trailer: Trailer,
+    mut visit: impl FnMut(Field, usize, Dest, &[u8]),
+) -> Result<NetHeader, TnetError> {
+    let fits = |s: &NetShape| {
+        let (ni, nh, no) = (s.inputs, s.hidden, s.outputs);
+        if ni > IN || nh > H || no > OUT || weights_needed(IN, nh, no) > W {
+            return Err(TnetError::ShapeOverCapacity {
+                inputs: ni,
+                hidden: nh,
+                outputs: no,
+                cap_inputs: IN,
+                cap_hidden: H,
+                cap_outputs: OUT,
+            });
+        }
+        Ok(())
+    };
+    tnet::walk(bytes, trailer, fits, |field, at, run, values| {
+        let dest = match run {
+            Run::InputLo => Dest::InputLo,
+            Run::InputHi => Dest::InputHi,
+            Run::OutputLo => Dest::OutputLo,
+            Run::OutputHi => Dest::OutputHi,
+            Run::Row {
+                unit,
+                sees,
+                cascade,
+            } => {
+                let start = match field {
+                    Field::OutputWeights => hidden_offset(IN, sees) + unit * (1 + IN + sees),
+                    _ => hidden_offset(IN, unit),
+                };
+                Dest::Weights(if cascade { start + 1 + IN } else { start })
+            }
+        };
+        visit(field, at, dest, values)
+    })
 }
 
 /// Store the byte run's `f32`s at the start of `dst` (as many as fit: the
@@ -222,98 +244,11 @@ fn first_non_finite(bytes: &[u8]) -> Option<usize> {
 fn fill(dst: &mut [f32], bytes: &[u8]) -> bool {
     let mut special = 0u32;
     for (d, c) in dst.iter_mut().zip(bytes.chunks_exact(4)) {
-        let w = word(c);
+        let w = tnet::word(c);
         special |= u32::from(w & 0x7f80_0000 == 0x7f80_0000);
         *d = f32::from_bits(w);
     }
     special == 0
-}
-
-/// What [`walk`] checks after the last array.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Trailer {
-    /// Four bytes that match the CRC-32 of everything before them.
-    Crc,
-    /// Exactly four bytes, their value not judged yet (the incremental
-    /// check, [`CheckJob`], hashes the body in later slices).
-    Length,
-    /// Exactly four bytes or [`TnetError::Malformed`] (the write after a
-    /// complete check).
-    Assumed,
-}
-
-/// Parse the whole file — header, every array, and the trailer —
-/// calling `visit(field, index_in_field, destination, bytes)` for each run
-/// of consecutive `f32`s, in file order: each range array whole, and each
-/// weight row as two runs (bias and inputs; earlier hidden units), because
-/// in storage the inputs occupy `IN` columns (the rest stay 0). Checks
-/// structure and capacity, not values (the visitor does).
-fn walk<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
-    bytes: &[u8],
-    trailer: Trailer,
-    mut visit: impl FnMut(Field, usize, Dest, &[u8]),
-) -> Result<NetHeader, TnetError> {
-    let mut r = Reader::new(bytes);
-    let (shape, hidden_activation, output_activation) = tnet::header(&mut r)?;
-    let (ni, nh, no) = (shape.inputs, shape.hidden, shape.outputs);
-    if ni > IN || nh > H || no > OUT || weights_needed(IN, nh, no) > W {
-        return Err(TnetError::ShapeOverCapacity {
-            inputs: ni,
-            hidden: nh,
-            outputs: no,
-            cap_inputs: IN,
-            cap_hidden: H,
-            cap_outputs: OUT,
-        });
-    }
-    let ranges = [
-        (Field::InputLo, ni, Dest::InputLo),
-        (Field::InputHi, ni, Dest::InputHi),
-        (Field::OutputLo, no, Dest::OutputLo),
-        (Field::OutputHi, no, Dest::OutputHi),
-    ];
-    for (field, n, dest) in ranges {
-        r.seq_len(field, n)?;
-        visit(field, 0, dest, r.f32_run(n)?);
-    }
-    let mut row =
-        |r: &mut Reader<'_>, field: Field, file_at: usize, start: usize, hidden: usize| {
-            visit(field, file_at, Dest::Weights(start), r.f32_run(1 + ni)?);
-            let at = file_at + 1 + ni;
-            visit(field, at, Dest::Weights(start + 1 + IN), r.f32_run(hidden)?);
-            Ok::<(), TnetError>(())
-        };
-    r.seq_len(Field::HiddenWeights, shape.hidden_weight_count())?;
-    for k in 0..nh {
-        let file_at = shape.hidden_row_offset(k);
-        row(
-            &mut r,
-            Field::HiddenWeights,
-            file_at,
-            hidden_offset(IN, k),
-            k,
-        )?;
-    }
-    r.seq_len(Field::OutputWeights, shape.output_weight_count())?;
-    let out_base = hidden_offset(IN, nh);
-    for o in 0..no {
-        let file_at = o * shape.output_row_len();
-        let start = out_base + o * (1 + IN + nh);
-        row(&mut r, Field::OutputWeights, file_at, start, nh)?;
-    }
-    match trailer {
-        Trailer::Crc => tnet::check_trailer(bytes, r.remaining())?,
-        Trailer::Length => {
-            tnet::stored_crc(r.remaining())?;
-        }
-        Trailer::Assumed if r.remaining().len() != 4 => return Err(TnetError::Malformed),
-        Trailer::Assumed => {}
-    }
-    Ok(NetHeader {
-        shape,
-        hidden_activation,
-        output_activation,
-    })
 }
 
 impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
@@ -323,7 +258,7 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
     /// static storage (`const`, so it can initialise a `static`).
     pub const fn empty() -> Self {
         CascadeNet {
-            shape: Shape {
+            shape: NetShape {
                 inputs: 0,
                 hidden: 0,
                 outputs: 0,
@@ -360,7 +295,7 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
         let header =
             walk::<IN, MAX_HIDDEN, OUT, W>(bytes, Trailer::Crc, |field, at, dest, run| {
                 if first_bad.is_none() {
-                    if let Some(i) = first_non_finite(run) {
+                    if let Some(i) = tnet::first_non_finite(run) {
                         first_bad = Some(TnetError::NonFinite {
                             field,
                             index: at + i,
@@ -490,7 +425,7 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
     /// Make `self` [empty](CascadeNet::empty) in place (`*self = empty()`
     /// would build the whole net on the stack first: 12 KiB on the MCU).
     fn clear(&mut self) {
-        self.shape = Shape {
+        self.shape = NetShape {
             inputs: 0,
             hidden: 0,
             outputs: 0,
@@ -625,7 +560,7 @@ impl<const IN: usize, const MAX_HIDDEN: usize, const OUT: usize, const W: usize>
     }
 
     /// Dimensions of the decoded net (all zero for an empty net).
-    pub const fn shape(&self) -> Shape {
+    pub const fn shape(&self) -> NetShape {
         self.shape
     }
 

@@ -2,6 +2,11 @@
 //! its normalisation ranges and activation kinds, serialised with postcard and
 //! sealed with a CRC-32.
 //!
+//! This module is the *wire format*: magic, version, header, the encoder,
+//! the parser every decode runs (`walk`: header, array lengths, trailer) and
+//! the CRC check; its errors are in `tnet/error.rs`. The *decoded* net, the
+//! fixed-capacity storage the firmware runs, is [`crate::net`].
+//!
 //! # Layout
 //! Fields in order, each in postcard's encoding (varints for integers,
 //! 4-byte little-endian IEEE-754 for `f32`, a varint length before each
@@ -11,7 +16,7 @@
 //! |---|---|---|
 //! | magic | `[u8; 4]` | `b"TNET"` |
 //! | version | `u16` | [`VERSION`] |
-//! | inputs, hidden, outputs | `u16` ×3 | the [`Shape`] |
+//! | inputs, hidden, outputs | `u16` ×3 | the [`NetShape`] |
 //! | hidden_activation, output_activation | `u8` ×2 | [`Activation`] codes |
 //! | input_lo, input_hi | `[f32]` ×2 | per-input normalisation range, `inputs` long |
 //! | output_lo, output_hi | `[f32]` ×2 | per-output range, `outputs` long |
@@ -29,14 +34,15 @@
 //! `ŷ_o = output_activation(Σ w·feature)`, de-normalised as
 //! `y_o = lo_o + ŷ_o (hi_o − lo_o)` (newtons for tendon tensions). Row `k`
 //! starts at offset `k (1 + I) + k (k − 1)/2` of `hidden_weights`; row `o` at
-//! `o (1 + I + H)` of `output_weights` ([`Shape::hidden_row_offset`]).
-
-use core::fmt;
+//! `o (1 + I + H)` of `output_weights` ([`NetShape::hidden_row_offset`]).
 
 use serde::Serialize;
 
 pub use crate::activation::Activation;
 use crate::crc32::Crc32;
+
+mod error;
+pub use error::{Field, TnetError};
 
 /// The four bytes every `.tnet` file starts with.
 pub const MAGIC: [u8; 4] = *b"TNET";
@@ -69,7 +75,7 @@ impl Activation {
 
 /// Dimensions of a cascade net.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct Shape {
+pub struct NetShape {
     /// Number of inputs (7 for a tip pose: px, py, pz, qw, qx, qy, qz).
     pub inputs: usize,
     /// Number of installed hidden units (may be 0).
@@ -78,7 +84,7 @@ pub struct Shape {
     pub outputs: usize,
 }
 
-impl Shape {
+impl NetShape {
     /// Number of weights of hidden unit `k`: bias, inputs, earlier hidden units.
     pub const fn hidden_row_len(&self, k: usize) -> usize {
         1 + self.inputs + k
@@ -147,153 +153,12 @@ const fn varint_len(mut v: usize) -> usize {
     n
 }
 
-/// Which array of the file a problem was found in.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Field {
-    /// Lower ends of the input normalisation ranges.
-    InputLo,
-    /// Upper ends of the input normalisation ranges.
-    InputHi,
-    /// Lower ends of the output ranges.
-    OutputLo,
-    /// Upper ends of the output ranges.
-    OutputHi,
-    /// Concatenated hidden unit weights.
-    HiddenWeights,
-    /// Concatenated output unit weights.
-    OutputWeights,
-}
-
-impl fmt::Display for Field {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            Field::InputLo => "input_lo",
-            Field::InputHi => "input_hi",
-            Field::OutputLo => "output_lo",
-            Field::OutputHi => "output_hi",
-            Field::HiddenWeights => "hidden_weights",
-            Field::OutputWeights => "output_weights",
-        })
-    }
-}
-
-/// Everything that can be wrong with a `.tnet` byte string or with a net
-/// handed to the encoder. Decoding never panics; it returns one of these.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
-pub enum TnetError {
-    /// The bytes end before the format says they should.
-    #[error("weight file truncated: it ends in the middle of the data")]
-    Truncated,
-    /// Not a `.tnet` file.
-    #[error("not a .tnet weight file: magic bytes are {found:02x?}, expected \"TNET\"")]
-    BadMagic {
-        /// The first four bytes found.
-        found: [u8; 4],
-    },
-    /// A format version this build cannot read.
-    #[error("unsupported .tnet version {found} (this build reads version {VERSION})")]
-    UnsupportedVersion {
-        /// The version in the file.
-        found: u16,
-    },
-    /// Zero inputs or zero outputs.
-    #[error("net shape has no inputs or no outputs ({inputs} inputs, {outputs} outputs)")]
-    EmptyShape {
-        /// Inputs in the file.
-        inputs: usize,
-        /// Outputs in the file.
-        outputs: usize,
-    },
-    /// The net does not fit the fixed capacity it is decoded into.
-    #[error(
-        "net shape {inputs}-{hidden}-{outputs} (inputs-hidden-outputs) exceeds this build's capacity {cap_inputs}-{cap_hidden}-{cap_outputs}"
-    )]
-    ShapeOverCapacity {
-        /// Inputs in the file.
-        inputs: usize,
-        /// Hidden units in the file.
-        hidden: usize,
-        /// Outputs in the file.
-        outputs: usize,
-        /// Input capacity.
-        cap_inputs: usize,
-        /// Hidden unit capacity.
-        cap_hidden: usize,
-        /// Output capacity.
-        cap_outputs: usize,
-    },
-    /// An activation code outside the known kinds.
-    #[error("unknown activation code {code}")]
-    UnknownActivation {
-        /// The code found.
-        code: u8,
-    },
-    /// An array whose length disagrees with the shape.
-    #[error("{field} has {found} entries, the shape needs {expected}")]
-    LengthMismatch {
-        /// The array.
-        field: Field,
-        /// Length the shape implies.
-        expected: usize,
-        /// Length found.
-        found: usize,
-    },
-    /// Bytes that are not valid postcard for the expected field (e.g. an
-    /// over-long varint).
-    #[error("weight file malformed: invalid encoding")]
-    Malformed,
-    /// Bytes after the CRC.
-    #[error("weight file has {extra} unexpected bytes after the checksum")]
-    TrailingBytes {
-        /// How many.
-        extra: usize,
-    },
-    /// The checksum does not match: the file is corrupted.
-    #[error("weight file corrupted: CRC-32 is {stored:#010x}, data hashes to {computed:#010x}")]
-    CrcMismatch {
-        /// CRC stored in the file.
-        stored: u32,
-        /// CRC of the data.
-        computed: u32,
-    },
-    /// A NaN or infinite weight or range bound.
-    #[error("{field}[{index}] is not a finite number")]
-    NonFinite {
-        /// The array.
-        field: Field,
-        /// Index in it.
-        index: usize,
-    },
-    /// A normalisation range with `hi <= lo` (would divide by zero or flip signs).
-    #[error("{field}[{index}]: normalisation range is empty (hi <= lo)")]
-    EmptyRange {
-        /// `InputLo` or `OutputLo`: which ranges.
-        field: Field,
-        /// Index of the range.
-        index: usize,
-    },
-    /// A shape dimension too large for the file's `u16` fields.
-    #[error("net shape dimension {value} does not fit the format (max 65535)")]
-    ShapeTooLarge {
-        /// The offending dimension.
-        value: usize,
-    },
-    /// The encoder's output buffer is too small.
-    #[error("output buffer holds {available} bytes, the encoded net needs {needed}")]
-    BufferTooSmall {
-        /// Bytes needed ([`encoded_len`]).
-        needed: usize,
-        /// Bytes available.
-        available: usize,
-    },
-}
-
 /// A borrowed description of a net to encode: what a trainer hands to
 /// [`encode`]. Weight arrays follow the module-level layout.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TnetView<'a> {
     /// Dimensions.
-    pub shape: Shape,
+    pub shape: NetShape,
     /// Activation of the hidden units (cascade correlation: [`Activation::SymmetricSigmoid`]).
     pub hidden_activation: Activation,
     /// Activation of the outputs ([`Activation::Linear`] or [`Activation::Sigmoid`]).
@@ -306,9 +171,9 @@ pub struct TnetView<'a> {
     pub output_lo: &'a [f32],
     /// Per-output upper bound (`> output_lo`).
     pub output_hi: &'a [f32],
-    /// Hidden unit rows concatenated, [`Shape::hidden_weight_count`] long.
+    /// Hidden unit rows concatenated, [`NetShape::hidden_weight_count`] long.
     pub hidden_weights: &'a [f32],
-    /// Output rows concatenated, [`Shape::output_weight_count`] long.
+    /// Output rows concatenated, [`NetShape::output_weight_count`] long.
     pub output_weights: &'a [f32],
 }
 
@@ -519,12 +384,12 @@ impl<'a> Reader<'a> {
 /// Parse and check the header (magic, version, shape, activations) of a
 /// `.tnet` byte string, without touching the weights: what a loader uses to
 /// report a file's shape or pick a capacity.
-pub fn read_header(bytes: &[u8]) -> Result<(Shape, Activation, Activation), TnetError> {
+pub fn read_header(bytes: &[u8]) -> Result<(NetShape, Activation, Activation), TnetError> {
     let mut r = Reader::new(bytes);
     header(&mut r)
 }
 
-pub(crate) fn header(r: &mut Reader<'_>) -> Result<(Shape, Activation, Activation), TnetError> {
+pub(crate) fn header(r: &mut Reader<'_>) -> Result<(NetShape, Activation, Activation), TnetError> {
     let found: [u8; 4] = r.take()?;
     if found != MAGIC {
         return Err(TnetError::BadMagic { found });
@@ -542,7 +407,7 @@ pub(crate) fn header(r: &mut Reader<'_>) -> Result<(Shape, Activation, Activatio
     let hidden_activation = r.activation()?;
     let output_activation = r.activation()?;
     Ok((
-        Shape {
+        NetShape {
             inputs,
             hidden,
             outputs,
@@ -550,6 +415,141 @@ pub(crate) fn header(r: &mut Reader<'_>) -> Result<(Shape, Activation, Activatio
         hidden_activation,
         output_activation,
     ))
+}
+
+/// What the decoder learnt from a `.tnet` it has fully validated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct NetHeader {
+    /// Dimensions.
+    pub shape: NetShape,
+    /// Activation of the hidden units.
+    pub hidden_activation: Activation,
+    /// Activation of the outputs.
+    pub output_activation: Activation,
+}
+
+/// The little-endian word in a 4-byte chunk (`chunks_exact(4)` gives only
+/// those; the pattern keeps the code free of panicking indexing).
+#[inline]
+pub(crate) fn word(c: &[u8]) -> u32 {
+    match c {
+        [a, b, c, d] => u32::from_le_bytes([*a, *b, *c, *d]),
+        _ => 0,
+    }
+}
+
+/// Index of the first NaN or ±∞ in a byte run of `f32`s: exponent bits all
+/// ones (a bit test instead of a float compare; same answer as `is_finite`).
+pub(crate) fn first_non_finite(bytes: &[u8]) -> Option<usize> {
+    bytes
+        .chunks_exact(4)
+        .position(|c| word(c) & 0x7f80_0000 == 0x7f80_0000)
+}
+
+/// What [`walk`] checks after the last array.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Trailer {
+    /// Four bytes that match the CRC-32 of everything before them.
+    Crc,
+    /// Exactly four bytes, their value not judged yet (the incremental
+    /// check, [`crate::CheckJob`], hashes the body in later slices).
+    Length,
+    /// Exactly four bytes or [`TnetError::Malformed`] (the write after a
+    /// complete check).
+    Assumed,
+}
+
+/// Which values of the file a run of consecutive `f32`s holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Run {
+    /// The whole `input_lo` array.
+    InputLo,
+    /// The whole `input_hi` array.
+    InputHi,
+    /// The whole `output_lo` array.
+    OutputLo,
+    /// The whole `output_hi` array.
+    OutputHi,
+    /// Part of row `unit` (hidden unit or output, as the field says), a
+    /// row that sees `sees` hidden units: its bias and inputs
+    /// (`cascade: false`) or its `sees` hidden-unit weights (`cascade: true`).
+    Row {
+        unit: usize,
+        sees: usize,
+        cascade: bool,
+    },
+}
+
+/// Parse the whole file — header, every array, and the trailer — calling
+/// `fits(header)` once the header is read (the decoded net's capacity
+/// check), then `visit(field, index_in_field, run, bytes)` for each run of
+/// consecutive `f32`s, in file order: each range array whole, and each
+/// weight row as two runs (bias and inputs; earlier hidden units), because
+/// the decoded net stores the inputs in a fixed number of columns. Checks
+/// structure, not values (the visitor does).
+pub(crate) fn walk(
+    bytes: &[u8],
+    trailer: Trailer,
+    fits: impl FnOnce(&NetShape) -> Result<(), TnetError>,
+    mut visit: impl FnMut(Field, usize, Run, &[u8]),
+) -> Result<NetHeader, TnetError> {
+    let mut r = Reader::new(bytes);
+    let (shape, hidden_activation, output_activation) = header(&mut r)?;
+    fits(&shape)?;
+    let (ni, nh, no) = (shape.inputs, shape.hidden, shape.outputs);
+    let ranges = [
+        (Field::InputLo, ni, Run::InputLo),
+        (Field::InputHi, ni, Run::InputHi),
+        (Field::OutputLo, no, Run::OutputLo),
+        (Field::OutputHi, no, Run::OutputHi),
+    ];
+    for (field, n, run) in ranges {
+        r.seq_len(field, n)?;
+        visit(field, 0, run, r.f32_run(n)?);
+    }
+    let mut row = |r: &mut Reader<'_>, field: Field, file_at: usize, unit: usize, sees: usize| {
+        let head = Run::Row {
+            unit,
+            sees,
+            cascade: false,
+        };
+        visit(field, file_at, head, r.f32_run(1 + ni)?);
+        let tail = Run::Row {
+            unit,
+            sees,
+            cascade: true,
+        };
+        visit(field, file_at + 1 + ni, tail, r.f32_run(sees)?);
+        Ok::<(), TnetError>(())
+    };
+    r.seq_len(Field::HiddenWeights, shape.hidden_weight_count())?;
+    for k in 0..nh {
+        row(
+            &mut r,
+            Field::HiddenWeights,
+            shape.hidden_row_offset(k),
+            k,
+            k,
+        )?;
+    }
+    r.seq_len(Field::OutputWeights, shape.output_weight_count())?;
+    for o in 0..no {
+        let file_at = o * shape.output_row_len();
+        row(&mut r, Field::OutputWeights, file_at, o, nh)?;
+    }
+    match trailer {
+        Trailer::Crc => check_trailer(bytes, r.remaining())?,
+        Trailer::Length => {
+            stored_crc(r.remaining())?;
+        }
+        Trailer::Assumed if r.remaining().len() != 4 => return Err(TnetError::Malformed),
+        Trailer::Assumed => {}
+    }
+    Ok(NetHeader {
+        shape,
+        hidden_activation,
+        output_activation,
+    })
 }
 
 /// The CRC stored in the trailer after the last field: exactly four bytes

@@ -5,15 +5,14 @@
 use nalgebra::DMatrix;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use tendril::learn::cascor::export::{
-    decode, infer_batch, read_tnet, to_bytes, write_tnet, HostNet, Ranges,
-};
-use tendril::learn::cascor::{CascadeNet, OutputKind};
-use tendril_shared::{Activation, Shape, TnetView};
+use tendril::learn::cascor::export::{to_bytes, write_tnet, Ranges};
+use tendril::learn::cascor::{GrowingNet, OutputKind};
+use tendril::net::{decode, infer_batch, read_tnet};
+use tendril_shared::{Activation, McuNet, NetShape, TnetView};
 
-fn random_net(hidden: usize, outputs: usize, seed: u64) -> (CascadeNet, Ranges) {
+fn random_net(hidden: usize, outputs: usize, seed: u64) -> (GrowingNet, Ranges) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let net = CascadeNet {
+    let net = GrowingNet {
         n_inputs: 7,
         n_outputs: outputs,
         hidden: (0..hidden)
@@ -42,7 +41,7 @@ fn poses(n: usize, r: &Ranges) -> DMatrix<f64> {
     DMatrix::from_fn(n, 7, |_, c| rng.random_range(r.input_lo[c]..r.input_hi[c]))
 }
 
-fn reencode(net: &HostNet) -> Vec<u8> {
+fn reencode(net: &McuNet) -> Vec<u8> {
     let s = net.shape();
     let hidden: Vec<f32> = net
         .hidden_units()
@@ -61,7 +60,7 @@ fn reencode(net: &HostNet) -> Vec<u8> {
         })
         .collect();
     let view = TnetView {
-        shape: Shape {
+        shape: NetShape {
             inputs: s.inputs,
             hidden: s.hidden,
             outputs: s.outputs,
@@ -89,7 +88,7 @@ fn written_file_decodes_to_bit_identical_outputs_and_bytes() {
     let from_file = read_tnet(&path).unwrap();
     assert_eq!(
         from_file.shape(),
-        Shape {
+        NetShape {
             inputs: 7,
             hidden: 12,
             outputs: 4

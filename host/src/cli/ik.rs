@@ -1,5 +1,5 @@
 //! `tendril ik`: tensions for tip poses through a `.tnet` net, checked and
-//! through the firmware's command stage by [`crate::ik_net`]; with `--exact`, the
+//! through the firmware's command stage by [`crate::net`]; with `--exact`, the
 //! model-based IK of [`crate::inverse`] (the net's guess as its start).
 
 use std::path::PathBuf;
@@ -7,8 +7,8 @@ use std::path::PathBuf;
 use anyhow::bail;
 
 use super::common::{parse_list, RobotArg};
-use crate::ik_net::{solve_csv, IkNet};
 use crate::inverse::{self, ExactIk, IkSettings};
+use crate::net::{solve_csv, GuardedNet};
 
 /// Inverse kinematics: tip pose → tendon tensions (N) with a trained net,
 /// or exactly through the statics (`--exact`).
@@ -64,7 +64,7 @@ fn parse_pose(text: &str) -> anyhow::Result<[f64; 7]> {
 /// `tendril ik --exact`.
 fn run_exact(a: &IkArgs, robot: &crate::robot::Robot) -> anyhow::Result<()> {
     let net = match &a.model {
-        Some(m) => Some(IkNet::load(m, robot, true)?),
+        Some(m) => Some(GuardedNet::load(m, robot, true)?),
         None => None,
     };
     let ik = ExactIk::new(robot, IkSettings::default());
@@ -114,7 +114,7 @@ pub fn run(a: IkArgs) -> anyhow::Result<()> {
     let Some(model) = &a.model else {
         bail!("give --model model.tnet (or --exact)");
     };
-    let ik = IkNet::load(model, &robot, a.allow_extrapolation)?;
+    let ik = GuardedNet::load(model, &robot, a.allow_extrapolation)?;
     if let Some(text) = &a.pose {
         let pose = parse_pose(text)?;
         let answer = ik.solve(&pose)?;

@@ -7,13 +7,14 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use serde::Serialize;
+use tendril_shared::McuNet;
 
 use super::{ErrorStats, EvalError, SplitMetrics};
 use crate::dataset::{split_indices, Dataset, DatasetError, Sidecar};
 use crate::fsutil::{check_distinct, write_atomic, PathCollision};
 use crate::inverse::{ExactIk, IkSettings, InverseError, Target};
-use crate::learn::cascor::export::{infer, infer_batch, read_tnet, ExportError, HostNet};
 use crate::learn::cascor::job::MAX_HELD_OUT_FRACTION;
+use crate::net::{infer, infer_batch, read_tnet, ReadError};
 use crate::robot::{Robot, RobotError};
 use crate::statics::{SolverSettings, Statics};
 
@@ -94,7 +95,7 @@ pub enum EvaluateError {
     Paths(#[from] PathCollision),
     /// The weight file could not be read.
     #[error(transparent)]
-    Model(#[from] ExportError),
+    Model(#[from] ReadError),
     /// The dataset could not be read.
     #[error(transparent)]
     Data(#[from] DatasetError),
@@ -197,7 +198,7 @@ pub fn run(job: &EvaluateJob) -> Result<Evaluation, EvaluateError> {
 /// `data` (the tendon counts already checked by [`evaluate_net`]).
 pub fn refine(
     statics: &Statics,
-    net: &HostNet,
+    net: &McuNet,
     data: &Dataset,
 ) -> Result<Refinement, EvaluateError> {
     let robot = statics.robot();
@@ -268,7 +269,7 @@ fn distance(a: &[f64; 7], b: &[f64; 7]) -> f64 {
 
 /// Mean wall time of one f32 inference (ns), timing batches on one thread
 /// for ≥ 50 ms; `None` without a pose to time.
-pub fn inference_ns(net: &HostNet, poses: &nalgebra::DMatrix<f64>) -> Option<f64> {
+pub fn inference_ns(net: &McuNet, poses: &nalgebra::DMatrix<f64>) -> Option<f64> {
     if poses.nrows() == 0 {
         return None;
     }
@@ -285,7 +286,7 @@ pub fn inference_ns(net: &HostNet, poses: &nalgebra::DMatrix<f64>) -> Option<f64
 /// of `statics`.
 pub fn evaluate_net(
     statics: &Statics,
-    net: &HostNet,
+    net: &McuNet,
     data: &Dataset,
 ) -> Result<SplitMetrics, EvaluateError> {
     if net.shape().outputs != data.n_tendons {

@@ -9,7 +9,7 @@ use rayon::prelude::*;
 
 use super::{ExactIk, IkSolution, InverseError, Target};
 use crate::dataset::POSE_COLUMNS;
-use crate::ik_net::{read_poses, IkError, IkNet};
+use crate::net::{read_poses, GuardedNet, IkError};
 
 /// One target's answer: reached, or the closest reachable pose.
 #[derive(Clone, Debug)]
@@ -70,7 +70,7 @@ pub enum BatchError {
 /// failure is an error.
 pub fn answer(
     ik: &ExactIk,
-    net: Option<&IkNet>,
+    net: Option<&GuardedNet>,
     pose: &[f64; 7],
     position_only: bool,
 ) -> Result<Answer, InverseError> {
@@ -106,7 +106,7 @@ pub struct Summary {
 /// (rad, empty for position targets) and `reachable` (0/1).
 pub fn solve_csv(
     ik: &ExactIk,
-    net: Option<&IkNet>,
+    net: Option<&GuardedNet>,
     position_only: bool,
     input: &Path,
     output: &Path,

@@ -127,7 +127,7 @@ impl Elm {
             .as_ref()
             .ok_or_else(|| LearnError::Numerical("ELM: no fit to export".into()))?;
         let (inputs, hidden, outputs) = (layer.w.nrows(), layer.b.len(), self.out.ncols());
-        let shape = tendril_shared::Shape {
+        let shape = tendril_shared::NetShape {
             inputs,
             hidden,
             outputs,

@@ -147,7 +147,7 @@ mod tests {
     fn quick_net_inverts_held_out_statics_to_a_few_millimetres() {
         let s = repo_statics("seed-4t.toml");
         let blob = quick_net(&s, 1500, 48, 6.0, 3).unwrap();
-        let net = tendril_shared::IkNet::decode(&blob).unwrap();
+        let net = tendril_shared::McuNet::decode(&blob).unwrap();
         // Held-out bends (not on the training spiral): predicted tensions,
         // run forward through the statics, must land near the pose's tip.
         let mut worst: f64 = 0.0;
@@ -193,7 +193,7 @@ mod tests {
         let s = repo_statics(file);
         let n = robot.n_tendons();
         let blob = quick_net_for(&s, 1000, 48, 5).unwrap();
-        let net = tendril_shared::IkNet::decode(&blob).unwrap();
+        let net = tendril_shared::McuNet::decode(&blob).unwrap();
         let mut lifter = Lifter::new(&s).unwrap();
         let mut worst: f64 = 0.0;
         for u in points {

@@ -12,9 +12,11 @@
 
 use core::task::Poll;
 
-use super::{fill, first_non_finite, prefix, walk, CascadeNet, Checked, NetHeader, Trailer};
+use super::{fill, prefix, walk, CascadeNet, Checked};
 use crate::crc32::Crc32;
-use crate::tnet::{self, Activation, Field, Shape, TnetError};
+use crate::tnet::{
+    self, first_non_finite, Activation, Field, NetHeader, NetShape, TnetError, Trailer,
+};
 
 /// One `f32` array of the file: the field, the offset of its first value
 /// in the file, and its number of values.
@@ -78,7 +80,7 @@ impl<'a, const IN: usize, const H: usize, const OUT: usize, const W: usize>
             crc: Crc32::new(),
             stored_crc: 0,
             header: NetHeader {
-                shape: Shape {
+                shape: NetShape {
                     inputs: 0,
                     hidden: 0,
                     outputs: 0,

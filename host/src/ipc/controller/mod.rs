@@ -25,7 +25,7 @@ use tendril_shared::messages::{
     command_status, setpoint_flags, Header, PlantState, Setpoint, TensionCommand, WeightUpdate,
     MAX_TENDONS,
 };
-use tendril_shared::POSE_DIM;
+use tendril_shared::{MAX_HIDDEN, MAX_WEIGHTS, POSE_DIM};
 
 use super::clock::{now_ns, tighten_timer_slack, Tick, Ticker};
 use super::stats::{CsvLog, Histogram, Summary};
@@ -42,12 +42,9 @@ pub use report::{ControllerStats, DetectedFault, FaultKind, FAULT_CAPACITY, FAUL
 use stuck::StuckDetector;
 pub use task::{Controller, Inbox};
 
-/// Hidden-unit capacity of the controller's net buffers (the one capacity in
-/// `tendril_shared`).
-pub const NET_CAPACITY: usize = tendril_shared::MAX_HIDDEN;
-
-/// The double-buffered net the controller runs.
-pub type Slots = NetSlots<POSE_DIM, NET_CAPACITY, MAX_TENDONS, { tendril_shared::MAX_WEIGHTS }>;
+/// The double-buffered net the controller runs, of the one capacity in
+/// `tendril_shared` (the trainer's cap, so every exported net fits).
+pub type Slots = NetSlots<POSE_DIM, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS>;
 
 /// Everything the controller process needs: written by a launcher as JSON
 /// (`tendril controller --config FILE`) or built from the flags. Units are

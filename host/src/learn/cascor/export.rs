@@ -1,24 +1,15 @@
-//! The trained net as a `.tnet` weight file (`docs/design.md` §5.1), written and read
-//! through the `tendril-shared` encoder/decoder the firmware uses, and host
-//! inference through the firmware's own f32 `infer`, so `tendril ik` and the
-//! MCU compute bit-identical tensions from the same file.
+//! Writing the trained net as a `.tnet` weight file (`docs/design.md` §5.1)
+//! through the `tendril-shared` encoder, so every file the trainer writes
+//! is one the firmware's decoder accepts. Reading and running a `.tnet` is
+//! [`crate::net`]'s job.
 
 use std::path::Path;
 
-use nalgebra::DMatrix;
-use tendril_shared::{Activation, IkNet, Shape, TnetError, TnetView, MAX_HIDDEN, POSE_DIM};
+use tendril_shared::{Activation, NetShape, TnetError, TnetView};
 
-use super::net::{CascadeNet, OutputKind};
+use super::net::{GrowingNet, OutputKind};
 
-/// Hidden-unit capacity of the host's decoded nets (the trainer's cap): the
-/// one capacity in `tendril_shared`, so every exported net fits the controllers.
-pub const HOST_MAX_HIDDEN: usize = MAX_HIDDEN;
-
-/// The host's decoded net: the same fixed-capacity type as the controllers'
-/// ([`tendril_shared::IkNet`]).
-pub type HostNet = IkNet;
-
-/// Why a net could not be exported or a `.tnet` file not loaded.
+/// Why a net could not be exported.
 #[derive(Debug, thiserror::Error)]
 pub enum ExportError {
     /// The format rejected the net or the bytes.
@@ -31,7 +22,7 @@ pub enum ExportError {
         /// What the format says.
         cause: TnetError,
     },
-    /// Reading or writing the file failed.
+    /// Writing the file failed.
     #[error("{path}: {cause}")]
     Io {
         /// The file concerned.
@@ -62,7 +53,7 @@ fn f32s(v: &[f64]) -> Vec<f32> {
 }
 
 /// Encode `net` (normalised in → normalised out) with its `ranges` as `.tnet` bytes.
-pub fn to_bytes(net: &CascadeNet, ranges: &Ranges) -> Result<Vec<u8>, ExportError> {
+pub fn to_bytes(net: &GrowingNet, ranges: &Ranges) -> Result<Vec<u8>, ExportError> {
     if ranges.input_lo.len() != net.n_inputs
         || ranges.input_hi.len() != net.n_inputs
         || ranges.output_lo.len() != net.n_outputs
@@ -95,7 +86,7 @@ pub fn to_bytes(net: &CascadeNet, ranges: &Ranges) -> Result<Vec<u8>, ExportErro
         f32s(&ranges.output_hi),
     );
     let view = TnetView {
-        shape: Shape {
+        shape: NetShape {
             inputs: net.n_inputs,
             hidden: net.n_hidden(),
             outputs: net.n_outputs,
@@ -119,7 +110,7 @@ pub fn to_bytes(net: &CascadeNet, ranges: &Ranges) -> Result<Vec<u8>, ExportErro
 }
 
 /// Write `net` with `ranges` to `path` atomically.
-pub fn write_tnet(path: &Path, net: &CascadeNet, ranges: &Ranges) -> Result<(), ExportError> {
+pub fn write_tnet(path: &Path, net: &GrowingNet, ranges: &Ranges) -> Result<(), ExportError> {
     let bytes = to_bytes(net, ranges).map_err(|e| match e {
         ExportError::Format { cause, .. } => ExportError::Format {
             path: path.display().to_string(),
@@ -133,62 +124,15 @@ pub fn write_tnet(path: &Path, net: &CascadeNet, ranges: &Ranges) -> Result<(), 
     })
 }
 
-/// Decode `.tnet` bytes into the host's fixed-capacity net (boxed: ~12 KiB).
-pub fn decode(bytes: &[u8]) -> Result<Box<HostNet>, TnetError> {
-    let mut net = Box::<HostNet>::default();
-    net.decode_into(bytes)?;
-    Ok(net)
-}
-
-/// Read and decode a `.tnet` file; errors name the file and the problem.
-pub fn read_tnet(path: &Path) -> Result<Box<HostNet>, ExportError> {
-    let bytes = std::fs::read(path).map_err(|cause| ExportError::Io {
-        path: path.display().to_string(),
-        cause,
-    })?;
-    decode(&bytes).map_err(|cause| ExportError::Format {
-        path: path.display().to_string(),
-        cause,
-    })
-}
-
-/// Tensions (N) for one pose through the firmware's f32 inference.
-pub fn infer(net: &HostNet, pose: &[f64; POSE_DIM]) -> Vec<f32> {
-    let mut x = [0.0f32; POSE_DIM];
-    for (d, s) in x.iter_mut().zip(pose) {
-        *d = *s as f32;
-    }
-    let y = tendril_firmware::infer(net, &x);
-    y[..net.shape().outputs].to_vec()
-}
-
-/// Batch inference: poses `n × 7` → tensions `n × outputs` (N), through the firmware's f32 code.
-pub fn infer_batch(net: &HostNet, poses: &DMatrix<f64>) -> DMatrix<f64> {
-    let no = net.shape().outputs;
-    let mut out = DMatrix::zeros(poses.nrows(), no);
-    let mut x = [0.0f32; POSE_DIM];
-    for r in 0..poses.nrows() {
-        for (c, d) in x.iter_mut().enumerate() {
-            *d = if c < poses.ncols() {
-                poses[(r, c)] as f32
-            } else {
-                0.0
-            };
-        }
-        let y = tendril_firmware::infer(net, &x);
-        for c in 0..no {
-            out[(r, c)] = f64::from(y[c]);
-        }
-    }
-    out
-}
-
 #[cfg(test)]
 mod tests {
-    use super::*;
+    use nalgebra::DMatrix;
 
-    fn small_net() -> (CascadeNet, Ranges) {
-        let net = CascadeNet {
+    use super::*;
+    use crate::net::{decode, infer};
+
+    fn small_net() -> (GrowingNet, Ranges) {
+        let net = GrowingNet {
             n_inputs: 7,
             n_outputs: 2,
             hidden: vec![

@@ -11,9 +11,10 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use serde::Serialize;
+use tendril_shared::MAX_HIDDEN;
 
-use super::export::{write_tnet, ExportError, Ranges, HOST_MAX_HIDDEN};
-use super::{train_with_stop, CascadeNet, CascorOptions, TrainReport};
+use super::export::{write_tnet, ExportError, Ranges};
+use super::{train_with_stop, CascorOptions, GrowingNet, TrainReport};
 use crate::dataset::split::{SPLIT_SEED, TEST_FRACTION, VALID_FRACTION};
 use crate::dataset::{prepare, Dataset};
 use crate::fsutil::{check_distinct, write_atomic, write_atomic_with, PathCollision};
@@ -137,7 +138,7 @@ pub struct SplitSizes {
 #[derive(Clone, Debug)]
 pub struct TrainResult {
     /// The kept net (normalised units).
-    pub net: CascadeNet,
+    pub net: GrowingNet,
     /// What training did.
     pub report: TrainReport,
     /// Normalisation ranges baked into the weight file.
@@ -288,9 +289,9 @@ fn check(job: &TrainJob<'_>) -> Result<(), TrainError> {
             if job.data.len() == 1 { "" } else { "s" }
         )));
     }
-    if job.options.max_hidden > HOST_MAX_HIDDEN {
+    if job.options.max_hidden > MAX_HIDDEN {
         return Err(TrainError::BadInput(format!(
-            "--max-hidden {} exceeds the decoder capacity {HOST_MAX_HIDDEN}",
+            "--max-hidden {} exceeds the decoder capacity {MAX_HIDDEN}",
             job.options.max_hidden
         )));
     }

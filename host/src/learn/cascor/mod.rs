@@ -26,7 +26,7 @@ pub mod train;
 use nalgebra::DMatrix;
 
 pub use candidates::Objective;
-pub use net::{CascadeNet, OutputKind};
+pub use net::{GrowingNet, OutputKind};
 pub use options::{CascorOptions, ObjectiveChoice, OutputSolver};
 pub use quickprop::QuickpropParams;
 pub use train::{train, train_with_stop, TrainReport, UnitLog};
@@ -38,7 +38,7 @@ use crate::learn::{LearnError, Learner, Split};
 pub struct Cascor {
     /// Hyper-parameters used by `fit`.
     pub options: CascorOptions,
-    net: Option<CascadeNet>,
+    net: Option<GrowingNet>,
     report: Option<TrainReport>,
 }
 
@@ -54,7 +54,7 @@ impl Cascor {
 
     /// A learner holding a net trained elsewhere (by [`train::train`] with
     /// these options), e.g. to wrap in a [`crate::learn::learner::Prefitted`].
-    pub fn from_trained(options: CascorOptions, net: CascadeNet, report: TrainReport) -> Cascor {
+    pub fn from_trained(options: CascorOptions, net: GrowingNet, report: TrainReport) -> Cascor {
         Cascor {
             options,
             net: Some(net),
@@ -63,7 +63,7 @@ impl Cascor {
     }
 
     /// The trained net, once `fit` has succeeded.
-    pub fn net(&self) -> Option<&CascadeNet> {
+    pub fn net(&self) -> Option<&GrowingNet> {
         self.net.as_ref()
     }
 
@@ -94,7 +94,7 @@ impl Learner for Cascor {
     }
 
     fn parameter_count(&self) -> usize {
-        self.net.as_ref().map_or(0, CascadeNet::parameter_count)
+        self.net.as_ref().map_or(0, GrowingNet::parameter_count)
     }
 
     fn describe(&self) -> String {

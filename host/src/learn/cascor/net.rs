@@ -41,9 +41,11 @@ pub fn logistic(x: f64) -> f64 {
     1.0 / (1.0 + (-x).exp())
 }
 
-/// A cascade-correlation network (weights in f64, inputs normalised to [0, 1]).
+/// A cascade-correlation network as the trainer grows it (weights in f64,
+/// inputs normalised to [0, 1]); exported, it becomes the firmware's
+/// fixed-capacity [`tendril_shared::CascadeNet`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct CascadeNet {
+pub struct GrowingNet {
     /// Number of inputs.
     pub n_inputs: usize,
     /// Number of outputs.
@@ -56,7 +58,7 @@ pub struct CascadeNet {
     pub output_kind: OutputKind,
 }
 
-impl CascadeNet {
+impl GrowingNet {
     /// Number of hidden units.
     pub fn n_hidden(&self) -> usize {
         self.hidden.len()
@@ -134,7 +136,7 @@ mod tests {
 
     #[test]
     fn folding_an_affine_input_map_keeps_outputs() {
-        let net = CascadeNet {
+        let net = GrowingNet {
             n_inputs: 2,
             n_outputs: 1,
             hidden: vec![vec![0.1, 0.5, -0.3], vec![-0.2, 0.4, 0.9, 1.5]],

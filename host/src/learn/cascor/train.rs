@@ -13,7 +13,7 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 use super::candidates::{Candidate, Objective};
-use super::net::{CascadeNet, OutputKind};
+use super::net::{GrowingNet, OutputKind};
 use super::outputs::{rmse, Data, State};
 use crate::learn::LearnError;
 
@@ -100,13 +100,13 @@ impl State {
         row
     }
 
-    pub(super) fn finish(&self, n_inputs: usize) -> CascadeNet {
+    pub(super) fn finish(&self, n_inputs: usize) -> GrowingNet {
         let (hidden, w) = match &self.best {
             Some((_, h, w)) => (h.clone(), w.clone()),
             None => (self.hidden.clone(), self.w.clone()),
         };
         let m = w.nrows();
-        let mut net = CascadeNet {
+        let mut net = GrowingNet {
             n_inputs,
             n_outputs: w.ncols(),
             hidden,
@@ -151,7 +151,7 @@ pub fn train(
     vy: &DMatrix<f64>,
     opts: &CascorOptions,
     seed: u64,
-) -> Result<(CascadeNet, TrainReport), LearnError> {
+) -> Result<(GrowingNet, TrainReport), LearnError> {
     train_with_stop(x, y, vx, vy, opts, seed, &AtomicBool::new(false))
 }
 
@@ -165,7 +165,7 @@ pub fn train_with_stop(
     opts: &CascorOptions,
     seed: u64,
     stop: &AtomicBool,
-) -> Result<(CascadeNet, TrainReport), LearnError> {
+) -> Result<(GrowingNet, TrainReport), LearnError> {
     check(x, y, "training split")?;
     check(vx, vy, "validation split")?;
     if x.nrows() < 2 || x.ncols() == 0 || y.ncols() == 0 {

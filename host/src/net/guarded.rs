@@ -14,13 +14,14 @@
 
 use std::path::{Path, PathBuf};
 
-use tendril_shared::TendonLimits;
+use tendril_shared::{McuNet, TendonLimits};
 
 use crate::command_stage::{clipped_by, command_for, limits_for};
 use crate::dataset::io::format_value;
 use crate::dataset::POSE_COLUMNS;
-use crate::learn::cascor::export::{infer, read_tnet, HostNet};
 use crate::robot::Robot;
+
+use super::{infer, read_tnet};
 
 /// Largest accepted deviation of |q| from 1 (a quaternion within it is
 /// renormalised; the dataset's are unit to ~1e-15).
@@ -129,28 +130,32 @@ pub struct IkAnswer {
 pub const LIMIT_SLACK: f64 = 0.01;
 
 /// A `.tnet` net with the robot limits it answers within.
-pub struct IkNet {
-    net: Box<HostNet>,
+pub struct GuardedNet {
+    net: Box<McuNet>,
     limits: TendonLimits,
     max_tension: Vec<f64>,
     allow_extrapolation: bool,
 }
 
-impl IkNet {
+impl GuardedNet {
     /// Load the net at `model` for `robot`. With `allow_extrapolation`, poses
     /// outside the trained ranges are answered (and listed in
     /// [`IkAnswer::extrapolated`]) instead of refused.
-    pub fn load(model: &Path, robot: &Robot, allow_extrapolation: bool) -> Result<IkNet, IkError> {
+    pub fn load(
+        model: &Path,
+        robot: &Robot,
+        allow_extrapolation: bool,
+    ) -> Result<GuardedNet, IkError> {
         let net = read_tnet(model).map_err(|e| IkError::Model(e.to_string()))?;
         Self::new(net, robot, allow_extrapolation)
     }
 
     /// Wrap a decoded net for `robot`.
     pub fn new(
-        net: Box<HostNet>,
+        net: Box<McuNet>,
         robot: &Robot,
         allow_extrapolation: bool,
-    ) -> Result<IkNet, IkError> {
+    ) -> Result<GuardedNet, IkError> {
         let outputs = net.shape().outputs;
         if outputs != robot.n_tendons() {
             return Err(IkError::TendonCount {
@@ -161,7 +166,7 @@ impl IkNet {
         }
         let limits = limits_for(robot, 1.0)
             .map_err(|e| IkError::Model(format!("tension limits of robot {}: {e}", robot.name)))?;
-        Ok(IkNet {
+        Ok(GuardedNet {
             net,
             limits,
             max_tension: robot.max_tensions(),
@@ -301,7 +306,7 @@ pub fn read_poses(input: &Path) -> Result<Vec<[f64; 7]>, IkError> {
 /// `output` atomically: `t0..` (the command stage's, N) then `raw_t0..` (the net's
 /// output, N), one row per input row. A refused row fails the whole batch,
 /// naming its line; nothing is written then.
-pub fn solve_csv(ik: &IkNet, input: &Path, output: &Path) -> Result<BatchSummary, IkError> {
+pub fn solve_csv(ik: &GuardedNet, input: &Path, output: &Path) -> Result<BatchSummary, IkError> {
     let file_error = |path: &Path, why: String| IkError::File {
         path: path.to_path_buf(),
         why,
@@ -356,9 +361,10 @@ mod tests {
         // The firmware's built-in net for the seed robot, asked for poses over
         // its training box and 30 % beyond (extrapolation allowed), where
         // the raw output leaves [min, max] and the stage must shift and clip.
+        let robot = crate::robot::repo_robot("seed-4t.toml");
         let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-        let robot = Robot::load(&root.join("robots/seed-4t.toml")).unwrap();
-        let ik = IkNet::load(&root.join("firmware/vectors/default.tnet"), &robot, true).unwrap();
+        let ik =
+            GuardedNet::load(&root.join("firmware/vectors/default.tnet"), &robot, true).unwrap();
         let limits = limits_for(&robot, 1.0).unwrap();
         let (min, max) = (robot.min_tensions(), robot.max_tensions());
         let (lo, hi) = (ik.net.input_lo().to_vec(), ik.net.input_hi().to_vec());
@@ -393,20 +399,20 @@ mod tests {
 
     #[test]
     fn quaternion_sign_and_length_are_normalised_or_refused() {
-        let p = IkNet::normalise(&[0.0, 0.0, 0.4, -0.6, 0.0, -0.8, 0.0]).unwrap();
+        let p = GuardedNet::normalise(&[0.0, 0.0, 0.4, -0.6, 0.0, -0.8, 0.0]).unwrap();
         assert_eq!(&p[3..], &[0.6, 0.0, 0.8, 0.0]);
-        let near = IkNet::normalise(&[0.0, 0.0, 0.4, 1.0005, 0.0, 0.0, 0.0]).unwrap();
+        let near = GuardedNet::normalise(&[0.0, 0.0, 0.4, 1.0005, 0.0, 0.0, 0.0]).unwrap();
         assert_eq!(near[3], 1.0);
         for bad in [
             [0.0, 0.0, 0.4, 0.0, 0.0, 0.0, 0.0],
             [0.0, 0.0, 0.4, 0.99, -0.05, 0.1, 0.0],
         ] {
             assert!(matches!(
-                IkNet::normalise(&bad),
+                GuardedNet::normalise(&bad),
                 Err(IkError::NotUnit { .. })
             ));
         }
-        let e = IkNet::normalise(&[1e39 * 1e300, 0.0, 0.4, 1.0, 0.0, 0.0, 0.0]).unwrap_err();
+        let e = GuardedNet::normalise(&[1e39 * 1e300, 0.0, 0.4, 1.0, 0.0, 0.0, 0.0]).unwrap_err();
         assert!(e.to_string().contains("px"), "{e}");
     }
 }

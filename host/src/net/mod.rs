@@ -1,0 +1,24 @@
+//! A trained `.tnet` net on the host (`docs/design.md` §5, §7): the one
+//! place that reads `.tnet` files and runs them. Every consumer — `tendril
+//! ik`, `evaluate`, the pipeline, the exact IK's net guess and the Python
+//! package — goes through here; the trainer only writes
+//! (`learn::cascor::export`, through the shared encoder). The IPC
+//! controller alone loads its bytes through the firmware's hot swap
+//! (`tendril_firmware::swap`), as the MCU does.
+//!
+//! - [`read`]: file → the firmware's fixed-capacity [`McuNet`], through the
+//!   decoder the MCU uses.
+//! - [`mod@infer`]: the firmware's f32 inference, bit-identical to the MCU's.
+//! - [`guarded`]: [`GuardedNet`], a net with its robot's limits that never
+//!   hands out an impossible tension (pose guards, command stage), and the
+//!   CSV batch of `tendril ik`.
+//!
+//! [`McuNet`]: tendril_shared::McuNet
+
+pub mod guarded;
+pub mod infer;
+pub mod read;
+
+pub use guarded::{read_poses, solve_csv, BatchSummary, GuardedNet, IkAnswer, IkError};
+pub use infer::{infer, infer_batch};
+pub use read::{decode, read_tnet, ReadError};
