@@ -18,6 +18,7 @@ pub mod inverse;
 pub mod ipc;
 pub mod kinematics;
 pub mod learn;
+pub mod numerics;
 pub mod pipeline;
 pub mod plot;
 pub mod robot;

@@ -8,8 +8,10 @@
 //! storing `w` keeps the internal force exact to roundoff, which is what lets
 //! the shooting residual reach 1e-10 N.
 
-use nalgebra::{Matrix3, Matrix6, Vector3, Vector6, LU, U6};
+use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
+use crate::numerics::dense::Factor6;
+use crate::numerics::rk4::Rk4State;
 use crate::robot::{hat, Robot, MAX_TENDONS};
 
 /// The backbone's state at one arc length s.
@@ -55,13 +57,29 @@ impl RodState {
         self.w + Vector3::z()
     }
 
+}
+
+impl Rk4State for RodState {
+    type Rates = RodRates;
+
     /// `self + h · rates` (one RK4 stage).
-    pub fn advanced(&self, rates: &RodRates, h: f64) -> RodState {
+    #[inline(always)]
+    fn advanced(&self, rates: &RodRates, h: f64) -> RodState {
         RodState {
             p: self.p + rates.dp * h,
             rot: self.rot + rates.dr * h,
             w: self.w + rates.dw * h,
             u: self.u + rates.du * h,
+        }
+    }
+
+    #[inline(always)]
+    fn rk4_mean(k: [&RodRates; 4]) -> RodRates {
+        RodRates {
+            dp: (k[0].dp + (k[1].dp + k[2].dp) * 2.0 + k[3].dp) / 6.0,
+            dr: (k[0].dr + (k[1].dr + k[2].dr) * 2.0 + k[3].dr) / 6.0,
+            dw: (k[0].dw + (k[1].dw + k[2].dw) * 2.0 + k[3].dw) / 6.0,
+            du: (k[0].du + (k[1].du + k[2].du) * 2.0 + k[3].du) / 6.0,
         }
     }
 }
@@ -109,18 +127,11 @@ pub(super) struct TendonTerms {
     pub alpha: Vector3<f64>,
 }
 
-/// The factored 6×6 strain-rate matrix.
-#[derive(Clone, Debug)]
-pub(super) enum Factor {
-    Ldlt(Ldlt6),
-    Lu(LU<f64, U6, U6>),
-}
-
 /// The strain-rate system at one point: its factor, solution and parts.
 #[derive(Clone, Debug)]
 pub(super) struct System {
     /// The factored matrix K.
-    pub factor: Factor,
+    pub factor: Factor6,
     /// v' (= w').
     pub dw: Vector3<f64>,
     /// u'.
@@ -135,134 +146,6 @@ pub(super) struct System {
     pub n_terms: usize,
 }
 
-impl System {
-    /// Solve K X = B in place; false when the factor cannot.
-    pub fn solve_mut(&self, b: &mut Matrix6<f64>) -> bool {
-        match &self.factor {
-            Factor::Ldlt(c) => {
-                for column in b.as_mut_slice().chunks_exact_mut(6) {
-                    let mut x = [0.0; 6];
-                    x.copy_from_slice(column);
-                    c.solve(&mut x);
-                    column.copy_from_slice(&x);
-                }
-                true
-            }
-            Factor::Lu(lu) => lu.solve_mut(b),
-        }
-    }
-}
-
-/// Square-root-free Cholesky factor K = L D Lᵀ (L unit lower triangular,
-/// D diagonal) of a 6×6 symmetric positive definite matrix, in fixed arrays:
-/// the strain-rate system is factored four times per RK4 step, and at this
-/// size fully unrolled loops beat a general decomposition (measured, see
-/// BENCHMARKS.md "Statics"). LDLᵀ rather than LLᵀ: the six square roots of
-/// LLᵀ sit on the factor's critical path, the divisions of both do too.
-#[derive(Clone, Copy, Debug)]
-pub(super) struct Ldlt6 {
-    /// L, row-major, below the diagonal; entries on and above it unused.
-    l: [[f64; 6]; 6],
-    /// 1 / D_jj.
-    inv_d: [f64; 6],
-}
-
-// Index loops on purpose: the triangular recurrences read as in the textbook,
-// and the constant bounds are what makes them unroll.
-#[allow(clippy::needless_range_loop)]
-impl Ldlt6 {
-    /// Factor the matrix whose lower triangle is `k` (row-major); `None`
-    /// when a pivot is not positive (or not finite).
-    #[inline(always)]
-    fn new(k: &[[f64; 6]; 6]) -> Option<Ldlt6> {
-        let mut f = Ldlt6 {
-            l: [[0.0; 6]; 6],
-            inv_d: [0.0; 6],
-        };
-        // dl[i][p] = L_ip D_pp, kept so each entry costs one product.
-        let mut dl = [[0.0; 6]; 6];
-        // One call per column with the column as a constant, so that every
-        // loop has constant bounds and unrolls.
-        let ok = f.column::<0>(k, &mut dl)
-            && f.column::<1>(k, &mut dl)
-            && f.column::<2>(k, &mut dl)
-            && f.column::<3>(k, &mut dl)
-            && f.column::<4>(k, &mut dl)
-            && f.column::<5>(k, &mut dl);
-        ok.then_some(f)
-    }
-
-    /// Column J of L and D_JJ; false when the pivot is not positive and finite.
-    #[inline(always)]
-    fn column<const J: usize>(&mut self, k: &[[f64; 6]; 6], dl: &mut [[f64; 6]; 6]) -> bool {
-        let l = &mut self.l;
-        let mut d = k[J][J];
-        for p in 0..J {
-            d -= l[J][p] * dl[J][p];
-        }
-        if !(d > 0.0 && d < f64::INFINITY) {
-            return false;
-        }
-        let inv = 1.0 / d;
-        self.inv_d[J] = inv;
-        for i in J + 1..6 {
-            let mut x = k[i][J];
-            for p in 0..J {
-                x -= dl[i][p] * l[J][p];
-            }
-            dl[i][J] = x;
-            l[i][J] = x * inv;
-        }
-        true
-    }
-
-    /// Solve K x = b in place, b a vector.
-    pub(super) fn solve_vector(&self, b: &mut Vector6<f64>) {
-        let mut x = [0.0; 6];
-        x.copy_from_slice(b.as_slice());
-        self.solve(&mut x);
-        b.copy_from_slice(&x);
-    }
-
-    /// Solve K x = b in place.
-    #[inline(always)]
-    fn solve(&self, b: &mut [f64; 6]) {
-        self.forward::<1>(b);
-        self.forward::<2>(b);
-        self.forward::<3>(b);
-        self.forward::<4>(b);
-        self.forward::<5>(b);
-        for (x, inv) in b.iter_mut().zip(&self.inv_d) {
-            *x *= inv;
-        }
-        self.backward::<4>(b);
-        self.backward::<3>(b);
-        self.backward::<2>(b);
-        self.backward::<1>(b);
-        self.backward::<0>(b);
-    }
-
-    /// Row I of L y = b (unit diagonal).
-    #[inline(always)]
-    fn forward<const I: usize>(&self, b: &mut [f64; 6]) {
-        let mut x = b[I];
-        for p in 0..I {
-            x -= self.l[I][p] * b[p];
-        }
-        b[I] = x;
-    }
-
-    /// Row I of Lᵀ x = y (unit diagonal).
-    #[inline(always)]
-    fn backward<const I: usize>(&self, b: &mut [f64; 6]) {
-        let mut x = b[I];
-        for p in I + 1..6 {
-            x -= self.l[p][I] * b[p];
-        }
-        b[I] = x;
-    }
-}
-
 /// R û, column by column: column k is R (u × e_k), a difference of two of
 /// R's columns scaled by components of u (half the products of a full 3×3
 /// product with the hat matrix; it is evaluated at every RK4 stage).
@@ -274,37 +157,6 @@ pub(super) fn rot_times_hat(rot: &Matrix3<f64>, u: &Vector3<f64>) -> Matrix3<f64
         c2 * u.x - c0 * u.z,
         c0 * u.y - c1 * u.x,
     ])
-}
-
-/// Factor K (lower triangle `k`) and solve K x = rhs. K is SPD by
-/// construction: K = diag(Kse, Kbt) + Σ Bᵢᵀ Aᵢ Bᵢ with Bᵢ = [I, −r̂ᵢ] and
-/// Aᵢ ⪰ 0. LU is the fallback if roundoff ever breaks the Cholesky; a
-/// matrix neither can solve is an error, never a guess.
-#[inline(always)]
-fn factor_and_solve(
-    k: &[[f64; 6]; 6],
-    rhs: [f64; 6],
-    s: f64,
-) -> Result<(Factor, [f64; 6]), SingularSystem> {
-    let (factor, x) = match Ldlt6::new(k) {
-        Some(c) => {
-            let mut x = rhs;
-            c.solve(&mut x);
-            (Factor::Ldlt(c), x)
-        }
-        None => {
-            let full = Matrix6::from_fn(|i, j| if j <= i { k[i][j] } else { k[j][i] });
-            let lu = full.lu();
-            let x = lu
-                .solve(&Vector6::from_row_slice(&rhs))
-                .ok_or(SingularSystem { s })?;
-            (Factor::Lu(lu), [x[0], x[1], x[2], x[3], x[4], x[5]])
-        }
-    };
-    if !x.iter().all(|v| v.is_finite()) {
-        return Err(SingularSystem { s });
-    }
-    Ok((factor, x))
 }
 
 /// The rod model of one robot under one set of tendon tensions: everything
@@ -474,7 +326,7 @@ impl Rod {
         // The same assembly and factor as [`Rod::system`] (so the plain and
         // the tangent pass stay bit-identical), without keeping the parts.
         let (k, rhs) = self.assemble(s, state, running, |_| {});
-        let (_, x) = factor_and_solve(&k, rhs, s)?;
+        let (_, x) = Factor6::ldlt_solve(&k, rhs).ok_or(SingularSystem { s })?;
         Ok((
             Vector3::new(x[0], x[1], x[2]),
             Vector3::new(x[3], x[4], x[5]),
@@ -495,7 +347,9 @@ impl Rod {
             terms[n_terms] = term;
             n_terms += 1;
         });
-        let (factor, x) = factor_and_solve(&k, rhs, s)?;
+        // K is SPD by construction: K = diag(Kse, Kbt) + Σ Bᵢᵀ Aᵢ Bᵢ with
+        // Bᵢ = [I, −r̂ᵢ] and Aᵢ ⪰ 0.
+        let (factor, x) = Factor6::ldlt_solve(&k, rhs).ok_or(SingularSystem { s })?;
         let (n, m) = self.internal_wrench(state);
         Ok(System {
             factor,
@@ -791,10 +645,9 @@ fn arc_moments(u: &Vector3<f64>, l: f64) -> (Vector3<f64>, Vector3<f64>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::path::Path;
 
     fn seed() -> Robot {
-        Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml")).unwrap()
+        crate::robot::repo_robot("seed-4t.toml")
     }
 
     #[test]
