@@ -15,18 +15,10 @@ use std::sync::atomic::AtomicBool;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use tendril::dataset::Sampler;
-use tendril::robot::Robot;
+use tendril::robot::{repo_robot as robot, Robot};
 use tendril::statics::batch::{solve_all, Load};
 use tendril::statics::{SolverSettings, Statics};
 
-fn robot(name: &str) -> Robot {
-    Robot::load(
-        &Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../robots")
-            .join(name),
-    )
-    .unwrap()
-}
 
 fn cold_and_warm(c: &mut Criterion, group: &str, statics: &Statics, tau: &[f64]) {
     c.bench_function(&format!("statics/{group}/cold"), |b| {

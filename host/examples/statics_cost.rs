@@ -11,7 +11,7 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
 use tendril::dataset::Sampler;
-use tendril::robot::Robot;
+use tendril::robot::{repo_robot, Robot};
 use tendril::statics::batch::{solve_all, Load};
 use tendril::statics::{SolverSettings, Statics};
 
@@ -20,11 +20,10 @@ fn main() -> anyhow::Result<()> {
     // Optional: another robot file and step count (cold/warm modes).
     let file = std::env::args().nth(2);
     let steps = std::env::args().nth(3).map(|s| s.parse()).transpose()?;
-    let robots = Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots");
     let robot = match (&file, mode.as_str()) {
         (Some(path), _) => Robot::load(Path::new(path))?,
-        (None, "multi") => Robot::load(&robots.join("tdcr-2seg.toml"))?,
-        (None, _) => Robot::load(&robots.join("seed-4t.toml"))?,
+        (None, "multi") => repo_robot("tdcr-2seg.toml"),
+        (None, _) => repo_robot("seed-4t.toml"),
     };
     let settings = SolverSettings {
         steps: steps.unwrap_or(SolverSettings::default().steps),

@@ -1,7 +1,6 @@
 //! Checks of the statics against independent facts: closed-form arcs, beam
 //! theory, RK4's order, global equilibrium of the converged shape, symmetry.
 
-use std::path::Path;
 
 use nalgebra::{Vector3, Vector6};
 
@@ -10,7 +9,7 @@ use super::*;
 use crate::robot::Robot;
 
 fn seed() -> Robot {
-    Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml")).unwrap()
+    crate::robot::repo_robot("seed-4t.toml")
 }
 
 fn fine() -> SolverSettings {
@@ -451,12 +450,7 @@ fn regression_cases() -> Vec<(&'static str, Vec<f64>)> {
 /// warm-started chain, then the helical variant of tendon 0 and a tip load.
 fn regression_poses() -> Vec<[f64; 7]> {
     let load = |name: &str| {
-        Robot::load(
-            &Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("../robots")
-                .join(name),
-        )
-        .unwrap()
+        crate::robot::repo_robot(name)
     };
     let mut out = Vec::new();
     for (name, tau) in regression_cases() {
