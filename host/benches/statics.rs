@@ -19,7 +19,6 @@ use tendril::robot::{repo_robot as robot, Robot};
 use tendril::statics::batch::{solve_all, Load};
 use tendril::statics::{SolverSettings, Statics};
 
-
 fn cold_and_warm(c: &mut Criterion, group: &str, statics: &Statics, tau: &[f64]) {
     c.bench_function(&format!("statics/{group}/cold"), |b| {
         b.iter(|| statics.solve(black_box(tau), None).unwrap())

@@ -3,13 +3,11 @@
 //! BDF-α scheme's numerical damping and order, and the equilibrium a damped
 //! run comes to.
 
-
 use nalgebra::{DMatrix, DVector, Vector3};
 
 use super::*;
 use crate::robot::{repo_robot as robot, Robot};
 use crate::statics::{SolverSettings, Statics};
-
 
 fn statics_tip(robot: &Robot, steps: usize, tensions: &[f64]) -> Vector3<f64> {
     let statics = Statics::new(

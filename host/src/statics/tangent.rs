@@ -19,8 +19,6 @@
 //! δq = δu × r + δw,   δψ = δu × q + u × δq + δu × r'.
 //! ```
 
-use std::ops::{Add, Div, Mul};
-
 use nalgebra::{Matrix3, SMatrix, Vector3, Vector6};
 
 use super::integrate::pieces;
@@ -69,7 +67,10 @@ impl<const C: usize> Sensitivity<C> {
     /// u(0) = u(0); nothing depends on τ yet. `tendons` tension columns
     /// follow the six of x (none for a [`ShootingSensitivity`]).
     pub fn at_base(kse: &Vector3<f64>, tendons: usize, rotation: bool, position: bool) -> Self {
-        assert!(6 + tendons <= C, "{tendons} tension columns do not fit in {C}");
+        assert!(
+            6 + tendons <= C,
+            "{tendons} tension columns do not fit in {C}"
+        );
         let mut t = Sensitivity {
             columns: 6 + tendons,
             rotation,
@@ -98,77 +99,55 @@ impl<const C: usize> Sensitivity<C> {
     }
 }
 
-/// `x + h·d` in the first `n` columns, `x` beyond; built in place rather
-/// than copied and patched (the sensitivity pass is on the statics hot path,
-/// and a copy of the whole sensitivity per stage showed in callgrind).
-#[inline(always)]
-fn step<T, const C: usize>(x: &[T; C], d: &[T; C], h: f64, n: usize) -> [T; C]
-where
-    T: Copy + Add<Output = T> + Mul<f64, Output = T>,
-{
-    std::array::from_fn(|j| if j < n { x[j] + d[j] * h } else { x[j] })
-}
-
-/// RK4's weighted mean of four column arrays in the first `n` columns.
-#[inline(always)]
-fn mean<T, const C: usize>(k: [&[T; C]; 4], n: usize) -> [T; C]
-where
-    T: Copy + Add<Output = T> + Mul<f64, Output = T> + Div<f64, Output = T>,
-{
-    std::array::from_fn(|j| {
-        if j < n {
-            (k[0][j] + (k[1][j] + k[2][j]) * 2.0 + k[3][j]) / 6.0
-        } else {
-            k[0][j]
-        }
-    })
-}
-
 impl<const C: usize> Rk4State for Sensitivity<C> {
     type Rates = Sensitivity<C>;
 
+    // One loop per field, the carried-or-not test outside it, so that the
+    // shooting sensitivity's constant-bound loops vectorise.
     #[inline(always)]
     fn advanced(&self, rates: &Self, h: f64) -> Self {
         let n = self.live();
-        Sensitivity {
-            columns: self.columns,
-            rotation: self.rotation,
-            position: self.position,
-            p: if self.position {
-                step(&self.p, &rates.p, h, n)
-            } else {
-                self.p
-            },
-            rot: if self.rotation {
-                step(&self.rot, &rates.rot, h, n)
-            } else {
-                self.rot
-            },
-            w: step(&self.w, &rates.w, h, n),
-            u: step(&self.u, &rates.u, h, n),
+        let mut out = *self;
+        if self.position {
+            for j in 0..n {
+                out.p[j] += rates.p[j] * h;
+            }
         }
+        if self.rotation {
+            for j in 0..n {
+                out.rot[j] += rates.rot[j] * h;
+            }
+        }
+        for j in 0..n {
+            out.w[j] += rates.w[j] * h;
+        }
+        for j in 0..n {
+            out.u[j] += rates.u[j] * h;
+        }
+        out
     }
 
     #[inline(always)]
     fn rk4_mean(k: [&Self; 4]) -> Self {
         let n = k[0].live();
-        Sensitivity {
-            columns: k[0].columns,
-            rotation: k[0].rotation,
-            position: k[0].position,
-            p: if k[0].position {
-                mean([&k[0].p, &k[1].p, &k[2].p, &k[3].p], n)
-            } else {
-                k[0].p
-            },
-            rot: if k[0].rotation {
-                mean([&k[0].rot, &k[1].rot, &k[2].rot, &k[3].rot], n)
-            } else {
-                k[0].rot
-            },
-            w: mean([&k[0].w, &k[1].w, &k[2].w, &k[3].w], n),
-            u: mean([&k[0].u, &k[1].u, &k[2].u, &k[3].u], n),
+        let mut out = *k[0];
+        if k[0].position {
+            for j in 0..n {
+                out.p[j] = (k[0].p[j] + (k[1].p[j] + k[2].p[j]) * 2.0 + k[3].p[j]) / 6.0;
+            }
         }
+        if k[0].rotation {
+            for j in 0..n {
+                out.rot[j] = (k[0].rot[j] + (k[1].rot[j] + k[2].rot[j]) * 2.0 + k[3].rot[j]) / 6.0;
+            }
+        }
+        for j in 0..n {
+            out.w[j] = (k[0].w[j] + (k[1].w[j] + k[2].w[j]) * 2.0 + k[3].w[j]) / 6.0;
+        }
+        for j in 0..n {
+            out.u[j] = (k[0].u[j] + (k[1].u[j] + k[2].u[j]) * 2.0 + k[3].u[j]) / 6.0;
+        }
+        out
     }
 }
 
@@ -241,17 +220,8 @@ impl Rod {
             let a_psi = (psi * q2 - q * q.dot(&psi)) / (q2 * q2.sqrt());
             *dg = stack(&a_psi, &g.r.cross(&a_psi));
         }
-        // Built in place; beyond the live columns, and where ∂p or ∂R is not
-        // carried, the sensitivity is zero (as `t` is there).
-        let mut out = Sensitivity {
-            columns: t.columns,
-            rotation: t.rotation,
-            position: t.position,
-            p: [Vector3::zeros(); C],
-            rot: [Matrix3::zeros(); C],
-            w: [Vector3::zeros(); C],
-            u: [Vector3::zeros(); C],
-        };
+        let mut out = *t;
+        let mut dz = [Vector6::zeros(); C];
         for j in 0..t.live() {
             let dw = t.w[j];
             let du = t.u[j];
@@ -278,13 +248,18 @@ impl Rod {
                 top += d_apsi;
                 bottom += term.r.cross(&d_apsi);
             }
-            let mut dz = -stack(&top, &bottom);
+            dz[j] = -stack(&top, &bottom);
             if j >= 6 {
-                dz -= per_tension[j - 6];
+                dz[j] -= per_tension[j - 6];
             }
-            if !sys.factor.solve_vector(&mut dz) {
-                return Err(SingularSystem { s });
-            }
+        }
+        // K δz = −δg for every column with the one factor.
+        if !sys.factor.solve_columns(&mut dz[..t.live()]) {
+            return Err(SingularSystem { s });
+        }
+        for (j, dz) in dz.iter().enumerate().take(t.live()) {
+            let dw = t.w[j];
+            let du = t.u[j];
             out.w[j] = dz.fixed_rows::<3>(0).into();
             out.u[j] = dz.fixed_rows::<3>(3).into();
             if t.position {

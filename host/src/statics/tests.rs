@@ -1,7 +1,6 @@
 //! Checks of the statics against independent facts: closed-form arcs, beam
 //! theory, RK4's order, global equilibrium of the converged shape, symmetry.
 
-
 use nalgebra::{Vector3, Vector6};
 
 use super::shoot::jacobian_steps;
@@ -449,9 +448,7 @@ fn regression_cases() -> Vec<(&'static str, Vec<f64>)> {
 /// Poses of [`regression_cases`]: cold solves, then the same batch as one
 /// warm-started chain, then the helical variant of tendon 0 and a tip load.
 fn regression_poses() -> Vec<[f64; 7]> {
-    let load = |name: &str| {
-        crate::robot::repo_robot(name)
-    };
+    let load = |name: &str| crate::robot::repo_robot(name);
     let mut out = Vec::new();
     for (name, tau) in regression_cases() {
         let s = Statics::new(&load(name), SolverSettings::default());

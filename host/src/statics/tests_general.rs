@@ -12,7 +12,6 @@ use super::rod::{Rod, RodState};
 use super::*;
 use crate::robot::{repo_robot as load, Robot};
 
-
 fn with_steps(steps: usize) -> SolverSettings {
     SolverSettings {
         steps,
