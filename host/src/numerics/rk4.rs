@@ -3,10 +3,10 @@
 //! the statics with their sensitivities (§2), and the dynamics pass.
 //!
 //! The step is written once, generic over the state and the rates function;
-//! it is monomorphised and inlined into each caller, so the statics inner
-//! loop costs what the hand-written steps did (measured with callgrind, see
-//! BENCHMARKS.md "Statics"). The arithmetic is the old steps' exactly,
-//! stage by stage, so the results are bit-identical to them.
+//! it is monomorphised and inlined into each caller, so the plain statics
+//! pass costs what the hand-written step did (callgrind, `statics_cost`).
+//! The arithmetic is the old steps' exactly, stage by stage, so the results
+//! are bit-identical to them.
 
 /// A state RK4 can step: `y + h·k` for rates `k`, and the weighted mean
 /// (k₁ + 2 k₂ + 2 k₃ + k₄) / 6 of four rates.
