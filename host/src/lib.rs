@@ -17,6 +17,7 @@ pub mod inverse;
 pub mod ipc;
 pub mod learn;
 pub mod net;
+pub mod numerics;
 pub mod pipeline;
 pub mod plan;
 pub mod plot;

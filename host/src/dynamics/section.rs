@@ -21,6 +21,8 @@ use std::ops::{Add, Mul};
 
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
+use crate::numerics::dense::Factor6;
+use crate::numerics::rk4::Rk4State;
 use crate::robot::{hat, Robot, MAX_TENDONS};
 use crate::statics::rod::{Rod, TendonSet};
 use crate::statics::SingularSystem;
@@ -103,23 +105,6 @@ pub struct DynRates {
     domega: Vector3<f64>,
 }
 
-impl DynRates {
-    /// Weighted sum of the four RK4 stages.
-    pub fn rk4_average(k: &[DynRates; 4]) -> DynRates {
-        let avg = |f: fn(&DynRates) -> Vector3<f64>| {
-            (f(&k[0]) + (f(&k[1]) + f(&k[2])) * 2.0 + f(&k[3])) / 6.0
-        };
-        DynRates {
-            dp: avg(|r| r.dp),
-            dr: (k[0].dr + (k[1].dr + k[2].dr) * 2.0 + k[3].dr) / 6.0,
-            dw: avg(|r| r.dw),
-            du: avg(|r| r.du),
-            dq: avg(|r| r.dq),
-            domega: avg(|r| r.domega),
-        }
-    }
-}
-
 impl DynState {
     /// The clamped base, s = 0: p = 0, R = I, at rest, strains (w, u).
     pub fn at_base(w: Vector3<f64>, u: Vector3<f64>) -> DynState {
@@ -138,8 +123,25 @@ impl DynState {
         self.w + Vector3::z()
     }
 
+    /// The time-differentiated quantities of this state with its strain rates.
+    pub(super) fn time_vars(&self, ws: Vector3<f64>, us: Vector3<f64>) -> TimeVars {
+        TimeVars {
+            w: self.w,
+            u: self.u,
+            q: self.q,
+            omega: self.omega,
+            ws,
+            us,
+        }
+    }
+}
+
+impl Rk4State for DynState {
+    type Rates = DynRates;
+
     /// `self + h · rates`.
-    pub fn advanced(&self, r: &DynRates, h: f64) -> DynState {
+    #[inline(always)]
+    fn advanced(&self, r: &DynRates, h: f64) -> DynState {
         DynState {
             p: self.p + r.dp * h,
             rot: self.rot + r.dr * h,
@@ -150,15 +152,18 @@ impl DynState {
         }
     }
 
-    /// The time-differentiated quantities of this state with its strain rates.
-    pub(super) fn time_vars(&self, ws: Vector3<f64>, us: Vector3<f64>) -> TimeVars {
-        TimeVars {
-            w: self.w,
-            u: self.u,
-            q: self.q,
-            omega: self.omega,
-            ws,
-            us,
+    #[inline(always)]
+    fn rk4_mean(k: [&DynRates; 4]) -> DynRates {
+        let avg = |f: fn(&DynRates) -> Vector3<f64>| {
+            (f(k[0]) + (f(k[1]) + f(k[2])) * 2.0 + f(k[3])) / 6.0
+        };
+        DynRates {
+            dp: avg(|r| r.dp),
+            dr: (k[0].dr + (k[1].dr + k[2].dr) * 2.0 + k[3].dr) / 6.0,
+            dw: avg(|r| r.dw),
+            du: avg(|r| r.du),
+            dq: avg(|r| r.dq),
+            domega: avg(|r| r.domega),
         }
     }
 }
@@ -325,11 +330,8 @@ impl DynamicRod {
             - bse.component_mul(&hist.ws);
         let bottom = -y.u.cross(&m) - v.cross(&n) - b_vec + inertia_m - bbt.component_mul(&hist.us);
         let rhs = Vector6::new(top.x, top.y, top.z, bottom.x, bottom.y, bottom.z);
-        let x = match k.cholesky() {
-            Some(c) => c.solve(&rhs),
-            None => k.lu().solve(&rhs).ok_or(SingularSystem { s })?,
-        };
-        if !x.iter().all(|v| v.is_finite()) {
+        let mut x = rhs;
+        if !Factor6::cholesky_or_lu(k).solve_vector(&mut x) || !x.iter().all(|v| v.is_finite()) {
             return Err(SingularSystem { s });
         }
         let ws = Vector3::new(x[0], x[1], x[2]);

@@ -11,12 +11,13 @@
 
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6, LU, U6};
 
+use crate::numerics::rk4::rk4_step;
 use crate::robot::{Robot, TensionError};
 use crate::statics::integrate::{pieces, Piece};
 use crate::statics::{SingularSystem, SolveError, SolverSettings, Statics, MAX_STEPS};
 
 use super::params::{Damping, DynamicsSettings};
-use super::section::{DynRates, DynState, DynamicRod, TimeVars};
+use super::section::{DynState, DynamicRod, TimeVars};
 
 /// Why a dynamics run could not start or step.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -381,16 +382,14 @@ fn pass(
         let hh = piece.h;
         for j in 0..piece.n {
             let s = piece.a + j as f64 * hh;
-            let (r1, z1) = model.rates(s, &y, &term(k), c0, piece.running)?;
-            let y2 = y.advanced(&r1, 0.5 * hh);
-            let (r2, z2) = model.rates(s + 0.5 * hh, &y2, &term(k + 1), c0, piece.running)?;
-            let y3 = y.advanced(&r2, 0.5 * hh);
-            let (r3, z3) = model.rates(s + 0.5 * hh, &y3, &term(k + 2), c0, piece.running)?;
-            let y4 = y.advanced(&r3, hh);
-            let (r4, z4) = model.rates(s + hh, &y4, &term(k + 3), c0, piece.running)?;
-            record[k..k + 4].copy_from_slice(&[z1, z2, z3, z4]);
+            // Each stage is a grid point with its own history term; its
+            // time variables are recorded for the next time step.
+            y = rk4_step(s, &y, hh, |stage, s, y| {
+                let (r, z) = model.rates(s, y, &term(k + stage), c0, piece.running)?;
+                record[k + stage] = z;
+                Ok(r)
+            })?;
             k += 4;
-            y = y.advanced(&DynRates::rk4_average(&[r1, r2, r3, r4]), hh);
         }
         record[k] = y.time_vars(Vector3::zeros(), Vector3::zeros());
         let end_term = term(k);

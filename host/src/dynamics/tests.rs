@@ -3,22 +3,11 @@
 //! BDF-α scheme's numerical damping and order, and the equilibrium a damped
 //! run comes to.
 
-use std::path::Path;
-
 use nalgebra::{DMatrix, DVector, Vector3};
 
 use super::*;
-use crate::robot::Robot;
+use crate::robot::{repo_robot as robot, Robot};
 use crate::statics::{SolverSettings, Statics};
-
-fn robot(name: &str) -> Robot {
-    Robot::load(
-        &Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../robots")
-            .join(name),
-    )
-    .unwrap()
-}
 
 fn statics_tip(robot: &Robot, steps: usize, tensions: &[f64]) -> Vector3<f64> {
     let statics = Statics::new(

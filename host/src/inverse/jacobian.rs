@@ -14,7 +14,7 @@
 use nalgebra::{DMatrix, Matrix3, Vector3, Vector6};
 
 use crate::statics::rod::{Rod, RodState};
-use crate::statics::tangent::integrate_with_full_tangent;
+use crate::statics::tangent::{integrate_with_sensitivity, FullSensitivity};
 use crate::statics::SingularSystem;
 
 /// Tip pose and its Jacobian with respect to the tensions at one solution.
@@ -54,9 +54,10 @@ pub fn tip_jacobian(
         &Vector3::new(x[3], x[4], x[5]),
         &rod.kse,
     );
-    let (tip, t) = integrate_with_full_tangent(rod, base, steps)?;
+    let start = FullSensitivity::with_tensions(rod);
+    let (tip, t) = integrate_with_sensitivity(rod, base, steps, start)?;
     let zero = Vector3::zeros();
-    let r = rod.tip_residual_full_jacobian(&tip, &t, &zero, &zero);
+    let r = rod.tip_residual_jacobian(&tip, &t, &zero, &zero);
     let r_x = r.fixed_columns::<6>(0).into_owned();
     let lu = r_x.lu();
     let tendons = t.columns - 6;

@@ -7,7 +7,8 @@
 
 use nalgebra::Vector3;
 
-use super::rod::{Rod, RodRates, RodState, SingularSystem, TendonSet};
+use super::rod::{Rod, RodState, SingularSystem, TendonSet};
+use crate::numerics::rk4;
 
 /// Fewest RK4 steps on a piece between anchors, however short it is.
 pub const MIN_STEPS_PER_PIECE: usize = 2;
@@ -164,15 +165,5 @@ pub fn rk4_step(
     h: f64,
     running: TendonSet,
 ) -> Result<RodState, SingularSystem> {
-    let k1 = rod.rates(s, y, running)?;
-    let k2 = rod.rates(s + 0.5 * h, &y.advanced(&k1, 0.5 * h), running)?;
-    let k3 = rod.rates(s + 0.5 * h, &y.advanced(&k2, 0.5 * h), running)?;
-    let k4 = rod.rates(s + h, &y.advanced(&k3, h), running)?;
-    let avg = RodRates {
-        dp: (k1.dp + (k2.dp + k3.dp) * 2.0 + k4.dp) / 6.0,
-        dr: (k1.dr + (k2.dr + k3.dr) * 2.0 + k4.dr) / 6.0,
-        dw: (k1.dw + (k2.dw + k3.dw) * 2.0 + k4.dw) / 6.0,
-        du: (k1.du + (k2.du + k3.du) * 2.0 + k4.du) / 6.0,
-    };
-    Ok(y.advanced(&avg, h))
+    rk4::rk4_step(s, y, h, |_, s, y| rod.rates(s, y, running))
 }

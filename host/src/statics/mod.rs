@@ -5,9 +5,10 @@
 //! the equations.
 //!
 //! `rod` holds the constitutive law, strain-rate system and anchor loads,
-//! `integrate` the piecewise RK4 pass from base to tip, `shoot` the
-//! boundary-value solve, `pose` the quaternion conventions, `batch` many
-//! solves in a canonical order.
+//! `integrate` the piecewise RK4 pass from base to tip, `tangent` the one
+//! sensitivity propagation, `shoot` the boundary-value solve, `pose` the
+//! quaternion conventions, `batch` many solves in a canonical order. The RK4
+//! step and the 6×6 solvers are [`crate::numerics`]'s.
 
 pub mod batch;
 pub mod integrate;

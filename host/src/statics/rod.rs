@@ -8,8 +8,10 @@
 //! storing `w` keeps the internal force exact to roundoff, which is what lets
 //! the shooting residual reach 1e-10 N.
 
-use nalgebra::{Matrix3, Matrix6, Vector3, Vector6, LU, U6};
+use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
+use crate::numerics::dense::Factor6;
+use crate::numerics::rk4::Rk4State;
 use crate::robot::{hat, Robot, MAX_TENDONS};
 
 /// The backbone's state at one arc length s.
@@ -54,14 +56,29 @@ impl RodState {
     pub fn v(&self) -> Vector3<f64> {
         self.w + Vector3::z()
     }
+}
+
+impl Rk4State for RodState {
+    type Rates = RodRates;
 
     /// `self + h · rates` (one RK4 stage).
-    pub fn advanced(&self, rates: &RodRates, h: f64) -> RodState {
+    #[inline(always)]
+    fn advanced(&self, rates: &RodRates, h: f64) -> RodState {
         RodState {
             p: self.p + rates.dp * h,
             rot: self.rot + rates.dr * h,
             w: self.w + rates.dw * h,
             u: self.u + rates.du * h,
+        }
+    }
+
+    #[inline(always)]
+    fn rk4_mean(k: [&RodRates; 4]) -> RodRates {
+        RodRates {
+            dp: (k[0].dp + (k[1].dp + k[2].dp) * 2.0 + k[3].dp) / 6.0,
+            dr: (k[0].dr + (k[1].dr + k[2].dr) * 2.0 + k[3].dr) / 6.0,
+            dw: (k[0].dw + (k[1].dw + k[2].dw) * 2.0 + k[3].dw) / 6.0,
+            du: (k[0].du + (k[1].du + k[2].du) * 2.0 + k[3].du) / 6.0,
         }
     }
 }
@@ -109,18 +126,11 @@ pub(super) struct TendonTerms {
     pub alpha: Vector3<f64>,
 }
 
-/// The factored 6×6 strain-rate matrix.
-#[derive(Clone, Debug)]
-pub(super) enum Factor {
-    Ldlt(Ldlt6),
-    Lu(LU<f64, U6, U6>),
-}
-
 /// The strain-rate system at one point: its factor, solution and parts.
 #[derive(Clone, Debug)]
 pub(super) struct System {
     /// The factored matrix K.
-    pub factor: Factor,
+    pub factor: Factor6,
     /// v' (= w').
     pub dw: Vector3<f64>,
     /// u'.
@@ -135,134 +145,6 @@ pub(super) struct System {
     pub n_terms: usize,
 }
 
-impl System {
-    /// Solve K X = B in place; false when the factor cannot.
-    pub fn solve_mut(&self, b: &mut Matrix6<f64>) -> bool {
-        match &self.factor {
-            Factor::Ldlt(c) => {
-                for column in b.as_mut_slice().chunks_exact_mut(6) {
-                    let mut x = [0.0; 6];
-                    x.copy_from_slice(column);
-                    c.solve(&mut x);
-                    column.copy_from_slice(&x);
-                }
-                true
-            }
-            Factor::Lu(lu) => lu.solve_mut(b),
-        }
-    }
-}
-
-/// Square-root-free Cholesky factor K = L D Lᵀ (L unit lower triangular,
-/// D diagonal) of a 6×6 symmetric positive definite matrix, in fixed arrays:
-/// the strain-rate system is factored four times per RK4 step, and at this
-/// size fully unrolled loops beat a general decomposition (measured, see
-/// BENCHMARKS.md "Statics"). LDLᵀ rather than LLᵀ: the six square roots of
-/// LLᵀ sit on the factor's critical path, the divisions of both do too.
-#[derive(Clone, Copy, Debug)]
-pub(super) struct Ldlt6 {
-    /// L, row-major, below the diagonal; entries on and above it unused.
-    l: [[f64; 6]; 6],
-    /// 1 / D_jj.
-    inv_d: [f64; 6],
-}
-
-// Index loops on purpose: the triangular recurrences read as in the textbook,
-// and the constant bounds are what makes them unroll.
-#[allow(clippy::needless_range_loop)]
-impl Ldlt6 {
-    /// Factor the matrix whose lower triangle is `k` (row-major); `None`
-    /// when a pivot is not positive (or not finite).
-    #[inline(always)]
-    fn new(k: &[[f64; 6]; 6]) -> Option<Ldlt6> {
-        let mut f = Ldlt6 {
-            l: [[0.0; 6]; 6],
-            inv_d: [0.0; 6],
-        };
-        // dl[i][p] = L_ip D_pp, kept so each entry costs one product.
-        let mut dl = [[0.0; 6]; 6];
-        // One call per column with the column as a constant, so that every
-        // loop has constant bounds and unrolls.
-        let ok = f.column::<0>(k, &mut dl)
-            && f.column::<1>(k, &mut dl)
-            && f.column::<2>(k, &mut dl)
-            && f.column::<3>(k, &mut dl)
-            && f.column::<4>(k, &mut dl)
-            && f.column::<5>(k, &mut dl);
-        ok.then_some(f)
-    }
-
-    /// Column J of L and D_JJ; false when the pivot is not positive and finite.
-    #[inline(always)]
-    fn column<const J: usize>(&mut self, k: &[[f64; 6]; 6], dl: &mut [[f64; 6]; 6]) -> bool {
-        let l = &mut self.l;
-        let mut d = k[J][J];
-        for p in 0..J {
-            d -= l[J][p] * dl[J][p];
-        }
-        if !(d > 0.0 && d < f64::INFINITY) {
-            return false;
-        }
-        let inv = 1.0 / d;
-        self.inv_d[J] = inv;
-        for i in J + 1..6 {
-            let mut x = k[i][J];
-            for p in 0..J {
-                x -= dl[i][p] * l[J][p];
-            }
-            dl[i][J] = x;
-            l[i][J] = x * inv;
-        }
-        true
-    }
-
-    /// Solve K x = b in place, b a vector.
-    pub(super) fn solve_vector(&self, b: &mut Vector6<f64>) {
-        let mut x = [0.0; 6];
-        x.copy_from_slice(b.as_slice());
-        self.solve(&mut x);
-        b.copy_from_slice(&x);
-    }
-
-    /// Solve K x = b in place.
-    #[inline(always)]
-    fn solve(&self, b: &mut [f64; 6]) {
-        self.forward::<1>(b);
-        self.forward::<2>(b);
-        self.forward::<3>(b);
-        self.forward::<4>(b);
-        self.forward::<5>(b);
-        for (x, inv) in b.iter_mut().zip(&self.inv_d) {
-            *x *= inv;
-        }
-        self.backward::<4>(b);
-        self.backward::<3>(b);
-        self.backward::<2>(b);
-        self.backward::<1>(b);
-        self.backward::<0>(b);
-    }
-
-    /// Row I of L y = b (unit diagonal).
-    #[inline(always)]
-    fn forward<const I: usize>(&self, b: &mut [f64; 6]) {
-        let mut x = b[I];
-        for p in 0..I {
-            x -= self.l[I][p] * b[p];
-        }
-        b[I] = x;
-    }
-
-    /// Row I of Lᵀ x = y (unit diagonal).
-    #[inline(always)]
-    fn backward<const I: usize>(&self, b: &mut [f64; 6]) {
-        let mut x = b[I];
-        for p in I + 1..6 {
-            x -= self.l[p][I] * b[p];
-        }
-        b[I] = x;
-    }
-}
-
 /// R û, column by column: column k is R (u × e_k), a difference of two of
 /// R's columns scaled by components of u (half the products of a full 3×3
 /// product with the hat matrix; it is evaluated at every RK4 stage).
@@ -274,37 +156,6 @@ pub(super) fn rot_times_hat(rot: &Matrix3<f64>, u: &Vector3<f64>) -> Matrix3<f64
         c2 * u.x - c0 * u.z,
         c0 * u.y - c1 * u.x,
     ])
-}
-
-/// Factor K (lower triangle `k`) and solve K x = rhs. K is SPD by
-/// construction: K = diag(Kse, Kbt) + Σ Bᵢᵀ Aᵢ Bᵢ with Bᵢ = [I, −r̂ᵢ] and
-/// Aᵢ ⪰ 0. LU is the fallback if roundoff ever breaks the Cholesky; a
-/// matrix neither can solve is an error, never a guess.
-#[inline(always)]
-fn factor_and_solve(
-    k: &[[f64; 6]; 6],
-    rhs: [f64; 6],
-    s: f64,
-) -> Result<(Factor, [f64; 6]), SingularSystem> {
-    let (factor, x) = match Ldlt6::new(k) {
-        Some(c) => {
-            let mut x = rhs;
-            c.solve(&mut x);
-            (Factor::Ldlt(c), x)
-        }
-        None => {
-            let full = Matrix6::from_fn(|i, j| if j <= i { k[i][j] } else { k[j][i] });
-            let lu = full.lu();
-            let x = lu
-                .solve(&Vector6::from_row_slice(&rhs))
-                .ok_or(SingularSystem { s })?;
-            (Factor::Lu(lu), [x[0], x[1], x[2], x[3], x[4], x[5]])
-        }
-    };
-    if !x.iter().all(|v| v.is_finite()) {
-        return Err(SingularSystem { s });
-    }
-    Ok((factor, x))
 }
 
 /// The rod model of one robot under one set of tendon tensions: everything
@@ -474,7 +325,7 @@ impl Rod {
         // The same assembly and factor as [`Rod::system`] (so the plain and
         // the tangent pass stay bit-identical), without keeping the parts.
         let (k, rhs) = self.assemble(s, state, running, |_| {});
-        let (_, x) = factor_and_solve(&k, rhs, s)?;
+        let (_, x) = Factor6::ldlt_solve(&k, rhs).ok_or(SingularSystem { s })?;
         Ok((
             Vector3::new(x[0], x[1], x[2]),
             Vector3::new(x[3], x[4], x[5]),
@@ -495,7 +346,9 @@ impl Rod {
             terms[n_terms] = term;
             n_terms += 1;
         });
-        let (factor, x) = factor_and_solve(&k, rhs, s)?;
+        // K is SPD by construction: K = diag(Kse, Kbt) + Σ Bᵢᵀ Aᵢ Bᵢ with
+        // Bᵢ = [I, −r̂ᵢ] and Aᵢ ⪰ 0.
+        let (factor, x) = Factor6::ldlt_solve(&k, rhs).ok_or(SingularSystem { s })?;
         let (n, m) = self.internal_wrench(state);
         Ok(System {
             factor,
@@ -789,105 +642,5 @@ fn arc_moments(u: &Vector3<f64>, l: f64) -> (Vector3<f64>, Vector3<f64>) {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use std::path::Path;
-
-    fn seed() -> Robot {
-        Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml")).unwrap()
-    }
-
-    #[test]
-    fn constant_curvature_arc_has_zero_strain_rates_without_gravity() {
-        // A straight tendon on a constant-curvature arc: n, m constant in the
-        // body frame, so v' = u' = 0 must solve the system exactly.
-        let robot = seed().without_gravity();
-        let mut rod = Rod::new(&robot);
-        let tau = 3.0;
-        rod.set_tensions(&[tau, 0.0, 0.0, 0.0]);
-        let ei = robot.kbt().x;
-        let ea = robot.kse().z;
-        let d = robot.tendons[0].offset;
-        let state = RodState {
-            p: Vector3::zeros(),
-            rot: Matrix3::identity(),
-            w: Vector3::new(0.0, 0.0, -tau / ea),
-            u: Vector3::new(0.0, tau * d / ei, 0.0),
-        };
-        let (dv, du) = rod.strain_rates(0.1, &state, rod.running_to(0.4)).unwrap();
-        assert!(dv.norm() < 1e-9, "v' = {dv}");
-        assert!(du.norm() < 1e-9, "u' = {du}");
-    }
-
-    #[test]
-    fn straight_rod_under_gravity_bends_at_the_rate_of_its_weight() {
-        // No tendons, straight rod: u' = Kbt⁻¹(−v̂ n) with n = 0 at first order,
-        // but n' = −f_e gives the classic m' = −e3 × n: check the force part,
-        // v'_x = −f_e,x / GA when n = 0.
-        let robot = seed();
-        let rod = Rod::new(&robot);
-        let state = RodState {
-            p: Vector3::zeros(),
-            rot: Matrix3::identity(),
-            w: Vector3::zeros(),
-            u: Vector3::zeros(),
-        };
-        let (dv, du) = rod.strain_rates(0.0, &state, rod.running_to(0.4)).unwrap();
-        let expected = -robot.weight_per_length().x / robot.kse().x;
-        assert!((dv.x - expected).abs() < 1e-15);
-        assert!(du.norm() < 1e-15);
-    }
-
-    /// The cold guess's arc moments against the arc itself: R(s) = exp(s û)
-    /// for constant u, p' = R e3, integrated by the trapezoidal rule on a
-    /// fine grid — for a bent arc (closed form) and a nearly straight one
-    /// (the series branch).
-    #[test]
-    fn arc_moments_match_the_integrated_arc() {
-        for u in [Vector3::new(0.3, -1.2, 0.0), Vector3::new(1e-4, 2e-4, 0.0)] {
-            let l = 0.4;
-            let n = 20_000;
-            let h = l / n as f64;
-            let tangent = |s: f64| nalgebra::Rotation3::from_scaled_axis(u * s) * Vector3::z();
-            let (mut p, mut first_moment) = (Vector3::zeros(), Vector3::zeros());
-            for k in 0..n {
-                let s = k as f64 * h;
-                let next = p + (tangent(s) + tangent(s + h)) * (0.5 * h);
-                first_moment += (p + next) * (0.5 * h);
-                p = next;
-            }
-            let (mean, tip) = arc_moments(&u, l);
-            assert!((tip - p).norm() < 1e-9, "{u}: tip {tip} vs {p}");
-            assert!(
-                (mean - first_moment).norm() < 1e-9,
-                "{u}: first moment {mean} vs {first_moment}"
-            );
-        }
-    }
-
-    #[test]
-    fn singular_system_is_an_error_not_a_zero_rate() {
-        // No shear/extension stiffness and no tendons: the 6×6 matrix has a
-        // zero 3×3 block, which neither Cholesky nor LU can solve.
-        let mut rod = Rod::new(&seed());
-        rod.kse = Vector3::zeros();
-        let state = RodState {
-            p: Vector3::zeros(),
-            rot: Matrix3::identity(),
-            w: Vector3::zeros(),
-            u: Vector3::new(0.0, 1.0, 0.0),
-        };
-        let running = rod.running_to(0.4);
-        assert_eq!(
-            rod.strain_rates(0.25, &state, running),
-            Err(SingularSystem { s: 0.25 })
-        );
-        // A non-finite state is reported the same way, not passed on as NaN rates.
-        let rod = Rod::new(&seed());
-        let nan = RodState {
-            u: Vector3::new(f64::NAN, 0.0, 0.0),
-            ..state
-        };
-        assert!(rod.strain_rates(0.1, &nan, running).is_err());
-    }
-}
+#[path = "rod_tests.rs"]
+mod tests;

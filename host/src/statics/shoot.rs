@@ -16,7 +16,7 @@ use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 use super::integrate::{integrate, integrate_sampled};
 use super::pose::{orthonormalise, quaternion_wxyz};
 use super::rod::{Rod, RodState, SingularSystem};
-use super::tangent::integrate_with_tangent;
+use super::tangent::{integrate_with_sensitivity, ShootingSensitivity};
 use crate::robot::{Robot, TensionError};
 
 /// Most RK4 steps over the length a solve accepts (`tendril fk --steps`):
@@ -340,13 +340,9 @@ impl Shooting<'_> {
             Grid::Coarse => self.jacobian_steps,
             Grid::Fine => self.steps,
         };
-        let (tip, t) = integrate_with_tangent(
-            self.rod,
-            base_state(self.rod, x),
-            steps,
-            self.track_rotation,
-        )
-        .ok()?;
+        let start = ShootingSensitivity::at_base(&self.rod.kse, 0, self.track_rotation, false);
+        let (tip, t) =
+            integrate_with_sensitivity(self.rod, base_state(self.rod, x), steps, start).ok()?;
         Some(
             self.rod
                 .tip_residual_jacobian(&tip, &t, &self.f_ext, &self.m_ext),

@@ -1,8 +1,6 @@
 //! Checks of the statics against independent facts: closed-form arcs, beam
 //! theory, RK4's order, global equilibrium of the converged shape, symmetry.
 
-use std::path::Path;
-
 use nalgebra::{Vector3, Vector6};
 
 use super::shoot::jacobian_steps;
@@ -10,7 +8,7 @@ use super::*;
 use crate::robot::Robot;
 
 fn seed() -> Robot {
-    Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml")).unwrap()
+    crate::robot::repo_robot("seed-4t.toml")
 }
 
 fn fine() -> SolverSettings {
@@ -450,14 +448,7 @@ fn regression_cases() -> Vec<(&'static str, Vec<f64>)> {
 /// Poses of [`regression_cases`]: cold solves, then the same batch as one
 /// warm-started chain, then the helical variant of tendon 0 and a tip load.
 fn regression_poses() -> Vec<[f64; 7]> {
-    let load = |name: &str| {
-        Robot::load(
-            &Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("../robots")
-                .join(name),
-        )
-        .unwrap()
-    };
+    let load = |name: &str| crate::robot::repo_robot(name);
     let mut out = Vec::new();
     for (name, tau) in regression_cases() {
         let s = Statics::new(&load(name), SolverSettings::default());

@@ -10,16 +10,7 @@ use nalgebra::Vector3;
 use super::integrate::integrate_observed;
 use super::rod::{Rod, RodState};
 use super::*;
-use crate::robot::Robot;
-
-fn load(name: &str) -> Robot {
-    Robot::load(
-        &Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../robots")
-            .join(name),
-    )
-    .unwrap()
-}
+use crate::robot::{repo_robot as load, Robot};
 
 fn with_steps(steps: usize) -> SolverSettings {
     SolverSettings {
