@@ -136,7 +136,9 @@ impl Temporary {
     }
 
     fn named(&self) -> &tempfile::NamedTempFile {
-        self.file.as_ref().expect("a Temporary holds its file until persisted")
+        self.file
+            .as_ref()
+            .expect("a Temporary holds its file until persisted")
     }
 
     /// The open file.
@@ -484,7 +486,10 @@ mod tests {
         }
         let err = write_atomic(full, &[b'x'; 100_000]).unwrap_err();
         assert_eq!(err.raw_os_error(), Some(libc::ENOSPC), "{err}");
-        assert!(std::fs::metadata(full).unwrap().file_type().is_char_device());
+        assert!(std::fs::metadata(full)
+            .unwrap()
+            .file_type()
+            .is_char_device());
         write_atomic(Path::new("/dev/null"), b"rows").unwrap();
         let null = std::fs::metadata("/dev/null").unwrap();
         assert!(null.file_type().is_char_device());

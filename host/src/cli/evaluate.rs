@@ -61,11 +61,20 @@ impl EvaluateArgs {
     }
 }
 
-/// Run `tendril evaluate`: the table to stdout, the JSON to `--json-out`.
+/// Run `tendril evaluate`: the table to stdout, the JSON to `--json-out`
+/// (the table to stderr when the JSON goes to stdout, `--json-out -`).
 pub fn run(a: EvaluateArgs) -> anyhow::Result<()> {
     let job = a.job();
     let e = job::run(&job)?;
-    print!(
+    let to_stderr = crate::fsutil::is_stdout(&job.json_out);
+    let say = |text: String| {
+        if to_stderr {
+            eprint!("{text}");
+        } else {
+            print!("{text}");
+        }
+    };
+    say(format!(
         "{}",
         e.metrics.table(&format!(
             "{} on {} ({} hidden units)",
@@ -73,12 +82,12 @@ pub fn run(a: EvaluateArgs) -> anyhow::Result<()> {
             job.data.display(),
             e.hidden_units
         ))
-    );
+    ));
     let r = &e.refinement;
-    println!(
+    say(format!(
         "net alone vs net + exact IK ({} rows, pose targets): tip error mean / p95 / max \
          {:.4} / {:.4} / {:.4} mm in {:.1} µs vs {:.2e} / {:.2e} / {:.2e} mm in {:.0} µs per query \
-         ({} out of reach, {} not converged)",
+         ({} out of reach, {} not converged)\n",
         r.rows,
         r.net_tip_error_mm.mean,
         r.net_tip_error_mm.p95,
@@ -90,7 +99,7 @@ pub fn run(a: EvaluateArgs) -> anyhow::Result<()> {
         r.refined_us_per_query,
         r.unreachable,
         r.failed
-    );
+    ));
     log::info!("wrote {}", job.json_out.display());
     Ok(())
 }

@@ -224,7 +224,10 @@ mod tests {
         let err = RunDir::create(&out).err().expect("the directory is locked");
         let msg = err.to_string();
         assert!(msg.contains("is in use by another tendril run"), "{msg}");
-        assert!(msg.contains(&format!("pid {}", std::process::id())), "{msg}");
+        assert!(
+            msg.contains(&format!("pid {}", std::process::id())),
+            "{msg}"
+        );
         assert_eq!(
             std::fs::read_to_string(first.file("report.json")).unwrap(),
             "first",
