@@ -74,15 +74,12 @@ pub fn run(a: EvaluateArgs) -> anyhow::Result<()> {
             print!("{text}");
         }
     };
-    say(format!(
-        "{}",
-        e.metrics.table(&format!(
-            "{} on {} ({} hidden units)",
-            job.model.display(),
-            job.data.display(),
-            e.hidden_units
-        ))
-    ));
+    say(e.metrics.table(&format!(
+        "{} on {} ({} hidden units)",
+        job.model.display(),
+        job.data.display(),
+        e.hidden_units
+    )));
     let r = &e.refinement;
     say(format!(
         "net alone vs net + exact IK ({} rows, pose targets): tip error mean / p95 / max \
