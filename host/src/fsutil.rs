@@ -1,45 +1,323 @@
-//! Atomic file output: write to a temporary file beside the target, then
-//! rename, so an interrupted run never leaves a truncated file under the
-//! final name. And the check that a command's outputs overwrite none of its
-//! inputs nor each other.
+//! File output, one policy for every command (`docs/design.md` §7): a
+//! regular file (new or existing, or the target of a symlink) is written to
+//! a temporary file beside it and renamed into place, so an interrupted run
+//! never leaves a truncated file under the final name; a path that names
+//! something else — a device (`/dev/null`, `/dev/full`), a FIFO, a socket, a
+//! process substitution (`/dev/fd/N`), `/dev/stdout` — is opened and written
+//! *through*, never replaced; `-` is stdout. Also the lock that keeps two
+//! runs out of one output directory, and the check that a command's outputs
+//! overwrite none of its inputs nor each other.
 
-use std::io::{self, Write};
+use std::fs::{File, OpenOptions};
+use std::io::{self, Read, Seek, Write};
 use std::path::{Component, Path, PathBuf};
+use std::sync::Mutex;
 
-/// Write `bytes` to `path` atomically (temp file in the same directory + rename).
+/// Whether `path` is `-`, which every single-file output reads as stdout.
+pub fn is_stdout(path: &Path) -> bool {
+    path.as_os_str() == "-"
+}
+
+/// Where the bytes for an output path go.
+#[derive(Debug, PartialEq, Eq)]
+enum Sink {
+    /// `-`.
+    Stdout,
+    /// Open this path and write into it (devices, FIFOs, sockets, descriptors).
+    Through(PathBuf),
+    /// A regular file (existing or not) at this path, with symlinks
+    /// resolved: written beside it and renamed over it.
+    Replace(PathBuf),
+}
+
+/// Paths that name an open descriptor of this process: whatever is behind
+/// them (even a regular file a shell redirected to) is written through, as a
+/// shell's `>` would, so the caller's descriptor sees the bytes.
+fn names_a_descriptor(path: &Path) -> bool {
+    ["/dev/stdout", "/dev/stderr", "/dev/fd/", "/proc/"]
+        .iter()
+        .any(|p| path.to_string_lossy().starts_with(p))
+}
+
+/// Decide how `path` is written (see the module documentation).
+fn sink_for(path: &Path) -> io::Result<Sink> {
+    if is_stdout(path) {
+        return Ok(Sink::Stdout);
+    }
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_dir() => Err(io::Error::new(
+            io::ErrorKind::IsADirectory,
+            "is a directory, not a file",
+        )),
+        Ok(m) if !m.is_file() || names_a_descriptor(path) => Ok(Sink::Through(path.to_path_buf())),
+        Ok(_) => Ok(Sink::Replace(path.canonicalize()?)),
+        Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(Sink::Replace(follow_links(path)?)),
+        Err(e) => Err(e),
+    }
+}
+
+/// `path` with its chain of symlinks followed to the (missing) file at the
+/// end, so a dangling link gets its target created and stays a link.
+fn follow_links(path: &Path) -> io::Result<PathBuf> {
+    let mut p = path.to_path_buf();
+    // As the kernel does (MAXSYMLINKS): a loop is an error, not a hang.
+    for _ in 0..40 {
+        match std::fs::symlink_metadata(&p) {
+            Ok(m) if m.file_type().is_symlink() => {
+                let target = std::fs::read_link(&p)?;
+                p = match p.parent() {
+                    Some(dir) if target.is_relative() => dir.join(target),
+                    _ => target,
+                };
+            }
+            _ => return Ok(p),
+        }
+    }
+    Err(io::Error::other("too many levels of symbolic links"))
+}
+
+/// Temporary files being written now, removed by [`remove_temporaries`]
+/// when a second signal ends the process before their owners can.
+static TEMPORARIES: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// Remove every temporary output file still registered. Called from the
+/// signal handler before a forced exit; never blocks (a held lock is skipped).
+pub fn remove_temporaries() {
+    if let Ok(list) = TEMPORARIES.try_lock() {
+        for p in list.iter() {
+            let _ = std::fs::remove_file(p);
+        }
+    }
+}
+
+/// A temporary output file beside its target (`.tendril-*.tmp`), registered
+/// for [`remove_temporaries`] while it lives and removed when dropped unless
+/// persisted.
+pub struct Temporary {
+    // Always Some until `persist` takes it (Drop forbids moving it out otherwise).
+    file: Option<tempfile::NamedTempFile>,
+}
+
+impl Temporary {
+    /// Create one in `dir`.
+    pub fn new_in(dir: &Path) -> io::Result<Temporary> {
+        let file = tempfile::Builder::new()
+            .prefix(".tendril-")
+            .suffix(".tmp")
+            .tempfile_in(dir)?;
+        if let Ok(mut list) = TEMPORARIES.lock() {
+            list.push(file.path().to_path_buf());
+        }
+        Ok(Temporary { file: Some(file) })
+    }
+
+    /// One for building the contents of output `path` before
+    /// [`Temporary::persist`]: beside the file it will replace (so the
+    /// rename is atomic), or in the system's temporary directory when
+    /// `path` is written through or is `-` (`/dev/fd/63`'s directory takes
+    /// no new files).
+    pub fn for_output(path: &Path) -> io::Result<Temporary> {
+        match sink_for(path)? {
+            Sink::Replace(target) => {
+                let dir = match target.parent() {
+                    Some(d) if !d.as_os_str().is_empty() => d,
+                    _ => Path::new("."),
+                };
+                std::fs::create_dir_all(dir)?;
+                Temporary::new_in(dir)
+            }
+            _ => Temporary::new_in(&std::env::temp_dir()),
+        }
+    }
+
+    /// Its path.
+    pub fn path(&self) -> &Path {
+        self.named().path()
+    }
+
+    fn named(&self) -> &tempfile::NamedTempFile {
+        self.file
+            .as_ref()
+            .expect("a Temporary holds its file until persisted")
+    }
+
+    /// The open file.
+    pub fn as_file(&self) -> &File {
+        self.named().as_file()
+    }
+
+    /// Put the finished contents at `path` by the output policy: renamed
+    /// over a regular file (or a symlink's target), copied through into a
+    /// device, FIFO or descriptor, or to stdout for `-`.
+    pub fn persist(mut self, path: &Path) -> io::Result<()> {
+        match sink_for(path)? {
+            Sink::Replace(target) => {
+                self.as_file().sync_all()?;
+                // tempfile creates 0600; results are meant to be shared like any output.
+                #[cfg(unix)]
+                {
+                    use std::os::unix::fs::PermissionsExt;
+                    self.as_file()
+                        .set_permissions(std::fs::Permissions::from_mode(0o644))?;
+                }
+                let from = self.path().to_path_buf();
+                let named = self.file.take().expect("held until persisted");
+                unregister(&from);
+                named.persist(&target).map_err(|e| e.error)?;
+                Ok(())
+            }
+            sink => {
+                let mut src = self.as_file();
+                src.rewind()?;
+                write_to(&sink, |w| io::copy(&mut src, w).map(drop))
+            }
+        }
+    }
+}
+
+impl Drop for Temporary {
+    fn drop(&mut self) {
+        if let Some(named) = &self.file {
+            unregister(named.path());
+        }
+    }
+}
+
+fn unregister(path: &Path) {
+    if let Ok(mut list) = TEMPORARIES.lock() {
+        list.retain(|p| p != path);
+    }
+}
+
+/// Stream `fill` into a sink that is written directly (stdout or through).
+fn write_to<F>(sink: &Sink, fill: F) -> io::Result<()>
+where
+    F: FnOnce(&mut dyn Write) -> io::Result<()>,
+{
+    let mut w: Box<dyn Write> = match sink {
+        Sink::Stdout => Box::new(io::stdout().lock()),
+        // No truncate, no create: the node exists and is not a regular file.
+        Sink::Through(p) => Box::new(OpenOptions::new().write(true).open(p)?),
+        Sink::Replace(_) => unreachable!("a regular file is written through a temporary"),
+    };
+    let mut buf = io::BufWriter::new(&mut w);
+    fill(&mut buf)?;
+    buf.flush()?;
+    drop(buf);
+    w.flush()
+}
+
+/// Write `bytes` to `path` by the output policy (see the module documentation).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
     write_atomic_with(path, |w| w.write_all(bytes))
 }
 
-/// Stream into `path` atomically: `fill` writes into a temporary file in the
-/// same directory, which replaces `path` only if `fill` succeeds.
+/// Stream into `path` by the output policy: for a regular file, `fill`
+/// writes into a temporary file in the same directory, which replaces the
+/// file only if `fill` succeeds; a device, FIFO or descriptor is written
+/// through (an error such as ENOSPC is returned); `-` is stdout.
 pub fn write_atomic_with<F>(path: &Path, fill: F) -> io::Result<()>
 where
     F: FnOnce(&mut dyn Write) -> io::Result<()>,
 {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
+    let target = match sink_for(path)? {
+        Sink::Replace(target) => target,
+        sink => return write_to(&sink, fill),
     };
-    std::fs::create_dir_all(dir)?;
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".tendril-")
-        .suffix(".tmp")
-        .tempfile_in(dir)?;
+    let tmp = Temporary::for_output(&target)?;
     {
-        let mut buf = io::BufWriter::new(tmp.as_file_mut());
+        let mut buf = io::BufWriter::new(tmp.as_file());
         fill(&mut buf)?;
         buf.flush()?;
     }
-    tmp.as_file().sync_all()?;
-    // tempfile creates 0600; results are meant to be shared like any output.
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        tmp.as_file()
-            .set_permissions(std::fs::Permissions::from_mode(0o644))?;
+    tmp.persist(&target)
+}
+
+/// A run's exclusive hold on its output directory: an `flock` on
+/// [`DirLock::FILE`] in it, released when dropped and by the kernel when the
+/// process dies (even by SIGKILL), so no stale lock outlives a run.
+#[derive(Debug)]
+pub struct DirLock {
+    _file: File,
+}
+
+/// The output directory could not be locked.
+#[derive(Debug, thiserror::Error)]
+pub enum LockError {
+    /// Another live process holds the lock.
+    #[error("{} is in use by another tendril run (pid {pid})", .dir.display())]
+    InUse {
+        /// The directory.
+        dir: PathBuf,
+        /// The holder's pid as it recorded it (`unknown` if it had not yet).
+        pid: String,
+    },
+    /// Creating or locking the lock file failed.
+    #[error("{}: {source}", .path.display())]
+    Io {
+        /// The directory or lock file.
+        path: PathBuf,
+        /// The OS error.
+        source: io::Error,
+    },
+}
+
+impl DirLock {
+    /// Name of the lock file inside the directory.
+    pub const FILE: &'static str = ".tendril.lock";
+
+    /// Create `dir` if needed and lock it, failing at once (no wait) when
+    /// another run holds it; nothing else in `dir` is touched either way.
+    pub fn acquire(dir: &Path) -> Result<DirLock, LockError> {
+        let io_err = |path: &Path| {
+            let path = path.to_path_buf();
+            move |source| LockError::Io { path, source }
+        };
+        std::fs::create_dir_all(dir).map_err(io_err(dir))?;
+        let path = dir.join(Self::FILE);
+        let mut file = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .map_err(io_err(&path))?;
+        if let Err(e) = flock_exclusive(&file) {
+            if e.kind() != io::ErrorKind::WouldBlock {
+                return Err(LockError::Io { path, source: e });
+            }
+            let mut pid = String::new();
+            let _ = file.read_to_string(&mut pid);
+            let pid = match pid.trim() {
+                "" => "unknown".to_string(),
+                p => p.to_string(),
+            };
+            return Err(LockError::InUse {
+                dir: dir.to_path_buf(),
+                pid,
+            });
+        }
+        // Only the holder writes: the pid is for the message above.
+        file.set_len(0).map_err(io_err(&path))?;
+        write!(file, "{}", std::process::id()).map_err(io_err(&path))?;
+        Ok(DirLock { _file: file })
     }
-    tmp.persist(path).map_err(|e| e.error)?;
+}
+
+#[cfg(unix)]
+fn flock_exclusive(file: &File) -> io::Result<()> {
+    use std::os::unix::io::AsRawFd;
+    // SAFETY: flock on a descriptor this File owns; no memory is passed.
+    let rc = unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(io::Error::last_os_error())
+    }
+}
+
+#[cfg(not(unix))]
+fn flock_exclusive(_file: &File) -> io::Result<()> {
     Ok(())
 }
 
@@ -188,5 +466,127 @@ mod tests {
             .filter(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
             .collect();
         assert!(leftovers.is_empty(), "temporary file left behind");
+    }
+
+    #[cfg(unix)]
+    fn mkfifo(path: &Path) {
+        use std::os::unix::ffi::OsStrExt;
+        let c = std::ffi::CString::new(path.as_os_str().as_bytes()).unwrap();
+        // SAFETY: a valid NUL-terminated path.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0, "mkfifo");
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_full_device_is_an_error_and_stays_a_device() {
+        use std::os::unix::fs::FileTypeExt;
+        let full = Path::new("/dev/full");
+        if !full.exists() {
+            return;
+        }
+        let err = write_atomic(full, &[b'x'; 100_000]).unwrap_err();
+        assert_eq!(err.raw_os_error(), Some(libc::ENOSPC), "{err}");
+        assert!(std::fs::metadata(full)
+            .unwrap()
+            .file_type()
+            .is_char_device());
+        write_atomic(Path::new("/dev/null"), b"rows").unwrap();
+        let null = std::fs::metadata("/dev/null").unwrap();
+        assert!(null.file_type().is_char_device());
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_fifo_is_written_through_and_stays_a_fifo() {
+        use std::os::unix::fs::FileTypeExt;
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("pipe");
+        mkfifo(&fifo);
+        let reader = {
+            let fifo = fifo.clone();
+            std::thread::spawn(move || std::fs::read(fifo).unwrap())
+        };
+        write_atomic_with(&fifo, |w| w.write_all(b"a,b\n1,2\n")).unwrap();
+        assert_eq!(reader.join().unwrap(), b"a,b\n1,2\n");
+        assert!(std::fs::symlink_metadata(&fifo)
+            .unwrap()
+            .file_type()
+            .is_fifo());
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_symlink_stays_a_link_and_its_target_is_replaced() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir(dir.path().join("real")).unwrap();
+        let target = dir.path().join("real").join("out.csv");
+        std::fs::write(&target, b"old").unwrap();
+        let link = dir.path().join("link.csv");
+        std::os::unix::fs::symlink("real/out.csv", &link).unwrap();
+        write_atomic(&link, b"new").unwrap();
+        assert!(std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        assert_eq!(std::fs::read(&target).unwrap(), b"new");
+        // A dangling link gets its target created.
+        let dangling = dir.path().join("later.csv");
+        std::os::unix::fs::symlink("real/later.csv", &dangling).unwrap();
+        write_atomic(&dangling, b"made").unwrap();
+        assert!(std::fs::symlink_metadata(&dangling)
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        assert_eq!(
+            std::fs::read(dir.path().join("real/later.csv")).unwrap(),
+            b"made"
+        );
+    }
+
+    #[test]
+    fn a_dash_is_stdout_and_creates_no_file() {
+        assert_eq!(sink_for(Path::new("-")).unwrap(), Sink::Stdout);
+        assert!(is_stdout(Path::new("-")));
+        assert!(!is_stdout(Path::new("./-")));
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_temporary_copied_through_a_device_is_removed() {
+        let tmp = Temporary::for_output(Path::new("/dev/null")).unwrap();
+        let path = tmp.path().to_path_buf();
+        assert!(path.starts_with(std::env::temp_dir()));
+        tmp.persist(Path::new("/dev/null")).unwrap();
+        assert!(!path.exists());
+    }
+
+    #[test]
+    fn second_signal_cleanup_removes_live_temporaries() {
+        let dir = tempfile::tempdir().unwrap();
+        let tmp = Temporary::new_in(dir.path()).unwrap();
+        let path = tmp.path().to_path_buf();
+        remove_temporaries();
+        assert!(!path.exists());
+        drop(tmp);
+        assert!(!TEMPORARIES.lock().unwrap().contains(&path));
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_locked_directory_is_refused_with_the_holders_pid_until_released() {
+        let dir = tempfile::tempdir().unwrap();
+        let first = DirLock::acquire(dir.path()).unwrap();
+        let err = DirLock::acquire(dir.path()).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            format!(
+                "{} is in use by another tendril run (pid {})",
+                dir.path().display(),
+                std::process::id()
+            )
+        );
+        drop(first);
+        DirLock::acquire(dir.path()).expect("released on drop");
     }
 }

@@ -32,6 +32,19 @@ pub fn parse_list(text: &str, what: &str) -> anyhow::Result<Vec<f64>> {
         .collect()
 }
 
+/// Refuse `-` (stdout) for an output that is not one stream of bytes: a
+/// directory, or a file that other files are written beside. `why` says
+/// what the option names. Single-file outputs take `-` through
+/// [`crate::fsutil::write_atomic_with`].
+pub fn refuse_stdout(option: &str, path: &std::path::Path, why: &str) -> anyhow::Result<()> {
+    if crate::fsutil::is_stdout(path) {
+        anyhow::bail!(
+            "{option} -: {why}, not a single stream; give a path (`./-` for a file named -)"
+        );
+    }
+    Ok(())
+}
+
 /// The Ctrl-C stop flag: the first Ctrl-C asks long commands to stop
 /// between work units, writing nothing (see [`crate::interrupt`]).
 pub use crate::interrupt::stop_flag;

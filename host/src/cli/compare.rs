@@ -58,6 +58,10 @@ impl CompareArgs {
 
 /// Run `tendril compare`.
 pub fn run(args: CompareArgs) -> anyhow::Result<()> {
+    super::common::refuse_stdout("--out", &args.out, "names a directory")?;
+    if let Some(d) = &args.dump_splits {
+        super::common::refuse_stdout("--dump-splits", d, "names a directory")?;
+    }
     let t = Instant::now();
     let r = job::run(&args.job())?;
     for f in &r.files {

@@ -34,6 +34,7 @@ pub struct DynamicsArgs {
 
 /// Run `tendril dynamics`.
 pub fn run(args: DynamicsArgs) -> anyhow::Result<()> {
+    super::common::refuse_stdout("--out", &args.out, "names a directory")?;
     let (robot, _) = args.robot.load()?;
     let job = OfflineRun {
         damping: Damping::of_robot(&robot),

@@ -61,26 +61,32 @@ impl EvaluateArgs {
     }
 }
 
-/// Run `tendril evaluate`: the table to stdout, the JSON to `--json-out`.
+/// Run `tendril evaluate`: the table to stdout, the JSON to `--json-out`
+/// (the table to stderr when the JSON goes to stdout, `--json-out -`).
 pub fn run(a: EvaluateArgs) -> anyhow::Result<()> {
     let job = a.job();
     let e = job::run(&job)?;
-    print!(
-        "{}",
-        e.metrics.table(&format!(
-            "{} on {} ({} hidden units)",
-            job.model.display(),
-            job.data.display(),
-            e.hidden_units
-        ))
-    );
+    let to_stderr = crate::fsutil::is_stdout(&job.json_out);
+    let say = |text: String| {
+        if to_stderr {
+            eprint!("{text}");
+        } else {
+            print!("{text}");
+        }
+    };
+    say(e.metrics.table(&format!(
+        "{} on {} ({} hidden units)",
+        job.model.display(),
+        job.data.display(),
+        e.hidden_units
+    )));
     let r = &e.refinement;
     let (net, refined) = (&r.net_tip_error_mm, &r.refined_tip_error_mm);
     let mm = crate::units::length_mm;
-    println!(
+    say(format!(
         "net alone vs net + exact IK ({} rows, pose targets): tip error mean / p95 / max \
          {} / {} / {} in {} µs vs {} / {} / {} in {} µs per query \
-         ({} out of reach, {} not converged)",
+         ({} out of reach, {} not converged)\n",
         r.rows,
         mm(net.mean),
         mm(net.p95),
@@ -92,7 +98,7 @@ pub fn run(a: EvaluateArgs) -> anyhow::Result<()> {
         crate::units::number(r.refined_us_per_query, 0),
         r.unreachable,
         r.failed
-    );
+    ));
     log::info!("wrote {}", job.json_out.display());
     Ok(())
 }

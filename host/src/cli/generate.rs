@@ -57,6 +57,11 @@ impl GenerateArgs {
 
 /// Run `tendril generate`.
 pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
+    super::common::refuse_stdout(
+        "--out",
+        &args.out,
+        "a dataset is a CSV with its sidecar (.json) beside it",
+    )?;
     let sidecar = job::generate(&args.request(), !args.quiet, stop_flag())?;
     log::info!(
         "wrote {} to {} in {:.2} s ({} re-solved cold, {} dropped)",

@@ -27,6 +27,9 @@ pub struct RunArgs {
 /// Run `tendril run`.
 pub fn run(args: RunArgs) -> anyhow::Result<()> {
     // Validate first, so a bad file is one clear error before any work.
+    if let Some(out) = &args.out {
+        super::common::refuse_stdout("--out", out, "names a directory")?;
+    }
     args.robot.load()?;
     let out = args
         .out

@@ -136,6 +136,7 @@ impl SimArgs {
 
 /// Run `tendril sim`.
 pub fn run(args: SimArgs) -> anyhow::Result<()> {
+    super::common::refuse_stdout("--out", &args.out, "names a directory")?;
     let out = args.out.clone();
     let r = crate::ipc::sim::run(&args.config()?)?;
     let mm = |v: Option<f64>| v.map_or("–".into(), |v| format!("{v:.3}"));

@@ -240,6 +240,14 @@ impl TrainArgs {
 
 /// Run `tendril train`.
 pub fn run(a: TrainArgs) -> anyhow::Result<()> {
+    super::common::refuse_stdout(
+        "--out",
+        &a.out,
+        "the model's log, curve and report are written beside it",
+    )?;
+    if let Some(plot) = &a.plot {
+        super::common::refuse_stdout("--plot", plot, "a PNG is drawn into a file")?;
+    }
     let data = Dataset::read_csv(&a.data)?;
     let job = a.job(&data)?;
     let t = job::run(&job, stop_flag())?;

@@ -23,6 +23,7 @@ pub struct WorkspaceArgs {
 
 /// Run `tendril workspace`.
 pub fn run(args: WorkspaceArgs) -> anyhow::Result<()> {
+    super::common::refuse_stdout("--out", &args.out, "a PNG is drawn into a file")?;
     let data = Dataset::read_csv(&args.data)?;
     let (robot, _) = args.robot.load()?;
     let statics = Statics::new(&robot, SolverSettings::default());

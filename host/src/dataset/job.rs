@@ -266,11 +266,7 @@ pub fn generate(
         sampler,
         progress,
     };
-    let temp = tempfile::Builder::new()
-        .prefix(".tendril-")
-        .suffix(".tmp")
-        .tempfile_in(&dir)
-        .map_err(|e| io_error(&dir, &e))?;
+    let temp = crate::fsutil::Temporary::for_output(&req.out).map_err(|e| io_error(&dir, &e))?;
     let tally = {
         let file = temp.as_file().try_clone().map_err(|e| io_error(&dir, &e))?;
         let mut rows = RowWriter::new(BufWriter::new(file), robot.n_tendons())
@@ -340,33 +336,24 @@ pub fn generate(
     Ok(sidecar)
 }
 
-/// Put the finished CSV in place and write its sidecar. The old sidecar goes
-/// first, so no crash between the steps can pair a sidecar with a CSV it does
-/// not describe ([`is_up_to_date`] would then reuse the wrong rows).
+/// Put the finished CSV in place (by the output policy of
+/// [`crate::fsutil`]: renamed over a regular file, copied through a device
+/// or FIFO) and write its sidecar. The old sidecar goes first, so no crash
+/// between the steps can pair a sidecar with a CSV it does not describe
+/// ([`is_up_to_date`] would then reuse the wrong rows).
 fn commit(
-    temp: tempfile::NamedTempFile,
+    temp: crate::fsutil::Temporary,
     out: &Path,
     sidecar: &Sidecar,
 ) -> Result<(), GenerateError> {
     let side_path = Sidecar::path_for(out);
-    temp.as_file()
-        .sync_all()
-        .map_err(|e| io_error(temp.path(), &e))?;
-    // tempfile creates 0600; datasets are meant to be shared like any output.
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        temp.as_file()
-            .set_permissions(std::fs::Permissions::from_mode(0o644))
-            .map_err(|e| io_error(temp.path(), &e))?;
-    }
     match std::fs::remove_file(&side_path) {
         Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
             return Err(io_error(&side_path, &e));
         }
         _ => {}
     }
-    temp.persist(out).map_err(|e| io_error(out, &e.error))?;
+    temp.persist(out).map_err(|e| io_error(out, &e))?;
     sidecar.write(&side_path)?;
     Ok(())
 }

@@ -138,6 +138,7 @@ pub fn run(
 ) -> anyhow::Result<()> {
     let robot = Robot::load(robot_file)?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let _lock = crate::fsutil::DirLock::acquire(out)?; // held for the whole run (issue 31)
     let mut report = Report::new(out, &robot, command);
     log::info!("robot: {robot}");
 

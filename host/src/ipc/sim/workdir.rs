@@ -9,21 +9,27 @@ use serde::Serialize;
 use super::supervisor::Role;
 use super::{SimConfig, SimError, RUN_DIR};
 
-/// Paths of one run.
+/// Paths of one run, and its lock on the output directory.
 pub struct RunDir {
     out: PathBuf,
     /// The work directory.
     pub work: PathBuf,
+    /// Held until the run's files are published or discarded: a second
+    /// run on the same directory fails at once instead of mixing its files
+    /// with this one's.
+    _lock: crate::fsutil::DirLock,
 }
 
 impl RunDir {
-    /// Create `out` and a fresh work directory in it.
+    /// Create and lock `out` (see [`crate::fsutil::DirLock`]), and make a
+    /// fresh work directory in it.
     pub fn create(out: &Path) -> Result<RunDir, SimError> {
         let io = |path: &Path| {
             let path = path.to_path_buf();
             move |source| SimError::Io { path, source }
         };
-        std::fs::create_dir_all(out).map_err(io(out))?;
+        let lock =
+            crate::fsutil::DirLock::acquire(out).map_err(|e| SimError::Config(e.to_string()))?;
         let work = out.join(RUN_DIR);
         // A launcher killed with SIGKILL leaves its work directory behind.
         if work.exists() {
@@ -33,6 +39,7 @@ impl RunDir {
         Ok(RunDir {
             out: out.to_path_buf(),
             work,
+            _lock: lock,
         })
     }
 
@@ -206,5 +213,28 @@ mod tests {
             "the user's"
         );
         assert!(!out.join(RUN_DIR).exists());
+    }
+
+    #[test]
+    fn a_second_run_on_a_locked_directory_fails_at_once_and_touches_nothing() {
+        let tmp = tempfile::tempdir().unwrap();
+        let out = tmp.path().join("out");
+        let first = RunDir::create(&out).unwrap();
+        std::fs::write(first.file("report.json"), "first").unwrap();
+        let err = RunDir::create(&out).err().expect("the directory is locked");
+        let msg = err.to_string();
+        assert!(msg.contains("is in use by another tendril run"), "{msg}");
+        assert!(
+            msg.contains(&format!("pid {}", std::process::id())),
+            "{msg}"
+        );
+        assert_eq!(
+            std::fs::read_to_string(first.file("report.json")).unwrap(),
+            "first",
+            "the second run removed the first one's work directory"
+        );
+        first.publish().unwrap();
+        let again = RunDir::create(&out).expect("released when the first run ended");
+        again.discard();
     }
 }

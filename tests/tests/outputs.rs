@@ -1,0 +1,286 @@
+//! Issue 31, "Outputs": an output path that is a device, a FIFO or a symlink
+//! is written through (or its target written), never replaced; `-` is
+//! stdout; SIGTERM and SIGHUP leave no temporary file; a run's output
+//! directory is locked against a second run.
+
+#![cfg(unix)]
+
+use std::os::unix::fs::FileTypeExt;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use tendril_tests::{one_loop_at_a_time, robot, tendril_bin, workspace_root};
+
+/// Three rows of tensions for `fk --input` on seed-4t.
+fn rows_csv(dir: &Path) -> PathBuf {
+    let path = dir.join("rows.csv");
+    std::fs::write(&path, "t0,t1,t2,t3\n0,0,0,0\n1,0,0,0\n0,2,0,0\n").unwrap();
+    path
+}
+
+fn fk_batch(input: &Path, output: &Path) -> Command {
+    let mut cmd = Command::new(tendril_bin());
+    cmd.arg("fk")
+        .arg("--robot")
+        .arg(robot("seed-4t.toml"))
+        .arg("--input")
+        .arg(input)
+        .arg("--output")
+        .arg(output)
+        .current_dir(workspace_root());
+    cmd
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Files whose names say they are our temporaries.
+fn temporaries(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(".tendril-") && n.ends_with(".tmp"))
+        .collect()
+}
+
+/// A full device to write to: a copy of /dev/full's node (1, 7) in `dir`
+/// when this process may make one, so a regression replaces only the copy;
+/// else /dev/full itself (a user who cannot make nodes cannot replace it).
+fn full_device(dir: &Path) -> PathBuf {
+    let copy = dir.join("full");
+    let made = Command::new("mknod")
+        .arg(&copy)
+        .args(["c", "1", "7"])
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    // A nodev mount makes the copy unopenable: then it proves nothing.
+    if made && std::fs::OpenOptions::new().write(true).open(&copy).is_ok() {
+        copy
+    } else {
+        PathBuf::from("/dev/full")
+    }
+}
+
+#[test]
+fn fk_into_a_full_device_fails_and_the_device_stays_a_device() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = rows_csv(dir.path());
+    let full = full_device(dir.path());
+    let o = fk_batch(&input, &full).output().unwrap();
+    assert!(
+        !o.status.success(),
+        "exit 0 writing into {}",
+        full.display()
+    );
+    assert!(
+        stderr(&o).contains("No space left on device"),
+        "{}",
+        stderr(&o)
+    );
+    let kind = std::fs::symlink_metadata(&full).unwrap().file_type();
+    assert!(kind.is_char_device(), "{} was replaced", full.display());
+    assert!(temporaries(dir.path()).is_empty());
+}
+
+#[test]
+fn fk_into_a_fifo_writes_through_to_its_reader_and_the_fifo_stays() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = rows_csv(dir.path());
+    let fifo = dir.path().join("rows.fifo");
+    assert!(Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    // The reader is a process with a time limit: a writer that replaced
+    // the FIFO instead of opening it would leave a reader thread blocked
+    // for ever.
+    let reader = Command::new("timeout")
+        .arg("30")
+        .arg("cat")
+        .arg(&fifo)
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let o = fk_batch(&input, &fifo).output().unwrap();
+    let text = String::from_utf8(reader.wait_with_output().unwrap().stdout).unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(text.lines().count(), 4, "{text}");
+    assert!(text.starts_with("t0,t1,t2,t3,px"), "{text}");
+    let kind = std::fs::symlink_metadata(&fifo).unwrap().file_type();
+    assert!(kind.is_fifo(), "the FIFO was replaced");
+    assert!(temporaries(dir.path()).is_empty());
+}
+
+#[test]
+fn fk_through_a_symlink_writes_its_target_and_the_link_stays() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = rows_csv(dir.path());
+    std::fs::create_dir(dir.path().join("results")).unwrap();
+    let target = dir.path().join("results").join("poses.csv");
+    std::fs::write(&target, "old").unwrap();
+    let link = dir.path().join("poses.csv");
+    std::os::unix::fs::symlink("results/poses.csv", &link).unwrap();
+    let o = fk_batch(&input, &link).output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let kind = std::fs::symlink_metadata(&link).unwrap().file_type();
+    assert!(kind.is_symlink(), "the link was replaced by a file");
+    let text = std::fs::read_to_string(&target).unwrap();
+    assert_eq!(text.lines().count(), 4, "{text}");
+}
+
+#[test]
+fn fk_output_dash_is_stdout_and_writes_no_file_named_dash() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = rows_csv(dir.path());
+    let o = fk_batch(&input, Path::new("-"))
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8(o.stdout).unwrap();
+    assert_eq!(text.lines().count(), 4, "{text}");
+    assert!(text.starts_with("t0,t1,t2,t3,px"), "{text}");
+    assert!(!dir.path().join("-").exists());
+}
+
+#[test]
+fn a_directory_output_refuses_dash() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = Command::new(tendril_bin())
+        .args(["sim", "--out", "-"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("--out -: names a directory"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}
+
+/// Start a long `generate`, wait for its temporary file, send `sig`, and
+/// check it exits non-zero leaving no temporary and no dataset.
+fn generate_stopped_by(sig: &str) {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("data.csv");
+    let mut child: Child = Command::new(tendril_bin())
+        .args(["generate", "--quiet", "--samples", "500000", "--out"])
+        .arg(&out)
+        .arg("--robot")
+        .arg(robot("seed-4t.toml"))
+        .current_dir(workspace_root())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while temporaries(dir.path()).is_empty() {
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "no temporary file appeared"
+        );
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!("generate ended before the signal: {status}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // Let it write some rows, so the temporary is a real partial file.
+    std::thread::sleep(Duration::from_millis(300));
+    let sent = Command::new("kill")
+        .arg(format!("-{sig}"))
+        .arg(child.id().to_string())
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            panic!("generate did not stop within 30 s of SIG{sig}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let o = child.wait_with_output().unwrap();
+    assert!(!status.success(), "exit 0 after SIG{sig}");
+    // The handler cannot tell the signals apart (ctrlc): 130 for each.
+    assert_eq!(status.code(), Some(130), "{status}: {}", stderr(&o));
+    assert_eq!(temporaries(dir.path()), Vec::<String>::new());
+    assert!(!out.exists(), "a dataset was written after SIG{sig}");
+}
+
+#[test]
+fn sigterm_during_generate_leaves_no_temporary_and_exits_non_zero() {
+    generate_stopped_by("TERM");
+}
+
+#[test]
+fn sighup_during_generate_leaves_no_temporary_and_exits_non_zero() {
+    generate_stopped_by("HUP");
+}
+
+#[test]
+fn a_second_sim_on_the_same_directory_fails_at_once_and_the_first_completes() {
+    let _one = one_loop_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sim");
+    let sim = |extra: &[&str]| {
+        let mut cmd = Command::new(tendril_bin());
+        cmd.arg("sim")
+            .arg("--robot")
+            .arg(robot("seed-4t.toml"))
+            .arg("--out")
+            .arg(&out)
+            .args(["--settle", "0.5", "--duration", "1.5"])
+            .args(extra)
+            // A fresh directory: the built-in net, not some out/model.tnet.
+            .current_dir(dir.path());
+        cmd
+    };
+    let first = sim(&[])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let lock = out.join(".tendril.lock");
+    let start = Instant::now();
+    while std::fs::read_to_string(&lock)
+        .map(|s| s.trim().is_empty())
+        .unwrap_or(true)
+    {
+        assert!(start.elapsed() < Duration::from_secs(30), "no lock taken");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let t = Instant::now();
+    let second = sim(&[]).output().unwrap();
+    assert!(!second.status.success(), "the second sim succeeded");
+    assert!(
+        t.elapsed() < Duration::from_secs(5),
+        "the second sim did not fail fast"
+    );
+    let msg = stderr(&second);
+    assert!(
+        msg.contains(&format!(
+            "{} is in use by another tendril run (pid {})",
+            out.display(),
+            first.id()
+        )),
+        "{msg}"
+    );
+    let first = first.wait_with_output().unwrap();
+    assert!(first.status.success(), "{}", stderr(&first));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["verdict"]["clean"], true, "{}", report["verdict"]);
+    for log in ["controller.csv", "planner-0.csv", "plant-0.csv"] {
+        assert!(out.join(log).is_file(), "{log} missing");
+    }
+}
