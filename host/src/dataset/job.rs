@@ -583,13 +583,22 @@ mod tests {
         let err = generate(&req, false, &AtomicBool::new(false)).unwrap_err();
         assert!(matches!(err, GenerateError::BadOutput { .. }), "{err}");
         assert!(err.to_string().contains("not a regular file"), "{err}");
-        assert!(!dir.path().join("rows.json").exists(), "a sidecar was written");
+        assert!(
+            !dir.path().join("rows.json").exists(),
+            "a sidecar was written"
+        );
         // The sidecar's path a FIFO: the rows would go to d.csv, the sidecar lost.
         let side = dir.path().join("d.json");
         let _held_side = open_fifo(&side);
         let err = generate(&request(dir.path(), 3), false, &AtomicBool::new(false)).unwrap_err();
-        assert!(err.to_string().contains("the sidecar must be a file"), "{err}");
-        assert!(!dir.path().join("d.csv").exists(), "the dataset was written");
+        assert!(
+            err.to_string().contains("the sidecar must be a file"),
+            "{err}"
+        );
+        assert!(
+            !dir.path().join("d.csv").exists(),
+            "the dataset was written"
+        );
         for f in [&fifo, &side] {
             assert!(std::fs::symlink_metadata(f).unwrap().file_type().is_fifo());
         }

@@ -346,6 +346,9 @@ mod tests {
         let mut log = CsvLog::create(Some(null), "a").unwrap();
         log.row(&[1.0]).unwrap();
         log.flush().unwrap();
-        assert!(std::fs::metadata(null).unwrap().file_type().is_char_device());
+        assert!(std::fs::metadata(null)
+            .unwrap()
+            .file_type()
+            .is_char_device());
     }
 }

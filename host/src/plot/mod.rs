@@ -150,7 +150,10 @@ mod tests {
         assert!(kind.is_symlink(), "the link was replaced by a file");
         assert!(std::fs::read(&target).unwrap().starts_with(PNG_MAGIC));
         assert_eq!(temporaries(dir.path()), Vec::<String>::new());
-        assert_eq!(temporaries(&dir.path().join("figures")), Vec::<String>::new());
+        assert_eq!(
+            temporaries(&dir.path().join("figures")),
+            Vec::<String>::new()
+        );
     }
 
     #[cfg(unix)]
