@@ -30,6 +30,15 @@ enum Sink {
     Replace(PathBuf),
 }
 
+/// Whether output to `path` lands in a regular file (new or existing, or a
+/// symlink's target) rather than being written through a device, FIFO,
+/// socket or descriptor, or to stdout (`-`). For outputs that need a
+/// companion file beside them (a dataset's sidecar): beside a device there
+/// is no place for one.
+pub fn is_regular_output(path: &Path) -> io::Result<bool> {
+    Ok(matches!(sink_for(path)?, Sink::Replace(_)))
+}
+
 /// Paths that name an open descriptor of this process: whatever is behind
 /// them (even a regular file a shell redirected to) is written through, as a
 /// shell's `>` would, so the caller's descriptor sees the bytes.
@@ -83,8 +92,14 @@ static TEMPORARIES: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 /// Remove every temporary output file still registered. Called from the
 /// signal handler before a forced exit; never blocks (a held lock is skipped).
 pub fn remove_temporaries() {
+    remove_temporaries_where(|_| true);
+}
+
+/// [`remove_temporaries`] for those `which` picks: the unit test removes
+/// only its own, not the live temporaries of the tests running beside it.
+fn remove_temporaries_where(which: impl Fn(&Path) -> bool) {
     if let Ok(list) = TEMPORARIES.try_lock() {
-        for p in list.iter() {
+        for p in list.iter().filter(|p| which(p)) {
             let _ = std::fs::remove_file(p);
         }
     }
@@ -101,9 +116,14 @@ pub struct Temporary {
 impl Temporary {
     /// Create one in `dir`.
     pub fn new_in(dir: &Path) -> io::Result<Temporary> {
+        Temporary::named_in(dir, ".tmp")
+    }
+
+    /// Create one in `dir` whose name ends in `suffix`.
+    fn named_in(dir: &Path, suffix: &str) -> io::Result<Temporary> {
         let file = tempfile::Builder::new()
             .prefix(".tendril-")
-            .suffix(".tmp")
+            .suffix(suffix)
             .tempfile_in(dir)?;
         if let Ok(mut list) = TEMPORARIES.lock() {
             list.push(file.path().to_path_buf());
@@ -117,6 +137,13 @@ impl Temporary {
     /// `path` is written through or is `-` (`/dev/fd/63`'s directory takes
     /// no new files).
     pub fn for_output(path: &Path) -> io::Result<Temporary> {
+        Temporary::for_output_ending(path, ".tmp")
+    }
+
+    /// As [`Temporary::for_output`], with a name ending in `suffix`
+    /// (`.tmp.png`): for writers that pick the file's format from its
+    /// extension, as plotters' bitmap backend does.
+    pub fn for_output_ending(path: &Path, suffix: &str) -> io::Result<Temporary> {
         match sink_for(path)? {
             Sink::Replace(target) => {
                 let dir = match target.parent() {
@@ -124,9 +151,9 @@ impl Temporary {
                     _ => Path::new("."),
                 };
                 std::fs::create_dir_all(dir)?;
-                Temporary::new_in(dir)
+                Temporary::named_in(dir, suffix)
             }
-            _ => Temporary::new_in(&std::env::temp_dir()),
+            _ => Temporary::named_in(&std::env::temp_dir(), suffix),
         }
     }
 
@@ -562,11 +589,38 @@ mod tests {
     }
 
     #[test]
+    fn a_temporary_for_a_picky_writer_keeps_its_extension_and_is_cleaned_up() {
+        let dir = tempfile::tempdir().unwrap();
+        let tmp = Temporary::for_output_ending(&dir.path().join("f.png"), ".tmp.png").unwrap();
+        let path = tmp.path().to_path_buf();
+        assert_eq!(path.extension().unwrap(), "png");
+        assert!(TEMPORARIES.lock().unwrap().contains(&path));
+        drop(tmp);
+        assert!(!path.exists());
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn only_files_and_links_to_files_are_regular_outputs() {
+        let dir = tempfile::tempdir().unwrap();
+        let new = dir.path().join("new.csv");
+        assert!(is_regular_output(&new).unwrap());
+        std::os::unix::fs::symlink("new.csv", dir.path().join("link.csv")).unwrap();
+        assert!(is_regular_output(&dir.path().join("link.csv")).unwrap());
+        let fifo = dir.path().join("pipe");
+        mkfifo(&fifo);
+        assert!(!is_regular_output(&fifo).unwrap());
+        assert!(!is_regular_output(Path::new("-")).unwrap());
+        assert!(!is_regular_output(Path::new("/dev/null")).unwrap());
+        assert!(is_regular_output(dir.path()).is_err());
+    }
+
+    #[test]
     fn second_signal_cleanup_removes_live_temporaries() {
         let dir = tempfile::tempdir().unwrap();
         let tmp = Temporary::new_in(dir.path()).unwrap();
         let path = tmp.path().to_path_buf();
-        remove_temporaries();
+        remove_temporaries_where(|p| p.starts_with(dir.path()));
         assert!(!path.exists());
         drop(tmp);
         assert!(!TEMPORARIES.lock().unwrap().contains(&path));

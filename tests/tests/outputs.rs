@@ -284,3 +284,149 @@ fn a_second_sim_on_the_same_directory_fails_at_once_and_the_first_completes() {
         assert!(out.join(log).is_file(), "{log} missing");
     }
 }
+
+/// A node like /dev/null (1, 3) in `dir` when this process may make one
+/// that opens, so a regression replaces only the copy; else /dev/null
+/// itself (a user who cannot make nodes cannot replace it).
+fn null_device(dir: &Path) -> PathBuf {
+    let copy = dir.join("null");
+    let made = Command::new("mknod")
+        .arg(&copy)
+        .args(["c", "1", "3"])
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if made && std::fs::OpenOptions::new().write(true).open(&copy).is_ok() {
+        copy
+    } else {
+        PathBuf::from("/dev/null")
+    }
+}
+
+/// Any of our temporaries in `dir`, whatever their extension (a figure's
+/// is `.tendril-*.tmp.png`).
+fn any_temporaries(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(".tendril-") || n.contains(".tmp."))
+        .collect()
+}
+
+/// A 30-row dataset in `dir` for `workspace --data`.
+fn small_dataset(dir: &Path) -> PathBuf {
+    let data = dir.join("data.csv");
+    let o = Command::new(tendril_bin())
+        .args(["generate", "--quiet", "--samples", "30", "--out"])
+        .arg(&data)
+        .arg("--robot")
+        .arg(robot("seed-4t.toml"))
+        .current_dir(workspace_root())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    data
+}
+
+fn workspace_figure(data: &Path, out: &Path) -> Command {
+    let mut cmd = Command::new(tendril_bin());
+    cmd.arg("workspace")
+        .arg("--robot")
+        .arg(robot("seed-4t.toml"))
+        .arg("--data")
+        .arg(data)
+        .arg("--out")
+        .arg(out)
+        .current_dir(workspace_root());
+    cmd
+}
+
+const PNG_MAGIC: &[u8] = b"\x89PNG";
+
+#[test]
+fn workspace_through_a_symlink_draws_its_target_and_the_link_stays() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = small_dataset(dir.path());
+    std::fs::create_dir(dir.path().join("figures")).unwrap();
+    let target = dir.path().join("figures").join("workspace.png");
+    std::fs::write(&target, "old").unwrap();
+    let link = dir.path().join("workspace.png");
+    std::os::unix::fs::symlink("figures/workspace.png", &link).unwrap();
+    let o = workspace_figure(&data, &link).output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let kind = std::fs::symlink_metadata(&link).unwrap().file_type();
+    assert!(kind.is_symlink(), "the link was replaced by a file");
+    assert!(std::fs::read(&target).unwrap().starts_with(PNG_MAGIC));
+    assert_eq!(any_temporaries(dir.path()), Vec::<String>::new());
+    assert_eq!(
+        any_temporaries(&dir.path().join("figures")),
+        Vec::<String>::new()
+    );
+}
+
+#[test]
+fn workspace_into_a_device_or_a_fifo_writes_through_and_the_node_stays() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = small_dataset(dir.path());
+    let null = null_device(dir.path());
+    let o = workspace_figure(&data, &null).output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let kind = std::fs::symlink_metadata(&null).unwrap().file_type();
+    assert!(kind.is_char_device(), "{} was replaced", null.display());
+
+    let fifo = dir.path().join("workspace.png");
+    assert!(Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    // A reader with a time limit: a FIFO replaced by a file would leave it
+    // waiting for a writer for ever. Its output is drained at once (a PNG
+    // is larger than a pipe's buffer).
+    let reader = Command::new("timeout")
+        .arg("30")
+        .arg("cat")
+        .arg(&fifo)
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let reader = std::thread::spawn(move || reader.wait_with_output().unwrap().stdout);
+    let o = workspace_figure(&data, &fifo).output().unwrap();
+    let png = reader.join().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let kind = std::fs::symlink_metadata(&fifo).unwrap().file_type();
+    assert!(kind.is_fifo(), "the FIFO was replaced");
+    assert!(png.starts_with(PNG_MAGIC), "the reader got no PNG");
+    assert_eq!(any_temporaries(dir.path()), Vec::<String>::new());
+}
+
+#[test]
+fn generate_into_a_device_is_refused_and_no_sidecar_is_made_beside_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let null = null_device(dir.path());
+    let o = Command::new(tendril_bin())
+        .args(["generate", "--quiet", "--samples", "30", "--out"])
+        .arg(&null)
+        .arg("--robot")
+        .arg(robot("seed-4t.toml"))
+        .current_dir(workspace_root())
+        .output()
+        .unwrap();
+    assert!(
+        !o.status.success(),
+        "exit 0 generating into {}",
+        null.display()
+    );
+    assert!(
+        stderr(&o).contains("is a device, FIFO or descriptor, not a regular file"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(
+        !null.with_extension("json").exists(),
+        "a sidecar was written beside the device"
+    );
+    let kind = std::fs::symlink_metadata(&null).unwrap().file_type();
+    assert!(kind.is_char_device(), "{} was replaced", null.display());
+}

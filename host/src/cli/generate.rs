@@ -22,7 +22,7 @@ pub struct GenerateArgs {
     /// Tension sampler [default: adjacent for robots with more than two tendons, else uniform].
     #[arg(long, value_enum)]
     pub sampler: Option<Sampler>,
-    /// Output CSV; the sidecar goes beside it as <name>.json.
+    /// Output CSV, a regular file (not a device or FIFO); the sidecar goes beside it as <name>.json.
     #[arg(long, value_name = "CSV", default_value = "data.csv")]
     pub out: PathBuf,
     /// Fail (exit non-zero, after writing) if more than this fraction of solves fails.

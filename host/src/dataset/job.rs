@@ -120,8 +120,8 @@ impl GenerateRequest {
         Ok(())
     }
 
-    /// Refuse an output that is a directory, an input or the other output,
-    /// before anything is written.
+    /// Refuse an output that is a directory, not a regular file, an input
+    /// or the other output, before anything is written.
     fn check_paths(&self) -> Result<(), GenerateError> {
         let sidecar = self.sidecar_path();
         for out in [&self.out, &sidecar] {
@@ -130,6 +130,26 @@ impl GenerateRequest {
                     path: out.clone(),
                     why: "is a directory; give a file name".into(),
                 });
+            }
+        }
+        // A dataset is two files, the CSV and the sidecar `train` needs
+        // beside it: rows streamed into a device or FIFO would leave a stray
+        // `/dev/full.json` (or no place at all) for their sidecar, and a
+        // sidecar written through a FIFO is lost. Refused, as `-` is.
+        for (out, what) in [(&self.out, "dataset"), (&sidecar, "sidecar")] {
+            match crate::fsutil::is_regular_output(out) {
+                Ok(true) => {}
+                Ok(false) => {
+                    return Err(GenerateError::BadOutput {
+                        path: out.clone(),
+                        why: format!(
+                            "is a device, FIFO or descriptor, not a regular file: the {what} \
+                             must be a file, as a dataset is a CSV with its sidecar (.json) \
+                             beside it for `train`; give a file name"
+                        ),
+                    })
+                }
+                Err(e) => return Err(io_error(out, &e)),
             }
         }
         if same_file(&self.out, &sidecar) {
@@ -531,6 +551,57 @@ mod tests {
         };
         let err = generate(&req, false, &AtomicBool::new(false)).unwrap_err();
         assert!(err.to_string().contains("is a directory"), "{err}");
+    }
+
+    /// A FIFO at `path`, held open for reading and writing so that a
+    /// writer never blocks (rows into it would sit in the pipe's buffer).
+    #[cfg(unix)]
+    fn open_fifo(path: &Path) -> std::fs::File {
+        let made = std::process::Command::new("mkfifo")
+            .arg(path)
+            .status()
+            .unwrap();
+        assert!(made.success());
+        std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(path)
+            .unwrap()
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_fifo_for_the_dataset_or_its_sidecar_is_refused_before_writing() {
+        use std::os::unix::fs::FileTypeExt;
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("rows");
+        let _held = open_fifo(&fifo);
+        let req = GenerateRequest {
+            out: fifo.clone(),
+            ..request(dir.path(), 3)
+        };
+        let err = generate(&req, false, &AtomicBool::new(false)).unwrap_err();
+        assert!(matches!(err, GenerateError::BadOutput { .. }), "{err}");
+        assert!(err.to_string().contains("not a regular file"), "{err}");
+        assert!(
+            !dir.path().join("rows.json").exists(),
+            "a sidecar was written"
+        );
+        // The sidecar's path a FIFO: the rows would go to d.csv, the sidecar lost.
+        let side = dir.path().join("d.json");
+        let _held_side = open_fifo(&side);
+        let err = generate(&request(dir.path(), 3), false, &AtomicBool::new(false)).unwrap_err();
+        assert!(
+            err.to_string().contains("the sidecar must be a file"),
+            "{err}"
+        );
+        assert!(
+            !dir.path().join("d.csv").exists(),
+            "the dataset was written"
+        );
+        for f in [&fifo, &side] {
+            assert!(std::fs::symlink_metadata(f).unwrap().file_type().is_fifo());
+        }
     }
 
     #[test]

@@ -157,6 +157,10 @@ impl Histogram {
 /// A CSV log written as the process runs (buffered, flushed on `flush` and
 /// on drop), so a process killed mid-run still leaves all but its last few
 /// rows for the launcher. Not atomic by design: it is a log, not an output.
+/// Under `tendril sim` it is a scratch file in the run's work directory,
+/// moved into `--out` only when the run completes; a standalone process's
+/// `--log` is opened in place (`File::create`), so a symlink is followed and
+/// a device or FIFO written through, never replaced (issue 31).
 pub struct CsvLog {
     path: PathBuf,
     out: Option<BufWriter<File>>,
@@ -317,5 +321,34 @@ mod tests {
         let (header, rows) = read_log(&path).unwrap();
         assert_eq!(header, vec!["a", "b"]);
         assert_eq!(rows, vec![vec![1.0, 2.5], vec![3.0, -4.0]]);
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_log_through_a_symlink_or_into_a_device_leaves_the_link_and_the_device() {
+        use std::os::unix::fs::FileTypeExt;
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir(dir.path().join("logs")).unwrap();
+        let link = dir.path().join("log.csv");
+        std::os::unix::fs::symlink("logs/log.csv", &link).unwrap();
+        let mut log = CsvLog::create(Some(&link), "a").unwrap();
+        log.row(&[1.0]).unwrap();
+        drop(log);
+        assert!(std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        assert_eq!(
+            std::fs::read_to_string(dir.path().join("logs/log.csv")).unwrap(),
+            "a\n1\n"
+        );
+        let null = Path::new("/dev/null");
+        let mut log = CsvLog::create(Some(null), "a").unwrap();
+        log.row(&[1.0]).unwrap();
+        log.flush().unwrap();
+        assert!(std::fs::metadata(null)
+            .unwrap()
+            .file_type()
+            .is_char_device());
     }
 }
