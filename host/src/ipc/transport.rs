@@ -67,16 +67,14 @@ unsafe impl<T: Message> ZeroCopySend for Wire<T> {
 /// processes — a launcher's children, already reaped — are touched; returns
 /// how many were removed.
 pub fn remove_orphan_node_entries(dead_pids: &[u32]) -> usize {
-    let global = &iceoryx2::config::Config::global_config().global;
-    let nodes = std::path::PathBuf::from(global.root_path().to_string())
-        .join(global.node.directory.to_string());
+    let (nodes, prefix) = node_directory();
     let Ok(entries) = std::fs::read_dir(&nodes) else {
         return 0;
     };
     let mut removed = 0;
     for entry in entries.flatten() {
         let dir = entry.path();
-        let details = dir.join(format!("{}node.details", global.prefix));
+        let details = dir.join(format!("{prefix}node.details"));
         let Ok(text) = std::fs::read_to_string(&details) else {
             continue;
         };
@@ -86,6 +84,84 @@ pub fn remove_orphan_node_entries(dead_pids: &[u32]) -> usize {
             .and_then(|v| v.trim().parse::<u32>().ok());
         if pid.is_some_and(|p| dead_pids.contains(&p)) && std::fs::remove_dir_all(&dir).is_ok() {
             log::debug!("removed the orphaned iceoryx2 node entry {}", dir.display());
+            removed += 1;
+        }
+    }
+    removed
+}
+
+/// The directory where iceoryx2 keeps its node entries, and the prefix of
+/// its file names there.
+fn node_directory() -> (std::path::PathBuf, String) {
+    let global = &iceoryx2::config::Config::global_config().global;
+    let nodes = std::path::PathBuf::from(global.root_path().to_string())
+        .join(global.node.directory.to_string());
+    (nodes, global.prefix.to_string())
+}
+
+/// Names of the node entries (directories) iceoryx2 has now: a launcher
+/// takes this before it starts its children, so that
+/// [`remove_broken_node_entries`] touches only what appeared during its run.
+pub fn node_entry_names() -> std::collections::HashSet<std::ffi::OsString> {
+    let (nodes, _) = node_directory();
+    std::fs::read_dir(nodes)
+        .map(|d| {
+            d.flatten()
+                .filter(|e| e.path().is_dir())
+                .map(|e| e.file_name())
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// Whether any process holds a lock on `path` (iceoryx2's node monitor is a
+/// file its node keeps locked for its whole life; the kernel drops the lock
+/// when the process dies).
+fn file_is_locked(path: &std::path::Path) -> bool {
+    use std::os::fd::AsRawFd;
+    let Ok(file) = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(path)
+    else {
+        return false;
+    };
+    // SAFETY: a zeroed `flock` is a valid argument; F_GETLK only writes it.
+    let mut query: libc::flock = unsafe { std::mem::zeroed() };
+    query.l_type = libc::F_WRLCK as _;
+    query.l_whence = libc::SEEK_SET as _;
+    // SAFETY: `file` is open for the call; `query` lives across it.
+    let rc = unsafe { libc::fcntl(file.as_raw_fd(), libc::F_GETLK, &mut query) };
+    rc == 0 && i32::from(query.l_type) != libc::F_UNLCK
+}
+
+/// Remove the node entries a process killed while tearing its node down
+/// leaves behind (docs/design.md §6): a node directory whose details file is
+/// already gone — so neither iceoryx2's dead-node cleanup nor
+/// [`remove_orphan_node_entries`] can tell whose it was — holding only
+/// service tags, beside monitor files that no process holds locked any more.
+/// Only entries that are not in `before` (those that appeared during this
+/// launcher's run) are touched; returns how many were removed.
+pub fn remove_broken_node_entries(before: &std::collections::HashSet<std::ffi::OsString>) -> usize {
+    let (nodes, prefix) = node_directory();
+    let details = format!("{prefix}node.details");
+    let mut removed = 0;
+    for name in node_entry_names() {
+        if before.contains(&name) {
+            continue;
+        }
+        let dir = nodes.join(&name);
+        let id = name.to_string_lossy();
+        let monitor = nodes.join(format!("{prefix}{id}.node_monitor"));
+        if dir.join(&details).exists() || !monitor.exists() || file_is_locked(&monitor) {
+            continue;
+        }
+        if std::fs::remove_dir_all(&dir).is_ok() {
+            for suffix in ["", "_context", "_owner_lock"] {
+                let _ =
+                    std::fs::remove_file(nodes.join(format!("{prefix}{id}.node_monitor{suffix}")));
+            }
+            log::debug!("removed the broken iceoryx2 node entry {}", dir.display());
             removed += 1;
         }
     }
@@ -297,6 +373,59 @@ pub fn drain<T: Message>(subscriber: &Sub<T>, out: &mut Vec<T>) -> Result<(), Ip
 mod tests {
     use super::*;
     use tendril_shared::messages::Header;
+
+    /// In iceoryx2's node directory: a fabricated broken entry (no details,
+    /// monitor unlocked) that appeared after the snapshot is removed with its
+    /// monitor files; a fabricated one that existed before the snapshot, and
+    /// a real live node created after it, are kept.
+    #[test]
+    fn only_broken_node_entries_that_appeared_after_the_snapshot_are_removed() {
+        let (nodes, prefix) = node_directory();
+        std::fs::create_dir_all(&nodes).unwrap();
+        let unique = format!("9{}", std::process::id());
+        let monitor_files = |id: &str| {
+            ["", "_context", "_owner_lock"]
+                .map(|suffix| nodes.join(format!("{prefix}{id}.node_monitor{suffix}")))
+        };
+        let make = |id: &str| {
+            let dir = nodes.join(id);
+            std::fs::create_dir_all(&dir).unwrap();
+            std::fs::write(dir.join(format!("{prefix}0000.service_tag")), b"").unwrap();
+            for f in monitor_files(id) {
+                std::fs::write(f, b"").unwrap();
+            }
+            dir
+        };
+        let old_id = format!("{unique}1");
+        let old = make(&old_id);
+        let before = node_entry_names();
+        let broken_id = format!("{unique}2");
+        let broken = make(&broken_id);
+        let _live = node("tendril-transport-test").unwrap();
+        let live_dir = node_entry_names()
+            .into_iter()
+            .map(|name| nodes.join(name))
+            .find(|dir| {
+                std::fs::read_to_string(dir.join(format!("{prefix}node.details")))
+                    .is_ok_and(|text| text.contains("tendril-transport-test"))
+            });
+
+        remove_broken_node_entries(&before);
+        let broken_left = broken.exists() || monitor_files(&broken_id).iter().any(|f| f.exists());
+        let old_kept = old.exists();
+        let live_kept = live_dir.as_ref().map(|d| d.exists());
+        let _ = std::fs::remove_dir_all(&old);
+        for f in monitor_files(&old_id) {
+            let _ = std::fs::remove_file(f);
+        }
+        assert!(!broken_left, "the broken entry or its monitor files stayed");
+        assert!(old_kept, "an entry older than the snapshot was removed");
+        assert_eq!(
+            live_kept,
+            Some(true),
+            "a live node's entry was removed (or not found)"
+        );
+    }
 
     fn setpoint(seq: u64, x: f32) -> Setpoint {
         Setpoint {

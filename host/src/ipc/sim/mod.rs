@@ -380,6 +380,7 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
     };
 
     // Services first, then the peers (see the module docs of `transport`).
+    let nodes_before = transport::node_entry_names();
     let node = transport::node("tendril-sim")?;
     let services = Services::open_or_create(&node, &prefix)?;
     let control = transport::publisher(&services.control)?;
@@ -392,6 +393,7 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
         children.stop_all(Duration::from_millis(500));
         node.try_cleanup_dead_nodes();
         transport::remove_orphan_node_entries(&children.ended_pids());
+        transport::remove_broken_node_entries(&nodes_before);
     };
     for role in [Role::Plant, Role::Controller, Role::Planner] {
         let spawned = configs
@@ -500,6 +502,7 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
     }
     node.try_cleanup_dead_nodes();
     transport::remove_orphan_node_entries(&children.ended_pids());
+    transport::remove_broken_node_entries(&nodes_before);
     if interrupted() {
         return Err(SimError::Interrupted);
     }
