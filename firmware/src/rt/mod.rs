@@ -3,7 +3,7 @@
 //! ([`stack`]), instruction counting with SysTick ([`cycles`]), the exit
 //! through semihosting ([`exit`]) and the panic handler. An image is its
 //! `#[entry]` function over these and the hardware-independent core
-//! (docs/design.md §5: the MCU binary is a thin shell around code that is
+//! (docs/design.md §5.4; the MCU binary is a thin shell around code that is
 //! tested on the host).
 //!
 //! Nothing here allocates or panics; hardware access is confined to the

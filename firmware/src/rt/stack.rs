@@ -1,7 +1,7 @@
 //! Stack high-water mark by painting: fill the free stack with a pattern,
 //! run, then find the lowest word that no longer holds it. The MCU has no
 //! guard page, so the measured peak (printed by the test images) is how the
-//! stack budget is checked (docs/design.md §5).
+//! stack budget is checked (docs/design.md §5.4).
 
 use core::ptr::{addr_of, read_volatile, write_volatile};
 
