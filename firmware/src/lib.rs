@@ -12,7 +12,10 @@
 //!   default): the test-vector format and runner shared by the MCU test image
 //!   and the host parity test, a deterministic synthetic net, and the hot-swap
 //!   run of `tendril-fw-swap`; test harnesses, not part of a controller build;
-//! - `vector_gen` (cargo feature `vector-gen`, std): those files for any net.
+//! - `vector_gen` (cargo feature `vector-gen`, std): those files for any net;
+//! - `rt` (MCU builds only, `target_os = "none"`): the start-up shell the
+//!   images share (semihosting console and logger, exit, panic handler,
+//!   stack painting, SysTick instruction counting).
 #![no_std]
 #![deny(missing_docs)]
 // Panic freedom is checked, not promised: no unwrap/expect/panic/indexing
@@ -42,6 +45,8 @@ mod tests;
 pub mod command;
 pub mod control;
 pub mod infer;
+#[cfg(target_os = "none")]
+pub mod rt;
 pub mod swap;
 #[cfg(any(test, feature = "harness"))]
 pub mod swap_demo;

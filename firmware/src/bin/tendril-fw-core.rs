@@ -39,8 +39,8 @@ mod mcu {
     use core::ptr::{addr_of, addr_of_mut, read_volatile, write_volatile};
 
     use cortex_m_rt::entry;
-    use cortex_m_semihosting::{debug, hio};
     use tendril_firmware::control::{control_step, ControlConfig, ControlState, Setpoint};
+    use tendril_firmware::rt;
     use tendril_firmware::{
         McuNet, McuSlots, McuSwap, NetStore, StepInput, DEFAULT_NET, POSE_DIM, SWAP_SLICE_BYTES,
     };
@@ -63,32 +63,10 @@ mod mcu {
     /// mailbox has taken a newer blob (which supersedes it).
     static mut UPDATE_BUSY: bool = false;
 
-    /// `log` records on the semihosting console.
-    struct SemihostingLogger;
-
-    impl log::Log for SemihostingLogger {
-        fn enabled(&self, _: &log::Metadata) -> bool {
-            true
-        }
-        fn log(&self, record: &log::Record) {
-            if let Ok(mut h) = hio::hstdout() {
-                let _ = core::fmt::Write::write_fmt(
-                    &mut h,
-                    format_args!("log {} {}\n", record.level(), record.args()),
-                );
-            }
-        }
-        fn flush(&self) {}
-    }
-
-    static LOGGER: SemihostingLogger = SemihostingLogger;
-
     #[entry]
     fn main() -> ! {
         static mut RAM_NET: McuNet = McuNet::empty();
-        if log::set_logger(&LOGGER).is_ok() {
-            log::set_max_level(log::LevelFilter::Info);
-        }
+        rt::init_logger();
         let n = DEFAULT_NET.shape().outputs;
         // The seed robots' co-contraction sets: opposite pairs.
         let limits = TendonLimits::uniform(n, 10.0, 500.0)
@@ -139,19 +117,6 @@ mod mcu {
             }
             Err(_) => false,
         };
-        debug::exit(if ok {
-            debug::EXIT_SUCCESS
-        } else {
-            debug::EXIT_FAILURE
-        });
-        #[allow(clippy::empty_loop)]
-        loop {}
-    }
-
-    #[panic_handler]
-    fn panic(_: &core::panic::PanicInfo) -> ! {
-        debug::exit(debug::EXIT_FAILURE);
-        #[allow(clippy::empty_loop)]
-        loop {}
+        rt::exit(ok)
     }
 }

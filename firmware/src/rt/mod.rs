@@ -1,0 +1,40 @@
+//! The MCU shell every image shares (`target_os = "none"` only): the
+//! semihosting console and `log` sink ([`console`]), stack painting
+//! ([`stack`]), instruction counting with SysTick ([`cycles`]), the exit
+//! through semihosting ([`exit`]) and the panic handler. An image is its
+//! `#[entry]` function over these and the hardware-independent core
+//! (docs/design.md §5.4; the MCU binary is a thin shell around code that is
+//! tested on the host).
+//!
+//! Nothing here allocates or panics; hardware access is confined to the
+//! `unsafe` blocks of [`stack`] and [`cycles`].
+
+pub mod console;
+pub mod cycles;
+pub mod stack;
+
+pub use console::{init_logger, Console};
+
+use cortex_m_semihosting::debug;
+
+/// End the run through semihosting with exit code 0 (`ok`) or 1, which
+/// QEMU passes on as its own exit status (how the QEMU tests read the
+/// verdict). Does not return; on a board without a debugger attached the
+/// core parks in a loop.
+pub fn exit(ok: bool) -> ! {
+    debug::exit(if ok {
+        debug::EXIT_SUCCESS
+    } else {
+        debug::EXIT_FAILURE
+    });
+    #[allow(clippy::empty_loop)]
+    loop {}
+}
+
+/// A panic ends the run as a failure: the images are checked to link no
+/// panic path (scripts/check-panic-free), so this is the last resort of a
+/// test image, never a controller's error handling.
+#[panic_handler]
+fn panic(_: &core::panic::PanicInfo) -> ! {
+    exit(false)
+}
