@@ -4,7 +4,8 @@
 //! temporary files are dropped, and the binary exits 130. A second signal
 //! exits at once after removing the temporaries still open; every output is
 //! written atomically ([`crate::fsutil`]), so even that leaves no partial
-//! file (`docs/design.md` §7).
+//! file, and the main job's staging directory is removed with the
+//! temporaries (`docs/design.md` §7).
 //!
 //! The `ctrlc` crate (with its `termination` feature) runs one handler for
 //! all three signals and does not say which arrived, so the exit status is
@@ -26,7 +27,10 @@ static HANDLER: Once = Once::new();
 pub fn stop_flag() -> &'static AtomicBool {
     HANDLER.call_once(|| {
         let _ = ctrlc::set_handler(|| {
-            if STOP.swap(true, Ordering::SeqCst) {
+            // A run moving its finished outputs into place
+            // (`fsutil::Publishing`) ends by itself in milliseconds; exiting
+            // half-way would mix two runs' files.
+            if STOP.swap(true, Ordering::SeqCst) && !crate::fsutil::Publishing::active() {
                 crate::fsutil::remove_temporaries();
                 std::process::exit(i32::from(EXIT_INTERRUPTED));
             }

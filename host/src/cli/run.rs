@@ -22,6 +22,12 @@ pub struct RunArgs {
     /// 2,000 samples, at most 16 hidden units, 4-second closed-loop runs.
     #[arg(long)]
     pub quick: bool,
+    /// Skip the firmware-parity stage (MCU build under QEMU).
+    #[arg(long)]
+    pub no_parity: bool,
+    /// Skip the closed-loop stage (real-time processes).
+    #[arg(long)]
+    pub no_closed_loop: bool,
 }
 
 /// Run `tendril run`.
@@ -37,11 +43,19 @@ pub fn run(args: RunArgs) -> anyhow::Result<()> {
     let options = crate::pipeline::RunOptions {
         samples: args.samples,
         quick: args.quick,
+        no_parity: args.no_parity,
+        no_closed_loop: args.no_closed_loop,
     };
     let command = format!(
-        "tendril run --robot {}{}",
+        "tendril run --robot {}{}{}{}",
         args.robot.robot.display(),
-        if args.quick { " --quick" } else { "" }
+        if args.quick { " --quick" } else { "" },
+        if args.no_parity { " --no-parity" } else { "" },
+        if args.no_closed_loop {
+            " --no-closed-loop"
+        } else {
+            ""
+        }
     );
     crate::pipeline::run(&args.robot.robot, &out, &options, command)
 }

@@ -5,11 +5,12 @@
 //! (1–8 tendons, one or more segments) into `out/<file stem>/`. Every stage
 //! adapts to the robot and the report says what a stage skipped and why.
 //!
-//! Every stage writes its files atomically and the report is rewritten after
-//! each stage, so an interrupted run leaves the finished stages' results and
-//! a report that says where it stopped.
+//! Every stage writes into a staging directory ([`staging`]), published
+//! into the output directory only when the whole run is done: an
+//! interrupted or failed run leaves exactly the previous run's outputs.
 
 mod closed_loop;
+pub mod staging;
 
 pub use closed_loop::run_dir;
 
@@ -35,6 +36,7 @@ use crate::plot::workspace::{draw_workspace, BackboneCurve};
 use crate::robot::{Robot, DEFAULT_ROBOT};
 use crate::statics::{SolverSettings, Statics};
 use crate::units::length_mm;
+use staging::Staging;
 
 /// Where the main job writes.
 pub const OUT_DIR: &str = "out";
@@ -50,9 +52,9 @@ struct Report {
 }
 
 impl Report {
-    fn new(out: &Path, robot: &Robot, command: String) -> Report {
+    fn new(path: PathBuf, robot: &Robot, command: String) -> Report {
         Report {
-            path: out.join("report.md"),
+            path,
             title: format!("# tendril — pipeline report: robot `{}`", robot.name),
             command,
             sections: Vec::new(),
@@ -109,6 +111,11 @@ pub struct RunOptions {
     /// [`QUICK_LOOP_S`]-second closed-loop runs. The numbers are not the
     /// robot's best; every stage still runs.
     pub quick: bool,
+    /// Skip the firmware-parity stage (it builds the MCU binary and runs
+    /// it under QEMU); the report says it was skipped on request.
+    pub no_parity: bool,
+    /// Skip the closed-loop stage (real-time processes); the report says so.
+    pub no_closed_loop: bool,
 }
 
 /// Samples of a `--quick` run (unless `--samples` says otherwise).
@@ -138,19 +145,51 @@ pub fn run(
 ) -> anyhow::Result<()> {
     let robot = Robot::load(robot_file)?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let _lock = crate::fsutil::DirLock::acquire(out)?; // held for the whole run (issue 31)
-    let mut report = Report::new(out, &robot, command);
+    let lock = crate::fsutil::DirLock::acquire(out)?; // held for the whole run (issue 31)
+    let staging = Staging::create(out, &lock)
+        .with_context(|| format!("creating {}", out.join(staging::STAGING).display()))?;
+    let result = stages(robot_file, &robot, out, &staging, options, command);
+    if result.is_ok() && !crate::interrupt::stop_requested() {
+        staging
+            .publish()
+            .with_context(|| format!("moving the finished run's files into {}", out.display()))?;
+        return Ok(());
+    }
+    drop(staging); // removes everything this run wrote
+    match result {
+        Err(e) if !crate::interrupt::stop_requested() => Err(e.context(format!(
+            "the run failed; {} was left as it was",
+            out.display()
+        ))),
+        Err(e) => Err(e),
+        // A signal in a stage that does not poll the flag: still nothing is published.
+        Ok(()) => Err(anyhow::anyhow!("interrupted")),
+    }
+}
+
+/// Every stage of [`run`], writing into `staging`; `out` is where the
+/// files will be once published (the report names those paths).
+fn stages(
+    robot_file: &Path,
+    robot: &Robot,
+    out: &Path,
+    staging: &Staging,
+    options: &RunOptions,
+    command: String,
+) -> anyhow::Result<()> {
+    let robot = robot.clone();
+    let mut report = Report::new(staging.path("report.md"), &robot, command);
     log::info!("robot: {robot}");
 
     // 1. Dataset (reused when the sidecar says it was made the same way).
-    let data_path = out.join("data.csv");
     let samples = options.samples.or(options.quick.then_some(QUICK_SAMPLES));
-    let sidecar = dataset(robot_file, &data_path, samples)?;
+    let (data_path, sidecar) = dataset(robot_file, out, staging, samples)?;
     let data = Dataset::read_csv(&data_path)?;
+    let data_path_shown = staging.shown(&data_path);
     report.add(format!(
         "## 1. Dataset\n\n`{}`: {} rows ({} requested), sampler `{}`, seed {}, {} RK4 steps; \
          {} warm solves re-solved cold, {} dropped; generated in {:.2} s.\n",
-        data_path.display(),
+        data_path_shown.display(),
         sidecar.count,
         sidecar.requested,
         sidecar.sampler,
@@ -163,7 +202,7 @@ pub fn run(
 
     // 2. Workspace figure (paper's Figure 1).
     let statics = Statics::new(&robot, SolverSettings::default());
-    let fig = out.join("workspace.png");
+    let fig = staging.path("workspace.png");
     let shapes = example_shapes(&statics)?;
     let title = format!(
         "{}: reachable tip positions ({} samples)",
@@ -182,7 +221,7 @@ pub fn run(
     ))?;
 
     // 3. Cascade-correlation training, export and task-space evaluation.
-    let model = out.join("model.tnet");
+    let model = staging.path("model.tnet");
     let split = SplitSpec::default();
     let mut cascor = CascorOptions::for_robot(&robot);
     if options.quick {
@@ -202,9 +241,9 @@ pub fn run(
             split,
             outputs: TrainOutputs {
                 model: model.clone(),
-                log: out.join("train_log.csv"),
-                curve: out.join("learning_curve.png"),
-                report: out.join("train_report.json"),
+                log: staging.path("train_log.csv"),
+                curve: staging.path("learning_curve.png"),
+                report: staging.path("train_report.json"),
             },
             threads: None,
         },
@@ -221,7 +260,7 @@ pub fn run(
         length_mm(test_tip_mean_mm)
     );
     write_atomic(
-        &out.join("evaluation.json"),
+        &staging.path("evaluation.json"),
         serde_json::to_string_pretty(&metrics)?.as_bytes(),
     )?;
     report.add(format!(
@@ -231,7 +270,7 @@ pub fn run(
          (train log `train_log.csv`, report `train_report.json`).\n\n![learning curve](learning_curve.png)\n\n\
          Held-out test split ({} poses), through the exported f32 weights (the firmware's \
          arithmetic):\n\n{}\n",
-        model.display(),
+        staging.shown(&model).display(),
         net.shape().hidden,
         train_seconds,
         test.len(),
@@ -276,13 +315,13 @@ pub fn run(
             robot_file,
             &statics,
             &model,
-            out,
+            staging.dir(),
             options.quick.then_some(QUICK_LOOP_S),
         )?;
         log::info!("closed loop: done in {:.1} s", t.elapsed().as_secs_f64());
         Ok(section)
     };
-    let beside = realtime_available();
+    let beside = !options.no_closed_loop && realtime_available();
     std::thread::scope(|scope| -> anyhow::Result<()> {
         let background = beside.then(|| {
             log::info!("closed loop: running beside the comparison (real-time scheduling)");
@@ -291,26 +330,33 @@ pub fn run(
         let t = Instant::now();
         log::info!("comparing with six baselines");
         let comparison = compare(&data, &robot, learners, &opts)?;
-        let written = comparison.write(&out.join("compare"))?;
+        let written = comparison.write(&staging.path("compare"))?;
         log::info!("comparison: done in {:.1} s", t.elapsed().as_secs_f64());
         report.add(format!(
             "## 4. Comparison with six baselines\n\n{}\n\nFiles: {}\n\n![comparison](compare/compare.png)\n",
             comparison.to_markdown(),
             written
                 .iter()
-                .map(|p| format!("`{}`", p.display()))
+                .map(|p| format!("`{}`", staging.shown(p).display()))
                 .collect::<Vec<_>>()
                 .join(", ")
         ))?;
 
         // 4b. Firmware parity: the exported net in the MCU binary's flash,
         // under QEMU, against the host build of the same core.
-        report.add(firmware_parity_section(&model, &out.join("parity.json")))?;
+        report.add(if options.no_parity {
+            "## 4b. Firmware parity\n\nSkipped on request (`--no-parity`).\n".into()
+        } else {
+            firmware_parity_section(&model, &staging.shown(&model), &staging.path("parity.json"))
+        })?;
 
         let section = match background {
             Some(handle) => handle
                 .join()
                 .map_err(|_| anyhow::anyhow!("the closed-loop stage panicked"))??,
+            None if options.no_closed_loop => {
+                "## 5. Closed loop\n\nSkipped on request (`--no-closed-loop`).\n".into()
+            }
             None => closed_loop()?,
         };
         report.add(section)
@@ -321,35 +367,45 @@ pub fn run(
         report.started.elapsed().as_secs_f64(),
         hidden_units,
         length_mm(test_tip_mean_mm),
-        report.path.display()
+        staging.shown(&report.path).display()
     );
     Ok(())
 }
 
-/// Stage 1's dataset at `data_path` for the robot in `robot_file`: reused when
-/// its sidecar says it was made the same way, else generated (the defaults of
-/// `tendril generate`: its sample count for the robot, seed 1, the robot's
-/// default sampler), or `samples` samples when given.
-fn dataset(robot_file: &Path, data_path: &Path, samples: Option<usize>) -> anyhow::Result<Sidecar> {
-    let mut request = GenerateRequest::new(robot_file, data_path);
+/// Stage 1's dataset for the robot in `robot_file`: `out/data.csv`, reused
+/// when its sidecar says it was made the same way, else generated into the
+/// staging directory (the defaults of `tendril generate`: its sample count
+/// for the robot, seed 1, the robot's default sampler, or `samples` samples
+/// when given). Returns where it is now and its sidecar.
+fn dataset(
+    robot_file: &Path,
+    out: &Path,
+    staging: &Staging,
+    samples: Option<usize>,
+) -> anyhow::Result<(PathBuf, Sidecar)> {
+    let mut request = GenerateRequest::new(robot_file, &out.join("data.csv"));
     if let Some(n) = samples {
         request.samples = n;
     }
     if is_up_to_date(&request) {
         log::info!(
             "dataset: reusing {} (same robot, sampler, seed, count)",
-            data_path.display()
+            request.out.display()
         );
-        return Ok(Sidecar::read(&request.sidecar_path())?);
+        let sidecar = Sidecar::read(&request.sidecar_path())?;
+        return Ok((request.out, sidecar));
     }
+    request.out = staging.path("data.csv");
     log::info!("dataset: generating {} samples", request.samples);
-    Ok(generate_dataset(&request, true, stop_flag())?)
+    let sidecar = generate_dataset(&request, true, stop_flag())?;
+    Ok((request.out, sidecar))
 }
 
 /// The report section of the firmware-parity stage; a missing QEMU or
 /// target skips it with the reason, a mismatch is reported as a failure.
-/// A passing run's numbers also go to `json` (for scripts and tests).
-fn firmware_parity_section(model: &Path, json: &Path) -> String {
+/// A passing run's numbers also go to `json` (for scripts and tests);
+/// `shown` is the model's path as the report names it.
+fn firmware_parity_section(model: &Path, shown: &Path, json: &Path) -> String {
     let title = "## 4b. Firmware parity (Cortex-M4F under QEMU vs host)";
     let Some(root) = crate::firmware_parity::workspace_root() else {
         return format!("{title}\n\nSkipped: not run from the source checkout.\n");
@@ -386,7 +442,7 @@ fn firmware_parity_section(model: &Path, json: &Path) -> String {
                 "{title}\n\n`{}` built into flash ({}-{}-{}, {} multiply-accumulates): {} result \
                  lines compared, {} bit-identical, largest relative difference {:.1e} (≤ 1e-6 \
                  required); {instr}; stack {} bytes.\n",
-                model.display(),
+                shown.display(),
                 r.net[0],
                 r.net[1],
                 r.net[2],

@@ -89,10 +89,73 @@ fn follow_links(path: &Path) -> io::Result<PathBuf> {
 /// when a second signal ends the process before their owners can.
 static TEMPORARIES: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 
-/// Remove every temporary output file still registered. Called from the
-/// signal handler before a forced exit; never blocks (a held lock is skipped).
+/// Temporary directories (the main job's staging directory), removed with
+/// everything in them by [`remove_temporaries`].
+static TEMPORARY_DIRS: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// Remove every temporary output file and directory still registered.
+/// Called from the signal handler before a forced exit; never blocks (a
+/// held lock is skipped).
 pub fn remove_temporaries() {
     remove_temporaries_where(|_| true);
+}
+
+/// Register a directory for [`remove_temporaries`] (its owner removes it
+/// in the ordinary course and then calls [`unregister_temporary_dir`]).
+pub fn register_temporary_dir(dir: &Path) {
+    if let Ok(mut list) = TEMPORARY_DIRS.lock() {
+        list.push(dir.to_path_buf());
+    }
+}
+
+/// Undo [`register_temporary_dir`].
+pub fn unregister_temporary_dir(dir: &Path) {
+    if let Ok(mut list) = TEMPORARY_DIRS.lock() {
+        list.retain(|d| d != dir);
+    }
+}
+
+/// Whether a [`Publishing`] guard is alive.
+static PUBLISHING: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// While alive, a second signal does not end the process at once
+/// ([`crate::interrupt`]): moving a finished run's files into place takes
+/// milliseconds, and stopping half-way would leave two runs' files mixed.
+#[derive(Debug)]
+pub struct Publishing(());
+
+impl Publishing {
+    /// Defer forced exits until the guard is dropped.
+    pub fn start() -> Publishing {
+        PUBLISHING.store(true, std::sync::atomic::Ordering::SeqCst);
+        Publishing(())
+    }
+
+    /// Whether a guard is alive.
+    pub fn active() -> bool {
+        PUBLISHING.load(std::sync::atomic::Ordering::SeqCst)
+    }
+}
+
+impl Drop for Publishing {
+    fn drop(&mut self) {
+        PUBLISHING.store(false, std::sync::atomic::Ordering::SeqCst);
+    }
+}
+
+/// Move the finished file `from` to output path `to` by the output policy:
+/// renamed over a regular file or a symlink's target (the link stays a
+/// link), copied through into a device, FIFO or descriptor (then removed).
+/// `from` must be on the same file system as `to`'s target (beside it).
+pub fn move_into_place(from: &Path, to: &Path) -> io::Result<()> {
+    match sink_for(to)? {
+        Sink::Replace(target) => std::fs::rename(from, target),
+        sink => {
+            let mut src = File::open(from)?;
+            write_to(&sink, |w| io::copy(&mut src, w).map(drop))?;
+            std::fs::remove_file(from)
+        }
+    }
 }
 
 /// [`remove_temporaries`] for those `which` picks: the unit test removes
@@ -101,6 +164,11 @@ fn remove_temporaries_where(which: impl Fn(&Path) -> bool) {
     if let Ok(list) = TEMPORARIES.try_lock() {
         for p in list.iter().filter(|p| which(p)) {
             let _ = std::fs::remove_file(p);
+        }
+    }
+    if let Ok(list) = TEMPORARY_DIRS.try_lock() {
+        for d in list.iter().filter(|d| which(d)) {
+            let _ = std::fs::remove_dir_all(d);
         }
     }
 }
@@ -424,223 +492,4 @@ fn normalise_lexically(path: &Path) -> PathBuf {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn an_output_equal_to_an_input_is_refused_whatever_its_spelling() {
-        let dir = tempfile::tempdir().unwrap();
-        let model = dir.path().join("m.tnet");
-        std::fs::write(&model, b"net").unwrap();
-        let spelled_otherwise = dir.path().join("sub").join("..").join("./m.tnet");
-        std::fs::create_dir(dir.path().join("sub")).unwrap();
-        let err = check_distinct(
-            &[("--model", &model)],
-            &[("--json-out", &spelled_otherwise)],
-        )
-        .unwrap_err();
-        assert_eq!(err.output, "--json-out");
-        assert_eq!(err.other, "--model");
-        assert!(err.to_string().contains("refusing to overwrite"), "{err}");
-    }
-
-    #[test]
-    fn two_outputs_naming_one_new_file_are_refused() {
-        let dir = tempfile::tempdir().unwrap();
-        let a = dir.path().join("new.csv");
-        let b = dir.path().join(".").join("new.csv");
-        let err = check_distinct(&[], &[("--out", &a), ("--log", &b)]).unwrap_err();
-        assert_eq!(
-            (err.output.as_str(), err.other.as_str()),
-            ("--log", "--out")
-        );
-    }
-
-    #[cfg(unix)]
-    #[test]
-    fn a_symlink_to_an_input_is_the_input() {
-        let dir = tempfile::tempdir().unwrap();
-        let data = dir.path().join("data.csv");
-        std::fs::write(&data, b"x").unwrap();
-        let link = dir.path().join("link.csv");
-        std::os::unix::fs::symlink(&data, &link).unwrap();
-        assert!(check_distinct(&[("--data", &data)], &[("--out", &link)]).is_err());
-    }
-
-    #[test]
-    fn distinct_paths_pass() {
-        let dir = tempfile::tempdir().unwrap();
-        let a = dir.path().join("a.tnet");
-        let b = dir.path().join("a.log.csv");
-        let c = dir.path().join("data.csv");
-        assert!(check_distinct(&[("--data", &c)], &[("--out", &a), ("--log", &b)]).is_ok());
-    }
-
-    #[test]
-    fn failed_fill_leaves_previous_file_untouched() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("out.csv");
-        write_atomic(&path, b"old").unwrap();
-        let err = write_atomic_with(&path, |w| {
-            w.write_all(b"partial")?;
-            Err(io::Error::other("interrupted"))
-        });
-        assert!(err.is_err());
-        assert_eq!(std::fs::read(&path).unwrap(), b"old");
-        let leftovers: Vec<_> = std::fs::read_dir(dir.path())
-            .unwrap()
-            .filter_map(|e| e.ok())
-            .filter(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
-            .collect();
-        assert!(leftovers.is_empty(), "temporary file left behind");
-    }
-
-    #[cfg(unix)]
-    fn mkfifo(path: &Path) {
-        use std::os::unix::ffi::OsStrExt;
-        let c = std::ffi::CString::new(path.as_os_str().as_bytes()).unwrap();
-        // SAFETY: a valid NUL-terminated path.
-        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0, "mkfifo");
-    }
-
-    #[cfg(target_os = "linux")]
-    #[test]
-    fn a_full_device_is_an_error_and_stays_a_device() {
-        use std::os::unix::fs::FileTypeExt;
-        let full = Path::new("/dev/full");
-        if !full.exists() {
-            return;
-        }
-        let err = write_atomic(full, &[b'x'; 100_000]).unwrap_err();
-        assert_eq!(err.raw_os_error(), Some(libc::ENOSPC), "{err}");
-        assert!(std::fs::metadata(full)
-            .unwrap()
-            .file_type()
-            .is_char_device());
-        write_atomic(Path::new("/dev/null"), b"rows").unwrap();
-        let null = std::fs::metadata("/dev/null").unwrap();
-        assert!(null.file_type().is_char_device());
-    }
-
-    #[cfg(unix)]
-    #[test]
-    fn a_fifo_is_written_through_and_stays_a_fifo() {
-        use std::os::unix::fs::FileTypeExt;
-        let dir = tempfile::tempdir().unwrap();
-        let fifo = dir.path().join("pipe");
-        mkfifo(&fifo);
-        let reader = {
-            let fifo = fifo.clone();
-            std::thread::spawn(move || std::fs::read(fifo).unwrap())
-        };
-        write_atomic_with(&fifo, |w| w.write_all(b"a,b\n1,2\n")).unwrap();
-        assert_eq!(reader.join().unwrap(), b"a,b\n1,2\n");
-        assert!(std::fs::symlink_metadata(&fifo)
-            .unwrap()
-            .file_type()
-            .is_fifo());
-        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
-    }
-
-    #[cfg(unix)]
-    #[test]
-    fn a_symlink_stays_a_link_and_its_target_is_replaced() {
-        let dir = tempfile::tempdir().unwrap();
-        std::fs::create_dir(dir.path().join("real")).unwrap();
-        let target = dir.path().join("real").join("out.csv");
-        std::fs::write(&target, b"old").unwrap();
-        let link = dir.path().join("link.csv");
-        std::os::unix::fs::symlink("real/out.csv", &link).unwrap();
-        write_atomic(&link, b"new").unwrap();
-        assert!(std::fs::symlink_metadata(&link)
-            .unwrap()
-            .file_type()
-            .is_symlink());
-        assert_eq!(std::fs::read(&target).unwrap(), b"new");
-        // A dangling link gets its target created.
-        let dangling = dir.path().join("later.csv");
-        std::os::unix::fs::symlink("real/later.csv", &dangling).unwrap();
-        write_atomic(&dangling, b"made").unwrap();
-        assert!(std::fs::symlink_metadata(&dangling)
-            .unwrap()
-            .file_type()
-            .is_symlink());
-        assert_eq!(
-            std::fs::read(dir.path().join("real/later.csv")).unwrap(),
-            b"made"
-        );
-    }
-
-    #[test]
-    fn a_dash_is_stdout_and_creates_no_file() {
-        assert_eq!(sink_for(Path::new("-")).unwrap(), Sink::Stdout);
-        assert!(is_stdout(Path::new("-")));
-        assert!(!is_stdout(Path::new("./-")));
-    }
-
-    #[cfg(unix)]
-    #[test]
-    fn a_temporary_copied_through_a_device_is_removed() {
-        let tmp = Temporary::for_output(Path::new("/dev/null")).unwrap();
-        let path = tmp.path().to_path_buf();
-        assert!(path.starts_with(std::env::temp_dir()));
-        tmp.persist(Path::new("/dev/null")).unwrap();
-        assert!(!path.exists());
-    }
-
-    #[test]
-    fn a_temporary_for_a_picky_writer_keeps_its_extension_and_is_cleaned_up() {
-        let dir = tempfile::tempdir().unwrap();
-        let tmp = Temporary::for_output_ending(&dir.path().join("f.png"), ".tmp.png").unwrap();
-        let path = tmp.path().to_path_buf();
-        assert_eq!(path.extension().unwrap(), "png");
-        assert!(TEMPORARIES.lock().unwrap().contains(&path));
-        drop(tmp);
-        assert!(!path.exists());
-    }
-
-    #[cfg(unix)]
-    #[test]
-    fn only_files_and_links_to_files_are_regular_outputs() {
-        let dir = tempfile::tempdir().unwrap();
-        let new = dir.path().join("new.csv");
-        assert!(is_regular_output(&new).unwrap());
-        std::os::unix::fs::symlink("new.csv", dir.path().join("link.csv")).unwrap();
-        assert!(is_regular_output(&dir.path().join("link.csv")).unwrap());
-        let fifo = dir.path().join("pipe");
-        mkfifo(&fifo);
-        assert!(!is_regular_output(&fifo).unwrap());
-        assert!(!is_regular_output(Path::new("-")).unwrap());
-        assert!(!is_regular_output(Path::new("/dev/null")).unwrap());
-        assert!(is_regular_output(dir.path()).is_err());
-    }
-
-    #[test]
-    fn second_signal_cleanup_removes_live_temporaries() {
-        let dir = tempfile::tempdir().unwrap();
-        let tmp = Temporary::new_in(dir.path()).unwrap();
-        let path = tmp.path().to_path_buf();
-        remove_temporaries_where(|p| p.starts_with(dir.path()));
-        assert!(!path.exists());
-        drop(tmp);
-        assert!(!TEMPORARIES.lock().unwrap().contains(&path));
-    }
-
-    #[cfg(unix)]
-    #[test]
-    fn a_locked_directory_is_refused_with_the_holders_pid_until_released() {
-        let dir = tempfile::tempdir().unwrap();
-        let first = DirLock::acquire(dir.path()).unwrap();
-        let err = DirLock::acquire(dir.path()).unwrap_err();
-        assert_eq!(
-            err.to_string(),
-            format!(
-                "{} is in use by another tendril run (pid {})",
-                dir.path().display(),
-                std::process::id()
-            )
-        );
-        drop(first);
-        DirLock::acquire(dir.path()).expect("released on drop");
-    }
-}
+mod tests;
