@@ -2,7 +2,7 @@
 //! trajectory written as CSV with a figure (`tendril dynamics`,
 //! `docs/design.md` §4.2 and §7).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use indicatif::{ProgressBar, ProgressStyle};
@@ -26,6 +26,52 @@ pub enum OfflineError {
     /// The duration is not a positive number of seconds.
     #[error("duration {0} s must be positive and finite")]
     BadDuration(f64),
+    /// The time step is not a positive number of seconds.
+    #[error("--dt {0} s must be positive and finite")]
+    BadDt(f64),
+    /// More steps than [`MAX_STEPS`]; the message says what they would cost.
+    #[error(
+        "--duration {duration_s} s at --dt {dt_s} s is {steps} time steps; at most {MAX_STEPS} \
+         are run (a tip CSV of up to {csv_mb:.0} MB and hours of computing): shorten \
+         --duration or lengthen --dt"
+    )]
+    TooManySteps {
+        /// Simulated time asked for, s.
+        duration_s: f64,
+        /// Time step, s.
+        dt_s: f64,
+        /// Steps that implies.
+        steps: f64,
+        /// Bound on the CSV those steps would write, MB.
+        csv_mb: f64,
+    },
+    /// The tension step comes at or after the end of the run: it would never act.
+    #[error(
+        "the tension step at {at_s} s is not before the end of the run (--duration {duration_s} s): \
+         it would never happen"
+    )]
+    StepAfterEnd {
+        /// Time of the step, s.
+        at_s: f64,
+        /// Simulated time, s.
+        duration_s: f64,
+    },
+    /// The output directory's file system has too little room for the CSV.
+    #[error(
+        "{}: {need_mb:.0} MB may be needed for the tip CSV of {steps} steps but only \
+         {free_mb:.0} MB are free",
+        .dir.display()
+    )]
+    NoSpace {
+        /// The output directory.
+        dir: PathBuf,
+        /// Steps of the run.
+        steps: u64,
+        /// Bound on the CSV, MB.
+        need_mb: f64,
+        /// Free space, MB.
+        free_mb: f64,
+    },
     /// The dynamics failed.
     #[error(transparent)]
     Dynamics(#[from] DynamicsError),
@@ -114,9 +160,54 @@ pub struct Sample {
     pub velocity: Vector3<f64>,
 }
 
+/// Most time steps of one offline run: 2,000 s at the default 1 ms, a tip
+/// CSV of at most ≈ 360 MB ([`CSV_ROW_BYTES`]) and about an hour of
+/// computing on one core at the default grid (`docs/design.md` §4.2).
+pub const MAX_STEPS: u64 = 2_000_000;
+
+/// Bound on one CSV row: seven numbers of at most 25 characters and their
+/// separators (Rust's shortest round-trip `f64` text).
+pub const CSV_ROW_BYTES: u64 = 7 * 26;
+
+/// Samples drawn in the figure at most: longer runs are decimated for it
+/// (the CSV keeps every step), so memory is bounded whatever the duration.
+pub const FIGURE_POINTS: u64 = 20_000;
+
+/// The number of time steps of a run of `duration_s` at `dt_s` with `step`,
+/// checked before any work: positive finite times, at most [`MAX_STEPS`],
+/// and a step that happens before the end.
+pub fn plan_steps(duration_s: f64, dt_s: f64, step: &TensionStep) -> Result<u64, OfflineError> {
+    if !(duration_s.is_finite() && duration_s > 0.0) {
+        return Err(OfflineError::BadDuration(duration_s));
+    }
+    if !(dt_s.is_finite() && dt_s > 0.0) {
+        return Err(OfflineError::BadDt(dt_s));
+    }
+    let steps = (duration_s / dt_s).round();
+    if !(steps <= MAX_STEPS as f64) {
+        return Err(OfflineError::TooManySteps {
+            duration_s,
+            dt_s,
+            steps,
+            csv_mb: steps * CSV_ROW_BYTES as f64 / 1e6,
+        });
+    }
+    // The step acts from the first time step at or after `at_s`; the last
+    // time step ends at `steps · dt`.
+    if step.at_s >= steps * dt_s {
+        return Err(OfflineError::StepAfterEnd {
+            at_s: step.at_s,
+            duration_s,
+        });
+    }
+    Ok(steps as u64)
+}
+
 /// Run the step response for `duration_s` (the tensions over each step are
 /// those at its end time: the step acts from the first time step at or
-/// after `at_s`). Checks `stop` between steps; `on_step` sees each sample.
+/// after `at_s`). Checks `stop` between steps; `on_step` sees each sample,
+/// the one at rest (t = 0) first, and may fail (a write): nothing is held,
+/// so memory does not grow with the duration.
 pub fn step_response(
     robot: &Robot,
     damping: Damping,
@@ -124,11 +215,13 @@ pub fn step_response(
     step: &TensionStep,
     duration_s: f64,
     stop: &AtomicBool,
-    mut on_step: impl FnMut(&Sample),
-) -> Result<Vec<Sample>, OfflineError> {
-    if !(duration_s.is_finite() && duration_s > 0.0) {
-        return Err(OfflineError::BadDuration(duration_s));
-    }
+    mut on_step: impl FnMut(&Sample) -> std::io::Result<()>,
+) -> Result<(), OfflineError> {
+    let steps = plan_steps(duration_s, settings.dt_s, step)?;
+    let write_err = |e: std::io::Error| OfflineError::Write {
+        path: PathBuf::from("tip.csv"),
+        message: e.to_string(),
+    };
     robot
         .check_tensions(&step.after)
         .map_err(DynamicsError::from)?;
@@ -140,14 +233,13 @@ pub fn step_response(
         Vector3::zeros(),
         Vector3::zeros(),
     )?;
-    let steps = (duration_s / settings.dt_s).round() as usize;
-    let mut out = Vec::with_capacity(steps + 1);
     let first = dynamics.tip();
-    out.push(Sample {
+    on_step(&Sample {
         t_s: 0.0,
         position: first.position,
         velocity: first.velocity,
-    });
+    })
+    .map_err(write_err)?;
     for k in 1..=steps {
         if stop.load(Ordering::SeqCst) {
             return Err(OfflineError::Interrupted);
@@ -159,30 +251,22 @@ pub fn step_response(
             position: tip.position,
             velocity: tip.velocity,
         };
-        on_step(&sample);
-        out.push(sample);
+        on_step(&sample).map_err(write_err)?;
     }
-    Ok(out)
+    Ok(())
 }
 
-/// Write the trajectory as CSV (`t,px,py,pz,vx,vy,vz`; s, m, m/s), atomically.
-pub fn write_csv(path: &Path, samples: &[Sample]) -> Result<(), OfflineError> {
-    write_atomic_with(path, |w| {
-        writeln!(w, "t,px,py,pz,vx,vy,vz")?;
-        for s in samples {
-            let (p, v) = (s.position, s.velocity);
-            writeln!(
-                w,
-                "{},{},{},{},{},{},{}",
-                s.t_s, p.x, p.y, p.z, v.x, v.y, v.z
-            )?;
-        }
-        Ok(())
-    })
-    .map_err(|e| OfflineError::Write {
-        path: path.to_path_buf(),
-        message: e.to_string(),
-    })
+/// The CSV header of the trajectory (s, m, m/s).
+pub const CSV_HEADER: &str = "t,px,py,pz,vx,vy,vz";
+
+/// One CSV row of the trajectory.
+fn write_row(w: &mut dyn std::io::Write, s: &Sample) -> std::io::Result<()> {
+    let (p, v) = (s.position, s.velocity);
+    writeln!(
+        w,
+        "{},{},{},{},{},{},{}",
+        s.t_s, p.x, p.y, p.z, v.x, v.y, v.z
+    )
 }
 
 /// What `tendril dynamics` asks for.
@@ -207,7 +291,23 @@ pub struct OfflineRun {
 /// Run an offline step response with a progress bar and Ctrl-C checks;
 /// write `tip.csv` and `tip.png` under `out`. Returns the CSV path.
 pub fn run(job: &OfflineRun, stop: &AtomicBool) -> Result<PathBuf, OfflineError> {
-    let steps = (job.duration_s / job.settings.dt_s).round().max(0.0) as u64;
+    let steps = plan_steps(job.duration_s, job.settings.dt_s, &job.step)?;
+    let need = (steps + 2) * CSV_ROW_BYTES;
+    std::fs::create_dir_all(&job.out).map_err(|e| OfflineError::Write {
+        path: job.out.clone(),
+        message: e.to_string(),
+    })?;
+    match crate::dataset::disk::free_bytes(&job.out) {
+        Some(free) if free < need => {
+            return Err(OfflineError::NoSpace {
+                dir: job.out.clone(),
+                steps,
+                need_mb: need as f64 / 1e6,
+                free_mb: free as f64 / 1e6,
+            })
+        }
+        _ => {}
+    }
     let bar = if job.progress {
         ProgressBar::new(steps)
     } else {
@@ -220,22 +320,53 @@ pub fn run(job: &OfflineRun, stop: &AtomicBool) -> Result<PathBuf, OfflineError>
     );
     bar.set_prefix("dynamics");
     let started = std::time::Instant::now();
-    let samples = step_response(
-        &job.robot,
-        job.damping,
-        job.settings,
-        &job.step,
-        job.duration_s,
-        stop,
-        |s| {
-            bar.inc(1);
-            if bar.position().is_multiple_of(100) {
-                bar.set_message(format!("t = {:.2} s", s.t_s));
-            }
-        },
-    );
+    // The CSV is streamed into its temporary file as the run goes; the
+    // figure gets every `every`-th sample (and the last).
+    let csv = job.out.join("tip.csv");
+    let every = steps.div_ceil(FIGURE_POINTS).max(1);
+    let mut figure = Vec::with_capacity((steps / every + 2) as usize);
+    let mut failed = None;
+    let written = write_atomic_with(&csv, |w| {
+        writeln!(w, "{CSV_HEADER}")?;
+        let mut k = 0u64;
+        let result = step_response(
+            &job.robot,
+            job.damping,
+            job.settings,
+            &job.step,
+            job.duration_s,
+            stop,
+            |s| {
+                if k.is_multiple_of(every) || k == steps {
+                    figure.push(*s);
+                }
+                k += 1;
+                bar.inc(1);
+                if bar.position().is_multiple_of(100) {
+                    bar.set_message(format!("t = {:.2} s", s.t_s));
+                }
+                write_row(w, s)
+            },
+        );
+        result.map_err(|e| {
+            failed = Some(e);
+            std::io::Error::other("the run failed")
+        })
+    });
     bar.finish_and_clear();
-    let samples = samples?;
+    match (failed, written) {
+        (Some(OfflineError::Write { message, .. }), _) => {
+            return Err(OfflineError::Write { path: csv, message })
+        }
+        (Some(e), _) => return Err(e),
+        (None, Err(e)) => {
+            return Err(OfflineError::Write {
+                path: csv,
+                message: e.to_string(),
+            })
+        }
+        (None, Ok(())) => {}
+    }
     let wall = started.elapsed().as_secs_f64();
     log::info!(
         "dynamics: {} steps of {} ms in {wall:.2} s ({:.2}x real time)",
@@ -243,14 +374,12 @@ pub fn run(job: &OfflineRun, stop: &AtomicBool) -> Result<PathBuf, OfflineError>
         job.settings.dt_s * 1e3,
         job.duration_s / wall
     );
-    let csv = job.out.join("tip.csv");
-    write_csv(&csv, &samples)?;
     let png = job.out.join("tip.png");
     let title = format!(
         "{}: tip after a tension step at {} s",
         job.robot.name, job.step.at_s
     );
-    super::figure::draw_step_response(&samples, job.step.at_s, &title, &png).map_err(|e| {
+    super::figure::draw_step_response(&figure, job.step.at_s, &title, &png).map_err(|e| {
         OfflineError::Write {
             path: png.clone(),
             message: e.to_string(),
@@ -258,4 +387,45 @@ pub fn run(job: &OfflineRun, stop: &AtomicBool) -> Result<PathBuf, OfflineError>
     })?;
     log::info!("wrote {} and {}", csv.display(), png.display());
     Ok(csv)
+}
+
+#[cfg(test)]
+mod bounds {
+    use super::*;
+
+    fn step(at_s: f64) -> TensionStep {
+        TensionStep::parse(&format!("0,0,0,0:2,0,0,0@{at_s}")).unwrap()
+    }
+
+    #[test]
+    fn a_run_beyond_the_step_cap_is_refused_with_its_cost_before_any_work() {
+        for (duration, dt) in [(1e6, 1e-3), (3.0, 1e-9), (2_000.001, 1e-3)] {
+            let err = plan_steps(duration, dt, &step(0.1)).unwrap_err();
+            let text = err.to_string();
+            assert!(matches!(err, OfflineError::TooManySteps { .. }), "{text}");
+            assert!(
+                text.contains("MB") && text.contains("at most 2000000"),
+                "{text}"
+            );
+        }
+        assert_eq!(plan_steps(2_000.0, 1e-3, &step(0.1)).unwrap(), MAX_STEPS);
+        assert!(matches!(
+            plan_steps(3.0, 0.0, &step(0.1)),
+            Err(OfflineError::BadDt(_))
+        ));
+        assert!(matches!(
+            plan_steps(f64::INFINITY, 1e-3, &step(0.1)),
+            Err(OfflineError::BadDuration(_))
+        ));
+    }
+
+    #[test]
+    fn a_step_at_or_after_the_end_is_refused() {
+        for at in [3.0, 5.0] {
+            let err = plan_steps(3.0, 1e-3, &step(at)).unwrap_err();
+            assert!(matches!(err, OfflineError::StepAfterEnd { .. }), "{err}");
+            assert!(err.to_string().contains("--duration 3 s"), "{err}");
+        }
+        assert_eq!(plan_steps(3.0, 1e-3, &step(2.999)).unwrap(), 3000);
+    }
 }
