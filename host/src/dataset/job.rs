@@ -105,12 +105,8 @@ impl GenerateRequest {
                 self.steps
             ));
         }
-        if !(0.0..1.0).contains(&self.test_fraction) {
-            return bad(format!(
-                "--test-fraction must be in [0, 1), got {}",
-                self.test_fraction
-            ));
-        }
+        crate::dataset::split::check_test_fraction(self.test_fraction)
+            .map_err(GenerateError::Invalid)?;
         if !(0.0..=1.0).contains(&self.max_failure_fraction) {
             return bad(format!(
                 "--max-failure-fraction must be in [0, 1], got {}",
@@ -625,6 +621,25 @@ mod tests {
         ] {
             let err = generate(&req, false, &AtomicBool::new(false)).unwrap_err();
             assert!(matches!(err, GenerateError::Invalid(_)), "{err}");
+        }
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+    }
+
+    #[test]
+    fn generate_refuses_the_test_fractions_train_refuses() {
+        let dir = tempfile::tempdir().unwrap();
+        for t in [0.0, 0.9, -0.1, f64::NAN] {
+            let req = GenerateRequest {
+                test_fraction: t,
+                ..request(dir.path(), 10)
+            };
+            let err = generate(&req, false, &AtomicBool::new(false)).unwrap_err();
+            assert!(err.to_string().contains("(0, 0.5]"), "{t}: {err}");
+            let split = crate::learn::cascor::job::SplitSpec {
+                test_fraction: t,
+                ..Default::default()
+            };
+            assert!(split.validate().is_err(), "train accepts {t}");
         }
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
     }

@@ -16,6 +16,22 @@ pub const TEST_FRACTION: f64 = 0.03;
 pub const VALID_FRACTION: f64 = 0.1;
 /// Default split seed.
 pub const SPLIT_SEED: u64 = 1;
+/// Largest held-out test fraction: above it a learner would be fitted on
+/// fewer rows than it is judged on.
+pub const MAX_TEST_FRACTION: f64 = 0.5;
+
+/// The one check of a `--test-fraction` (`generate` records it, `train` and
+/// `compare` split by it): in (0, [`MAX_TEST_FRACTION`]]. Zero would leave
+/// no test rows to judge a learner on.
+pub fn check_test_fraction(t: f64) -> Result<(), String> {
+    if t > 0.0 && t <= MAX_TEST_FRACTION {
+        Ok(())
+    } else {
+        Err(format!(
+            "--test-fraction must be in (0, {MAX_TEST_FRACTION}], got {t}"
+        ))
+    }
+}
 
 /// Seeded shuffle of `0..n` into (train, test), `round(n · test_fraction)`
 /// test rows (at least one when n ≥ 2 and the fraction is positive).

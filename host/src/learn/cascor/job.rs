@@ -28,7 +28,7 @@ pub const MIN_TRAIN_ROWS: usize = 50;
 
 /// Largest held-out test (or validation) fraction: beyond half, the net
 /// would be fitted on fewer rows than it is judged on.
-pub const MAX_HELD_OUT_FRACTION: f64 = 0.5;
+pub const MAX_HELD_OUT_FRACTION: f64 = crate::dataset::split::MAX_TEST_FRACTION;
 
 /// How to split the data.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -54,12 +54,8 @@ impl Default for SplitSpec {
 impl SplitSpec {
     /// Check the fractions; the error names the option and its range.
     pub fn validate(&self) -> Result<(), TrainError> {
-        let t = self.test_fraction;
-        if !(t > 0.0 && t <= MAX_HELD_OUT_FRACTION) {
-            return Err(TrainError::BadInput(format!(
-                "--test-fraction must be in (0, {MAX_HELD_OUT_FRACTION}], got {t}"
-            )));
-        }
+        crate::dataset::split::check_test_fraction(self.test_fraction)
+            .map_err(TrainError::BadInput)?;
         let v = self.valid_fraction;
         if !(0.0..=MAX_HELD_OUT_FRACTION).contains(&v) {
             return Err(TrainError::BadInput(format!(
