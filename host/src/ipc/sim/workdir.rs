@@ -50,7 +50,9 @@ impl RunDir {
 
     /// Move every file of the run into the output directory, after
     /// removing the process logs of a previous run (a previous run may
-    /// have had more generations).
+    /// have had more generations). An output that is a symlink stays a
+    /// link and its target is replaced; a device or FIFO is written
+    /// through ([`crate::fsutil::move_into_place`], the policy of every output).
     pub fn publish(self) -> Result<(), SimError> {
         let io = |path: PathBuf| move |source| SimError::Io { path, source };
         for entry in std::fs::read_dir(&self.out).map_err(io(self.out.clone()))? {
@@ -71,7 +73,7 @@ impl RunDir {
                 continue;
             }
             let to = self.out.join(&name);
-            std::fs::rename(entry.path(), &to).map_err(io(to))?;
+            crate::fsutil::move_into_place(&entry.path(), &to).map_err(io(to))?;
         }
         std::fs::remove_dir_all(&self.work).map_err(io(self.work.clone()))
     }
