@@ -106,7 +106,7 @@ impl Dataset {
         let file = std::fs::File::open(path).map_err(io)?;
         let mut reader = csv::ReaderBuilder::new()
             .has_headers(true)
-            .from_reader(file);
+            .from_reader(crate::fsutil::LineCapped::new(file));
         let header: Vec<String> = reader
             .headers()
             .map_err(|e| DatasetError::Header {
@@ -323,12 +323,15 @@ impl Sidecar {
     }
 
     /// Read a sidecar.
+    /// A sidecar is a few KiB of JSON: one of more than 1 MiB, or a path
+    /// that is not a regular file, is refused before it is read whole.
     pub fn read(path: &Path) -> Result<Sidecar, DatasetError> {
-        let text = std::fs::read_to_string(path).map_err(|source| DatasetError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        serde_json::from_str(&text).map_err(|e| DatasetError::Header {
+        let text =
+            crate::fsutil::read_capped(path, 1 << 20).map_err(|source| DatasetError::Io {
+                path: path.to_path_buf(),
+                source,
+            })?;
+        serde_json::from_slice(&text).map_err(|e| DatasetError::Header {
             path: path.to_path_buf(),
             why: e.to_string(),
         })

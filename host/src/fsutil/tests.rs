@@ -249,3 +249,36 @@ fn registered_temporary_directories_are_removed_with_the_temporaries() {
     unregister_temporary_dir(&staging);
     assert!(!TEMPORARY_DIRS.lock().unwrap().contains(&staging));
 }
+
+#[cfg(unix)]
+#[test]
+fn a_capped_read_refuses_devices_directories_and_big_files() {
+    let err = read_capped(Path::new("/dev/zero"), 1 << 20).unwrap_err();
+    assert!(err.to_string().contains("not a regular file"), "{err}");
+    let dir = tempfile::tempdir().unwrap();
+    assert!(read_capped(dir.path(), 1 << 20).is_err());
+    let big = dir.path().join("big");
+    File::create(&big).unwrap().set_len(3 << 20).unwrap();
+    let err = read_capped(&big, 1 << 20).unwrap_err();
+    assert!(
+        err.to_string().contains("3 MiB is larger than the 1 MiB"),
+        "{err}"
+    );
+    std::fs::write(&big, b"name = 1").unwrap();
+    assert_eq!(read_capped(&big, 1 << 20).unwrap(), b"name = 1");
+}
+
+#[test]
+fn a_line_capped_reader_fails_on_an_endless_line_and_passes_csv() {
+    let mut endless = LineCapped::new(io::repeat(0));
+    let mut sink = Vec::new();
+    let err = io::copy(&mut endless, &mut sink).unwrap_err();
+    assert!(err.to_string().contains("longer than 1 MiB"), "{err}");
+    assert!(sink.len() <= LineCapped::<io::Empty>::MAX_LINE + 64 * 1024);
+    let csv = "t0,t1\n1,2\n".repeat(300_000);
+    let mut text = String::new();
+    LineCapped::new(csv.as_bytes())
+        .read_to_string(&mut text)
+        .unwrap();
+    assert_eq!(text, csv);
+}

@@ -127,6 +127,9 @@ impl DampingFile {
     }
 }
 
+/// Largest robot file read: the largest robot in `robots/` is a few KiB.
+pub const MAX_ROBOT_FILE_BYTES: u64 = 1 << 20;
+
 impl Robot {
     /// Load and validate a robot file.
     pub fn load(path: &Path) -> Result<Robot, RobotError> {
@@ -144,11 +147,17 @@ impl Robot {
                 BUILTIN_DEFAULT_TOML.to_string(),
             ));
         }
-        let text = std::fs::read_to_string(path).map_err(|e| RobotError {
+        let cannot_read = |problem: String| RobotError {
             file: path.to_path_buf(),
             field: "file".into(),
-            problem: format!("cannot read: {e}"),
-        })?;
+            problem: format!("cannot read: {problem}"),
+        };
+        // A robot file is a page of TOML: an endless or huge input is refused
+        // before it is read whole (issue 31: `--robot /dev/zero`).
+        let bytes = crate::fsutil::read_capped(path, MAX_ROBOT_FILE_BYTES)
+            .map_err(|e| cannot_read(e.to_string()))?;
+        let text =
+            String::from_utf8(bytes).map_err(|e| cannot_read(format!("not UTF-8 text ({e})")))?;
         Ok((Self::from_toml(&text, path)?, text))
     }
 
