@@ -135,6 +135,21 @@ impl Dataset {
                 ),
             });
         }
+        // A tension column after the pose (`…,qz,t4`) would be ignored: the
+        // file is for a robot with more tendons, or was edited by hand.
+        if let Some(extra) = header[expected.len()..].iter().find(|h| {
+            h.strip_prefix('t')
+                .is_some_and(|k| k.parse::<usize>().is_ok())
+        }) {
+            return Err(DatasetError::Header {
+                path: path.to_path_buf(),
+                why: format!(
+                    "column {extra} is a tension, but the tension columns t0..t{} come first \
+                     ({n_tendons} tendons); a dataset lists each tendon once, before the pose",
+                    n_tendons - 1
+                ),
+            });
+        }
         let width = expected.len();
         let mut values = Vec::new();
         for (k, record) in reader.records().enumerate() {
@@ -373,6 +388,10 @@ mod tests {
         std::fs::write(&path, "t0,px,py\n1,2,3\n").unwrap();
         let e = Dataset::read_csv(&path).unwrap_err().to_string();
         assert!(e.contains("bad header"), "{e}");
+
+        std::fs::write(&path, "t0,px,py,pz,qw,qx,qy,qz,t1\n1,2,3,4,5,6,7,8,9\n").unwrap();
+        let e = Dataset::read_csv(&path).unwrap_err().to_string();
+        assert!(e.contains("column t1 is a tension"), "{e}");
 
         std::fs::write(&path, "t0,px,py,pz,qw,qx,qy,qz\n1,2,3,4,5,6,7,oops\n").unwrap();
         let e = Dataset::read_csv(&path).unwrap_err().to_string();
