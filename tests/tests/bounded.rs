@@ -225,6 +225,8 @@ fn fk_peak_rss_kib(dir: &Path, rows: usize) -> i64 {
         text.push_str(&format!("{a},{b},0,{}\n", (k % 7) as f64 * 0.1));
     }
     std::fs::write(&input, text).unwrap();
+    // Reaped by wait4 below, which also returns its resource usage.
+    #[allow(clippy::zombie_processes)]
     let child = Command::new(tendril_bin())
         .args(["fk", "--robot", robot().to_str().unwrap(), "--input"])
         .arg(&input)

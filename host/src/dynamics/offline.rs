@@ -184,7 +184,7 @@ pub fn plan_steps(duration_s: f64, dt_s: f64, step: &TensionStep) -> Result<u64,
         return Err(OfflineError::BadDt(dt_s));
     }
     let steps = (duration_s / dt_s).round();
-    if !(steps <= MAX_STEPS as f64) {
+    if steps > MAX_STEPS as f64 {
         return Err(OfflineError::TooManySteps {
             duration_s,
             dt_s,
