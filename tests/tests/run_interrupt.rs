@@ -128,6 +128,16 @@ fn assert_unchanged(dir: &Path, before: &BTreeMap<PathBuf, Vec<u8>>, what: &str,
     );
 }
 
+/// A first run interrupted early leaves no output directory at all.
+#[test]
+fn an_interrupted_first_run_leaves_no_directory() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("fresh");
+    let (code, log) = interrupted_run(&dir, "1500", libc::SIGINT, When::Early);
+    assert_eq!(code, Some(130), "{log}");
+    assert!(!dir.exists(), "left {:?}\n{log}", snapshot(&dir).keys());
+}
+
 #[test]
 fn an_interrupted_run_leaves_exactly_the_previous_outputs() {
     let tmp = tempfile::tempdir().unwrap();

@@ -144,6 +144,7 @@ pub fn run(
     command: String,
 ) -> anyhow::Result<()> {
     let robot = Robot::load(robot_file)?;
+    let existed = std::fs::symlink_metadata(out).is_ok();
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let lock = crate::fsutil::DirLock::acquire(out)?; // held for the whole run (issue 31)
     let staging = Staging::create(out, &lock)
@@ -156,6 +157,12 @@ pub fn run(
         return Ok(());
     }
     drop(staging); // removes everything this run wrote
+    if !existed {
+        // The directory was this run's: leave no empty `out/` with a lock in it.
+        drop(lock);
+        let _ = std::fs::remove_file(out.join(crate::fsutil::DirLock::FILE));
+        let _ = std::fs::remove_dir(out);
+    }
     match result {
         Err(e) if !crate::interrupt::stop_requested() => Err(e.context(format!(
             "the run failed; {} was left as it was",
