@@ -36,8 +36,11 @@ pub use capacity::{McuNet, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS, POSE_DIM};
 pub use limits::{CoContraction, LimitsError, TendonLimits};
 pub use net::{weight_capacity, CascadeNet, CheckJob, Checked, Row};
 #[cfg(feature = "std")]
-pub use tnet::encode_to_vec;
-pub use tnet::{encode, encoded_len, NetHeader, NetShape, TnetError, TnetView};
+pub use tnet::{encode_to_vec, encode_to_vec_with};
+pub use tnet::{
+    encode, encode_with, encoded_len, encoded_len_with, read_provenance, NetHeader, NetShape,
+    Provenance, SplitRecord, TnetError, TnetView,
+};
 
 /// `encode` into a fresh vector, for this crate's tests (no `std` feature needed).
 #[cfg(test)]

@@ -18,6 +18,7 @@
 //! | version | `u16` | [`VERSION`] |
 //! | inputs, hidden, outputs | `u16` ×3 | the [`NetShape`] |
 //! | hidden_activation, output_activation | `u8` ×2 | [`Activation`] codes |
+//! | provenance (version 2 only) | 81 raw bytes | [`Provenance`]: robot fingerprint `[u8; 32]`, robot name `[u8; 32]` (UTF-8, zero-padded), flags `u8` (bit 0: split recorded), split seed `u64` LE, test fraction `f64` LE |
 //! | input_lo, input_hi | `[f32]` ×2 | per-input normalisation range, `inputs` long |
 //! | output_lo, output_hi | `[f32]` ×2 | per-output range, `outputs` long |
 //! | hidden_weights | `[f32]` | hidden unit rows, concatenated |
@@ -42,13 +43,21 @@ pub use crate::activation::Activation;
 use crate::crc32::Crc32;
 
 mod error;
+mod provenance;
 pub use error::{Field, TnetError};
+pub use provenance::{Provenance, SplitRecord, NAME_LEN, PROVENANCE_LEN};
 
 /// The four bytes every `.tnet` file starts with.
 pub const MAGIC: [u8; 4] = *b"TNET";
 
-/// The format version this crate writes and reads.
-pub const VERSION: u16 = 1;
+/// The newest format version: this crate writes it for a net with a
+/// [`Provenance`] ([`encode_with`]) and reads it and [`VERSION_1`].
+pub const VERSION: u16 = 2;
+
+/// The first format version, without the provenance block: still read,
+/// and written for a net without provenance ([`encode`]: test vectors,
+/// synthetic nets, the firmware's built-in net).
+pub const VERSION_1: u16 = 1;
 
 /// The wire codes of the activations (the `hidden_activation` and
 /// `output_activation` bytes).
@@ -115,9 +124,16 @@ impl NetShape {
         self.hidden_weight_count() + self.output_weight_count()
     }
 
-    /// Bytes of the `.tnet` file of a net of this shape, CRC included (what
-    /// [`encoded_len`] returns for every such net): `const`, so a buffer
-    /// can be checked against the largest net at compile time.
+    /// Bytes of the version-2 `.tnet` file (with its [`Provenance`]) of a
+    /// net of this shape, CRC included: the largest file of this shape.
+    pub const fn encoded_len_v2(&self) -> usize {
+        // Both version numbers are one-byte varints.
+        self.encoded_len() + PROVENANCE_LEN
+    }
+
+    /// Bytes of the version-1 `.tnet` file of a net of this shape, CRC
+    /// included (what [`encoded_len`] returns for every such net): `const`,
+    /// so a buffer can be checked against the largest net at compile time.
     pub const fn encoded_len(&self) -> usize {
         let (i, o) = (self.inputs, self.outputs);
         let arrays = [
@@ -129,7 +145,7 @@ impl NetShape {
             self.output_weight_count(),
         ];
         let mut len = MAGIC.len()
-            + varint_len(VERSION as usize)
+            + varint_len(VERSION_1 as usize)
             + varint_len(i)
             + varint_len(self.hidden)
             + varint_len(o)
@@ -177,9 +193,9 @@ pub struct TnetView<'a> {
     pub output_weights: &'a [f32],
 }
 
-/// postcard's view of the file minus the CRC; the field order *is* the format.
+/// postcard's view of the file's header, before the provenance block.
 #[derive(Serialize)]
-struct Wire<'a> {
+struct Head {
     magic: [u8; 4],
     version: u16,
     inputs: u16,
@@ -187,6 +203,19 @@ struct Wire<'a> {
     outputs: u16,
     hidden_activation: u8,
     output_activation: u8,
+}
+
+/// postcard's view of the file minus the CRC; the field order *is* the
+/// format (the provenance block, raw bytes, sits between head and arrays).
+struct Wire<'a> {
+    head: Head,
+    provenance: Option<[u8; PROVENANCE_LEN]>,
+    arrays: Arrays<'a>,
+}
+
+/// postcard's view of the arrays.
+#[derive(Serialize)]
+struct Arrays<'a> {
     input_lo: &'a [f32],
     input_hi: &'a [f32],
     output_lo: &'a [f32],
@@ -229,8 +258,9 @@ pub(crate) fn check_ranges(field: Field, lo: &[f32], hi: &[f32]) -> Result<(), T
 
 impl<'a> TnetView<'a> {
     /// Check everything the decoder would check: non-empty shape, array
-    /// lengths, finite values, non-empty ranges. Returns the postcard view.
-    fn wire(&self) -> Result<Wire<'a>, TnetError> {
+    /// lengths, finite values, non-empty ranges. Returns the postcard view
+    /// (version 2 with `provenance`, else version 1).
+    fn wire(&self, provenance: Option<&Provenance>) -> Result<Wire<'a>, TnetError> {
         let s = self.shape;
         if s.inputs == 0 || s.outputs == 0 {
             return Err(TnetError::EmptyShape {
@@ -261,39 +291,99 @@ impl<'a> TnetView<'a> {
         check_ranges(Field::InputLo, self.input_lo, self.input_hi)?;
         check_ranges(Field::OutputLo, self.output_lo, self.output_hi)?;
         Ok(Wire {
-            magic: MAGIC,
-            version: VERSION,
-            inputs: dim(s.inputs)?,
-            hidden: dim(s.hidden)?,
-            outputs: dim(s.outputs)?,
-            hidden_activation: self.hidden_activation.code(),
-            output_activation: self.output_activation.code(),
-            input_lo: self.input_lo,
-            input_hi: self.input_hi,
-            output_lo: self.output_lo,
-            output_hi: self.output_hi,
-            hidden_weights: self.hidden_weights,
-            output_weights: self.output_weights,
+            head: Head {
+                magic: MAGIC,
+                version: if provenance.is_some() {
+                    VERSION
+                } else {
+                    VERSION_1
+                },
+                inputs: dim(s.inputs)?,
+                hidden: dim(s.hidden)?,
+                outputs: dim(s.outputs)?,
+                hidden_activation: self.hidden_activation.code(),
+                output_activation: self.output_activation.code(),
+            },
+            provenance: provenance.map(|p| p.to_bytes()),
+            arrays: Arrays {
+                input_lo: self.input_lo,
+                input_hi: self.input_hi,
+                output_lo: self.output_lo,
+                output_hi: self.output_hi,
+                hidden_weights: self.hidden_weights,
+                output_weights: self.output_weights,
+            },
         })
     }
 }
 
-/// Size in bytes of the encoded net, CRC included; validates like [`encode`].
-pub fn encoded_len(net: &TnetView<'_>) -> Result<usize, TnetError> {
-    let wire = net.wire()?;
-    let size = postcard::serialize_with_flavor::<_, postcard::ser_flavors::Size, usize>(
-        &wire,
+/// postcard's size of `value`.
+fn postcard_len<T: Serialize>(value: &T) -> Result<usize, TnetError> {
+    postcard::serialize_with_flavor::<_, postcard::ser_flavors::Size, usize>(
+        value,
         postcard::ser_flavors::Size::default(),
     )
-    .map_err(|_| TnetError::Malformed)?;
-    Ok(size + 4)
+    .map_err(|_| TnetError::Malformed)
 }
 
-/// Encode `net` into `buf`, returning the number of bytes written
-/// ([`encoded_len`]). Refuses (typed error, nothing promised about `buf`)
-/// anything the decoder would reject, so every file this writes decodes.
+impl Wire<'_> {
+    /// Bytes of the body (everything before the CRC).
+    fn body_len(&self) -> Result<usize, TnetError> {
+        let prov = self.provenance.map_or(0, |p| p.len());
+        Ok(postcard_len(&self.head)? + prov + postcard_len(&self.arrays)?)
+    }
+
+    /// Write the body into `buf` (at least [`Wire::body_len`] long).
+    fn write(&self, buf: &mut [u8], too_small: TnetError) -> Result<usize, TnetError> {
+        let head = postcard::to_slice(&self.head, buf)
+            .map_err(|_| too_small)?
+            .len();
+        let mut at = head;
+        if let Some(p) = &self.provenance {
+            buf.get_mut(at..at + p.len())
+                .ok_or(too_small)?
+                .copy_from_slice(p);
+            at += p.len();
+        }
+        let rest = buf.get_mut(at..).ok_or(too_small)?;
+        let arrays = postcard::to_slice(&self.arrays, rest)
+            .map_err(|_| too_small)?
+            .len();
+        Ok(at + arrays)
+    }
+}
+
+/// Size in bytes of the encoded version-1 net, CRC included; validates
+/// like [`encode`].
+pub fn encoded_len(net: &TnetView<'_>) -> Result<usize, TnetError> {
+    encoded_len_with(net, None)
+}
+
+/// Size in bytes of the net encoded by [`encode_with`] with `provenance`.
+pub fn encoded_len_with(
+    net: &TnetView<'_>,
+    provenance: Option<&Provenance>,
+) -> Result<usize, TnetError> {
+    Ok(net.wire(provenance)?.body_len()? + 4)
+}
+
+/// Encode `net` as version 1 (no provenance) into `buf`, returning the
+/// number of bytes written ([`encoded_len`]). Refuses (typed error, nothing
+/// promised about `buf`) anything the decoder would reject, so every file
+/// this writes decodes.
 pub fn encode(net: &TnetView<'_>, buf: &mut [u8]) -> Result<usize, TnetError> {
-    let needed = encoded_len(net)?;
+    encode_with(net, None, buf)
+}
+
+/// Encode `net` into `buf`: version 2 with its `provenance` (what the
+/// trainer writes), version 1 without. Otherwise as [`encode`].
+pub fn encode_with(
+    net: &TnetView<'_>,
+    provenance: Option<&Provenance>,
+    buf: &mut [u8],
+) -> Result<usize, TnetError> {
+    let wire = net.wire(provenance)?;
+    let needed = wire.body_len()? + 4;
     if buf.len() < needed {
         return Err(TnetError::BufferTooSmall {
             needed,
@@ -302,8 +392,7 @@ pub fn encode(net: &TnetView<'_>, buf: &mut [u8]) -> Result<usize, TnetError> {
     }
     let available = buf.len();
     let too_small = TnetError::BufferTooSmall { needed, available };
-    let wire = net.wire()?;
-    let body_len = postcard::to_slice(&wire, buf).map_err(|_| too_small)?.len();
+    let body_len = wire.write(buf, too_small)?;
     let (body, rest) = buf.split_at_mut(body_len);
     let mut crc = Crc32::new();
     crc.update(body);
@@ -312,13 +401,23 @@ pub fn encode(net: &TnetView<'_>, buf: &mut [u8]) -> Result<usize, TnetError> {
     Ok(body_len + 4)
 }
 
-/// Encode `net` into a new vector (host convenience for the trainer's export).
+/// Encode `net` into a new vector (host convenience for the trainer's
+/// export): version 2 with `provenance`, version 1 without.
 #[cfg(feature = "std")]
-pub fn encode_to_vec(net: &TnetView<'_>) -> Result<std::vec::Vec<u8>, TnetError> {
-    let mut buf = std::vec![0u8; encoded_len(net)?];
-    let n = encode(net, &mut buf)?;
+pub fn encode_to_vec_with(
+    net: &TnetView<'_>,
+    provenance: Option<&Provenance>,
+) -> Result<std::vec::Vec<u8>, TnetError> {
+    let mut buf = std::vec![0u8; encoded_len_with(net, provenance)?];
+    let n = encode_with(net, provenance, &mut buf)?;
     buf.truncate(n);
     Ok(buf)
+}
+
+/// [`encode_to_vec_with`] without provenance (version 1).
+#[cfg(feature = "std")]
+pub fn encode_to_vec(net: &TnetView<'_>) -> Result<std::vec::Vec<u8>, TnetError> {
+    encode_to_vec_with(net, None)
 }
 
 /// A cursor over the file that maps postcard's errors to [`TnetError`].
@@ -375,6 +474,17 @@ impl<'a> Reader<'a> {
         }
     }
 
+    /// `n` raw bytes.
+    pub(crate) fn raw(&mut self, n: usize) -> Result<&'a [u8], TnetError> {
+        match self.rest.split_at_checked(n) {
+            Some((run, rest)) => {
+                self.rest = rest;
+                Ok(run)
+            }
+            None => Err(TnetError::Truncated),
+        }
+    }
+
     pub(crate) fn activation(&mut self) -> Result<Activation, TnetError> {
         let code: u8 = self.take()?;
         Activation::from_code(code).ok_or(TnetError::UnknownActivation { code })
@@ -389,13 +499,31 @@ pub fn read_header(bytes: &[u8]) -> Result<(NetShape, Activation, Activation), T
     header(&mut r)
 }
 
+/// The [`Provenance`] of a `.tnet` byte string: `None` for version 1.
+/// Parses the header and the block only; the caller decodes (and so
+/// CRC-checks) the bytes first, as the host's `read_tnet` does.
+pub fn read_provenance(bytes: &[u8]) -> Result<Option<Provenance>, TnetError> {
+    let mut r = Reader::new(bytes);
+    let (_, block) = header_and_provenance(&mut r)?;
+    block.map(Provenance::parse).transpose()
+}
+
 pub(crate) fn header(r: &mut Reader<'_>) -> Result<(NetShape, Activation, Activation), TnetError> {
+    header_and_provenance(r).map(|(h, _)| h)
+}
+
+/// The header and, for version 2, the raw provenance block (skipped, not
+/// judged: the firmware runs a net whatever robot it names).
+#[allow(clippy::type_complexity)]
+fn header_and_provenance<'a>(
+    r: &mut Reader<'a>,
+) -> Result<((NetShape, Activation, Activation), Option<&'a [u8]>), TnetError> {
     let found: [u8; 4] = r.take()?;
     if found != MAGIC {
         return Err(TnetError::BadMagic { found });
     }
     let version: u16 = r.take()?;
-    if version != VERSION {
+    if version != VERSION && version != VERSION_1 {
         return Err(TnetError::UnsupportedVersion { found: version });
     }
     let inputs = usize::from(r.take::<u16>()?);
@@ -406,15 +534,17 @@ pub(crate) fn header(r: &mut Reader<'_>) -> Result<(NetShape, Activation, Activa
     }
     let hidden_activation = r.activation()?;
     let output_activation = r.activation()?;
-    Ok((
-        NetShape {
-            inputs,
-            hidden,
-            outputs,
-        },
-        hidden_activation,
-        output_activation,
-    ))
+    let block = if version == VERSION {
+        Some(r.raw(PROVENANCE_LEN)?)
+    } else {
+        None
+    };
+    let shape = NetShape {
+        inputs,
+        hidden,
+        outputs,
+    };
+    Ok(((shape, hidden_activation, output_activation), block))
 }
 
 /// What the decoder learnt from a `.tnet` it has fully validated.
