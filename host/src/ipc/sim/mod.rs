@@ -328,6 +328,20 @@ fn model_file(cfg: &SimConfig, dir: &RunDir) -> Result<(PathBuf, Vec<u8>, ModelU
                 path: path.clone(),
                 source,
             })?;
+            // Refuse a net for another robot before any process starts (the
+            // controller checks again, for `tendril controller` alone).
+            let robot = crate::robot::Robot::load(&cfg.robot)
+                .map_err(|e| SimError::Config(e.to_string()))?;
+            let (_, provenance) = crate::net::decode_with_provenance(&bytes)
+                .map_err(|e| SimError::Config(format!("{}: {e}", path.display())))?;
+            crate::net::check_model_robot(
+                path,
+                provenance.as_ref(),
+                &robot,
+                cfg.controller.allow_robot_mismatch,
+                crate::net::CLI_OVERRIDE,
+            )
+            .map_err(|e| SimError::Config(e.to_string()))?;
             let used = ModelUsed {
                 path: path.clone(),
                 built_in: false,
