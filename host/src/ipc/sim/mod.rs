@@ -299,6 +299,7 @@ pub fn run(cfg: &SimConfig) -> Result<SimReport, SimError> {
     let family = crate::plan::Family::of(&statics).map_err(IpcError::from)?;
     cfg.planner.shape.check(&family).map_err(IpcError::from)?;
     install_interrupt_latch();
+    check_model(cfg)?;
     let dir = RunDir::create(&cfg.out)?;
     let result = run_in(cfg, &dir);
     match result {
@@ -311,6 +312,28 @@ pub fn run(cfg: &SimConfig) -> Result<SimReport, SimError> {
             Err(e)
         }
     }
+}
+
+/// Refuse a `--model` file trained for another robot before anything is
+/// created or started (the controller checks again, for `tendril
+/// controller` alone).
+fn check_model(cfg: &SimConfig) -> Result<(), SimError> {
+    let ModelSource::File(path) = &cfg.model else {
+        return Ok(());
+    };
+    let robot =
+        crate::robot::Robot::load(&cfg.robot).map_err(|e| SimError::Config(e.to_string()))?;
+    let (_, provenance) =
+        crate::net::read_model(path).map_err(|e| SimError::Config(e.to_string()))?;
+    crate::net::check_model_robot(
+        path,
+        provenance.as_ref(),
+        &robot,
+        cfg.controller.allow_robot_mismatch,
+        crate::net::CLI_OVERRIDE,
+    )
+    .map_err(|e| SimError::Config(e.to_string()))?;
+    Ok(())
 }
 
 fn model_file(cfg: &SimConfig, dir: &RunDir) -> Result<(PathBuf, Vec<u8>, ModelUsed), SimError> {
@@ -328,20 +351,6 @@ fn model_file(cfg: &SimConfig, dir: &RunDir) -> Result<(PathBuf, Vec<u8>, ModelU
                 path: path.clone(),
                 source,
             })?;
-            // Refuse a net for another robot before any process starts (the
-            // controller checks again, for `tendril controller` alone).
-            let robot = crate::robot::Robot::load(&cfg.robot)
-                .map_err(|e| SimError::Config(e.to_string()))?;
-            let (_, provenance) = crate::net::decode_with_provenance(&bytes)
-                .map_err(|e| SimError::Config(format!("{}: {e}", path.display())))?;
-            crate::net::check_model_robot(
-                path,
-                provenance.as_ref(),
-                &robot,
-                cfg.controller.allow_robot_mismatch,
-                crate::net::CLI_OVERRIDE,
-            )
-            .map_err(|e| SimError::Config(e.to_string()))?;
             let used = ModelUsed {
                 path: path.clone(),
                 built_in: false,
