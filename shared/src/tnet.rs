@@ -414,6 +414,44 @@ pub fn encode_to_vec_with(
     Ok(buf)
 }
 
+/// Version 2 of a version-1 byte string: `provenance` inserted after the
+/// header, the CRC recomputed (for a net fitted for a known robot by code
+/// that writes version 1, like the sim's quick net). The input must decode;
+/// a version-2 input is refused ([`TnetError::UnsupportedVersion`]).
+#[cfg(feature = "std")]
+pub fn stamp_provenance(
+    v1: &[u8],
+    provenance: &Provenance,
+) -> Result<std::vec::Vec<u8>, TnetError> {
+    let mut r = Reader::new(v1);
+    let (_, block) = header_and_provenance(&mut r)?;
+    if block.is_some() {
+        return Err(TnetError::UnsupportedVersion { found: VERSION });
+    }
+    let header_len = v1.len() - r.remaining().len();
+    let body_end = v1.len().checked_sub(4).ok_or(TnetError::Truncated)?;
+    let (head, arrays) = v1
+        .get(..header_len)
+        .zip(v1.get(header_len..body_end))
+        .ok_or(TnetError::Truncated)?;
+    // A corrupted input must not come out sealed with a fresh CRC.
+    let mut crc = Crc32::new();
+    crc.update(v1.get(..body_end).unwrap_or(&[]));
+    crc_matches(stored_crc(v1.get(body_end..).unwrap_or(&[]))?, crc.finish())?;
+    let mut out = std::vec::Vec::with_capacity(v1.len() + PROVENANCE_LEN);
+    out.extend_from_slice(head);
+    // The version is a one-byte varint right after the magic.
+    if let Some(v) = out.get_mut(MAGIC.len()) {
+        *v = VERSION as u8;
+    }
+    out.extend_from_slice(&provenance.to_bytes());
+    out.extend_from_slice(arrays);
+    let mut crc = Crc32::new();
+    crc.update(&out);
+    out.extend_from_slice(&crc.finish().to_le_bytes());
+    Ok(out)
+}
+
 /// [`encode_to_vec_with`] without provenance (version 1).
 #[cfg(feature = "std")]
 pub fn encode_to_vec(net: &TnetView<'_>) -> Result<std::vec::Vec<u8>, TnetError> {

@@ -261,6 +261,21 @@ mod tests {
         assert_eq!(read_provenance(&bad), Err(TnetError::BadProvenance));
     }
 
+    #[cfg(feature = "std")]
+    #[test]
+    fn stamping_a_version_1_file_gives_the_encoders_version_2() {
+        let p = sample();
+        let (v1, v2) = blobs(&p);
+        assert_eq!(crate::tnet::stamp_provenance(&v1, &p).unwrap(), v2);
+        let mut bad = v1.clone();
+        bad[20] ^= 1;
+        assert!(matches!(
+            crate::tnet::stamp_provenance(&bad, &p),
+            Err(TnetError::CrcMismatch { .. })
+        ));
+        assert!(crate::tnet::stamp_provenance(&v2, &p).is_err());
+    }
+
     #[test]
     fn long_names_are_cut_at_a_character_boundary() {
         let name = "é".repeat(20); // 40 bytes
