@@ -153,13 +153,19 @@ fn ik_refuses_a_net_for_a_robot_half_as_stiff_unless_allowed() {
     // The right robot, and the same robot restyled (comments, spacing,
     // number spelling): accepted without a word.
     let restyled = robot_variant(dir.path(), "restyled.toml", |t| {
-        format!("# a copy\n\n{}", t.replace("youngs_modulus = 207e9", "youngs_modulus=2.07e11 # Pa"))
+        format!(
+            "# a copy\n\n{}",
+            t.replace("youngs_modulus = 207e9", "youngs_modulus=2.07e11 # Pa")
+        )
     });
     for r in [robot("seed-4t.toml"), restyled] {
         let o = ik(&r, &[]);
         ok(&o, "ik with the net's robot");
         let e = stderr(&o);
-        assert!(!e.contains("trained for robot") && !e.contains("does not record"), "{e}");
+        assert!(
+            !e.contains("trained for robot") && !e.contains("does not record"),
+            "{e}"
+        );
     }
 }
 
@@ -172,13 +178,27 @@ fn sim_and_controller_refuse_a_net_for_another_robot_before_starting() {
     let sim = run_in(
         dir.path(),
         &[
-            "sim", "--robot", soft, "--model", "m.tnet", "--out", "sim", "--duration", "1",
+            "sim",
+            "--robot",
+            soft,
+            "--model",
+            "m.tnet",
+            "--out",
+            "sim",
+            "--duration",
+            "1",
         ],
     );
     let e = stderr(&sim);
     assert!(!sim.status.success(), "sim accepted it: {e}");
-    assert!(e.contains("seed-4t-soft") && e.contains("--allow-robot-mismatch"), "{e}");
-    assert!(!dir.path().join("sim").exists(), "sim left an output directory");
+    assert!(
+        e.contains("seed-4t-soft") && e.contains("--allow-robot-mismatch"),
+        "{e}"
+    );
+    assert!(
+        !dir.path().join("sim").exists(),
+        "sim left an output directory"
+    );
     let controller = run_in(
         dir.path(),
         &[
@@ -195,7 +215,10 @@ fn sim_and_controller_refuse_a_net_for_another_robot_before_starting() {
     );
     let e = stderr(&controller);
     assert!(!controller.status.success(), "controller accepted it: {e}");
-    assert!(e.contains("seed-4t-soft") && e.contains("--allow-robot-mismatch"), "{e}");
+    assert!(
+        e.contains("seed-4t-soft") && e.contains("--allow-robot-mismatch"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -220,8 +243,14 @@ fn evaluate_takes_the_nets_split_and_refuses_another_seed() {
     };
     let refused = eval(&["--seed", "2"]);
     let e = stderr(&refused);
-    assert!(!refused.status.success(), "scored training rows as test rows: {e}");
-    assert!(e.contains("--seed 2") && e.contains("trained with (1)"), "{e}");
+    assert!(
+        !refused.status.success(),
+        "scored training rows as test rows: {e}"
+    );
+    assert!(
+        e.contains("--seed 2") && e.contains("trained with (1)"),
+        "{e}"
+    );
     assert!(!dir.path().join("m.eval.json").exists());
     let refused = eval(&["--test-fraction", "0.2"]);
     assert!(!refused.status.success(), "{}", stderr(&refused));
@@ -241,7 +270,10 @@ fn train_refuses_a_robot_that_is_not_the_datas() {
     let dir = tempfile::tempdir().unwrap();
     data_and_net(dir.path());
     let soft = soft_robot(dir.path());
-    let o = run_in(dir.path(), &train_args(&["--robot", soft.to_str().unwrap()]));
+    let o = run_in(
+        dir.path(),
+        &train_args(&["--robot", soft.to_str().unwrap()]),
+    );
     let e = stderr(&o);
     assert!(!o.status.success(), "trained for the wrong robot: {e}");
     assert!(
@@ -305,7 +337,10 @@ fn train_resolves_the_recorded_robot_beside_the_sidecar_and_never_falls_back() {
     let o = train(&[]);
     let e = stderr(&o);
     assert!(!o.status.success(), "fell back to another robot: {e}");
-    assert!(e.contains("bot.toml") && e.contains("does not exist"), "{e}");
+    assert!(
+        e.contains("bot.toml") && e.contains("does not exist"),
+        "{e}"
+    );
     assert!(!elsewhere.join("m.tnet").exists());
     // Beside the sidecar: found, and the net records it.
     std::fs::copy(gen.join("bot.toml"), data.join("bot.toml")).unwrap();
@@ -324,7 +359,10 @@ fn train_resolves_the_recorded_robot_beside_the_sidecar_and_never_falls_back() {
     let o = train(&[]);
     let e = stderr(&o);
     assert!(!o.status.success(), "trained for a changed robot: {e}");
-    assert!(e.contains("has changed since the dataset was generated"), "{e}");
+    assert!(
+        e.contains("has changed since the dataset was generated"),
+        "{e}"
+    );
     assert!(!elsewhere.join("m.tnet").exists());
 }
 
@@ -364,7 +402,10 @@ fn train_refuses_constant_tension_columns_naming_them() {
     );
     let e = stderr(&o);
     assert!(!o.status.success(), "trained on all-zero tensions: {e}");
-    assert!(e.contains("t0 (always 0 N), t1 (always 0 N), t2 (always 0 N), t3"), "{e}");
+    assert!(
+        e.contains("t0 (always 0 N), t1 (always 0 N), t2 (always 0 N), t3"),
+        "{e}"
+    );
     assert!(!dir.path().join("z.tnet").exists());
 }
 

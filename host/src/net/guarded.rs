@@ -367,8 +367,13 @@ mod tests {
         // the raw output leaves [min, max] and the stage must shift and clip.
         let robot = crate::robot::repo_robot("seed-4t.toml");
         let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-        let ik =
-            GuardedNet::load(&root.join("firmware/vectors/default.tnet"), &robot, true, false).unwrap();
+        let ik = GuardedNet::load(
+            &root.join("firmware/vectors/default.tnet"),
+            &robot,
+            true,
+            false,
+        )
+        .unwrap();
         let limits = limits_for(&robot, 1.0).unwrap();
         let (min, max) = (robot.min_tensions(), robot.max_tensions());
         let (lo, hi) = (ik.net.input_lo().to_vec(), ik.net.input_hi().to_vec());

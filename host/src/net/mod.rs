@@ -26,6 +26,6 @@ pub use guarded::{read_poses, solve_csv, BatchSummary, GuardedNet, IkAnswer, IkE
 pub use infer::{infer, infer_batch};
 pub use read::{decode, read_tnet, ReadError};
 pub use robot_check::{
-    check_model_robot, decode_with_provenance, load_for_robot, read_model, ModelError,
-    RobotCheck, RobotMismatch, CLI_OVERRIDE,
+    check_model_robot, decode_with_provenance, load_for_robot, read_model, ModelError, RobotCheck,
+    RobotMismatch, CLI_OVERRIDE,
 };

@@ -18,14 +18,20 @@ use crate::robot::Robot;
 /// How the user overrides a mismatch, for the error message: the CLI flag.
 pub const CLI_OVERRIDE: &str = "--allow-robot-mismatch";
 
-/// A net trained for another robot than the one given.
+/// A net trained for another robot than the one given (boxed: errors
+/// travel by value through every `Result` of the consumers).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error(
-    "{model}: the net was trained for robot {net_robot} ({net_hash}), not for the given \
-     robot {robot} ({robot_hash}): its tensions would not reach the poses on this robot; \
-     give the robot it was trained for (or {how} to use it anyway)"
+    "{}: the net was trained for robot {} ({}), not for the given robot {} ({}): its \
+     tensions would not reach the poses on this robot; give the robot it was trained for \
+     (or {} to use it anyway)",
+    .0.model, .0.net_robot, .0.net_hash, .0.robot, .0.robot_hash, .0.how
 )]
-pub struct RobotMismatch {
+pub struct RobotMismatch(pub Box<MismatchDetail>);
+
+/// Both robots of a [`RobotMismatch`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct MismatchDetail {
     /// The `.tnet` file.
     pub model: String,
     /// The robot name the net records.
@@ -75,7 +81,7 @@ pub fn check_model_robot(
     if p.robot_sha256 == fingerprint {
         return Ok(RobotCheck::Match);
     }
-    let mismatch = RobotMismatch {
+    let mismatch = MismatchDetail {
         model: model.display().to_string(),
         net_robot: p.robot_name().to_string(),
         net_hash: short_hex(&p.robot_sha256),
@@ -84,7 +90,7 @@ pub fn check_model_robot(
         how: how.to_string(),
     };
     if !allow_mismatch {
-        return Err(mismatch);
+        return Err(RobotMismatch(Box::new(mismatch)));
     }
     log::warn!(
         "{}: the net was trained for robot {} ({}), not for robot {} ({}): used anyway \
@@ -139,7 +145,13 @@ pub fn load_for_robot(
     allow_mismatch: bool,
 ) -> Result<(Box<McuNet>, Option<Provenance>), ModelError> {
     let (net, provenance) = read_model(path)?;
-    check_model_robot(path, provenance.as_ref(), robot, allow_mismatch, CLI_OVERRIDE)?;
+    check_model_robot(
+        path,
+        provenance.as_ref(),
+        robot,
+        allow_mismatch,
+        CLI_OVERRIDE,
+    )?;
     Ok((net, provenance))
 }
 

@@ -80,7 +80,10 @@ mod tests {
     fn comments_whitespace_order_and_spelling_do_not_change_the_fingerprint() {
         let base = parse(GOOD).unwrap().fingerprint();
         let restyled = GOOD
-            .replace("youngs_modulus = 207e9", "# stiff\n  youngs_modulus   =  2.07e11  # Pa")
+            .replace(
+                "youngs_modulus = 207e9",
+                "# stiff\n  youngs_modulus   =  2.07e11  # Pa",
+            )
             .replace("density = 39317.0", "density = 39317")
             .replace("name = \"t\"", "name = \"renamed\"\n\n");
         assert_ne!(restyled, GOOD);

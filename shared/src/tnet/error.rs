@@ -49,7 +49,9 @@ pub enum TnetError {
         found: [u8; 4],
     },
     /// A format version this build cannot read.
-    #[error("unsupported .tnet version {found} (this build reads versions {VERSION_1} and {VERSION})")]
+    #[error(
+        "unsupported .tnet version {found} (this build reads versions {VERSION_1} and {VERSION})"
+    )]
     UnsupportedVersion {
         /// The version in the file.
         found: u16,

@@ -120,11 +120,10 @@ impl Provenance {
             }),
             _ => return Err(bad),
         };
-        let end = robot_name
-            .iter()
-            .position(|&b| b == 0)
-            .unwrap_or(NAME_LEN);
-        let padding_clean = robot_name.get(end..).is_some_and(|p| p.iter().all(|&b| b == 0));
+        let end = robot_name.iter().position(|&b| b == 0).unwrap_or(NAME_LEN);
+        let padding_clean = robot_name
+            .get(end..)
+            .is_some_and(|p| p.iter().all(|&b| b == 0));
         let name_ok = robot_name
             .get(..end)
             .is_some_and(|n| core::str::from_utf8(n).is_ok());

@@ -373,7 +373,8 @@ fn model_file(cfg: &SimConfig, dir: &RunDir) -> Result<(PathBuf, Vec<u8>, ModelU
             let blob = crate::plan::stand_in::quick_net_for(&statics, 2000, 48, 7)
                 .map_err(|e| SimError::Config(e.to_string()))?;
             // Fitted for this robot: say so, so the controller can check it.
-            let provenance = tendril_shared::Provenance::new(robot.fingerprint(), &robot.name, None);
+            let provenance =
+                tendril_shared::Provenance::new(robot.fingerprint(), &robot.name, None);
             let blob = tendril_shared::stamp_provenance(&blob, &provenance)
                 .map_err(|e| SimError::Config(format!("the quick net: {e}")))?;
             let path = write("quick.tnet", &blob)?;

@@ -86,8 +86,8 @@ fn recorded_robot(
         if !(place.is_file() || builtin) {
             continue;
         }
-        let (robot, text) = Robot::load_with_source(place)
-            .map_err(|e| bad(format!("the dataset's robot: {e}")))?;
+        let (robot, text) =
+            Robot::load_with_source(place).map_err(|e| bad(format!("the dataset's robot: {e}")))?;
         let sha = sha256_hex(&text);
         if sha == side.robot_sha256 {
             return Ok((robot, place.clone()));
@@ -169,8 +169,8 @@ pub fn robot_for_data(
                  otherwise)",
                 data_file.display()
             );
-            let robot = Robot::load(&path)
-                .map_err(|e| bad(format!("robot for the targets: {e}")))?;
+            let robot =
+                Robot::load(&path).map_err(|e| bad(format!("robot for the targets: {e}")))?;
             (robot, path)
         }
     };
