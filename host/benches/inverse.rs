@@ -54,8 +54,13 @@ fn targets(c: &mut Criterion) {
         })
     });
 
-    let net =
-        GuardedNet::load(&root().join("firmware/vectors/default.tnet"), &robot, true).unwrap();
+    let net = GuardedNet::load(
+        &root().join("firmware/vectors/default.tnet"),
+        &robot,
+        true,
+        false,
+    )
+    .unwrap();
     c.bench_function("inverse/net", |b| {
         b.iter(|| {
             let guess = net.solve(black_box(&pose)).unwrap();

@@ -8,7 +8,7 @@ use numpy::ndarray::Array2;
 use numpy::{AllowTypeChange, IntoPyArray, PyArrayLikeDyn};
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
-use tendril::net::{read_tnet, GuardedNet, ReadError};
+use tendril::net::{check_model_robot, read_model, GuardedNet, ReadError};
 
 use crate::arrays::rows;
 use crate::detach::detached;
@@ -27,10 +27,17 @@ impl Net {
     /// it drives (default: ``Robot.default()``); the firmware's command stage
     /// for it turns the net's output into tensions in its limits.
     /// allow_extrapolation: answer poses outside the net's training
-    /// ranges instead of refusing them.
+    /// ranges instead of refusing them. A net that records another robot
+    /// than ``robot`` raises ``ValueError`` naming both, unless
+    /// allow_robot_mismatch (then a warning is logged).
     #[staticmethod]
-    #[pyo3(signature = (path, robot=None, allow_extrapolation=false))]
-    fn load(path: PathBuf, robot: Option<&Robot>, allow_extrapolation: bool) -> PyResult<Net> {
+    #[pyo3(signature = (path, robot=None, allow_extrapolation=false, allow_robot_mismatch=false))]
+    fn load(
+        path: PathBuf,
+        robot: Option<&Robot>,
+        allow_extrapolation: bool,
+        allow_robot_mismatch: bool,
+    ) -> PyResult<Net> {
         let fallback;
         let robot = match robot {
             Some(r) => r,
@@ -39,10 +46,18 @@ impl Net {
                 &fallback
             }
         };
-        let net = read_tnet(&path).map_err(|e| match &e {
+        let (net, provenance) = read_model(&path).map_err(|e| match &e {
             ReadError::Io { .. } => os_error(&e),
             _ => invalid(&e),
         })?;
+        check_model_robot(
+            &path,
+            provenance.as_ref(),
+            &robot.model,
+            allow_robot_mismatch,
+            "allow_robot_mismatch=True",
+        )
+        .map_err(|e| invalid(&e))?;
         let ik =
             GuardedNet::new(net, &robot.model, allow_extrapolation).map_err(|e| invalid(&e))?;
         Ok(Net { ik })

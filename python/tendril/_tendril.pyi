@@ -79,7 +79,10 @@ class Net:
 
     @staticmethod
     def load(
-        path: _Path, robot: Optional[Robot] = None, allow_extrapolation: bool = False
+        path: _Path,
+        robot: Optional[Robot] = None,
+        allow_extrapolation: bool = False,
+        allow_robot_mismatch: bool = False,
     ) -> "Net": ...
     @property
     def n_tendons(self) -> int: ...

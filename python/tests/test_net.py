@@ -64,3 +64,21 @@ def test_net_for_another_tendon_count_is_refused(root):
         tendril.Net.load(root / "firmware" / "vectors" / "default.tnet", one_tendon)
     with pytest.raises(OSError, match="nothing.tnet"):
         tendril.Net.load(root / "nothing.tnet")
+
+
+def test_a_net_for_another_robot_is_refused_unless_allowed(tmp_path, root, cli):
+    # A small net trained for the seed robot records its fingerprint (.tnet version 2).
+    seed = root / "robots" / "seed-4t.toml"
+    data, model = tmp_path / "d.csv", tmp_path / "m.tnet"
+    done = run_cli(cli, "generate", "--robot", str(seed), "--samples", "300", "--out", str(data))
+    assert done.returncode == 0, done.stderr
+    done = run_cli(cli, "train", "--data", str(data), "--out", str(model),
+                   "--max-hidden", "1", "--pool", "1", "--threads", "1")
+    assert done.returncode == 0, done.stderr
+    soft = tmp_path / "soft.toml"
+    soft.write_text(seed.read_text().replace("youngs_modulus = 207e9", "youngs_modulus = 103.5e9"))
+    tendril.Net.load(model, tendril.Robot.load(seed))
+    with pytest.raises(ValueError, match=r"trained for robot seed-4t .*allow_robot_mismatch=True"):
+        tendril.Net.load(model, tendril.Robot.load(soft))
+    net = tendril.Net.load(model, tendril.Robot.load(soft), allow_robot_mismatch=True)
+    assert net.n_tendons == 4

@@ -35,9 +35,12 @@ pub use activation::Activation;
 pub use capacity::{McuNet, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS, POSE_DIM};
 pub use limits::{CoContraction, LimitsError, TendonLimits};
 pub use net::{weight_capacity, CascadeNet, CheckJob, Checked, Row};
+pub use tnet::{
+    encode, encode_with, encoded_len, encoded_len_with, read_provenance, NetHeader, NetShape,
+    Provenance, SplitRecord, TnetError, TnetView,
+};
 #[cfg(feature = "std")]
-pub use tnet::encode_to_vec;
-pub use tnet::{encode, encoded_len, NetHeader, NetShape, TnetError, TnetView};
+pub use tnet::{encode_to_vec, encode_to_vec_with, stamp_provenance};
 
 /// `encode` into a fresh vector, for this crate's tests (no `std` feature needed).
 #[cfg(test)]

@@ -25,7 +25,7 @@ const _: () = assert!(
         hidden: MAX_HIDDEN,
         outputs: MAX_TENDONS,
     }
-    .encoded_len()
+    .encoded_len_v2()
         <= WEIGHT_UPDATE_CAPACITY,
     "the largest net must fit a WeightUpdate"
 );

@@ -18,6 +18,7 @@
 //! | version | `u16` | [`VERSION`] |
 //! | inputs, hidden, outputs | `u16` ×3 | the [`NetShape`] |
 //! | hidden_activation, output_activation | `u8` ×2 | [`Activation`] codes |
+//! | provenance (version 2 only) | 81 raw bytes | [`Provenance`]: robot fingerprint `[u8; 32]`, robot name `[u8; 32]` (UTF-8, zero-padded), flags `u8` (bit 0: split recorded), split seed `u64` LE, test fraction `f64` LE |
 //! | input_lo, input_hi | `[f32]` ×2 | per-input normalisation range, `inputs` long |
 //! | output_lo, output_hi | `[f32]` ×2 | per-output range, `outputs` long |
 //! | hidden_weights | `[f32]` | hidden unit rows, concatenated |
@@ -36,19 +37,29 @@
 //! starts at offset `k (1 + I) + k (k − 1)/2` of `hidden_weights`; row `o` at
 //! `o (1 + I + H)` of `output_weights` ([`NetShape::hidden_row_offset`]).
 
-use serde::Serialize;
-
 pub use crate::activation::Activation;
 use crate::crc32::Crc32;
 
+mod encode;
 mod error;
+mod provenance;
+pub use encode::{encode, encode_with, encoded_len, encoded_len_with};
+#[cfg(feature = "std")]
+pub use encode::{encode_to_vec, encode_to_vec_with, stamp_provenance};
 pub use error::{Field, TnetError};
+pub use provenance::{Provenance, SplitRecord, NAME_LEN, PROVENANCE_LEN};
 
 /// The four bytes every `.tnet` file starts with.
 pub const MAGIC: [u8; 4] = *b"TNET";
 
-/// The format version this crate writes and reads.
-pub const VERSION: u16 = 1;
+/// The newest format version: this crate writes it for a net with a
+/// [`Provenance`] ([`encode_with`]) and reads it and [`VERSION_1`].
+pub const VERSION: u16 = 2;
+
+/// The first format version, without the provenance block: still read,
+/// and written for a net without provenance ([`encode`]: test vectors,
+/// synthetic nets, the firmware's built-in net).
+pub const VERSION_1: u16 = 1;
 
 /// The wire codes of the activations (the `hidden_activation` and
 /// `output_activation` bytes).
@@ -115,9 +126,16 @@ impl NetShape {
         self.hidden_weight_count() + self.output_weight_count()
     }
 
-    /// Bytes of the `.tnet` file of a net of this shape, CRC included (what
-    /// [`encoded_len`] returns for every such net): `const`, so a buffer
-    /// can be checked against the largest net at compile time.
+    /// Bytes of the version-2 `.tnet` file (with its [`Provenance`]) of a
+    /// net of this shape, CRC included: the largest file of this shape.
+    pub const fn encoded_len_v2(&self) -> usize {
+        // Both version numbers are one-byte varints.
+        self.encoded_len() + PROVENANCE_LEN
+    }
+
+    /// Bytes of the version-1 `.tnet` file of a net of this shape, CRC
+    /// included (what [`encoded_len`] returns for every such net): `const`,
+    /// so a buffer can be checked against the largest net at compile time.
     pub const fn encoded_len(&self) -> usize {
         let (i, o) = (self.inputs, self.outputs);
         let arrays = [
@@ -129,7 +147,7 @@ impl NetShape {
             self.output_weight_count(),
         ];
         let mut len = MAGIC.len()
-            + varint_len(VERSION as usize)
+            + varint_len(VERSION_1 as usize)
             + varint_len(i)
             + varint_len(self.hidden)
             + varint_len(o)
@@ -177,40 +195,6 @@ pub struct TnetView<'a> {
     pub output_weights: &'a [f32],
 }
 
-/// postcard's view of the file minus the CRC; the field order *is* the format.
-#[derive(Serialize)]
-struct Wire<'a> {
-    magic: [u8; 4],
-    version: u16,
-    inputs: u16,
-    hidden: u16,
-    outputs: u16,
-    hidden_activation: u8,
-    output_activation: u8,
-    input_lo: &'a [f32],
-    input_hi: &'a [f32],
-    output_lo: &'a [f32],
-    output_hi: &'a [f32],
-    hidden_weights: &'a [f32],
-    output_weights: &'a [f32],
-}
-
-fn dim(value: usize) -> Result<u16, TnetError> {
-    u16::try_from(value).map_err(|_| TnetError::ShapeTooLarge { value })
-}
-
-fn check_len(field: Field, slice: &[f32], expected: usize) -> Result<(), TnetError> {
-    if slice.len() == expected {
-        Ok(())
-    } else {
-        Err(TnetError::LengthMismatch {
-            field,
-            expected,
-            found: slice.len(),
-        })
-    }
-}
-
 /// First non-finite entry of `values`, as an error naming `field`.
 pub(crate) fn check_finite(field: Field, values: &[f32]) -> Result<(), TnetError> {
     match values.iter().position(|v| !v.is_finite()) {
@@ -225,100 +209,6 @@ pub(crate) fn check_ranges(field: Field, lo: &[f32], hi: &[f32]) -> Result<(), T
         Some(index) => Err(TnetError::EmptyRange { field, index }),
         None => Ok(()),
     }
-}
-
-impl<'a> TnetView<'a> {
-    /// Check everything the decoder would check: non-empty shape, array
-    /// lengths, finite values, non-empty ranges. Returns the postcard view.
-    fn wire(&self) -> Result<Wire<'a>, TnetError> {
-        let s = self.shape;
-        if s.inputs == 0 || s.outputs == 0 {
-            return Err(TnetError::EmptyShape {
-                inputs: s.inputs,
-                outputs: s.outputs,
-            });
-        }
-        let arrays = [
-            (Field::InputLo, self.input_lo, s.inputs),
-            (Field::InputHi, self.input_hi, s.inputs),
-            (Field::OutputLo, self.output_lo, s.outputs),
-            (Field::OutputHi, self.output_hi, s.outputs),
-            (
-                Field::HiddenWeights,
-                self.hidden_weights,
-                s.hidden_weight_count(),
-            ),
-            (
-                Field::OutputWeights,
-                self.output_weights,
-                s.output_weight_count(),
-            ),
-        ];
-        for (field, slice, expected) in arrays {
-            check_len(field, slice, expected)?;
-            check_finite(field, slice)?;
-        }
-        check_ranges(Field::InputLo, self.input_lo, self.input_hi)?;
-        check_ranges(Field::OutputLo, self.output_lo, self.output_hi)?;
-        Ok(Wire {
-            magic: MAGIC,
-            version: VERSION,
-            inputs: dim(s.inputs)?,
-            hidden: dim(s.hidden)?,
-            outputs: dim(s.outputs)?,
-            hidden_activation: self.hidden_activation.code(),
-            output_activation: self.output_activation.code(),
-            input_lo: self.input_lo,
-            input_hi: self.input_hi,
-            output_lo: self.output_lo,
-            output_hi: self.output_hi,
-            hidden_weights: self.hidden_weights,
-            output_weights: self.output_weights,
-        })
-    }
-}
-
-/// Size in bytes of the encoded net, CRC included; validates like [`encode`].
-pub fn encoded_len(net: &TnetView<'_>) -> Result<usize, TnetError> {
-    let wire = net.wire()?;
-    let size = postcard::serialize_with_flavor::<_, postcard::ser_flavors::Size, usize>(
-        &wire,
-        postcard::ser_flavors::Size::default(),
-    )
-    .map_err(|_| TnetError::Malformed)?;
-    Ok(size + 4)
-}
-
-/// Encode `net` into `buf`, returning the number of bytes written
-/// ([`encoded_len`]). Refuses (typed error, nothing promised about `buf`)
-/// anything the decoder would reject, so every file this writes decodes.
-pub fn encode(net: &TnetView<'_>, buf: &mut [u8]) -> Result<usize, TnetError> {
-    let needed = encoded_len(net)?;
-    if buf.len() < needed {
-        return Err(TnetError::BufferTooSmall {
-            needed,
-            available: buf.len(),
-        });
-    }
-    let available = buf.len();
-    let too_small = TnetError::BufferTooSmall { needed, available };
-    let wire = net.wire()?;
-    let body_len = postcard::to_slice(&wire, buf).map_err(|_| too_small)?.len();
-    let (body, rest) = buf.split_at_mut(body_len);
-    let mut crc = Crc32::new();
-    crc.update(body);
-    let tail = rest.get_mut(..4).ok_or(too_small)?;
-    tail.copy_from_slice(&crc.finish().to_le_bytes());
-    Ok(body_len + 4)
-}
-
-/// Encode `net` into a new vector (host convenience for the trainer's export).
-#[cfg(feature = "std")]
-pub fn encode_to_vec(net: &TnetView<'_>) -> Result<std::vec::Vec<u8>, TnetError> {
-    let mut buf = std::vec![0u8; encoded_len(net)?];
-    let n = encode(net, &mut buf)?;
-    buf.truncate(n);
-    Ok(buf)
 }
 
 /// A cursor over the file that maps postcard's errors to [`TnetError`].
@@ -375,6 +265,17 @@ impl<'a> Reader<'a> {
         }
     }
 
+    /// `n` raw bytes.
+    pub(crate) fn raw(&mut self, n: usize) -> Result<&'a [u8], TnetError> {
+        match self.rest.split_at_checked(n) {
+            Some((run, rest)) => {
+                self.rest = rest;
+                Ok(run)
+            }
+            None => Err(TnetError::Truncated),
+        }
+    }
+
     pub(crate) fn activation(&mut self) -> Result<Activation, TnetError> {
         let code: u8 = self.take()?;
         Activation::from_code(code).ok_or(TnetError::UnknownActivation { code })
@@ -389,13 +290,31 @@ pub fn read_header(bytes: &[u8]) -> Result<(NetShape, Activation, Activation), T
     header(&mut r)
 }
 
+/// The [`Provenance`] of a `.tnet` byte string: `None` for version 1.
+/// Parses the header and the block only; the caller decodes (and so
+/// CRC-checks) the bytes first, as the host's `read_tnet` does.
+pub fn read_provenance(bytes: &[u8]) -> Result<Option<Provenance>, TnetError> {
+    let mut r = Reader::new(bytes);
+    let (_, block) = header_and_provenance(&mut r)?;
+    block.map(Provenance::parse).transpose()
+}
+
 pub(crate) fn header(r: &mut Reader<'_>) -> Result<(NetShape, Activation, Activation), TnetError> {
+    header_and_provenance(r).map(|(h, _)| h)
+}
+
+/// The header and, for version 2, the raw provenance block (skipped, not
+/// judged: the firmware runs a net whatever robot it names).
+#[allow(clippy::type_complexity)]
+pub(crate) fn header_and_provenance<'a>(
+    r: &mut Reader<'a>,
+) -> Result<((NetShape, Activation, Activation), Option<&'a [u8]>), TnetError> {
     let found: [u8; 4] = r.take()?;
     if found != MAGIC {
         return Err(TnetError::BadMagic { found });
     }
     let version: u16 = r.take()?;
-    if version != VERSION {
+    if version != VERSION && version != VERSION_1 {
         return Err(TnetError::UnsupportedVersion { found: version });
     }
     let inputs = usize::from(r.take::<u16>()?);
@@ -406,15 +325,17 @@ pub(crate) fn header(r: &mut Reader<'_>) -> Result<(NetShape, Activation, Activa
     }
     let hidden_activation = r.activation()?;
     let output_activation = r.activation()?;
-    Ok((
-        NetShape {
-            inputs,
-            hidden,
-            outputs,
-        },
-        hidden_activation,
-        output_activation,
-    ))
+    let block = if version == VERSION {
+        Some(r.raw(PROVENANCE_LEN)?)
+    } else {
+        None
+    };
+    let shape = NetShape {
+        inputs,
+        hidden,
+        outputs,
+    };
+    Ok(((shape, hidden_activation, output_activation), block))
 }
 
 /// What the decoder learnt from a `.tnet` it has fully validated.

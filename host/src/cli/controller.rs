@@ -91,6 +91,9 @@ pub struct ControllerArgs {
     /// Trained IK net (`tendril train` output).
     #[arg(long, default_value = "out/model.tnet")]
     pub model: PathBuf,
+    /// Run a net trained for another robot than --robot (with a warning) instead of refusing it.
+    #[arg(long)]
+    pub allow_robot_mismatch: bool,
     /// iceoryx2 service-name prefix.
     #[arg(long, default_value = crate::ipc::DEFAULT_PREFIX)]
     pub prefix: String,
@@ -125,6 +128,7 @@ impl ControllerArgs {
             return Ok(crate::ipc::read_config(path)?);
         }
         let mut cfg = ControllerConfig::new(self.robot, self.model);
+        cfg.allow_robot_mismatch = self.allow_robot_mismatch;
         cfg.prefix = self.prefix;
         self.tuning.apply(&mut cfg);
         cfg.duration_s = self.duration;

@@ -10,7 +10,7 @@ use crate::evaluate::job::{self, EvaluateJob, RowSelection};
 pub enum Rows {
     /// Every row (e.g. a separate test file).
     All,
-    /// Only the held-out test split `tendril train` left out (same --seed, --test-fraction).
+    /// Only the held-out test split `tendril train` left out (the split the net records).
     Test,
 }
 
@@ -28,12 +28,17 @@ pub struct EvaluateArgs {
     /// Rows to evaluate.
     #[arg(long, value_enum, default_value_t = Rows::All)]
     pub rows: Rows,
-    /// Split seed (with --rows test; must match `tendril train --seed`).
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
-    /// Test fraction in (0, 0.5] (with --rows test; must match `tendril train`).
-    #[arg(long, default_value_t = 0.03)]
-    pub test_fraction: f64,
+    /// Split seed (with --rows test) [default: the seed the net records, else 1]; a seed
+    /// other than the one the net records is refused (its "test" rows would be training rows).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Test fraction in (0, 0.5] (with --rows test) [default: the one the net records, else
+    /// 0.03]; another than the net's is refused.
+    #[arg(long)]
+    pub test_fraction: Option<f64>,
+    /// Evaluate a net trained for another robot than --robot (with a warning) instead of refusing it.
+    #[arg(long)]
+    pub allow_robot_mismatch: bool,
     /// Metrics JSON to write; default: <model>.eval.json.
     #[arg(long, value_name = "JSON")]
     pub json_out: Option<PathBuf>,
@@ -53,6 +58,7 @@ impl EvaluateArgs {
                     test_fraction: self.test_fraction,
                 },
             },
+            allow_robot_mismatch: self.allow_robot_mismatch,
             json_out: self
                 .json_out
                 .clone()

@@ -40,6 +40,9 @@ pub struct IkArgs {
     /// Answer poses outside the net's training ranges (with a warning) instead of refusing them.
     #[arg(long)]
     pub allow_extrapolation: bool,
+    /// Use a net trained for another robot than --robot (with a warning) instead of refusing it.
+    #[arg(long)]
+    pub allow_robot_mismatch: bool,
     /// Batch input CSV with columns px,py,pz,qw,qx,qy,qz (others ignored).
     #[arg(long, value_name = "CSV", requires = "output")]
     pub input: Option<PathBuf>,
@@ -64,7 +67,7 @@ fn parse_pose(text: &str) -> anyhow::Result<[f64; 7]> {
 /// `tendril ik --exact`.
 fn run_exact(a: &IkArgs, robot: &crate::robot::Robot) -> anyhow::Result<()> {
     let net = match &a.model {
-        Some(m) => Some(GuardedNet::load(m, robot, true)?),
+        Some(m) => Some(GuardedNet::load(m, robot, true, a.allow_robot_mismatch)?),
         None => None,
     };
     let ik = ExactIk::new(robot, IkSettings::default());
@@ -114,7 +117,7 @@ pub fn run(a: IkArgs) -> anyhow::Result<()> {
     let Some(model) = &a.model else {
         bail!("give --model model.tnet (or --exact)");
     };
-    let ik = GuardedNet::load(model, &robot, a.allow_extrapolation)?;
+    let ik = GuardedNet::load(model, &robot, a.allow_extrapolation, a.allow_robot_mismatch)?;
     if let Some(text) = &a.pose {
         let pose = parse_pose(text)?;
         let answer = ik.solve(&pose)?;

@@ -31,6 +31,9 @@ pub struct SimArgs {
     /// of loading --model: for tests and demos without a trained model.
     #[arg(long, conflicts_with = "model")]
     pub quick_model: bool,
+    /// Run a net trained for another robot than --robot (with a warning) instead of refusing it.
+    #[arg(long)]
+    pub allow_robot_mismatch: bool,
     /// Output directory for report.json, report.md, sim.png and the logs.
     #[arg(long, default_value = "out/sim")]
     pub out: PathBuf,
@@ -102,6 +105,7 @@ impl SimArgs {
             ..cfg.planner.inject
         };
         self.tuning.apply(&mut cfg.controller);
+        cfg.controller.allow_robot_mismatch = self.allow_robot_mismatch;
         // Real-time scheduling is on by default under `sim` (`--realtime
         // off` to disable): it keeps the 1 kHz loop on time on a busy machine.
         cfg.realtime = self.tuning.realtime != Some(OnOff::Off);

@@ -61,9 +61,15 @@ pub struct TrainArgs {
     pub plot: Option<PathBuf>,
     /// Robot the dataset is for: its co-contraction sets centre the targets
     /// (docs/design.md §4). Default: the robot file the dataset's sidecar
-    /// records, else robots/seed-4t.toml.
+    /// records (as recorded, or relative to the sidecar; its SHA-256 checked),
+    /// else robots/seed-4t.toml. Must be the sidecar's robot.
     #[arg(long, value_name = "FILE")]
     pub robot: Option<PathBuf>,
+    /// Train for --robot although the dataset's sidecar records another
+    /// robot file (SHA-256), or for a recorded robot file that has changed
+    /// since (a warning instead of an error).
+    #[arg(long)]
+    pub allow_robot_mismatch: bool,
     /// Training report JSON (choices made, targets, learning curve, test RMSE); default: <out>.train.json.
     #[arg(long, value_name = "JSON")]
     pub report: Option<PathBuf>,
@@ -202,7 +208,12 @@ impl TrainArgs {
 impl TrainArgs {
     /// The training job these arguments describe, on `data` read from `--data`.
     pub fn job<'a>(&self, data: &'a Dataset) -> anyhow::Result<TrainJob<'a>> {
-        let r = job::robot_for_data(data, &self.data, self.robot.as_deref())?;
+        let r = job::robot_for_data(
+            data,
+            &self.data,
+            self.robot.as_deref(),
+            self.allow_robot_mismatch,
+        )?;
         log::info!(
             "targets: {} (robot {})",
             if r.targets == Targets::Tensions {
@@ -234,6 +245,7 @@ impl TrainArgs {
             },
             outputs,
             threads: self.threads,
+            robot: Some(r.robot),
         })
     }
 }

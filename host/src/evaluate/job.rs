@@ -14,7 +14,9 @@ use crate::dataset::{split_indices, Dataset, DatasetError, Sidecar};
 use crate::fsutil::{check_distinct, write_atomic, PathCollision};
 use crate::inverse::{ExactIk, IkSettings, InverseError, Target};
 use crate::learn::cascor::job::MAX_HELD_OUT_FRACTION;
-use crate::net::{infer, infer_batch, read_tnet, ReadError};
+use crate::net::{
+    check_model_robot, infer, infer_batch, read_model, ReadError, RobotMismatch, CLI_OVERRIDE,
+};
 use crate::robot::{Robot, RobotError};
 use crate::statics::{SolverSettings, Statics};
 
@@ -23,14 +25,59 @@ use crate::statics::{SolverSettings, Statics};
 pub enum RowSelection {
     /// Every row (e.g. a separate test file).
     All,
-    /// Only the held-out test split a training run with this seed and test
-    /// fraction left out.
+    /// Only the held-out test split the training run left out: the seed
+    /// and test fraction the net records (`docs/design.md` §5.1); one
+    /// given here must agree with them. A net that records none (version
+    /// 1) takes these, or the trainer's defaults.
     Test {
         /// Split seed (`tendril train --seed`).
-        seed: u64,
+        seed: Option<u64>,
         /// Test fraction (`tendril train --test-fraction`), in (0, 0.5].
-        test_fraction: f64,
+        test_fraction: Option<f64>,
     },
+}
+
+/// The split `rows` selects for a net that records `recorded`: the
+/// recorded split, unless a given value disagrees (an error: the rows it
+/// would select include training rows).
+fn test_split(
+    model: &Path,
+    seed: Option<u64>,
+    test_fraction: Option<f64>,
+    recorded: Option<tendril_shared::SplitRecord>,
+) -> Result<(u64, f64), EvaluateError> {
+    use crate::dataset::split::{SPLIT_SEED, TEST_FRACTION};
+    let Some(r) = recorded else {
+        log::warn!(
+            "{}: the net does not record its training split; --rows test uses --seed {} and \
+             --test-fraction {}, which must be the ones `tendril train` was given",
+            model.display(),
+            seed.unwrap_or(SPLIT_SEED),
+            test_fraction.unwrap_or(TEST_FRACTION)
+        );
+        return Ok((
+            seed.unwrap_or(SPLIT_SEED),
+            test_fraction.unwrap_or(TEST_FRACTION),
+        ));
+    };
+    let disagree = |what: &str, given: String, net: String| {
+        EvaluateError::BadInput(format!(
+            "{what} {given} is not the one the net {} was trained with ({net}): --rows test \
+             would score rows the net was fitted on; leave {what} out (the net records its split)",
+            model.display()
+        ))
+    };
+    if let Some(s) = seed.filter(|&s| s != r.seed) {
+        return Err(disagree("--seed", s.to_string(), r.seed.to_string()));
+    }
+    if let Some(f) = test_fraction.filter(|&f| f != r.test_fraction) {
+        return Err(disagree(
+            "--test-fraction",
+            f.to_string(),
+            r.test_fraction.to_string(),
+        ));
+    }
+    Ok((r.seed, r.test_fraction))
 }
 
 /// An evaluation: which net, on which data and robot, where the JSON goes.
@@ -44,6 +91,9 @@ pub struct EvaluateJob {
     pub robot: PathBuf,
     /// Rows to evaluate.
     pub rows: RowSelection,
+    /// Evaluate a net that records another robot than `robot` (a warning)
+    /// instead of refusing it ([`crate::net::check_model_robot`]).
+    pub allow_robot_mismatch: bool,
     /// Metrics JSON to write.
     pub json_out: PathBuf,
 }
@@ -102,6 +152,9 @@ pub enum EvaluateError {
     /// The robot file could not be loaded.
     #[error(transparent)]
     Robot(#[from] RobotError),
+    /// The net was trained for another robot.
+    #[error(transparent)]
+    Mismatch(#[from] RobotMismatch),
     /// A metric could not be computed.
     #[error(transparent)]
     Metric(#[from] EvalError),
@@ -136,21 +189,34 @@ pub fn run(job: &EvaluateJob) -> Result<Evaluation, EvaluateError> {
         ],
         &[("--json-out", &job.json_out)],
     )?;
-    if let RowSelection::Test { test_fraction, .. } = job.rows {
+    if let RowSelection::Test {
+        test_fraction: Some(test_fraction),
+        ..
+    } = job.rows
+    {
         if !(test_fraction > 0.0 && test_fraction <= MAX_HELD_OUT_FRACTION) {
             return Err(EvaluateError::BadInput(format!(
                 "--test-fraction must be in (0, {MAX_HELD_OUT_FRACTION}], got {test_fraction}"
             )));
         }
     }
-    let net = read_tnet(&job.model)?;
+    let (net, provenance) = read_model(&job.model)?;
     let robot = Robot::load(&job.robot)?;
+    check_model_robot(
+        &job.model,
+        provenance.as_ref(),
+        &robot,
+        job.allow_robot_mismatch,
+        CLI_OVERRIDE,
+    )?;
     let mut data = Dataset::read_csv(&job.data)?;
     if let RowSelection::Test {
         seed,
         test_fraction,
     } = job.rows
     {
+        let recorded = provenance.and_then(|p| p.split);
+        let (seed, test_fraction) = test_split(&job.model, seed, test_fraction, recorded)?;
         let (_, test) = split_indices(data.len(), test_fraction, seed);
         data = data.rows(&test);
     }

@@ -21,7 +21,7 @@ use crate::dataset::io::format_value;
 use crate::dataset::POSE_COLUMNS;
 use crate::robot::Robot;
 
-use super::{infer, read_tnet};
+use super::{infer, load_for_robot};
 
 /// Largest accepted deviation of |q| from 1 (a quaternion within it is
 /// renormalised; the dataset's are unit to ~1e-15).
@@ -138,15 +138,19 @@ pub struct GuardedNet {
 }
 
 impl GuardedNet {
-    /// Load the net at `model` for `robot`. With `allow_extrapolation`, poses
+    /// Load the net at `model` for `robot`, refusing a net trained for
+    /// another robot unless `allow_robot_mismatch`
+    /// ([`super::check_model_robot`]). With `allow_extrapolation`, poses
     /// outside the trained ranges are answered (and listed in
     /// [`IkAnswer::extrapolated`]) instead of refused.
     pub fn load(
         model: &Path,
         robot: &Robot,
         allow_extrapolation: bool,
+        allow_robot_mismatch: bool,
     ) -> Result<GuardedNet, IkError> {
-        let net = read_tnet(model).map_err(|e| IkError::Model(e.to_string()))?;
+        let (net, _) = load_for_robot(model, robot, allow_robot_mismatch)
+            .map_err(|e| IkError::Model(e.to_string()))?;
         Self::new(net, robot, allow_extrapolation)
     }
 
@@ -363,8 +367,13 @@ mod tests {
         // the raw output leaves [min, max] and the stage must shift and clip.
         let robot = crate::robot::repo_robot("seed-4t.toml");
         let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-        let ik =
-            GuardedNet::load(&root.join("firmware/vectors/default.tnet"), &robot, true).unwrap();
+        let ik = GuardedNet::load(
+            &root.join("firmware/vectors/default.tnet"),
+            &robot,
+            true,
+            false,
+        )
+        .unwrap();
         let limits = limits_for(&robot, 1.0).unwrap();
         let (min, max) = (robot.min_tensions(), robot.max_tensions());
         let (lo, hi) = (ik.net.input_lo().to_vec(), ik.net.input_hi().to_vec());

@@ -9,6 +9,8 @@
 //! - [`read`]: file → the firmware's fixed-capacity [`McuNet`], through the
 //!   decoder the MCU uses.
 //! - [`mod@infer`]: the firmware's f32 inference, bit-identical to the MCU's.
+//! - [`robot_check`]: the one check of a net's recorded robot against the
+//!   robot a consumer is given (`--allow-robot-mismatch` to override).
 //! - [`guarded`]: [`GuardedNet`], a net with its robot's limits that never
 //!   hands out an impossible tension (pose guards, command stage), and the
 //!   CSV batch of `tendril ik`.
@@ -18,7 +20,12 @@
 pub mod guarded;
 pub mod infer;
 pub mod read;
+pub mod robot_check;
 
 pub use guarded::{read_poses, solve_csv, BatchSummary, GuardedNet, IkAnswer, IkError};
 pub use infer::{infer, infer_batch};
 pub use read::{decode, read_tnet, ReadError};
+pub use robot_check::{
+    check_model_robot, decode_with_provenance, load_for_robot, read_model, ModelError, RobotCheck,
+    RobotMismatch, CLI_OVERRIDE,
+};

@@ -31,7 +31,6 @@ use crate::learn::cascor::job::{self as train_job, SplitSpec, TrainJob, TrainOut
 use crate::learn::cascor::{Cascor, CascorOptions};
 use crate::learn::learner::{Learner, Prefitted, Split};
 use crate::learn::targets::Targets;
-use crate::net::read_tnet;
 use crate::plot::workspace::{draw_workspace, BackboneCurve};
 use crate::robot::{Robot, DEFAULT_ROBOT};
 use crate::statics::{SolverSettings, Statics};
@@ -253,11 +252,13 @@ fn stages(
                 report: staging.path("train_report.json"),
             },
             threads: None,
+            robot: Some(robot.clone()),
         },
         stop_flag(),
     )?;
     let train_seconds = t0.elapsed().as_secs_f64();
-    let net = read_tnet(&model)?;
+    // The net records its robot (`docs/design.md` §5.1): check it like any consumer.
+    let (net, _) = crate::net::load_for_robot(&model, &robot, false)?;
     let test = prepare(&data, split.test_fraction, split.valid_fraction, split.seed).test;
     let metrics = evaluate_net(&statics, &net, &test)?;
     let (hidden_units, test_tip_mean_mm) = (net.shape().hidden, metrics.position_mm.mean);

@@ -10,6 +10,7 @@ use std::path::Path;
 use nalgebra::{Matrix3, Vector3};
 
 pub mod file;
+pub mod fingerprint;
 pub mod groups;
 
 pub use file::{RobotError, BUILTIN_DEFAULT_TOML, DEFAULT_ROBOT};

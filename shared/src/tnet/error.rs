@@ -3,7 +3,7 @@
 
 use core::fmt;
 
-use super::VERSION;
+use super::{VERSION, VERSION_1};
 
 /// Which array of the file a problem was found in.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -49,7 +49,9 @@ pub enum TnetError {
         found: [u8; 4],
     },
     /// A format version this build cannot read.
-    #[error("unsupported .tnet version {found} (this build reads version {VERSION})")]
+    #[error(
+        "unsupported .tnet version {found} (this build reads versions {VERSION_1} and {VERSION})"
+    )]
     UnsupportedVersion {
         /// The version in the file.
         found: u16,
@@ -136,6 +138,10 @@ pub enum TnetError {
         /// The offending dimension.
         value: usize,
     },
+    /// A version-2 provenance block with unknown flags, a name that is not
+    /// UTF-8 or a test fraction outside (0, 1).
+    #[error("weight file's provenance block (robot and split) is malformed")]
+    BadProvenance,
     /// The encoder's output buffer is too small.
     #[error("output buffer holds {available} bytes, the encoded net needs {needed}")]
     BufferTooSmall {

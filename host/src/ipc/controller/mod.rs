@@ -56,6 +56,9 @@ pub struct ControllerConfig {
     pub robot: PathBuf,
     /// The `.tnet` to start with.
     pub model: PathBuf,
+    /// Run a net that records another robot than `robot` (with a warning)
+    /// instead of refusing to start ([`crate::net::check_model_robot`]).
+    pub allow_robot_mismatch: bool,
     /// Service-name prefix.
     pub prefix: String,
     /// Loop rate, Hz.
@@ -139,6 +142,7 @@ impl ControllerConfig {
         ControllerConfig {
             robot,
             model,
+            allow_robot_mismatch: false,
             prefix: super::DEFAULT_PREFIX.into(),
             rate_hz: 1000.0,
             spin_us: 50.0,
@@ -193,6 +197,16 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
         path: cfg.model.clone(),
         source,
     })?;
+    let (_, provenance) = crate::net::decode_with_provenance(&bytes)
+        .map_err(|e| IpcError::Other(format!("{}: {e}", cfg.model.display())))?;
+    crate::net::check_model_robot(
+        &cfg.model,
+        provenance.as_ref(),
+        &robot,
+        cfg.allow_robot_mismatch,
+        crate::net::CLI_OVERRIDE,
+    )
+    .map_err(|e| IpcError::Other(e.to_string()))?;
     // Validate everything before touching shared memory.
     Controller::new(cfg, &robot, &bytes, 0)?;
 

@@ -299,6 +299,7 @@ pub fn run(cfg: &SimConfig) -> Result<SimReport, SimError> {
     let family = crate::plan::Family::of(&statics).map_err(IpcError::from)?;
     cfg.planner.shape.check(&family).map_err(IpcError::from)?;
     install_interrupt_latch();
+    check_model(cfg)?;
     let dir = RunDir::create(&cfg.out)?;
     let result = run_in(cfg, &dir);
     match result {
@@ -311,6 +312,28 @@ pub fn run(cfg: &SimConfig) -> Result<SimReport, SimError> {
             Err(e)
         }
     }
+}
+
+/// Refuse a `--model` file trained for another robot before anything is
+/// created or started (the controller checks again, for `tendril
+/// controller` alone).
+fn check_model(cfg: &SimConfig) -> Result<(), SimError> {
+    let ModelSource::File(path) = &cfg.model else {
+        return Ok(());
+    };
+    let robot =
+        crate::robot::Robot::load(&cfg.robot).map_err(|e| SimError::Config(e.to_string()))?;
+    let (_, provenance) =
+        crate::net::read_model(path).map_err(|e| SimError::Config(e.to_string()))?;
+    crate::net::check_model_robot(
+        path,
+        provenance.as_ref(),
+        &robot,
+        cfg.controller.allow_robot_mismatch,
+        crate::net::CLI_OVERRIDE,
+    )
+    .map_err(|e| SimError::Config(e.to_string()))?;
+    Ok(())
 }
 
 fn model_file(cfg: &SimConfig, dir: &RunDir) -> Result<(PathBuf, Vec<u8>, ModelUsed), SimError> {
@@ -349,6 +372,11 @@ fn model_file(cfg: &SimConfig, dir: &RunDir) -> Result<(PathBuf, Vec<u8>, ModelU
                 crate::statics::Statics::new(&robot, crate::statics::SolverSettings::default());
             let blob = crate::plan::stand_in::quick_net_for(&statics, 2000, 48, 7)
                 .map_err(|e| SimError::Config(e.to_string()))?;
+            // Fitted for this robot: say so, so the controller can check it.
+            let provenance =
+                tendril_shared::Provenance::new(robot.fingerprint(), &robot.name, None);
+            let blob = tendril_shared::stamp_provenance(&blob, &provenance)
+                .map_err(|e| SimError::Config(format!("the quick net: {e}")))?;
             let path = write("quick.tnet", &blob)?;
             let used = ModelUsed {
                 path: cfg.out.join("quick.tnet"),

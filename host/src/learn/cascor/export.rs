@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use tendril_shared::{Activation, NetShape, TnetError, TnetView};
+use tendril_shared::{Activation, NetShape, Provenance, TnetError, TnetView};
 
 use super::net::{GrowingNet, OutputKind};
 
@@ -52,8 +52,20 @@ fn f32s(v: &[f64]) -> Vec<f32> {
     v.iter().map(|&x| x as f32).collect()
 }
 
-/// Encode `net` (normalised in → normalised out) with its `ranges` as `.tnet` bytes.
+/// Encode `net` (normalised in → normalised out) with its `ranges` as
+/// version-1 `.tnet` bytes (no robot recorded).
 pub fn to_bytes(net: &GrowingNet, ranges: &Ranges) -> Result<Vec<u8>, ExportError> {
+    to_bytes_with(net, ranges, None)
+}
+
+/// Encode `net` with its `ranges` and, when given, the robot and split it
+/// was trained for: version 2, which every consumer checks against the
+/// robot it is given (`docs/design.md` §5.1).
+pub fn to_bytes_with(
+    net: &GrowingNet,
+    ranges: &Ranges,
+    provenance: Option<&Provenance>,
+) -> Result<Vec<u8>, ExportError> {
     if ranges.input_lo.len() != net.n_inputs
         || ranges.input_hi.len() != net.n_inputs
         || ranges.output_lo.len() != net.n_outputs
@@ -103,15 +115,26 @@ pub fn to_bytes(net: &GrowingNet, ranges: &Ranges) -> Result<Vec<u8>, ExportErro
         hidden_weights: &hidden,
         output_weights: &outputs,
     };
-    tendril_shared::encode_to_vec(&view).map_err(|cause| ExportError::Format {
+    tendril_shared::encode_to_vec_with(&view, provenance).map_err(|cause| ExportError::Format {
         path: "<memory>".into(),
         cause,
     })
 }
 
-/// Write `net` with `ranges` to `path` atomically.
+/// Write `net` with `ranges` to `path` atomically (version 1).
 pub fn write_tnet(path: &Path, net: &GrowingNet, ranges: &Ranges) -> Result<(), ExportError> {
-    let bytes = to_bytes(net, ranges).map_err(|e| match e {
+    write_tnet_with(path, net, ranges, None)
+}
+
+/// Write `net` with `ranges` and `provenance` ([`to_bytes_with`]) to
+/// `path` atomically.
+pub fn write_tnet_with(
+    path: &Path,
+    net: &GrowingNet,
+    ranges: &Ranges,
+    provenance: Option<&Provenance>,
+) -> Result<(), ExportError> {
+    let bytes = to_bytes_with(net, ranges, provenance).map_err(|e| match e {
         ExportError::Format { cause, .. } => ExportError::Format {
             path: path.display().to_string(),
             cause,
@@ -174,6 +197,20 @@ mod tests {
                 y32[o]
             );
         }
+    }
+
+    #[test]
+    fn the_robot_and_split_go_into_the_file() {
+        let (net, ranges) = small_net();
+        let split = tendril_shared::SplitRecord {
+            seed: 7,
+            test_fraction: 0.05,
+        };
+        let p = Provenance::new([3; 32], "two-tendon", Some(split));
+        let bytes = to_bytes_with(&net, &ranges, Some(&p)).unwrap();
+        let (dec, read) = crate::net::decode_with_provenance(&bytes).unwrap();
+        assert_eq!(read, Some(p));
+        assert_eq!(*dec, *decode(&to_bytes(&net, &ranges).unwrap()).unwrap());
     }
 
     #[test]

@@ -13,7 +13,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use serde::Serialize;
 use tendril_shared::MAX_HIDDEN;
 
-use super::export::{write_tnet, ExportError, Ranges};
+pub use super::data_robot::{robot_for_data, DataRobot};
+use super::export::{write_tnet_with, ExportError, Ranges};
 use super::{train_with_stop, CascorOptions, GrowingNet, TrainReport};
 use crate::dataset::split::{SPLIT_SEED, TEST_FRACTION, VALID_FRACTION};
 use crate::dataset::{prepare, Dataset};
@@ -117,6 +118,10 @@ pub struct TrainJob<'a> {
     pub outputs: TrainOutputs,
     /// Worker threads (`None`: rayon's default, all cores).
     pub threads: Option<usize>,
+    /// The robot the net is for: its fingerprint and name, and the split,
+    /// go into the `.tnet` (version 2, `docs/design.md` §5.1) so that every
+    /// consumer can check the robot it is given. `None` writes version 1.
+    pub robot: Option<crate::robot::Robot>,
 }
 
 /// Rows in each split.
@@ -155,8 +160,10 @@ pub enum TrainError {
     #[error(transparent)]
     Paths(#[from] PathCollision),
     /// Training failed or was interrupted.
+    // The cause is part of the message and deliberately not a `source`
+    // (hence no `#[from]`): `{:#}` would print it twice (issue 31).
     #[error("training: {0}")]
-    Learn(#[from] LearnError),
+    Learn(LearnError),
     /// The worker pool could not be built.
     #[error("worker threads: {0}")]
     Threads(String),
@@ -173,58 +180,17 @@ pub enum TrainError {
     },
 }
 
+impl From<LearnError> for TrainError {
+    fn from(e: LearnError) -> Self {
+        TrainError::Learn(e)
+    }
+}
+
 impl TrainError {
     /// Whether the run ended because a stop was requested (Ctrl-C).
     pub fn is_interrupted(&self) -> bool {
         matches!(self, TrainError::Learn(LearnError::Interrupted))
     }
-}
-
-/// The robot a training run on `data` (read from the file `data_file`) is
-/// for, and the targets it implies.
-#[derive(Clone, Debug)]
-pub struct DataRobot {
-    /// The robot.
-    pub robot: crate::robot::Robot,
-    /// Its file: `--robot` when given, else the robot file the dataset's
-    /// sidecar records (if that file is still there), else the default robot.
-    pub path: PathBuf,
-    /// [`Targets::for_dataset`] of the robot and the dataset's sidecar.
-    pub targets: Targets,
-}
-
-/// See [`DataRobot`]; the robot's tendon count must be the dataset's.
-pub fn robot_for_data(
-    data: &Dataset,
-    data_file: &Path,
-    given: Option<&Path>,
-) -> Result<DataRobot, TrainError> {
-    let sidecar = crate::dataset::Sidecar::read(&crate::dataset::Sidecar::path_for(data_file)).ok();
-    let recorded = sidecar
-        .as_ref()
-        .map(|s| PathBuf::from(&s.robot_file))
-        .filter(|p| p.is_file());
-    let path = given
-        .map(Path::to_path_buf)
-        .or(recorded)
-        .unwrap_or_else(|| PathBuf::from(crate::robot::DEFAULT_ROBOT));
-    let robot = crate::robot::Robot::load(&path)
-        .map_err(|e| TrainError::BadInput(format!("robot for the targets: {e}")))?;
-    if robot.n_tendons() != data.n_tendons {
-        return Err(TrainError::BadInput(format!(
-            "robot {} ({}) has {} tendons but the dataset has {}: give its robot with --robot",
-            robot.name,
-            path.display(),
-            robot.n_tendons(),
-            data.n_tendons
-        )));
-    }
-    let targets = Targets::for_dataset(&robot, sidecar.as_ref());
-    Ok(DataRobot {
-        robot,
-        path,
-        targets,
-    })
 }
 
 /// The report JSON written beside the weight file.
@@ -285,6 +251,7 @@ fn check(job: &TrainJob<'_>) -> Result<(), TrainError> {
             if job.data.len() == 1 { "" } else { "s" }
         )));
     }
+    check_tensions_vary(job.data)?;
     if job.options.max_hidden > MAX_HIDDEN {
         return Err(TrainError::BadInput(format!(
             "--max-hidden {} exceeds the decoder capacity {MAX_HIDDEN}",
@@ -292,6 +259,33 @@ fn check(job: &TrainJob<'_>) -> Result<(), TrainError> {
         )));
     }
     Ok(())
+}
+
+/// Refuse a dataset whose tension column(s) hold one value in every row
+/// (all zero, say): the net would learn a constant for that tendon, not
+/// inverse kinematics, and the file's output range would be empty.
+fn check_tensions_vary(data: &crate::dataset::Dataset) -> Result<(), TrainError> {
+    let constant: Vec<String> = (0..data.n_tendons)
+        .filter(|&c| {
+            let col = data.tensions.column(c);
+            col.iter().all(|&v| v == col[0])
+        })
+        .map(|c| match data.tensions.column(c).iter().next() {
+            Some(v) => format!("t{c} (always {v} N)"),
+            None => format!("t{c}"),
+        })
+        .collect();
+    if constant.is_empty() {
+        return Ok(());
+    }
+    Err(TrainError::BadInput(format!(
+        "tension column{} {} of the dataset never change{}: a net cannot learn inverse \
+         kinematics from {}; generate data in which every tendon pulls",
+        if constant.len() == 1 { "" } else { "s" },
+        constant.join(", "),
+        if constant.len() == 1 { "s" } else { "" },
+        if constant.len() == 1 { "it" } else { "them" }
+    )))
 }
 
 fn train_and_write(job: &TrainJob<'_>, stop: &AtomicBool) -> Result<TrainResult, TrainError> {
@@ -359,7 +353,14 @@ fn train_and_write(job: &TrainJob<'_>, stop: &AtomicBool) -> Result<TrainResult,
         path: o.curve.clone(),
         why: e.to_string(),
     })?;
-    write_tnet(&o.model, &net, &ranges)?;
+    let provenance = job.robot.as_ref().map(|r| {
+        let split = tendril_shared::SplitRecord {
+            seed: s.seed,
+            test_fraction: s.test_fraction,
+        };
+        tendril_shared::Provenance::new(r.fingerprint(), &r.name, Some(split))
+    });
+    write_tnet_with(&o.model, &net, &ranges, provenance.as_ref())?;
     write_log(&o.log, &report)?;
     let file = ReportFile {
         data_rows: data.len(),
@@ -452,6 +453,7 @@ mod tests {
             split: SplitSpec::default(),
             outputs: TrainOutputs::beside(&dir.join("m.tnet")),
             threads: Some(1),
+            robot: None,
         }
     }
 

@@ -14,6 +14,7 @@
 //! - [`export`]: the `.tnet` weight file (`docs/design.md` §5.1).
 
 pub mod candidates;
+mod data_robot;
 pub mod export;
 mod growth;
 pub mod job;
