@@ -11,10 +11,12 @@
 //! step and the 6×6 solvers are [`crate::numerics`]'s.
 
 pub mod batch;
+pub mod continuation;
 pub mod integrate;
 pub mod pose;
 pub mod rod;
 pub mod shoot;
+pub mod stability;
 pub mod tangent;
 
 pub use rod::SingularSystem;
@@ -24,6 +26,7 @@ pub use shoot::{Solution, SolveError, SolverSettings, Statics, WarmStart, MAX_ST
 mod tests;
 #[cfg(test)]
 mod tests_general;
+
 
 /// [`crate::robot::repo_robot`]'s statics with the default solver settings:
 /// the repository's robot files for tests, benches and examples.
