@@ -13,7 +13,7 @@ use crate::dataset::POSE_COLUMNS;
 use crate::fsutil::write_atomic_with;
 use crate::robot::count;
 use crate::statics::batch::{solve_all, Load};
-use crate::statics::{SolverSettings, Statics, MAX_STEPS};
+use crate::statics::{SolveError, SolverSettings, Statics, MAX_STEPS};
 
 /// Optional batch columns of the tip wrench (base frame; N, N m).
 const LOAD_COLUMNS: [&str; 6] = ["fx", "fy", "fz", "mx", "my", "mz"];
@@ -116,7 +116,7 @@ fn parse_vector(text: Option<&str>, what: &str) -> anyhow::Result<Vector3<f64>> 
 }
 
 fn single(statics: &Statics, load: &Load, args: &FkArgs) -> anyhow::Result<()> {
-    let sol = statics.solve_loaded(&load.tensions, load.tip_force, load.tip_moment, None)?;
+    let sol = statics.equilibrium(&load.tensions, load.tip_force, load.tip_moment, None)?;
     let shape = args.shape.map(|n| statics.shape(&sol, n as usize));
     let p = sol.position;
     if args.json {
@@ -249,7 +249,7 @@ fn batch(statics: &Statics, input: &Path, output: &Path) -> anyhow::Result<()> {
             head.len() - 1
         }));
     }
-    let mut failed = 0;
+    let (mut failed, mut unstable) = (0, 0);
     write_atomic_with(output, |w| {
         let mut out = csv::Writer::from_writer(w);
         out.write_record(&head)?;
@@ -263,8 +263,12 @@ fn batch(statics: &Statics, input: &Path, output: &Path) -> anyhow::Result<()> {
                     .map(|&x| format_value(x))
                     .chain(["true".to_string()])
                     .collect(),
-                Err(_) => {
+                Err(e) => {
                     failed += 1;
+                    unstable += usize::from(matches!(
+                        e,
+                        SolveError::Unstable { .. } | SolveError::NonUnique { .. }
+                    ));
                     std::iter::repeat_n(String::new(), 7)
                         .chain(["false".to_string()])
                         .collect()
@@ -281,7 +285,8 @@ fn batch(statics: &Statics, input: &Path, output: &Path) -> anyhow::Result<()> {
     .with_context(|| format!("{}: cannot write", output.display()))?;
     if failed > 0 {
         bail!(
-            "{failed} of {} did not converge (converged=false in {})",
+            "{failed} of {} did not converge or have no stable equilibrium ({unstable} \
+             unstable or not unique; converged=false in {})",
             count(results.len(), "row"),
             output.display()
         );

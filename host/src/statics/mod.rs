@@ -26,6 +26,8 @@ pub use shoot::{Solution, SolveError, SolverSettings, Statics, WarmStart, MAX_ST
 mod tests;
 #[cfg(test)]
 mod tests_general;
+#[cfg(test)]
+mod tests_stability;
 
 
 /// [`crate::robot::repo_robot`]'s statics with the default solver settings:

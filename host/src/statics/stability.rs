@@ -87,7 +87,7 @@ pub fn stability_pass(
     let tip = yt.0.p;
     let mut first_moment = Vector3::zeros();
     let mut tail = 0.0;
-    let mut dets = vec![0.0; nodes.len()];
+    let mut signs = vec![(0.0, 0); nodes.len()];
     for k in (0..nodes.len()).rev() {
         if k + 1 < nodes.len() {
             let h = nodes[k + 1].s - nodes[k].s;
@@ -105,17 +105,30 @@ pub fn stability_pass(
                 m[(3 + i, j)] -= correction[(i, j)];
             }
         }
-        dets[k] = m.determinant();
+        // In the section's own frame (same determinant): a section turned
+        // past a right angle would otherwise give the matrix eigenvalues
+        // with negative real parts that mean nothing.
+        for j in 0..6 {
+            let top = node.rot.tr_mul(&m.fixed_view::<3, 1>(0, j).into_owned());
+            let bottom = node.rot.tr_mul(&m.fixed_view::<3, 1>(3, j).into_owned());
+            m.fixed_view_mut::<3, 1>(0, j).copy_from(&top);
+            m.fixed_view_mut::<3, 1>(3, j).copy_from(&bottom);
+        }
+        signs[k] = (m.determinant(), negative_real_eigenvalues(&m));
     }
-    let reference = dets[0].signum();
+    let (d_base, count_base) = signs[0];
+    let reference = d_base.signum();
     let mut conjugate = None;
     for k in 1..nodes.len() {
-        let d = reference * dets[k];
+        let (d, count) = signs[k];
+        let d = reference * d;
         let positive = d > 0.0;
-        if !positive {
-            // Where the linear interpolant of D crosses zero.
-            let d0 = reference * dets[k - 1];
-            let frac = if d0 > 0.0 && d.is_finite() {
+        if !positive || count != count_base {
+            // Where the linear interpolant of D crosses zero; a double root
+            // (two modes at once, as a rod of round section has) leaves D's
+            // sign alone and is seen by the eigenvalues at the node.
+            let d0 = reference * signs[k - 1].0;
+            let frac = if !positive && d0 > 0.0 && d.is_finite() {
                 d0 / (d0 - d)
             } else {
                 1.0
@@ -130,6 +143,16 @@ pub fn stability_pass(
     })
 }
 
+/// How many eigenvalues of `m` are real (to roundoff) and negative: where
+/// two of them cross zero together D keeps its sign, but this count changes.
+fn negative_real_eigenvalues(m: &Matrix6<f64>) -> usize {
+    let tiny = 1e-6 * m.norm();
+    m.complex_eigenvalues()
+        .iter()
+        .filter(|z| z.re < 0.0 && z.im.abs() <= tiny)
+        .count()
+}
+
 /// G = ρ Fᵀ − (F·ρ) I: the change of the moment about the section of a dead
 /// force `f` on a rigid arm `rho` when the arm turns by δΘ, (δΘ × ρ) × F.
 fn load_stiffness(rho: &Vector3<f64>, f: &Vector3<f64>) -> Matrix3<f64> {
@@ -142,6 +165,8 @@ struct Node {
     s: f64,
     /// Position, base frame, m.
     p: Vector3<f64>,
+    /// Orientation R(s).
+    rot: Matrix3<f64>,
     /// ∂W/∂x ([`spatial_wrench_jacobian`]).
     wrench: Matrix6<f64>,
     /// ∂Θ/∂x, the spatial rotation of the section: δΘ̂ = δR Rᵀ.
@@ -161,6 +186,7 @@ impl Node {
         Node {
             s,
             p: y.p,
+            rot: y.rot,
             wrench: spatial_wrench_jacobian(rod, s, y, t, running),
             rotation,
         }
