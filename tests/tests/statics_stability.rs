@@ -91,20 +91,31 @@ fn a_perfect_column_above_the_euler_load_is_refused_as_not_unique() {
     // buckles either way. The old solve printed the straight column, exit 0.
     let out = fk_2seg(&format!("0,0,{}", -1.3 * euler_load()));
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "accepted: {}", String::from_utf8_lossy(&out.stdout));
-    assert!(out.stdout.is_empty(), "printed an answer: {}", String::from_utf8_lossy(&out.stdout));
+    assert!(
+        !out.status.success(),
+        "accepted: {}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    assert!(
+        out.stdout.is_empty(),
+        "printed an answer: {}",
+        String::from_utf8_lossy(&out.stdout)
+    );
     assert!(stderr.contains("not unique"), "{stderr}");
     // Where: at P_cr / P of the load, to the step halving's resolution.
     let percent = 100.0 / 1.3;
-    assert!(stderr.contains(&format!("{percent:.1} %")) || {
-        let got: f64 = stderr
-            .split(" at ")
-            .last()
-            .and_then(|t| t.split_whitespace().next())
-            .and_then(|t| t.parse().ok())
-            .unwrap_or(f64::NAN);
-        (got - percent).abs() < 0.5
-    }, "{stderr}");
+    assert!(
+        stderr.contains(&format!("{percent:.1} %")) || {
+            let got: f64 = stderr
+                .split(" at ")
+                .last()
+                .and_then(|t| t.split_whitespace().next())
+                .and_then(|t| t.parse().ok())
+                .unwrap_or(f64::NAN);
+            (got - percent).abs() < 0.5
+        },
+        "{stderr}"
+    );
 }
 
 #[test]
@@ -136,9 +147,16 @@ fn a_buckled_column_follows_its_imperfection_and_matches_the_elastica() {
     for sign in [1.0, -1.0] {
         let force = format!("0,{},{}", sign * 1e-3 * p_axial, -p_axial);
         let p = position(&json(&fk_2seg(&force)));
-        assert!(sign * p[1] > 0.0, "{force}: tip {p:?} did not follow the imperfection");
+        assert!(
+            sign * p[1] > 0.0,
+            "{force}: tip {p:?} did not follow the imperfection"
+        );
         let rel = (p[1].abs() - elastica).abs() / elastica;
-        assert!(rel < 0.03, "{force}: lateral {} vs elastica {elastica} (rel {rel})", p[1]);
+        assert!(
+            rel < 0.03,
+            "{force}: lateral {} vs elastica {elastica} (rel {rel})",
+            p[1]
+        );
     }
 }
 
@@ -167,14 +185,33 @@ fn a_batch_marks_the_row_without_a_stable_equilibrium_and_exits_non_zero() {
         output.to_str().unwrap(),
     ]);
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "exit 0 with an unstable row: {stderr}");
+    assert!(
+        !out.status.success(),
+        "exit 0 with an unstable row: {stderr}"
+    );
     assert!(stderr.contains("1 of 2 rows"), "{stderr}");
     assert!(stderr.contains("stable"), "{stderr}");
     let text = std::fs::read_to_string(Path::new(&output)).unwrap();
-    let flags: Vec<&str> = text.lines().skip(1).map(|l| l.rsplit(',').next().unwrap()).collect();
+    let flags: Vec<&str> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.rsplit(',').next().unwrap())
+        .collect();
     assert_eq!(flags, ["true", "false"], "{text}");
     // The stable row has its pose (straight: px = 0), the other none.
-    let px: Vec<&str> = text.lines().skip(1).map(|l| l.split(',').nth(7).unwrap()).collect();
-    assert_eq!(px[0].parse::<f64>().map(f64::abs).ok().filter(|x| *x < 1e-9), Some(0.0), "{text}");
+    let px: Vec<&str> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(7).unwrap())
+        .collect();
+    assert_eq!(
+        px[0]
+            .parse::<f64>()
+            .map(f64::abs)
+            .ok()
+            .filter(|x| *x < 1e-9),
+        Some(0.0),
+        "{text}"
+    );
     assert_eq!(px[1], "", "{text}");
 }

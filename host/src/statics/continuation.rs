@@ -21,8 +21,7 @@
 use nalgebra::{Vector3, Vector6};
 
 use super::shoot::{
-    base_state, Shooting, Solution, SolveError, Statics, WarmStart,
-    SENSITIVITY_PASS_COST,
+    base_state, Shooting, Solution, SolveError, Statics, WarmStart, SENSITIVITY_PASS_COST,
 };
 use super::stability::{stability_pass, StabilityPass};
 

@@ -238,7 +238,11 @@ impl Statics {
                 }
             }
         };
-        Ok(self.solution((x, tip, jac, res, iterations, integrations), guess, tensions))
+        Ok(self.solution(
+            (x, tip, jac, res, iterations, integrations),
+            guess,
+            tensions,
+        ))
     }
 
     /// The rod of this robot under `tensions` (checked by the caller).
@@ -260,11 +264,7 @@ impl Statics {
             residual,
             iterations,
             integrations,
-            warm: WarmStart {
-                x,
-                jacobian,
-                guess,
-            },
+            warm: WarmStart { x, jacobian, guess },
             tensions: tensions.to_vec(),
         }
     }

@@ -64,10 +64,7 @@ pub fn stability_pass(
     f_ext: &Vector3<f64>,
     m_ext: &Vector3<f64>,
 ) -> Result<StabilityPass, SingularSystem> {
-    let mut yt = (
-        base,
-        ShootingSensitivity::at_base(&rod.kse, 0, true, false),
-    );
+    let mut yt = (base, ShootingSensitivity::at_base(&rod.kse, 0, true, false));
     let mut nodes = Vec::with_capacity(steps + 2 * rod.knots().len() + 1);
     nodes.push(Node::at(rod, 0.0, &yt.0, &yt.1, rod.running_to(0.0)));
     for piece in pieces(rod, steps) {
@@ -179,9 +176,11 @@ impl Node {
         for j in 0..6 {
             let w = t.rot[j] * y.rot.transpose();
             let skew = (w - w.transpose()) * 0.5;
-            rotation
-                .column_mut(j)
-                .copy_from(&Vector3::new(skew[(2, 1)], skew[(0, 2)], skew[(1, 0)]));
+            rotation.column_mut(j).copy_from(&Vector3::new(
+                skew[(2, 1)],
+                skew[(0, 2)],
+                skew[(1, 0)],
+            ));
         }
         Node {
             s,

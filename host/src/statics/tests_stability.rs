@@ -37,7 +37,11 @@ fn a_straight_column_is_stable_below_the_euler_load_and_unstable_above() {
         for ratio in [0.5, 0.97] {
             let f = axial(ratio * pcr);
             let sol = statics.solve_loaded(&tau, f, zero(), None).unwrap();
-            assert_eq!(statics.check_stable(&sol, f, zero()), Ok(()), "{name} at {ratio} P_cr");
+            assert_eq!(
+                statics.check_stable(&sol, f, zero()),
+                Ok(()),
+                "{name} at {ratio} P_cr"
+            );
         }
         for ratio in [1.03, 1.5, 3.0] {
             let f = axial(ratio * pcr);
@@ -45,7 +49,8 @@ fn a_straight_column_is_stable_below_the_euler_load_and_unstable_above() {
             // equilibrium, and would print it.
             let sol = statics.solve_loaded(&tau, f, zero(), None).unwrap();
             assert!(sol.position.xy().norm() < 1e-12, "{name}: not straight");
-            let Err(SolveError::Unstable { conjugate_at_m }) = statics.check_stable(&sol, f, zero())
+            let Err(SolveError::Unstable { conjugate_at_m }) =
+                statics.check_stable(&sol, f, zero())
             else {
                 panic!("{name}: straight column at {ratio} P_cr not reported unstable");
             };
@@ -119,7 +124,11 @@ fn a_lateral_tip_force_bends_the_rod_toward_it_from_seven_to_ten_newtons() {
         let load = Vector3::new(f, 0.0, 0.0);
         let sol = statics.equilibrium(&[0.0; 4], load, zero(), None).unwrap();
         assert!(sol.position.x > last_x, "{f} N: x {}", sol.position.x);
-        assert!(tip_angle_deg(&sol) < 90.0, "{f} N: {}°", tip_angle_deg(&sol));
+        assert!(
+            tip_angle_deg(&sol) < 90.0,
+            "{f} N: {}°",
+            tip_angle_deg(&sol)
+        );
         last_x = sol.position.x;
     }
 }
@@ -150,7 +159,11 @@ fn small_tip_force_through_continuation_matches_cantilever_theory() {
         .unwrap();
     let beam = f * robot.length.powi(3) / (3.0 * robot.kbt().x);
     let rel = (sol.position.y - beam).abs() / beam;
-    assert!(rel < 1e-3, "deflection {} vs {beam} (rel {rel:e})", sol.position.y);
+    assert!(
+        rel < 1e-3,
+        "deflection {} vs {beam} (rel {rel:e})",
+        sol.position.y
+    );
 }
 
 #[test]
