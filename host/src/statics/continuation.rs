@@ -222,9 +222,8 @@ impl Statics {
             }
             step = (step * 2.0).min(FIRST_STEP);
         }
-        Err(SolveError::NotConverged {
-            residual: f64::NAN,
-            iterations,
+        Err(SolveError::Stalled {
+            load_fraction: lambda,
         })
     }
 }

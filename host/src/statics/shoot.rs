@@ -141,6 +141,19 @@ pub enum SolveError {
         /// Fraction of the asked tip load where it happened, 0..1.
         load_fraction: f64,
     },
+    /// Continuation from rest spent its budget of load steps
+    /// (`continuation`) before reaching the full tip load: the load is too
+    /// large for the grid to follow (more RK4 steps may), not a proven fold.
+    #[error(
+        "statics did not converge: loading the rod from rest, the solve could not follow its \
+         equilibrium past {percent:.1} % of the tip load (a load this large may need more \
+         --steps)",
+        percent = load_fraction * 100.0
+    )]
+    Stalled {
+        /// Fraction of the tip load reached, 0..1.
+        load_fraction: f64,
+    },
     /// The strain-rate system of the rod could not be solved at the start
     /// of the solve (`docs/design.md` §2: it is positive definite for any
     /// physical robot, so this means non-physical numbers).

@@ -184,3 +184,18 @@ fn tendon_poses_are_stable_and_unchanged_by_the_test() {
         }
     }
 }
+
+#[test]
+fn a_load_the_grid_cannot_follow_is_reported_as_stalled_with_how_far_it_got() {
+    // 1000 N sideways on seed-4t (F L²/EI ≈ 1500): the continuation spends
+    // its steps and says how far it got, with no NaN in the message.
+    let statics = repo_statics("seed-4t.toml");
+    let result = statics.equilibrium(&[0.0; 4], Vector3::new(1000.0, 0.0, 0.0), zero(), None);
+    match result {
+        Ok(sol) => assert!(tip_angle_deg(&sol) < 90.0 && sol.position.x > 0.0),
+        Err(SolveError::Stalled { load_fraction }) => {
+            assert!((0.0..1.0).contains(&load_fraction))
+        }
+        Err(e) => panic!("{e}"),
+    }
+}
