@@ -84,7 +84,8 @@ pub fn stability_pass(
     let tip = yt.0.p;
     let mut first_moment = Vector3::zeros();
     let mut tail = 0.0;
-    let mut signs = vec![(0.0, 0); nodes.len()];
+    let mut dets = vec![0.0; nodes.len()];
+    let mut matrices = vec![Matrix6::zeros(); nodes.len()];
     for k in (0..nodes.len()).rev() {
         if k + 1 < nodes.len() {
             let h = nodes[k + 1].s - nodes[k].s;
@@ -111,20 +112,31 @@ pub fn stability_pass(
             m.fixed_view_mut::<3, 1>(0, j).copy_from(&top);
             m.fixed_view_mut::<3, 1>(3, j).copy_from(&bottom);
         }
-        signs[k] = (m.determinant(), negative_real_eigenvalues(&m));
+        dets[k] = m.determinant();
+        matrices[k] = m;
     }
-    let (d_base, count_base) = signs[0];
-    let reference = d_base.signum();
+    // D's sign at every node; the eigenvalue count (for double roots, where
+    // D only touches zero) where |D| has a local minimum, the node after it,
+    // and the tip: a double crossing leaves the count changed from there on.
+    let reference = dets[0].signum();
+    let count_base = negative_real_eigenvalues(&matrices[0]);
+    let last = nodes.len() - 1;
+    let dip = |k: usize| {
+        k == last
+            || (k >= 1 && dets[k].abs() < dets[k - 1].abs() && dets[k].abs() <= dets[k + 1].abs())
+            || (k >= 2
+                && dets[k - 1].abs() < dets[k - 2].abs()
+                && dets[k - 1].abs() <= dets[k].abs())
+    };
     let mut conjugate = None;
     for k in 1..nodes.len() {
-        let (d, count) = signs[k];
-        let d = reference * d;
+        let d = reference * dets[k];
         let positive = d > 0.0;
-        if !positive || count != count_base {
+        if !positive || (dip(k) && negative_real_eigenvalues(&matrices[k]) != count_base) {
             // Where the linear interpolant of D crosses zero; a double root
             // (two modes at once, as a rod of round section has) leaves D's
-            // sign alone and is seen by the eigenvalues at the node.
-            let d0 = reference * signs[k - 1].0;
+            // sign alone and is seen by the eigenvalues.
+            let d0 = reference * dets[k - 1];
             let frac = if !positive && d0 > 0.0 && d.is_finite() {
                 d0 / (d0 - d)
             } else {

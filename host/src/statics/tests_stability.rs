@@ -179,6 +179,11 @@ fn tendon_poses_are_stable_and_unchanged_by_the_test() {
                 .map(|i| (code / 3usize.pow(i as u32) % 3) as f64 * 0.5 * max[i])
                 .collect();
             let plain = statics.solve(&tau, None).unwrap();
+            assert_eq!(
+                statics.check_stable(&plain, zero(), zero()),
+                Ok(()),
+                "{name} {tau:?}"
+            );
             let checked = statics.equilibrium(&tau, zero(), zero(), None).unwrap();
             assert_eq!(plain.position, checked.position, "{name} {tau:?}");
         }
@@ -197,5 +202,26 @@ fn a_load_the_grid_cannot_follow_is_reported_as_stalled_with_how_far_it_got() {
             assert!((0.0..1.0).contains(&load_fraction))
         }
         Err(e) => panic!("{e}"),
+    }
+}
+
+#[test]
+fn a_column_standing_under_its_own_weight_buckles_past_greenhills_load() {
+    // A clamped–free column under its own weight q per length buckles at
+    // q L³ = 7.837 E I (Greenhill). Gravity along −z makes the weight of
+    // the rod standing on its base compress it.
+    let base = load("seed-4t.toml");
+    let unit = base.density * base.area();
+    let greenhill = 7.837 * base.kbt().x / base.length.powi(3) / unit;
+    for (ratio, stable) in [(0.9, true), (1.1, false)] {
+        let mut robot = base.clone();
+        robot.gravity = Vector3::new(0.0, 0.0, -ratio * greenhill);
+        let statics = Statics::new(&robot, SolverSettings::default());
+        let result = statics.equilibrium(&[0.0; 4], zero(), zero(), None);
+        match (stable, &result) {
+            (true, Ok(sol)) => assert!(sol.position.xy().norm() < 1e-12),
+            (false, Err(SolveError::Unstable { .. })) => {}
+            _ => panic!("{ratio} × Greenhill's load: {result:?}"),
+        }
     }
 }
