@@ -390,7 +390,7 @@ impl Robot {
             .remove(0);
         let shape = detached(py, |_| {
             statics
-                .solve_loaded(&load.tensions, load.tip_force, load.tip_moment, None)
+                .equilibrium(&load.tensions, load.tip_force, load.tip_moment, None)
                 .map(|sol| statics.shape(&sol, points))
         })?
         .map_err(|e| runtime_error(&e))?;

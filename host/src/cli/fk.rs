@@ -17,7 +17,7 @@ use crate::dataset::io::format_value;
 use crate::fsutil::write_atomic_with;
 use crate::robot::count;
 use crate::statics::batch::{solve_all, Load, RowResult};
-use crate::statics::{SolverSettings, Statics, MAX_STEPS};
+use crate::statics::{SolveError, SolverSettings, Statics, MAX_STEPS};
 
 /// Optional batch columns of the tip wrench (base frame; N, N m).
 const LOAD_COLUMNS: [&str; 6] = ["fx", "fy", "fz", "mx", "my", "mz"];
@@ -131,7 +131,7 @@ fn parse_vector(text: Option<&str>, what: &str) -> anyhow::Result<Vector3<f64>> 
 }
 
 fn single(statics: &Statics, load: &Load, args: &FkArgs) -> anyhow::Result<()> {
-    let sol = statics.solve_loaded(&load.tensions, load.tip_force, load.tip_moment, None)?;
+    let sol = statics.equilibrium(&load.tensions, load.tip_force, load.tip_moment, None)?;
     let shape = args.shape.map(|n| statics.shape(&sol, n as usize));
     let p = sol.position;
     if args.json {
@@ -338,7 +338,7 @@ fn batch(statics: &Statics, input: &Path, output: &Path) -> anyhow::Result<()> {
     let cols = Columns::of(&header, n, input)?;
 
     let bar = solve_bar(0, true);
-    let (mut rows, mut failed) = (0usize, 0usize);
+    let (mut rows, mut failed, mut unstable) = (0usize, 0usize, 0usize);
     // The first error met inside the streaming writer (it can only return io::Error).
     let mut fault: Option<anyhow::Error> = None;
     let written = write_atomic_with(output, |w| {
@@ -377,6 +377,10 @@ fn batch(statics: &Statics, input: &Path, output: &Path) -> anyhow::Result<()> {
                 row.resize(cols.head.len(), String::new());
                 let (values, bad) = result_values(result);
                 failed += usize::from(bad);
+                unstable += usize::from(matches!(
+                    result,
+                    Err(SolveError::Unstable { .. } | SolveError::NonUnique { .. })
+                ));
                 for (&c, v) in cols.place.iter().zip(values) {
                     row[c] = v;
                 }
@@ -394,7 +398,8 @@ fn batch(statics: &Statics, input: &Path, output: &Path) -> anyhow::Result<()> {
     written.with_context(|| format!("{}: cannot write", output.display()))?;
     if failed > 0 {
         bail!(
-            "{failed} of {} did not converge (converged=false in {})",
+            "{failed} of {} did not converge or have no stable equilibrium ({unstable} \
+             unstable or not unique; converged=false in {})",
             count(rows, "row"),
             output.display()
         );

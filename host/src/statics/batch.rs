@@ -137,8 +137,10 @@ pub fn solve_all(
                     .as_ref()
                     .filter(|(p, _)| load.distance(p, &max) <= WARM_RADIUS)
                     .map(|(_, w)| w);
+                // The stable equilibrium reached from rest, or why there is
+                // none (`continuation`).
                 let result =
-                    statics.solve_loaded(&load.tensions, load.tip_force, load.tip_moment, warm);
+                    statics.equilibrium(&load.tensions, load.tip_force, load.tip_moment, warm);
                 if let Ok(sol) = &result {
                     previous = Some((load, sol.warm.clone()));
                 }

@@ -7,14 +7,18 @@
 //! `rod` holds the constitutive law, strain-rate system and anchor loads,
 //! `integrate` the piecewise RK4 pass from base to tip, `tangent` the one
 //! sensitivity propagation, `shoot` the boundary-value solve, `pose` the
-//! quaternion conventions, `batch` many solves in a canonical order. The RK4
+//! quaternion conventions, `batch` many solves in a canonical order,
+//! `stability` the conjugate-point test of a solution and `continuation` the
+//! equilibrium a rod loaded from rest reaches (`docs/design.md` §2.2). The RK4
 //! step and the 6×6 solvers are [`crate::numerics`]'s.
 
 pub mod batch;
+pub mod continuation;
 pub mod integrate;
 pub mod pose;
 pub mod rod;
 pub mod shoot;
+pub mod stability;
 pub mod tangent;
 
 pub use rod::SingularSystem;
@@ -24,6 +28,8 @@ pub use shoot::{Solution, SolveError, SolverSettings, Statics, WarmStart, MAX_ST
 mod tests;
 #[cfg(test)]
 mod tests_general;
+#[cfg(test)]
+mod tests_stability;
 
 /// [`crate::robot::repo_robot`]'s statics with the default solver settings:
 /// the repository's robot files for tests, benches and examples.

@@ -90,6 +90,11 @@ impl Solution {
         [p.x, p.y, p.z, q[0], q[1], q[2], q[3]]
     }
 
+    /// The tendon tensions solved for, N.
+    pub fn tensions(&self) -> &[f64] {
+        &self.tensions
+    }
+
     /// Base internal force n(0), N.
     pub fn base_force(&self) -> Vector3<f64> {
         self.warm.x.fixed_rows::<3>(0).into()
@@ -112,6 +117,42 @@ pub enum SolveError {
         residual: f64,
         /// Iterations spent.
         iterations: usize,
+    },
+    /// The equilibrium found is unstable: a conjugate point lies on the rod
+    /// (`stability`), so a real rod would not stay there.
+    #[error(
+        "the equilibrium is unstable (a conjugate point at s = {conjugate_at_m:.4} m of the \
+         backbone): a real rod would buckle or snap away from it, so it is not an answer"
+    )]
+    Unstable {
+        /// Arc length of the first conjugate point, m.
+        conjugate_at_m: f64,
+    },
+    /// Loading the rod from rest to the asked tip load, the equilibrium
+    /// branch turned unstable (a bifurcation) or ended (a fold) on the way:
+    /// which equilibrium the rod reaches is not unique.
+    #[error(
+        "the equilibrium is not unique: loading the rod from rest, its equilibrium turns \
+         unstable or ends (a bifurcation or fold, where the rod would buckle or snap) at \
+         {percent:.1} % of the tip load",
+        percent = load_fraction * 100.0
+    )]
+    NonUnique {
+        /// Fraction of the asked tip load where it happened, 0..1.
+        load_fraction: f64,
+    },
+    /// Continuation from rest spent its budget of load steps
+    /// (`continuation`) before reaching the full tip load: the load is too
+    /// large for the grid to follow (more RK4 steps may), not a proven fold.
+    #[error(
+        "statics did not converge: loading the rod from rest, the solve could not follow its \
+         equilibrium past {percent:.1} % of the tip load (a load this large may need more \
+         --steps)",
+        percent = load_fraction * 100.0
+    )]
+    Stalled {
+        /// Fraction of the tip load reached, 0..1.
+        load_fraction: f64,
     },
     /// The strain-rate system of the rod could not be solved at the start
     /// of the solve (`docs/design.md` §2: it is positive definite for any
@@ -210,21 +251,35 @@ impl Statics {
                 }
             }
         };
+        Ok(self.solution(
+            (x, tip, jac, res, iterations, integrations),
+            guess,
+            tensions,
+        ))
+    }
+
+    /// The rod of this robot under `tensions` (checked by the caller).
+    pub(super) fn rod_for(&self, tensions: &[f64]) -> Rod {
+        let mut rod = self.rod.clone();
+        rod.set_tensions(tensions);
+        rod
+    }
+
+    /// The [`Solution`] of a Newton solve that ended at `ok` for `tensions`
+    /// and the tip load whose analytic guess is `guess`.
+    pub(super) fn solution(&self, ok: NewtonOk, guess: Vector6<f64>, tensions: &[f64]) -> Solution {
+        let (x, tip, jacobian, residual, iterations, integrations) = ok;
         let rotation = orthonormalise(&tip.rot);
-        Ok(Solution {
+        Solution {
             position: tip.p,
             quaternion: quaternion_wxyz(&rotation),
             rotation,
-            residual: res,
+            residual,
             iterations,
             integrations,
-            warm: WarmStart {
-                x,
-                jacobian: jac,
-                guess,
-            },
+            warm: WarmStart { x, jacobian, guess },
             tensions: tensions.to_vec(),
-        })
+        }
     }
 
     /// Backbone points (base frame, m) at `points` ≥ 2 evenly spaced arc
@@ -254,7 +309,7 @@ impl Statics {
     }
 }
 
-fn base_state(rod: &Rod, x: &Vector6<f64>) -> RodState {
+pub(super) fn base_state(rod: &Rod, x: &Vector6<f64>) -> RodState {
     RodState::at_base(
         &Vector3::new(x[0], x[1], x[2]),
         &Vector3::new(x[3], x[4], x[5]),
@@ -264,15 +319,15 @@ fn base_state(rod: &Rod, x: &Vector6<f64>) -> RodState {
 
 /// One shooting problem: the rod with its tensions and tip load.
 #[derive(Clone, Copy)]
-struct Shooting<'a> {
-    rod: &'a Rod,
-    steps: usize,
+pub(super) struct Shooting<'a> {
+    pub(super) rod: &'a Rod,
+    pub(super) steps: usize,
     /// RK4 steps of the pass that gives the Jacobian ([`jacobian_steps`]).
-    jacobian_steps: usize,
-    f_ext: Vector3<f64>,
-    m_ext: Vector3<f64>,
+    pub(super) jacobian_steps: usize,
+    pub(super) f_ext: Vector3<f64>,
+    pub(super) m_ext: Vector3<f64>,
     /// Whether the residual depends on the rotation (gravity or a tip load).
-    track_rotation: bool,
+    pub(super) track_rotation: bool,
 }
 
 /// What a rod pass with sensitivities costs in plain passes of the same
@@ -310,12 +365,12 @@ const CHORD_CONTRACTION: f64 = 0.01;
 const STALE_CONTRACTION: f64 = 0.05;
 
 /// (unknowns, tip state there, Jacobian, residual norm, iterations, integrations)
-type NewtonOk = (Vector6<f64>, RodState, Matrix6<f64>, f64, usize, f64);
+pub(super) type NewtonOk = (Vector6<f64>, RodState, Matrix6<f64>, f64, usize, f64);
 /// (best residual norm, iterations, integrations)
-type NewtonErr = (f64, usize, f64);
+pub(super) type NewtonErr = (f64, usize, f64);
 
 impl Shooting<'_> {
-    fn tip(&self, x: &Vector6<f64>) -> Result<RodState, SingularSystem> {
+    pub(super) fn tip(&self, x: &Vector6<f64>) -> Result<RodState, SingularSystem> {
         integrate(self.rod, base_state(self.rod, x), self.steps)
     }
 
@@ -364,7 +419,7 @@ impl Shooting<'_> {
     /// coarse Jacobian that gives no descent at all is replaced by the fine
     /// grid's before the solve gives up. `j0`: a Jacobian from a nearby
     /// solution (warm start), used while it contracts.
-    fn newton(
+    pub(super) fn newton(
         &self,
         x0: Vector6<f64>,
         j0: Option<Matrix6<f64>>,

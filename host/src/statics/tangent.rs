@@ -175,7 +175,12 @@ impl Rod {
     }
 
     /// δF of tendon `i`'s pull F = −τ q/|q| for a change δq of its tangent.
-    fn force_change(&self, i: usize, q: &Vector3<f64>, dq: &Vector3<f64>) -> Vector3<f64> {
+    pub(super) fn force_change(
+        &self,
+        i: usize,
+        q: &Vector3<f64>,
+        dq: &Vector3<f64>,
+    ) -> Vector3<f64> {
         let norm = q.norm();
         let t = q / norm;
         (dq - t * t.dot(dq)) * (-self.tension[i] / norm)
