@@ -176,7 +176,7 @@ fn previous(k: usize, n: usize, total: usize) -> usize {
         return 0;
     }
     let mut stride = 1;
-    while (k / stride) % levels == 0 {
+    while (k / stride).is_multiple_of(levels) {
         stride *= levels;
     }
     k - stride
