@@ -372,7 +372,7 @@ fn exact_batch_writes_checked_rows_and_refuses_bad_input() {
     let mut lines = text.lines();
     assert_eq!(
         lines.next().unwrap(),
-        "t0,t1,t2,t3,px,py,pz,qw,qx,qy,qz,position_error,orientation_error,reachable"
+        "t0,t1,t2,t3,px,py,pz,qw,qx,qy,qz,position_error,orientation_error,reachable,status"
     );
     for (line, pose) in lines.zip([&a, &b]) {
         let cells: Vec<&str> = line.split(',').collect();

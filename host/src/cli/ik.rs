@@ -9,6 +9,7 @@ use anyhow::bail;
 use super::common::{parse_list, RobotArg};
 use crate::inverse::{self, ExactIk, IkSettings};
 use crate::net::{solve_csv, GuardedNet};
+use crate::robot::count;
 
 /// Inverse kinematics: tip pose → tendon tensions (N) with a trained net,
 /// or exactly through the statics (`--exact`).
@@ -47,7 +48,8 @@ pub struct IkArgs {
     #[arg(long, value_name = "CSV", requires = "output")]
     pub input: Option<PathBuf>,
     /// Batch output CSV: t0.. (command stage) and raw_t0.. (net output), N; with --exact t0..,
-    /// the reached pose, its errors and `reachable`. Written atomically.
+    /// the reached pose, its errors, `reachable` and `status` (exact, closest or failed), every
+    /// row answered, exit non-zero when any row was not reached. Written atomically.
     #[arg(long, value_name = "CSV", requires = "input")]
     pub output: Option<PathBuf>,
 }
@@ -99,13 +101,35 @@ fn run_exact(a: &IkArgs, robot: &crate::robot::Robot) -> anyhow::Result<()> {
     };
     let s = inverse::batch::solve_csv(&ik, net.as_ref(), a.position_only, input, output)?;
     eprintln!(
-        "wrote {} ({} rows, {} out of reach, worst reached error {:.2e} m)",
+        "wrote {} ({}: {} reached, {} out of reach, {} failed; worst reached error {:.2e} m)",
         output.display(),
-        s.rows,
+        count(s.rows, "row"),
+        s.rows - s.unreachable - s.failed,
         s.unreachable,
+        s.failed,
         s.worst_reached
     );
-    Ok(())
+    // As `fk --input`: every row is written, and the exit status is 0 only
+    // when every target was reached; as a single `--pose`, a target out of
+    // reach is not reached (its closest pose is written all the same).
+    let out = output.display();
+    match (s.unreachable, s.failed) {
+        (0, 0) => Ok(()),
+        (u, 0) => bail!(
+            "{u} of {} out of reach (closest pose written, status=closest in {out})",
+            count(s.rows, "row")
+        ),
+        (0, f) => bail!(
+            "{f} of {} failed: the exact IK did not converge (status=failed in {out})",
+            count(s.rows, "row")
+        ),
+        (u, f) => bail!(
+            "{} of {} not reached: {u} out of reach (closest pose written, status=closest), \
+             {f} failed (status=failed) in {out}",
+            u + f,
+            count(s.rows, "row")
+        ),
+    }
 }
 
 /// Run `tendril ik`.

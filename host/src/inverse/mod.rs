@@ -4,18 +4,23 @@
 //! height and orientation free (the planner's lift) — to a micron.
 //!
 //! `jacobian` gives ∂pose/∂τ exactly from the shooting sensitivities,
-//! `solve` runs bounded Levenberg–Marquardt on τ and then resolves the
-//! redundancy (least total tension above the floors), `batch` answers a CSV
-//! of targets in parallel.
+//! `solve` runs one local bounded Gauss–Newton on τ and then resolves the
+//! redundancy (least total tension above the floors), `global` restarts it
+//! from the nearest samples of a forward-kinematics `table` when it does not
+//! reach the target (so a closest pose is the closest, not a local one),
+//! `batch` streams a CSV of targets, every row answered.
 
 pub mod batch;
+mod global;
 pub mod jacobian;
 pub mod solve;
+pub mod table;
 
 use nalgebra::{DMatrix, UnitQuaternion, Vector2, Vector3};
 
 pub use jacobian::{tip_jacobian, JacobianError, TipJacobian};
 pub use solve::{ExactIk, IkSettings};
+pub use table::SeedTable;
 
 use crate::statics::{SolveError, WarmStart};
 
@@ -163,7 +168,8 @@ pub enum InverseError {
     /// The tip Jacobian could not be formed.
     #[error(transparent)]
     Jacobian(#[from] JacobianError),
-    /// The iteration ran out before reaching the target or a closest point.
+    /// Every start of the global search ran out of solves before reaching
+    /// the target or a closest point (`position_error`: the best met).
     #[error("exact IK did not converge: tip {position_error:.3e} m from the target after {solves} statics solves")]
     NotConverged {
         /// Distance left, m.
@@ -171,7 +177,8 @@ pub enum InverseError {
         /// Statics solves spent.
         solves: usize,
     },
-    /// The target is out of reach: `closest` is the nearest reachable pose.
+    /// The target is out of reach: `closest` is the nearest reachable pose
+    /// the global search found (no farther than its table's best sample).
     #[error(
         "target out of reach: the closest reachable tip is {:.6} m away ({})",
         closest.position_error,

@@ -9,8 +9,10 @@
 //! Gauss–Newton step on the free tensions (off their limits, or at a limit
 //! with the step pointing inside), cut to a trust radius and at the first
 //! limit it meets; a step that does not lower the error shrinks the radius.
-//! When no step can lower it any more the target is out of reach and the
-//! point reached is the closest one. After a small step the Jacobian is
+//! When no step can lower it any more, or the error is orthogonal to every
+//! move the free tensions can make ([`STATIONARY`]), the run has stalled at
+//! a locally closest point; [`super::global`] restarts it elsewhere before
+//! calling the target out of reach. After a small step the Jacobian is
 //! Broyden's update of the last one, refreshed when a step it proposes
 //! fails. A lateral target (the planner's lift) is e = [px − x*, py − y*].
 //!
@@ -23,9 +25,14 @@
 //! (Σ τ is stationary on the target set, the first-order optimum of this
 //! linear objective) or a move no longer lowers Σ τ.
 
-use nalgebra::{DMatrix, DVector, Rotation3};
+use std::sync::{Arc, OnceLock};
+
+use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, Vector3};
 
 use super::jacobian::tip_jacobian;
+use super::table::SeedTable;
+
+mod redundancy;
 use super::{IkSolution, InverseError, Target};
 use crate::robot::Robot;
 use crate::statics::pose::angle_between;
@@ -42,8 +49,13 @@ pub struct IkSettings {
     /// Metres per radian weighing orientation error against position error;
     /// `None`: the backbone length.
     pub orientation_weight: Option<f64>,
-    /// Most statics solves per target before giving up.
+    /// Most statics solves of one local run (each start of the global
+    /// search has its own).
     pub max_solves: usize,
+    /// Further starts of the global search, from the forward-kinematics
+    /// table's samples nearest the target, when the first start does not
+    /// reach it (`docs/design.md` §4.1); 0: a local answer only.
+    pub restarts: usize,
     /// Resolve the redundancy to the least total tension (phase 2).
     pub least_tension: bool,
     /// The forward statics' settings.
@@ -57,29 +69,22 @@ impl Default for IkSettings {
             orientation_tol: 1e-6,
             orientation_weight: None,
             max_solves: 200,
+            restarts: 6,
             least_tension: true,
             statics: SolverSettings::default(),
         }
     }
 }
 
+/// A point is a closest one when the free gradient |Jᵀe| is at most this
+/// fraction of |J| |e|: within the Gauss–Newton model, moving on could
+/// bring the tip closer by about ½ STATIONARY² |e| (1e-8 of the distance).
+const STATIONARY: f64 = 1e-4;
 /// Tensions are "at a limit" within this much, N.
 pub(crate) const AT_LIMIT: f64 = 1e-9;
 /// Singular values below this fraction of the largest are dropped from a
 /// Gauss–Newton step (roundoff).
 const RANK_TOLERANCE: f64 = 1e-12;
-/// Singular values below this fraction of the largest count as a null
-/// direction of the target set in phase 2: co-contraction moves the tip by
-/// the axial strain only (~1.5 µm per N on the seed robot, 1e-4 of the
-/// bending sensitivity), so within the target tolerance the tensions along
-/// it are free and the least total tension picks them.
-const NEAR_NULL: f64 = 1e-3;
-/// Phase-2 moves that may fail to lower Σ τ before it stops: along the
-/// near-null (axial) direction re-reaching the target undoes the move, and
-/// each try costs solves.
-const MAX_REFUSED_MOVES: usize = 2;
-/// Most phase-2 moves along the target set.
-const MAX_REDUNDANCY_MOVES: usize = 20;
 /// Steps no longer than this fraction of the widest tension range update
 /// the last ∂e/∂τ (Broyden) instead of a new sensitivity pass, which costs
 /// ~1.6 statics solves: a warm path step is a few hundredths of a newton.
@@ -100,15 +105,18 @@ pub struct ExactIk {
     hi: Vec<f64>,
     weight: f64,
     settings: IkSettings,
+    /// The coarse forward-kinematics table of the tension box the global
+    /// search seeds from, built at its first use and shared by clones.
+    table: Arc<OnceLock<SeedTable>>,
 }
 
 /// One evaluated point of the iteration.
 #[derive(Clone, Debug)]
-struct Point {
-    tau: Vec<f64>,
-    sol: Solution,
+pub(super) struct Point {
+    pub(super) tau: Vec<f64>,
+    pub(super) sol: Solution,
     err: DVector<f64>,
-    cost: f64,
+    pub(super) cost: f64,
     /// ∂e/∂τ.
     jac: Option<DMatrix<f64>>,
     /// The tip Jacobian ∂pose/∂τ it was cut from (unweighted, 6 rows);
@@ -121,8 +129,35 @@ struct Point {
 /// How phase 1 ended.
 enum Reach {
     Converged(Point),
-    /// No step lowers the error: the closest reachable point.
+    /// No step lowers the error, or the error is orthogonal to every
+    /// feasible move ([`ExactIk::stationary`]): a locally closest point.
     Stalled(Point),
+    /// The run's statics solves ran out first.
+    Budget(Point),
+}
+
+/// How one local run ended ([`ExactIk::local`]).
+pub(super) enum Local {
+    /// The target is reached: the answer, redundancy resolved.
+    Reached(Box<IkSolution>),
+    /// A locally closest point (first-order stationary, or no step lowers
+    /// the error).
+    Stationary(Point),
+    /// The run's budget ran out at this point, still descending.
+    Budget(Point),
+}
+
+/// The statics solves one local run may spend.
+#[derive(Clone, Copy)]
+struct Budget {
+    spent_before: usize,
+    max: usize,
+}
+
+impl Budget {
+    fn spent(&self, solves: usize) -> bool {
+        solves - self.spent_before >= self.max
+    }
 }
 
 impl ExactIk {
@@ -135,6 +170,7 @@ impl ExactIk {
             hi: robot.max_tensions(),
             weight: settings.orientation_weight.unwrap_or(robot.length),
             settings,
+            table: Arc::new(OnceLock::new()),
         }
     }
 
@@ -143,22 +179,33 @@ impl ExactIk {
         self.statics.robot()
     }
 
+    /// The settings.
+    pub fn settings(&self) -> &IkSettings {
+        &self.settings
+    }
+
+    /// The statics of the robot.
+    pub(super) fn statics(&self) -> &Statics {
+        &self.statics
+    }
+
+    /// The seed table of the global search ([`SeedTable`]), built on first
+    /// use: call it once before a parallel batch so that the build itself
+    /// runs in parallel.
+    pub fn seed_table(&self) -> &SeedTable {
+        self.table.get_or_init(|| SeedTable::build(self))
+    }
+
     /// The tension limits (τ_min, τ_max), N.
     pub fn limits(&self) -> (&[f64], &[f64]) {
         (&self.lo, &self.hi)
     }
 
-    /// Tensions reaching `target`, starting from `start` (clamped into the
-    /// limits; `None`: every tendon at its floor, a cold start) with the
-    /// statics warm start `warm` of a nearby solution if there is one.
-    pub fn solve(
-        &self,
-        target: &Target,
-        start: Option<&[f64]>,
-        warm: Option<&WarmStart>,
-    ) -> Result<IkSolution, InverseError> {
+    /// The start tensions `start` clamped into the limits (a non-finite
+    /// value: its floor); `None`: every tendon at its floor, a cold start.
+    pub(super) fn start_tensions(&self, start: Option<&[f64]>) -> Result<Vec<f64>, InverseError> {
         let n = self.lo.len();
-        let tau0: Vec<f64> = match start {
+        Ok(match start {
             Some(s) if s.len() != n => {
                 return Err(InverseError::StartCount {
                     expected: n,
@@ -171,22 +218,38 @@ impl ExactIk {
                 .map(|(&t, (&lo, &hi))| if t.is_finite() { t.clamp(lo, hi) } else { lo })
                 .collect(),
             None => self.lo.clone(),
+        })
+    }
+
+    /// One local run from `tau0` (within the limits) with its own budget of
+    /// `max_solves` statics solves, counted into `solves`:
+    /// phase 1, then for a reached target phase 2 and the snap onto the
+    /// limits ([`super::global`] runs it from several starts).
+    pub(super) fn local(
+        &self,
+        target: &Target,
+        tau0: Vec<f64>,
+        warm: Option<&WarmStart>,
+        solves: &mut usize,
+        max_solves: usize,
+    ) -> Result<Local, InverseError> {
+        let budget = Budget {
+            spent_before: *solves,
+            max: max_solves,
         };
-        let mut solves = 0;
-        let first = self.point(target, tau0, warm, &mut solves)?;
-        match self.reach(target, first, &mut solves)? {
+        let first = self.point(target, tau0, warm, solves)?;
+        match self.reach(target, first, solves, budget)? {
             Reach::Converged(p) => {
                 let p = if self.settings.least_tension {
-                    self.least_tension(target, p, &mut solves)?
+                    self.least_tension(target, p, solves, budget)?
                 } else {
                     p
                 };
-                let p = self.onto_limits(target, p, &mut solves)?;
-                Ok(self.answer(target, &p, solves))
+                let p = self.onto_limits(target, p, solves)?;
+                Ok(Local::Reached(Box::new(self.answer(target, &p, *solves))))
             }
-            Reach::Stalled(p) => Err(InverseError::Unreachable {
-                closest: Box::new(self.answer(target, &p, solves)),
-            }),
+            Reach::Stalled(p) => Ok(Local::Stationary(p)),
+            Reach::Budget(p) => Ok(Local::Budget(p)),
         }
     }
 
@@ -211,20 +274,28 @@ impl ExactIk {
         })
     }
 
-    /// e = [p − p*], [p − p*; ℓ θ(R R*ᵀ)], [px − x*, py − y*] or [a · p − u*].
     fn error(&self, target: &Target, sol: &Solution) -> DVector<f64> {
+        self.error_at(target, &sol.position, &sol.rotation)
+    }
+
+    /// e = [p − p*], [p − p*; ℓ θ(R R*ᵀ)], [px − x*, py − y*] or [a · p − u*]
+    /// for the tip at `position` (m) turned by `rotation`.
+    pub(super) fn error_at(
+        &self,
+        target: &Target,
+        position: &Vector3<f64>,
+        rotation: &Matrix3<f64>,
+    ) -> DVector<f64> {
         match target {
-            Target::Position(p) => DVector::from_column_slice((sol.position - p).as_slice()),
+            Target::Position(p) => DVector::from_column_slice((position - p).as_slice()),
             Target::Pose(p, q) => {
-                let dp = sol.position - p;
-                let r = sol.rotation * q.to_rotation_matrix().matrix().transpose();
+                let dp = position - p;
+                let r = rotation * q.to_rotation_matrix().matrix().transpose();
                 let theta = Rotation3::from_matrix_unchecked(r).scaled_axis() * self.weight;
                 DVector::from_iterator(6, dp.iter().chain(theta.iter()).copied())
             }
-            Target::Lateral(xy) => {
-                DVector::from_vec(vec![sol.position.x - xy.x, sol.position.y - xy.y])
-            }
-            Target::Along(axis, u) => DVector::from_element(1, axis.dot(&sol.position) - u),
+            Target::Lateral(xy) => DVector::from_vec(vec![position.x - xy.x, position.y - xy.y]),
+            Target::Along(axis, u) => DVector::from_element(1, axis.dot(position) - u),
         }
     }
 
@@ -322,11 +393,30 @@ impl ExactIk {
         }
     }
 
-    fn not_converged(&self, p: &Point, solves: usize) -> InverseError {
-        InverseError::NotConverged {
-            position_error: p.err.rows(0, p.err.len().min(3)).norm(),
-            solves,
-        }
+    /// Whether `p` is a first-order stationary point of ½|e|² on the box:
+    /// the gradient g = Jᵀe on the free tensions (off their limits, or at a
+    /// limit with −g pointing inside) is at most [`STATIONARY`] of |J| |e|,
+    /// i.e. the error is orthogonal to every move the free tensions can make.
+    /// Only with an exact Jacobian.
+    fn stationary(&self, p: &Point) -> bool {
+        p.tip_jac.is_some() && self.cosine(p) <= STATIONARY
+    }
+
+    /// |Jᵀe| on the free tensions over |J| |e| (∞ without a Jacobian).
+    fn cosine(&self, p: &Point) -> f64 {
+        let Some(j) = &p.jac else {
+            return f64::INFINITY;
+        };
+        let g = j.tr_mul(&p.err);
+        let free: f64 = (0..self.lo.len())
+            .filter(|&i| {
+                let held_below = p.tau[i] <= self.lo[i] + AT_LIMIT && g[i] >= 0.0;
+                let held_above = p.tau[i] >= self.hi[i] - AT_LIMIT && g[i] <= 0.0;
+                !(held_below || held_above)
+            })
+            .map(|i| g[i] * g[i])
+            .sum();
+        free.sqrt() / (j.norm() * p.err.norm())
     }
 
     /// Phase 1 (module docs).
@@ -335,6 +425,7 @@ impl ExactIk {
         target: &Target,
         mut cur: Point,
         solves: &mut usize,
+        budget: Budget,
     ) -> Result<Reach, InverseError> {
         let mut radius = 0.25 * self.span();
         let mut slow = 0;
@@ -342,10 +433,13 @@ impl ExactIk {
             if self.converged(target, &cur) {
                 return Ok(Reach::Converged(cur));
             }
-            if *solves >= self.settings.max_solves {
-                return Err(self.not_converged(&cur, *solves));
+            if budget.spent(*solves) {
+                return Ok(Reach::Budget(cur));
             }
             let j = self.jacobian(target, &mut cur)?.clone();
+            if self.stationary(&cur) {
+                return Ok(Reach::Stalled(cur));
+            }
             let Some((free, full)) = self.gauss_newton_step(&j, &cur) else {
                 if Self::refresh(&mut cur) {
                     continue;
@@ -421,8 +515,8 @@ impl ExactIk {
                     Err(e) => return Err(e),
                 }
                 radius = 0.25 * moved;
-                if *solves >= self.settings.max_solves {
-                    return Err(self.not_converged(&cur, *solves));
+                if budget.spent(*solves) {
+                    return Ok(Reach::Budget(cur));
                 }
             }
         }
@@ -477,7 +571,7 @@ impl ExactIk {
     }
 
     /// The widest tension range of any tendon, N.
-    fn span(&self) -> f64 {
+    pub(super) fn span(&self) -> f64 {
         self.hi
             .iter()
             .zip(&self.lo)
@@ -485,139 +579,7 @@ impl ExactIk {
             .fold(0.0, f64::max)
     }
 
-    /// The descent direction of Σ τ on the target set at `tau`: −1 projected
-    /// on the null space of the free tensions' Jacobian, the free set
-    /// shrunk until no tension at a limit is pushed out. `None` when it
-    /// vanishes (first-order optimum).
-    fn descent(&self, j: &DMatrix<f64>, tau: &[f64]) -> Option<(DVector<f64>, Vec<usize>)> {
-        if !j.iter().all(|v| v.is_finite()) {
-            return None;
-        }
-        let mut free: Vec<usize> = (0..tau.len()).collect();
-        loop {
-            if free.is_empty() {
-                return None;
-            }
-            let jf = j.select_columns(&free);
-            let svd = jf.clone().svd(true, true);
-            let eps = NEAR_NULL * svd.singular_values.max();
-            let pinv = svd.pseudo_inverse(eps).ok()?;
-            let ones = DVector::from_element(free.len(), 1.0);
-            let d = -(&ones - pinv * (jf * &ones));
-            let before = free.len();
-            let mut k = 0;
-            free.retain(|&i| {
-                let dk = d[k];
-                k += 1;
-                let out_below = tau[i] <= self.lo[i] + AT_LIMIT && dk < 0.0;
-                let out_above = tau[i] >= self.hi[i] - AT_LIMIT && dk > 0.0;
-                !(out_below || out_above)
-            });
-            if free.len() == before {
-                return (d.norm() > 1e-9).then_some((d, free));
-            }
-        }
-    }
-
-    /// Phase 2: least total tension on the target set (module docs).
-    fn least_tension(
-        &self,
-        target: &Target,
-        mut best: Point,
-        solves: &mut usize,
-    ) -> Result<Point, InverseError> {
-        let mut trust = 0.5 * self.span();
-        let mut refused = 0;
-        for _ in 0..MAX_REDUNDANCY_MOVES {
-            if *solves >= self.settings.max_solves || refused >= MAX_REFUSED_MOVES {
-                break;
-            }
-            let j = self.jacobian(target, &mut best)?.clone();
-            let Some((d, free)) = self.descent(&j, &best.tau) else {
-                break;
-            };
-            let mut alpha = trust / d.norm();
-            for (k, &i) in free.iter().enumerate() {
-                if d[k] < 0.0 {
-                    alpha = alpha.min((best.tau[i] - self.lo[i]) / -d[k]);
-                } else if d[k] > 0.0 {
-                    alpha = alpha.min((self.hi[i] - best.tau[i]) / d[k]);
-                }
-            }
-            if alpha * d.norm() <= 1e-12 {
-                break;
-            }
-            let mut tau = best.tau.clone();
-            for (k, &i) in free.iter().enumerate() {
-                tau[i] = (tau[i] + alpha * d[k]).clamp(self.lo[i], self.hi[i]);
-            }
-            let total = |t: &[f64]| t.iter().sum::<f64>();
-            let moved = match self.point(target, tau, Some(&best.sol.warm), solves) {
-                Ok(mut p) => {
-                    self.broyden(&best, &mut p);
-                    match self.reach(target, p, solves) {
-                        Ok(Reach::Converged(p)) if total(&p.tau) < total(&best.tau) - 1e-12 => {
-                            Some(p)
-                        }
-                        Ok(_) | Err(InverseError::NotConverged { .. }) => None,
-                        Err(e) => return Err(e),
-                    }
-                }
-                Err(InverseError::Statics(_)) => None,
-                Err(e) => return Err(e),
-            };
-            match moved {
-                Some(p) => best = p,
-                None => {
-                    refused += 1;
-                    trust = 0.25 * alpha * d.norm();
-                }
-            }
-        }
-        Ok(best)
-    }
-
-    /// Tensions within [`AT_LIMIT`] of a limit are put on it (a slack
-    /// tendon reads 0 N, not 3e-11 N, after the last Gauss–Newton step
-    /// nudged it), and the pose is solved again for them, if the result
-    /// still reaches the target; otherwise `p` as it is.
-    fn onto_limits(
-        &self,
-        target: &Target,
-        p: Point,
-        solves: &mut usize,
-    ) -> Result<Point, InverseError> {
-        let snapped: Vec<f64> = p
-            .tau
-            .iter()
-            .zip(self.lo.iter().zip(&self.hi))
-            .map(|(&t, (&lo, &hi))| {
-                if t - lo <= AT_LIMIT {
-                    lo
-                } else if hi - t <= AT_LIMIT {
-                    hi
-                } else {
-                    t
-                }
-            })
-            .collect();
-        if snapped == p.tau {
-            return Ok(p);
-        }
-        match self.point(target, snapped, Some(&p.sol.warm), solves) {
-            Ok(mut q) if self.converged(target, &q) => {
-                // The Jacobians of tensions 1e-9 N away are the same to
-                // far below their use (the lift's tangent, Broyden).
-                q.jac = p.jac;
-                q.tip_jac = p.tip_jac;
-                Ok(q)
-            }
-            Ok(_) | Err(InverseError::Statics(_)) => Ok(p),
-            Err(e) => Err(e),
-        }
-    }
-
-    fn answer(&self, target: &Target, p: &Point, solves: usize) -> IkSolution {
+    pub(super) fn answer(&self, target: &Target, p: &Point, solves: usize) -> IkSolution {
         let pose = p.sol.pose();
         let orientation_error = match target {
             Target::Position(_) | Target::Lateral(_) | Target::Along(..) => None,

@@ -251,8 +251,11 @@ impl Lifter {
     /// [`Target::Position`] the exact IK still reaches, by bracketing and
     /// bisection to [`HEIGHT_TOLERANCE`]. `None` when `xy` is out of reach.
     pub fn height_range(&self, xy: [f64; 2]) -> Option<(f64, f64)> {
+        // Local runs: the bisection follows one branch of warm starts, and
+        // a global search at every height past the end would cost ~7 runs.
         let reach = IkSettings {
             least_tension: false,
+            restarts: 0,
             ..self.settings
         };
         let ik = ExactIk::new(self.ik.robot(), reach);
