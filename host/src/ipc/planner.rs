@@ -103,6 +103,7 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
     let traj = Trajectory::new(&cfg.shape, &statics)?;
 
     let node = transport::node("tendril-planner")?;
+    let _orphan = transport::ReleaseIfOrphaned(&node);
     let services = Services::open_or_create(&node, &cfg.prefix)?;
     let publisher = transport::publisher(&services.setpoint)?;
     // The controller's commands say it is alive (the peers-lost rule).

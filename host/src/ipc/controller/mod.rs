@@ -197,6 +197,7 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
     Controller::new(cfg, &robot, &bytes, 0)?;
 
     let node = transport::node("tendril-controller")?;
+    let _orphan = transport::ReleaseIfOrphaned(&node);
     let services = Services::open_or_create(&node, &cfg.prefix)?;
     let setpoints = transport::subscriber(&services.setpoint)?;
     let states = transport::subscriber(&services.plant_state)?;

@@ -124,6 +124,7 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
     let mut model = PlantModel::new(&robot, cfg.params.clone())?;
     let n = model.n();
     let node = transport::node("tendril-plant")?;
+    let _orphan = transport::ReleaseIfOrphaned(&node);
     let services = Services::open_or_create(&node, &cfg.prefix)?;
     let commands = transport::subscriber(&services.tension_cmd)?;
     let listener = transport::listener(&services.tension_cmd_event)?;

@@ -174,12 +174,16 @@ fn role_index(role: Role) -> usize {
 }
 
 /// Between fork and exec: die with the launcher. Only async-signal-safe
-/// calls here (no allocation: the launcher is multi-threaded).
+/// calls here (no allocation: the launcher is multi-threaded). SIGTERM, as
+/// the child asks again itself ([`crate::ipc::die_with_parent`]): until the
+/// child installs its handler the default action ends it as surely as
+/// SIGKILL; after, it stops its loop and releases its and the launcher's
+/// iceoryx2 resources.
 fn die_with_parent(parent: libc::pid_t) -> std::io::Result<()> {
     // SAFETY: prctl with these arguments and getppid only set and read
     // process attributes; both are async-signal-safe.
     unsafe {
-        if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) != 0 {
+        if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
             return Err(std::io::Error::last_os_error());
         }
         // The launcher may have died before the prctl took effect.
