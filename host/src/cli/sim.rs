@@ -101,6 +101,7 @@ impl SimArgs {
             outside_at_s: self.inject_outside_at,
             ..cfg.planner.inject
         };
+        self.tuning.check()?;
         self.tuning.apply(&mut cfg.controller);
         // Real-time scheduling is on by default under `sim` (`--realtime
         // off` to disable): it keeps the 1 kHz loop on time on a busy machine.

@@ -160,12 +160,17 @@ pub struct PeerWatch {
 }
 
 impl PeerWatch {
-    /// Start watching at `now_ns`; `timeout_s` `None` never declares the peers lost.
-    pub fn new(timeout_s: Option<f64>, now_ns: u64) -> PeerWatch {
+    /// Start watching at `now_ns`; `timeout_s` `None` never declares the
+    /// peers lost. Before the first message the limit is `start_grace_s`
+    /// (default [`PEER_START_GRACE_S`]) or the timeout, whichever is longer:
+    /// a user who asks for a 1 s timeout gets 1 s from the start by passing
+    /// it as the grace too (the CLI does, issue 31).
+    pub fn new(timeout_s: Option<f64>, start_grace_s: Option<f64>, now_ns: u64) -> PeerWatch {
         let timeout_ns = timeout_s.map(|t| (t.max(0.0) * 1e9) as u64);
+        let grace_ns = (start_grace_s.unwrap_or(PEER_START_GRACE_S).max(0.0) * 1e9) as u64;
         PeerWatch {
             timeout_ns,
-            grace_ns: timeout_ns.map_or(0, |t| t.max((PEER_START_GRACE_S * 1e9) as u64)),
+            grace_ns: timeout_ns.map_or(0, |t| t.max(grace_ns)),
             last_ns: now_ns,
             heard: false,
         }
@@ -235,13 +240,18 @@ mod tests {
     #[test]
     fn peers_count_as_lost_after_the_timeout_and_a_longer_start_grace() {
         let s = 1_000_000_000u64;
-        let mut w = PeerWatch::new(Some(2.0), 0);
+        let mut w = PeerWatch::new(Some(2.0), None, 0);
         assert!(!w.lost(9 * s), "start grace is 10 s");
         assert!(w.lost(11 * s));
         w.heard(11 * s);
         assert!(!w.lost(13 * s));
         assert!(w.lost(13 * s + 1));
-        assert!(!PeerWatch::new(None, 0).lost(u64::MAX));
+        assert!(!PeerWatch::new(None, None, 0).lost(u64::MAX));
+        // A grace given as the timeout itself: lost after the timeout from the start.
+        let w = PeerWatch::new(Some(1.0), Some(1.0), 0);
+        assert!(!w.lost(s) && w.lost(s + 1));
+        // A grace never shortens the timeout.
+        assert!(!PeerWatch::new(Some(3.0), Some(1.0), 0).lost(2 * s));
     }
 
     #[test]
@@ -267,6 +277,7 @@ mod tests {
             duration_s: None,
             inject: planner::Injections::default(),
             peer_timeout_s: Some(2.0),
+            peer_start_grace_s: None,
             supervised: true,
             log: None,
             realtime: false,

@@ -53,6 +53,9 @@ pub struct PlantConfig {
     /// Stop with [`IpcError::PeersLost`] after this long without a tension
     /// command, s (None: never).
     pub peer_timeout_s: Option<f64>,
+    /// How long the peers may take to appear before the first message, s
+    /// (None: [`super::PEER_START_GRACE_S`]; never shorter than the timeout).
+    pub peer_start_grace_s: Option<f64>,
     /// Die with the launching process ([`super::die_with_parent`]).
     pub supervised: bool,
     /// Per-step CSV log.
@@ -76,6 +79,7 @@ impl Default for PlantConfig {
             command_timeout_s: 0.05,
             duration_s: None,
             peer_timeout_s: Some(2.0),
+            peer_start_grace_s: None,
             supervised: false,
             log: None,
             stats: None,
@@ -147,7 +151,7 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
     let mut status_sticky = 0u32;
     let mut pending = Vec::with_capacity(16);
     let idle = Duration::from_secs_f64(cfg.idle_period_s.clamp(1e-4, 1.0));
-    let mut peers = super::PeerWatch::new(cfg.peer_timeout_s, start);
+    let mut peers = super::PeerWatch::new(cfg.peer_timeout_s, cfg.peer_start_grace_s, start);
     let faults = cfg.params.faults.clone();
     let mut last_flush = start;
 

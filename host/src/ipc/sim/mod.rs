@@ -191,6 +191,7 @@ impl SimConfig {
                     ..Injections::default()
                 },
                 peer_timeout_s: controller.peer_timeout_s,
+                peer_start_grace_s: None,
                 supervised: true,
                 log: None,
                 realtime: true,
