@@ -37,6 +37,10 @@ pub struct SimArgs {
     /// Seconds of trajectory after the settle hold.
     #[arg(long, default_value_t = 10.0, allow_hyphen_values = true)]
     pub duration: f64,
+    /// Bound on the RMS tracking error, mm: a run above it is not clean
+    /// (exit status non-zero, the reason in report.md).
+    #[arg(long, default_value_t = crate::ipc::sim::DEFAULT_MAX_RMS_MM)]
+    pub max_rms_mm: f64,
     /// iceoryx2 service-name prefix (default: unique per run).
     #[arg(long)]
     pub prefix: Option<String>,
@@ -93,6 +97,7 @@ impl SimArgs {
         let mut cfg = SimConfig::new(exe, self.robot, model, self.out);
         cfg.prefix = self.prefix;
         cfg.duration_s = self.duration;
+        cfg.max_rms_mm = self.max_rms_mm;
         cfg.planner.shape = self.traj.shape()?;
         cfg.planner.rate_hz = self.traj.planner_rate;
         cfg.planner.settle_s = self.traj.settle;

@@ -15,6 +15,7 @@
 pub mod analysis;
 pub mod assess;
 pub mod faults;
+pub mod oscillation;
 pub mod report;
 pub mod supervisor;
 pub mod workdir;
@@ -45,6 +46,11 @@ pub const BUILT_IN_NET: &[u8] = include_bytes!("../../../../firmware/vectors/def
 
 /// Integral gain of the correction when it is on, 1/s.
 pub const DEFAULT_KI_PER_S: f64 = 10.0;
+
+/// Default bound on the RMS tracking error of a clean run, mm: twice the
+/// millimetre the nominal circle is held to (tests/tests/hil_loop.rs), far
+/// below what a wrong net or an unstable loop gives (51 mm, issue 31).
+pub const DEFAULT_MAX_RMS_MM: f64 = 2.0;
 
 /// Name of the working directory inside the output directory.
 pub const RUN_DIR: &str = ".sim-run";
@@ -148,6 +154,8 @@ pub struct SimConfig {
     pub pin: bool,
     /// Free-form description for the report.
     pub label: String,
+    /// A run whose RMS tracking error exceeds this (mm) is not clean.
+    pub max_rms_mm: f64,
 }
 
 /// A unique service prefix for one run: parallel sims and tests never share services.
@@ -206,6 +214,7 @@ impl SimConfig {
             realtime: true,
             pin: true,
             label: String::new(),
+            max_rms_mm: DEFAULT_MAX_RMS_MM,
         }
     }
 
@@ -220,6 +229,12 @@ impl SimConfig {
             return Err(SimError::Config(format!(
                 "--duration {}: must be a finite number of seconds > 0",
                 self.duration_s
+            )));
+        }
+        if !(self.max_rms_mm.is_finite() && self.max_rms_mm > 0.0) {
+            return Err(SimError::Config(format!(
+                "--max-rms-mm {}: must be a finite bound > 0 mm",
+                self.max_rms_mm
             )));
         }
         let settle = self.planner.settle_s;
