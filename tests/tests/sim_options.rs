@@ -131,3 +131,42 @@ fn an_explicit_peer_timeout_holds_from_the_start() {
         );
     }
 }
+
+/// `sim --duration 100000` would log ≈ 69 GB: refused at once with its cost
+/// and the flag that raises the cap, nothing started or written (it used to
+/// run, growing its logs by ≈ 2.5 GB an hour).
+#[test]
+fn an_absurd_duration_is_refused_with_its_cost_before_anything_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let mut child = Command::new(tendril_bin())
+        .arg("sim")
+        .arg("--robot")
+        .arg(robot("seed-4t.toml"))
+        .args(["--model", "firmware/vectors/default.tnet"])
+        .args(["--duration", "100000", "--out"])
+        .arg(&out)
+        .current_dir(workspace_root())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("spawn tendril sim");
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while child.try_wait().unwrap().is_none() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let running = child.try_wait().unwrap().is_none();
+    if running {
+        // SIGTERM: the sim stops its children and removes its work directory.
+        let _ = Command::new("kill").arg(child.id().to_string()).status();
+    }
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!running, "sim --duration 100000 started: {err}");
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        err.contains("≈ 69.0 GB") && err.contains("--max-log-gb"),
+        "{err}"
+    );
+    assert!(!out.join(".sim-run").exists() && !out.join("report.json").exists());
+}

@@ -197,7 +197,8 @@ fn sigterm_and_sigint_stop_the_children_exit_non_zero_and_keep_old_outputs() {
         );
         assert!(!output.status.success(), "SIG{sig}: exit status 0");
         assert!(
-            stderr(&output).contains("interrupted"),
+            stderr(&output).contains("interrupted")
+                && stderr(&output).contains("this run's logs were discarded"),
             "SIG{sig}: {}",
             stderr(&output)
         );

@@ -41,6 +41,10 @@ pub struct SimArgs {
     /// (exit status non-zero, the reason in report.md).
     #[arg(long, default_value_t = crate::ipc::sim::DEFAULT_MAX_RMS_MM)]
     pub max_rms_mm: f64,
+    /// Cap on the run's logs, GB: a --duration whose logs would be larger
+    /// (≈ 0.7 MB/s with 4 tendons at 1 kHz) is refused before it starts.
+    #[arg(long, default_value_t = crate::ipc::sim::budget::DEFAULT_MAX_LOG_GB)]
+    pub max_log_gb: f64,
     /// iceoryx2 service-name prefix (default: unique per run).
     #[arg(long)]
     pub prefix: Option<String>,
@@ -98,6 +102,7 @@ impl SimArgs {
         cfg.prefix = self.prefix;
         cfg.duration_s = self.duration;
         cfg.max_rms_mm = self.max_rms_mm;
+        cfg.max_log_gb = self.max_log_gb;
         cfg.planner.shape = self.traj.shape()?;
         cfg.planner.rate_hz = self.traj.planner_rate;
         cfg.planner.settle_s = self.traj.settle;

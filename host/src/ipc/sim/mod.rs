@@ -14,6 +14,7 @@
 
 pub mod analysis;
 pub mod assess;
+pub mod budget;
 pub mod faults;
 pub mod oscillation;
 pub mod report;
@@ -87,8 +88,14 @@ pub enum SimError {
     /// The planner never sent a setpoint.
     #[error("no setpoint from the planner within {0} s")]
     NoSetpoint(f64),
-    /// SIGINT or SIGTERM: the processes were stopped, the outputs left as they were.
-    #[error("interrupted: stopped planner, controller and plant; previous outputs left intact")]
+    /// SIGINT or SIGTERM: the processes were stopped, the run's work
+    /// directory (its logs so far) removed, the outputs left as they were:
+    /// an interrupted run has no report to stand behind its logs
+    /// (PROBES.md: an interrupted run leaves exactly the previous outputs).
+    #[error(
+        "interrupted: stopped planner, controller and plant; this run's logs were discarded \
+         and the previous outputs left as they were"
+    )]
     Interrupted,
 }
 
@@ -156,6 +163,8 @@ pub struct SimConfig {
     pub label: String,
     /// A run whose RMS tracking error exceeds this (mm) is not clean.
     pub max_rms_mm: f64,
+    /// Cap on the run's estimated log size, GB ([`budget`]).
+    pub max_log_gb: f64,
 }
 
 /// A unique service prefix for one run: parallel sims and tests never share services.
@@ -215,6 +224,7 @@ impl SimConfig {
             pin: true,
             label: String::new(),
             max_rms_mm: DEFAULT_MAX_RMS_MM,
+            max_log_gb: budget::DEFAULT_MAX_LOG_GB,
         }
     }
 
@@ -235,6 +245,12 @@ impl SimConfig {
             return Err(SimError::Config(format!(
                 "--max-rms-mm {}: must be a finite bound > 0 mm",
                 self.max_rms_mm
+            )));
+        }
+        if !(self.max_log_gb.is_finite() && self.max_log_gb > 0.0) {
+            return Err(SimError::Config(format!(
+                "--max-log-gb {}: must be a finite size > 0 GB",
+                self.max_log_gb
             )));
         }
         let settle = self.planner.settle_s;
@@ -314,6 +330,11 @@ pub fn run(cfg: &SimConfig) -> Result<SimReport, SimError> {
     let statics = Statics::new(&robot, crate::statics::SolverSettings::default());
     let family = crate::plan::Family::of(&statics).map_err(IpcError::from)?;
     cfg.planner.shape.check(&family).map_err(IpcError::from)?;
+    budget::check(
+        cfg,
+        robot.max_tensions().len(),
+        budget::free_bytes(&cfg.out),
+    )?;
     install_interrupt_latch();
     let dir = RunDir::create(&cfg.out)?;
     let result = run_in(cfg, &dir);
