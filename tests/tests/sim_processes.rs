@@ -17,15 +17,12 @@ const DEFAULT_NET: &str = "firmware/vectors/default.tnet";
 /// and by the one that counts node entries, so they never overlap.
 static NODE_ENTRIES: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
-/// One sim at a time: each is three real-time processes pinned like the
-/// others, and two at once starve each other's planner (spurious watchdog
-/// holds, then a run that is rightly judged not clean).
-static ONE_SIM_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-fn one_sim_at_a_time() -> std::sync::MutexGuard<'static, ()> {
-    ONE_SIM_AT_A_TIME
-        .lock()
-        .unwrap_or_else(|poisoned| poisoned.into_inner())
+/// One sim at a time, on the whole machine: each is three real-time
+/// processes pinned like the others, and two at once starve each other's
+/// planner (spurious watchdog holds, then a run that is rightly judged not
+/// clean).
+fn one_sim_at_a_time() -> tendril_tests::LoopGuard {
+    tendril_tests::one_loop_at_a_time()
 }
 
 /// Short runs: these tests are about processes, not accuracy.
