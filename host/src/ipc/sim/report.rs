@@ -51,10 +51,13 @@ pub struct SimReport {
     /// above it the run is not clean.
     #[serde(default)]
     pub max_rms_mm: f64,
-    /// Whether the bound was applied (not after an injected process kill,
-    /// whose recovery is judged by the fault records instead).
+    /// Whether the bound was applied: not to a path with jumps (steps, a
+    /// pose table) nor after an injected kill or stuck motor.
     #[serde(default)]
     pub max_rms_applied: bool,
+    /// Why not, when it was not.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_rms_waived_because: Option<String>,
     /// The oscillation test of the tracking error and its evidence: a
     /// sustained tone makes the run not clean.
     #[serde(default)]
@@ -302,10 +305,9 @@ impl SimReport {
         );
         row(
             "RMS bound (mm)",
-            if self.max_rms_applied {
-                format!("{:.3}", self.max_rms_mm)
-            } else {
-                format!("{:.3} (not applied: a process was killed)", self.max_rms_mm)
+            match &self.max_rms_waived_because {
+                None => format!("{:.3}", self.max_rms_mm),
+                Some(why) => format!("{:.3} (not applied: {why})", self.max_rms_mm),
             },
         );
         let o = &self.oscillation;
