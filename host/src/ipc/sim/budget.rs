@@ -68,7 +68,20 @@ pub fn free_bytes(path: &Path) -> Option<u64> {
 }
 
 fn gb(bytes: f64) -> String {
-    format!("{:.1} GB", bytes / 1e9)
+    if bytes < 1e9 {
+        format!("{:.1} MB", bytes / 1e6)
+    } else {
+        format!("{:.1} GB", bytes / 1e9)
+    }
+}
+
+/// Seconds, readable also when absurd (`1e300`).
+fn secs(s: f64) -> String {
+    if s < 1e9 {
+        format!("{s}")
+    } else {
+        format!("{s:e}")
+    }
 }
 
 /// Refuse a run whose logs would exceed the cap or the free space.
@@ -79,8 +92,8 @@ pub fn check(cfg: &SimConfig, tendons: usize, free: Option<u64>) -> Result<Cost,
         format!(
             "--duration {} s (+ {} s settle): the logs would take ≈ {} ({:.2} MB/s) and about as \
              much memory to analyse",
-            cfg.duration_s,
-            cfg.planner.settle_s,
+            secs(cfg.duration_s),
+            secs(cfg.planner.settle_s),
             gb(cost.log_bytes),
             cost.bytes_per_s / 1e6
         )
@@ -145,5 +158,14 @@ mod tests {
             .to_string();
         assert!(err.contains("only 1.0 GB are free"), "{err}");
         assert!(check(&cfg(10.0), 4, Some(1_000_000_000)).is_ok());
+        let err = check(&cfg(1e300), 4, None).unwrap_err().to_string();
+        assert!(err.contains("--duration 1e300 s"), "{err}");
+        let mut tiny = cfg(10.0);
+        tiny.max_log_gb = 1e-6;
+        let err = check(&tiny, 4, None).unwrap_err().to_string();
+        assert!(
+            err.contains("≈ 8.3 MB") && err.contains("cap is 0.0 MB"),
+            "{err}"
+        );
     }
 }
