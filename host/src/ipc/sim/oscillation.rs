@@ -12,7 +12,8 @@
 //! path at its own frequency and its harmonics) sit below the band; sensor
 //! noise is spread over the band and has no peak carrying its power; a step
 //! transient is excluded (windows holding a jump of the desired position,
-//! or starting within [`AFTER_JUMP_S`] of one, are not examined).
+//! or starting within [`AFTER_JUMP_S`] of one, are not examined), and a
+//! tone must be found in at least [`MIN_TONE_WINDOWS`] windows.
 
 use serde::{Deserialize, Serialize};
 
@@ -32,10 +33,15 @@ pub const MIN_TONE_RMS_MM: f64 = 0.1;
 const MIN_TONE_SHARE: f64 = 0.5;
 /// Share of the examined windows that must hold the tone (sustained, not a blip).
 const MIN_WINDOW_SHARE: f64 = 0.5;
+/// Fewest windows with a tone that make an oscillation: it must last (3 s
+/// at least; a stable loop's ringing after a step decays well within that).
+const MIN_TONE_WINDOWS: usize = 3;
 /// A desired position that moves further than this between two samples is a jump, m.
 const JUMP_M: f64 = 1e-3;
-/// Windows starting within this long after a jump are skipped, s.
-const AFTER_JUMP_S: f64 = 0.5;
+/// Windows starting within this long after a jump are skipped, s: the
+/// dynamic rod's first mode (ζ₁ ≈ 17 %, ω₁ ≈ 22.7 rad/s) rings down by
+/// e^(−ζ₁ω₁ · 1 s) ≈ 2 % in that time.
+const AFTER_JUMP_S: f64 = 1.0;
 /// Largest gap between tracking samples inside a window, s.
 const MAX_GAP_S: f64 = 0.05;
 /// At most this many windows are examined (evenly spread) in a long run.
@@ -226,8 +232,8 @@ pub fn detect(samples: &[Sample], band_from_hz: f64) -> Oscillation {
     out.windows_with_tone = freqs.len();
     out.frequency_hz = median(&mut freqs);
     out.tone_rms_mm = median(&mut rms);
-    out.detected =
-        out.windows >= 2 && out.windows_with_tone as f64 >= MIN_WINDOW_SHARE * out.windows as f64;
+    out.detected = out.windows_with_tone >= MIN_TONE_WINDOWS
+        && out.windows_with_tone as f64 >= MIN_WINDOW_SHARE * out.windows as f64;
     out
 }
 
