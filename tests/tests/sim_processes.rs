@@ -157,7 +157,9 @@ fn sigkill_of_the_sim_takes_its_children_down_within_a_second() {
 #[test]
 fn sigterm_and_sigint_stop_the_children_exit_non_zero_and_keep_old_outputs() {
     let _one = one_sim_at_a_time();
-    for sig in ["TERM", "INT"] {
+    // SIGHUP too (issue 31: it used to kill the launcher where it stood,
+    // exit 129, leaving its work directory and partial logs).
+    for sig in ["TERM", "INT", "HUP"] {
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("out");
         std::fs::create_dir_all(&out).unwrap();
