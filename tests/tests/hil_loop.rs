@@ -79,6 +79,24 @@ fn assert_loop_kept_its_period(report: &Value, secs: f64) {
     );
 }
 
+/// Real-time loops are serialised machine-wide: while one test holds the
+/// loop lock, no other process can take it (so a loop's skipped periods
+/// measure the loop, not a second loop pinned to the same CPU).
+#[test]
+fn a_held_loop_lock_keeps_other_processes_out() {
+    let guard = tendril_tests::one_loop_at_a_time();
+    let other = std::fs::OpenOptions::new()
+        .write(true)
+        .open(tendril_tests::loop_lock_path())
+        .expect("the loop lock file exists while held");
+    assert!(
+        matches!(other.try_lock(), Err(std::fs::TryLockError::WouldBlock)),
+        "a second handle (as another process would open) took the loop lock"
+    );
+    drop(guard);
+    assert!(other.try_lock().is_ok(), "the lock outlived its guard");
+}
+
 #[test]
 fn nominal_circle_tracks_within_a_millimetre_rms_with_correction() {
     let (r, dir, _) = sim(&[

@@ -17,15 +17,12 @@ const DEFAULT_NET: &str = "firmware/vectors/default.tnet";
 /// and by the one that counts node entries, so they never overlap.
 static NODE_ENTRIES: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
-/// One sim at a time: each is three real-time processes pinned like the
-/// others, and two at once starve each other's planner (spurious watchdog
-/// holds, then a run that is rightly judged not clean).
-static ONE_SIM_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-fn one_sim_at_a_time() -> std::sync::MutexGuard<'static, ()> {
-    ONE_SIM_AT_A_TIME
-        .lock()
-        .unwrap_or_else(|poisoned| poisoned.into_inner())
+/// One sim at a time, on the whole machine: each is three real-time
+/// processes pinned like the others, and two at once starve each other's
+/// planner (spurious watchdog holds, then a run that is rightly judged not
+/// clean).
+fn one_sim_at_a_time() -> tendril_tests::LoopGuard {
+    tendril_tests::one_loop_at_a_time()
 }
 
 /// Short runs: these tests are about processes, not accuracy.
@@ -160,7 +157,9 @@ fn sigkill_of_the_sim_takes_its_children_down_within_a_second() {
 #[test]
 fn sigterm_and_sigint_stop_the_children_exit_non_zero_and_keep_old_outputs() {
     let _one = one_sim_at_a_time();
-    for sig in ["TERM", "INT"] {
+    // SIGHUP too (issue 31: it used to kill the launcher where it stood,
+    // exit 129, leaving its work directory and partial logs).
+    for sig in ["TERM", "INT", "HUP"] {
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("out");
         std::fs::create_dir_all(&out).unwrap();
@@ -197,7 +196,8 @@ fn sigterm_and_sigint_stop_the_children_exit_non_zero_and_keep_old_outputs() {
         );
         assert!(!output.status.success(), "SIG{sig}: exit status 0");
         assert!(
-            stderr(&output).contains("interrupted"),
+            stderr(&output).contains("interrupted")
+                && stderr(&output).contains("this run's logs were discarded"),
             "SIG{sig}: {}",
             stderr(&output)
         );

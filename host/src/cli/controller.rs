@@ -3,6 +3,7 @@
 
 use std::path::PathBuf;
 
+use anyhow::bail;
 use clap::{Args, ValueEnum};
 
 use crate::ipc::controller::ControllerConfig;
@@ -59,7 +60,68 @@ pub struct LoopOpts {
     pub slew: f64,
 }
 
+/// Refuse a numeric option that is not finite or fails `ok`, naming the
+/// flag and what it must be. Every numeric option of `sim`, `controller`,
+/// `plant` and `planner` passes here before anything starts (issue 31: a
+/// NaN used to reach a child's JSON configuration as `null` and fail there
+/// as a parse error of an internal file).
+pub(crate) fn check(flag: &str, value: f64, ok: bool, want: &str) -> anyhow::Result<()> {
+    if value.is_finite() && ok {
+        Ok(())
+    } else {
+        bail!("{flag} {value}: must be {want}")
+    }
+}
+
+/// The largest loop rate the processes accept, Hz (as the controller's own check).
+pub(crate) const MAX_RATE_HZ: f64 = 20_000.0;
+
+/// `--peer-timeout`: (the timeout, the start grace). Given explicitly, the
+/// timeout holds from the start; by default the peers get
+/// [`crate::ipc::PEER_START_GRACE_S`] to appear, then 2 s of silence.
+pub(crate) fn peer_timeout(flag: Option<f64>) -> anyhow::Result<(Option<f64>, Option<f64>)> {
+    match flag {
+        None => Ok((Some(2.0), None)),
+        Some(t) => {
+            check(
+                "--peer-timeout",
+                t,
+                t >= 0.0,
+                "a number of seconds ≥ 0 (0 = never)",
+            )?;
+            Ok(((t > 0.0).then_some(t), Some(t)))
+        }
+    }
+}
+
 impl LoopOpts {
+    /// Refuse values no loop can run with, naming the flag.
+    pub fn check(&self) -> anyhow::Result<()> {
+        let r = self.rate;
+        check("--rate", r, r > 0.0 && r <= MAX_RATE_HZ, "in (0, 20000] Hz")?;
+        let period_us = 1e6 / r;
+        check(
+            "--spin-us",
+            self.spin_us,
+            self.spin_us >= 0.0 && self.spin_us <= period_us,
+            &format!("in [0, {period_us}] µs (one period)"),
+        )?;
+        let w = self.watchdog_periods;
+        check("--watchdog-periods", w, w > 0.0, "a number of periods > 0")?;
+        check("--ki", self.ki, self.ki >= 0.0, "a gain ≥ 0 (1/s)")?;
+        let (l, win) = (self.correction_limit_mm, self.correction_window_mm);
+        check("--correction-limit-mm", l, l >= 0.0, "≥ 0 mm")?;
+        check("--correction-window-mm", win, win >= 0.0, "≥ 0 mm")?;
+        let lead = self.lead_ms;
+        check(
+            "--lead-ms",
+            lead,
+            (0.0..=1000.0).contains(&lead),
+            "in [0, 1000] ms",
+        )?;
+        check("--slew", self.slew, self.slew > 0.0, "a rate > 0 N/s")
+    }
+
     /// Fill the loop fields of a controller config.
     pub fn apply(&self, cfg: &mut ControllerConfig) {
         cfg.rate_hz = self.rate;
@@ -103,9 +165,10 @@ pub struct ControllerArgs {
     #[arg(long)]
     pub duration: Option<f64>,
     /// Stop (non-zero exit) after this many seconds with neither a setpoint
-    /// nor a plant state; 0 = never.
-    #[arg(long, default_value_t = 2.0)]
-    pub peer_timeout: f64,
+    /// nor a plant state; 0 = never [default: 2 s, after up to 10 s for the
+    /// peers to start; given explicitly, it holds from the start].
+    #[arg(long)]
+    pub peer_timeout: Option<f64>,
     /// Die with the parent process (as `tendril sim` starts it; also when
     /// the TENDRIL_SUPERVISED environment variable is set).
     #[arg(long)]
@@ -127,12 +190,16 @@ impl ControllerArgs {
         if let Some(path) = &self.config {
             return Ok(crate::ipc::read_config(path)?);
         }
+        self.tuning.check()?;
+        if let Some(d) = self.duration {
+            check("--duration", d, d > 0.0, "a number of seconds > 0")?;
+        }
         let mut cfg = ControllerConfig::new(self.robot, self.model);
         cfg.allow_robot_mismatch = self.allow_robot_mismatch;
         cfg.prefix = self.prefix;
         self.tuning.apply(&mut cfg);
         cfg.duration_s = self.duration;
-        cfg.peer_timeout_s = (self.peer_timeout > 0.0).then_some(self.peer_timeout);
+        (cfg.peer_timeout_s, cfg.peer_start_grace_s) = peer_timeout(self.peer_timeout)?;
         cfg.supervised = self.supervised;
         cfg.log = self.log;
         cfg.stats = self.stats;

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Context};
 use clap::{Args, ValueEnum};
 
+use super::controller::{check, peer_timeout};
 use crate::ipc::planner::{Injections, PlannerConfig};
 use crate::plan::{read_pose_csv, PathShape};
 
@@ -102,8 +103,49 @@ fn pair(s: &str, what: &str) -> anyhow::Result<[f64; 2]> {
 }
 
 impl TrajectoryOpts {
+    /// Refuse rates, times and sizes no trajectory can have, naming the flag.
+    pub fn check(&self) -> anyhow::Result<()> {
+        let r = self.planner_rate;
+        check(
+            "--planner-rate",
+            r,
+            r > 0.0 && r <= super::controller::MAX_RATE_HZ,
+            "in (0, 20000] Hz",
+        )?;
+        check(
+            "--settle",
+            self.settle,
+            self.settle >= 0.0,
+            "a number of seconds ≥ 0",
+        )?;
+        check(
+            "--radius-mm",
+            self.radius_mm,
+            self.radius_mm >= 0.0,
+            "≥ 0 mm",
+        )?;
+        check("--freq", self.freq, self.freq > 0.0, "a frequency > 0 Hz")?;
+        check(
+            "--dwell",
+            self.dwell,
+            self.dwell > 0.0,
+            "a number of seconds > 0",
+        )?;
+        check(
+            "--turns",
+            self.turns,
+            self.turns > 0.0,
+            "a number of revolutions > 0",
+        )?;
+        if let Some(h) = self.height_mm {
+            check("--height-mm", h, true, "a finite height in mm")?;
+        }
+        Ok(())
+    }
+
     /// The trajectory shape in SI units.
     pub fn shape(&self) -> anyhow::Result<PathShape> {
+        self.check()?;
         let radius = self.radius_mm * 1e-3;
         let height = self.height_mm.map(|h| h * 1e-3);
         let lateral = || pair(&self.center_mm, "--center-mm");
@@ -196,9 +238,10 @@ pub struct PlannerArgs {
     #[arg(long, default_value_t = 0.05)]
     pub outside_for: f64,
     /// Stop (non-zero exit) after this many seconds without a tension
-    /// command from a controller; 0 = never.
-    #[arg(long, default_value_t = 2.0)]
-    pub peer_timeout: f64,
+    /// command from a controller; 0 = never [default: 2 s, after up to 10 s
+    /// for a controller to start; given explicitly, it holds from the start].
+    #[arg(long)]
+    pub peer_timeout: Option<f64>,
     /// Die with the parent process (as `tendril sim` starts it; also when
     /// the TENDRIL_SUPERVISED environment variable is set).
     #[arg(long)]
@@ -220,6 +263,12 @@ impl PlannerArgs {
         if let Some(path) = &self.config {
             return Ok(crate::ipc::read_config(path)?);
         }
+        if let Some(d) = self.duration {
+            check("--duration", d, d > 0.0, "a number of seconds > 0")?;
+        }
+        let of = self.outside_for;
+        check("--outside-for", of, of > 0.0, "a number of seconds > 0")?;
+        let (peer_timeout_s, peer_start_grace_s) = peer_timeout(self.peer_timeout)?;
         Ok(PlannerConfig {
             robot: self.robot,
             prefix: self.prefix,
@@ -232,7 +281,8 @@ impl PlannerArgs {
                 outside_at_s: self.inject_outside_at,
                 outside_for_s: self.outside_for,
             },
-            peer_timeout_s: (self.peer_timeout > 0.0).then_some(self.peer_timeout),
+            peer_timeout_s,
+            peer_start_grace_s,
             supervised: self.supervised,
             log: self.log,
             realtime: self.realtime,

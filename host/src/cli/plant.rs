@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Context};
 use clap::Args;
 
+use super::controller::{check, peer_timeout};
 use crate::ipc::plant::{
     DelayFault, DropFault, PlantConfig, PlantFaults, PlantParams, RobotModel, StuckFault,
 };
@@ -55,16 +56,36 @@ fn window(spec: &str, what: &str) -> anyhow::Result<(f64, f64, f64)> {
 }
 
 impl PlantOpts {
-    /// Model parameters in SI units.
+    /// Model parameters in SI units (each refused with its flag's name when
+    /// out of range).
     pub fn params(&self) -> anyhow::Result<PlantParams> {
+        let (tau, comp, noise) = (self.motor_tau_ms, self.compliance_tau_ms, self.noise_mm);
+        check("--motor-tau-ms", tau, tau > 0.0, "a time constant > 0 ms")?;
+        check(
+            "--compliance-tau-ms",
+            comp,
+            comp >= 0.0,
+            "≥ 0 ms (0 = rigid)",
+        )?;
+        check(
+            "--noise-mm",
+            noise,
+            noise >= 0.0,
+            "a standard deviation ≥ 0 mm",
+        )?;
+        if self.statics_steps == 0 {
+            bail!("--statics-steps 0: must be at least 1");
+        }
         let stuck = match &self.stuck {
             None => None,
             Some(s) => {
                 let err = || format!("--stuck {s:?}: expected TENDON@SECONDS");
                 let (k, t) = s.split_once('@').with_context(err)?;
+                let at_s: f64 = t.trim().parse().with_context(err)?;
+                check("--stuck time", at_s, at_s >= 0.0, "a number of seconds ≥ 0")?;
                 Some(StuckFault {
                     tendon: k.trim().parse().with_context(err)?,
-                    at_s: t.trim().parse().with_context(err)?,
+                    at_s,
                 })
             }
         };
@@ -93,6 +114,14 @@ impl PlantOpts {
                 })
             })
             .transpose()?;
+        if let Some(d) = delay {
+            check(
+                "--delay",
+                d.delay_s * 1e3,
+                d.delay_s >= 0.0,
+                "a delay ≥ 0 ms",
+            )?;
+        }
         Ok(PlantParams {
             motor_tau_s: self.motor_tau_ms * 1e-3,
             compliance_tau_s: self.compliance_tau_ms * 1e-3,
@@ -128,9 +157,10 @@ pub struct PlantArgs {
     #[arg(long)]
     pub duration: Option<f64>,
     /// Stop (non-zero exit) after this many seconds without a tension
-    /// command; 0 = never.
-    #[arg(long, default_value_t = 2.0)]
-    pub peer_timeout: f64,
+    /// command; 0 = never [default: 2 s, after up to 10 s for a controller
+    /// to start; given explicitly, it holds from the start].
+    #[arg(long)]
+    pub peer_timeout: Option<f64>,
     /// Die with the parent process (as `tendril sim` starts it; also when
     /// the TENDRIL_SUPERVISED environment variable is set).
     #[arg(long)]
@@ -155,6 +185,10 @@ impl PlantArgs {
         if let Some(path) = &self.config {
             return Ok(crate::ipc::read_config(path)?);
         }
+        if let Some(d) = self.duration {
+            check("--duration", d, d > 0.0, "a number of seconds > 0")?;
+        }
+        let (peer_timeout_s, peer_start_grace_s) = peer_timeout(self.peer_timeout)?;
         Ok(PlantConfig {
             robot: self.robot,
             prefix: self.prefix,
@@ -164,7 +198,8 @@ impl PlantArgs {
             },
             spin: self.model.spin,
             duration_s: self.duration,
-            peer_timeout_s: (self.peer_timeout > 0.0).then_some(self.peer_timeout),
+            peer_timeout_s,
+            peer_start_grace_s,
             supervised: self.supervised,
             log: self.log,
             stats: self.stats,

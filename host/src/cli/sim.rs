@@ -40,6 +40,14 @@ pub struct SimArgs {
     /// Seconds of trajectory after the settle hold.
     #[arg(long, default_value_t = 10.0, allow_hyphen_values = true)]
     pub duration: f64,
+    /// Bound on the RMS tracking error, mm: a run above it is not clean
+    /// (exit status non-zero, the reason in report.md).
+    #[arg(long, default_value_t = crate::ipc::sim::DEFAULT_MAX_RMS_MM)]
+    pub max_rms_mm: f64,
+    /// Cap on the run's logs, GB: a --duration whose logs would be larger
+    /// (≈ 0.7 MB/s with 4 tendons at 1 kHz) is refused before it starts.
+    #[arg(long, default_value_t = crate::ipc::sim::budget::DEFAULT_MAX_LOG_GB)]
+    pub max_log_gb: f64,
     /// iceoryx2 service-name prefix (default: unique per run).
     #[arg(long)]
     pub prefix: Option<String>,
@@ -96,6 +104,8 @@ impl SimArgs {
         let mut cfg = SimConfig::new(exe, self.robot, model, self.out);
         cfg.prefix = self.prefix;
         cfg.duration_s = self.duration;
+        cfg.max_rms_mm = self.max_rms_mm;
+        cfg.max_log_gb = self.max_log_gb;
         cfg.planner.shape = self.traj.shape()?;
         cfg.planner.rate_hz = self.traj.planner_rate;
         cfg.planner.settle_s = self.traj.settle;
@@ -104,6 +114,7 @@ impl SimArgs {
             outside_at_s: self.inject_outside_at,
             ..cfg.planner.inject
         };
+        self.tuning.check()?;
         self.tuning.apply(&mut cfg.controller);
         cfg.controller.allow_robot_mismatch = self.allow_robot_mismatch;
         // Real-time scheduling is on by default under `sim` (`--realtime

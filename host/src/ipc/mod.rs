@@ -71,21 +71,38 @@ pub enum IpcError {
 /// pid, which the child then checks against its parent.
 pub const SUPERVISED_ENV: &str = "TENDRIL_SUPERVISED";
 
+/// The launcher's pid once [`die_with_parent`] has tied this process to it
+/// (0: not supervised).
+static LAUNCHER: std::sync::atomic::AtomicI32 = std::sync::atomic::AtomicI32::new(0);
+
 /// If `supervised` (a config flag) or [`SUPERVISED_ENV`] says so, ask the
-/// kernel to SIGKILL this process when its parent exits
+/// kernel to send this process SIGTERM when its parent exits
 /// (`PR_SET_PDEATHSIG`), so a killed `tendril sim` leaves no child holding
 /// the robot at real-time priority. Returns whether it did. A parent that
 /// died before the request (the child was re-parented already) is an error.
+///
+/// SIGTERM, not SIGKILL (issue 31): a child killed outright cannot release
+/// its iceoryx2 resources, and with the launcher dead by SIGKILL nobody
+/// would release the launcher's either until the next sim. iceoryx2's
+/// signal handler (installed here) turns the SIGTERM into a stop request
+/// that every loop checks each period ([`StopWatch::requested`], which also
+/// notices the launcher's death itself through [`launcher_gone`], so a
+/// signal swallowed anywhere cannot keep a child running); the child then
+/// leaves its loop and [`transport::ReleaseIfOrphaned`] removes the dead
+/// launcher's node and, with the last child, the run's services.
 pub fn die_with_parent(supervised: bool) -> Result<bool, IpcError> {
     let env = std::env::var(SUPERVISED_ENV).ok();
     if !supervised && env.is_none() {
         return Ok(false);
     }
+    // Catch SIGTERM before asking for it (no signal can have arrived yet:
+    // the default action would have ended the process).
+    let _ = SignalHandler::termination_requested();
     // SAFETY: PR_SET_PDEATHSIG takes a signal number and touches no memory.
     let rc = unsafe {
         libc::prctl(
             libc::PR_SET_PDEATHSIG,
-            libc::SIGKILL as libc::c_ulong,
+            libc::SIGTERM as libc::c_ulong,
             0,
             0,
             0,
@@ -105,7 +122,16 @@ pub fn die_with_parent(supervised: bool) -> Result<bool, IpcError> {
             "the launching process exited before this one started".into(),
         ));
     }
+    LAUNCHER.store(parent, std::sync::atomic::Ordering::Relaxed);
     Ok(true)
+}
+
+/// Whether this process was tied to a launcher ([`die_with_parent`]) that
+/// has since died (this process was re-parented). One `getppid` call.
+pub fn launcher_gone() -> bool {
+    let launcher = LAUNCHER.load(std::sync::atomic::Ordering::Relaxed);
+    // SAFETY: getppid has no preconditions.
+    launcher != 0 && unsafe { libc::getppid() } != launcher
 }
 
 /// Read a process configuration written as JSON (`--config FILE`).
@@ -134,12 +160,17 @@ pub struct PeerWatch {
 }
 
 impl PeerWatch {
-    /// Start watching at `now_ns`; `timeout_s` `None` never declares the peers lost.
-    pub fn new(timeout_s: Option<f64>, now_ns: u64) -> PeerWatch {
+    /// Start watching at `now_ns`; `timeout_s` `None` never declares the
+    /// peers lost. Before the first message the limit is `start_grace_s`
+    /// (default [`PEER_START_GRACE_S`]) or the timeout, whichever is longer:
+    /// a user who asks for a 1 s timeout gets 1 s from the start by passing
+    /// it as the grace too (the CLI does, issue 31).
+    pub fn new(timeout_s: Option<f64>, start_grace_s: Option<f64>, now_ns: u64) -> PeerWatch {
         let timeout_ns = timeout_s.map(|t| (t.max(0.0) * 1e9) as u64);
+        let grace_ns = (start_grace_s.unwrap_or(PEER_START_GRACE_S).max(0.0) * 1e9) as u64;
         PeerWatch {
             timeout_ns,
-            grace_ns: timeout_ns.map_or(0, |t| t.max((PEER_START_GRACE_S * 1e9) as u64)),
+            grace_ns: timeout_ns.map_or(0, |t| t.max(grace_ns)),
             last_ns: now_ns,
             heard: false,
         }
@@ -167,7 +198,7 @@ impl PeerWatch {
 }
 
 /// Why a process should stop: a `STOP` on the control service (the
-/// launcher's clean shutdown) or SIGTERM/SIGINT.
+/// launcher's clean shutdown), SIGTERM/SIGINT, or its launcher's death.
 pub struct StopWatch {
     control: transport::Sub<Control>,
 }
@@ -183,7 +214,7 @@ impl StopWatch {
     /// Whether a stop was requested since the last call (cheap: one
     /// shared-memory poll and an atomic read).
     pub fn requested(&self) -> bool {
-        if SignalHandler::termination_requested() {
+        if SignalHandler::termination_requested() || launcher_gone() {
             return true;
         }
         let mut stop = false;
@@ -209,13 +240,18 @@ mod tests {
     #[test]
     fn peers_count_as_lost_after_the_timeout_and_a_longer_start_grace() {
         let s = 1_000_000_000u64;
-        let mut w = PeerWatch::new(Some(2.0), 0);
+        let mut w = PeerWatch::new(Some(2.0), None, 0);
         assert!(!w.lost(9 * s), "start grace is 10 s");
         assert!(w.lost(11 * s));
         w.heard(11 * s);
         assert!(!w.lost(13 * s));
         assert!(w.lost(13 * s + 1));
-        assert!(!PeerWatch::new(None, 0).lost(u64::MAX));
+        assert!(!PeerWatch::new(None, None, 0).lost(u64::MAX));
+        // A grace given as the timeout itself: lost after the timeout from the start.
+        let w = PeerWatch::new(Some(1.0), Some(1.0), 0);
+        assert!(!w.lost(s) && w.lost(s + 1));
+        // A grace never shortens the timeout.
+        assert!(!PeerWatch::new(Some(3.0), Some(1.0), 0).lost(2 * s));
     }
 
     #[test]
@@ -241,6 +277,7 @@ mod tests {
             duration_s: None,
             inject: planner::Injections::default(),
             peer_timeout_s: Some(2.0),
+            peer_start_grace_s: None,
             supervised: true,
             log: None,
             realtime: false,

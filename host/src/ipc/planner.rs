@@ -53,6 +53,10 @@ pub struct PlannerConfig {
     /// command from a controller, s (None: never).
     #[serde(default)]
     pub peer_timeout_s: Option<f64>,
+    /// How long the peers may take to appear before the first message, s
+    /// (None: [`super::PEER_START_GRACE_S`]; never shorter than the timeout).
+    #[serde(default)]
+    pub peer_start_grace_s: Option<f64>,
     /// Die with the launching process ([`super::die_with_parent`]).
     #[serde(default)]
     pub supervised: bool,
@@ -103,6 +107,7 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
     let traj = Trajectory::new(&cfg.shape, &statics)?;
 
     let node = transport::node("tendril-planner")?;
+    let _orphan = transport::ReleaseIfOrphaned(&node);
     let services = Services::open_or_create(&node, &cfg.prefix)?;
     let publisher = transport::publisher(&services.setpoint)?;
     // The controller's commands say it is alive (the peers-lost rule).
@@ -120,7 +125,7 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
 
     let period_ns = (1e9 / cfg.rate_hz).round() as u64;
     let start = now_ns();
-    let mut peers = super::PeerWatch::new(cfg.peer_timeout_s, start);
+    let mut peers = super::PeerWatch::new(cfg.peer_timeout_s, cfg.peer_start_grace_s, start);
     let mut ticker = Ticker::new(start, period_ns);
     let mut seq = 0u64;
     let mut last_flush = start;

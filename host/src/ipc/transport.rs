@@ -168,6 +168,29 @@ pub fn remove_broken_node_entries(before: &std::collections::HashSet<std::ffi::O
     removed
 }
 
+/// Held by a supervised child for as long as its node lives (declare it
+/// right after the node, so it drops before it): when the child ends
+/// because its launcher died (SIGKILL leaves the launcher no chance to clean
+/// up), it removes the resources of the dead nodes — the launcher's own,
+/// and a child's killed before — so that the run's services go with the
+/// last child instead of waiting in `/dev/shm` for the next sim (issue 31).
+pub struct ReleaseIfOrphaned<'a>(pub &'a Node<Svc>);
+
+impl Drop for ReleaseIfOrphaned<'_> {
+    fn drop(&mut self) {
+        if super::launcher_gone() {
+            let state = self
+                .0
+                .blocking_cleanup_dead_nodes(std::time::Duration::from_millis(500));
+            log::info!(
+                "launcher gone: removed {} dead iceoryx2 node(s) ({} could not be)",
+                state.cleanups,
+                state.failed_cleanups
+            );
+        }
+    }
+}
+
 /// Publisher of one message type.
 pub type Pub<T> = Publisher<Svc, Wire<T>, ()>;
 /// Subscriber of one message type.

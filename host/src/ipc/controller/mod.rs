@@ -93,6 +93,9 @@ pub struct ControllerConfig {
     /// Stop with [`IpcError::PeersLost`] after this long with neither a
     /// setpoint nor a plant state, s (None: never).
     pub peer_timeout_s: Option<f64>,
+    /// How long the peers may take to appear before the first message, s
+    /// (None: [`super::PEER_START_GRACE_S`]; never shorter than the timeout).
+    pub peer_start_grace_s: Option<f64>,
     /// Die with the launching process ([`super::die_with_parent`]).
     pub supervised: bool,
     /// Per-period CSV log.
@@ -158,6 +161,7 @@ impl ControllerConfig {
             stuck_motor: StuckMotorDetection::default(),
             duration_s: None,
             peer_timeout_s: Some(2.0),
+            peer_start_grace_s: None,
             supervised: false,
             log: None,
             stats: None,
@@ -211,6 +215,7 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
     Controller::new(cfg, &robot, &bytes, 0)?;
 
     let node = transport::node("tendril-controller")?;
+    let _orphan = transport::ReleaseIfOrphaned(&node);
     let services = Services::open_or_create(&node, &cfg.prefix)?;
     let setpoints = transport::subscriber(&services.setpoint)?;
     let states = transport::subscriber(&services.plant_state)?;
@@ -236,7 +241,7 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
     let spin_ns = (cfg.spin_us * 1e3) as u64;
     let mut overran = false;
     let mut last_flush = start;
-    let mut peers = super::PeerWatch::new(cfg.peer_timeout_s, start);
+    let mut peers = super::PeerWatch::new(cfg.peer_timeout_s, cfg.peer_start_grace_s, start);
     let outcome = loop {
         let tick = ticker.wait(spin_ns);
         let t_wake = now_ns();

@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 use tendril_shared::messages::{plant_status, Header, PlantState, TensionCommand, MAX_TENDONS};
 
 use super::clock::now_ns;
-use super::stats::{CsvLog, Summary};
+use super::stats::{CsvLog, Histogram, Summary};
 use super::transport::{self, Services};
 use super::{IpcError, StopWatch};
 use crate::robot::Robot;
@@ -53,6 +53,9 @@ pub struct PlantConfig {
     /// Stop with [`IpcError::PeersLost`] after this long without a tension
     /// command, s (None: never).
     pub peer_timeout_s: Option<f64>,
+    /// How long the peers may take to appear before the first message, s
+    /// (None: [`super::PEER_START_GRACE_S`]; never shorter than the timeout).
+    pub peer_start_grace_s: Option<f64>,
     /// Die with the launching process ([`super::die_with_parent`]).
     pub supervised: bool,
     /// Per-step CSV log.
@@ -76,6 +79,7 @@ impl Default for PlantConfig {
             command_timeout_s: 0.05,
             duration_s: None,
             peer_timeout_s: Some(2.0),
+            peer_start_grace_s: None,
             supervised: false,
             log: None,
             stats: None,
@@ -124,6 +128,7 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
     let mut model = PlantModel::new(&robot, cfg.params.clone())?;
     let n = model.n();
     let node = transport::node("tendril-plant")?;
+    let _orphan = transport::ReleaseIfOrphaned(&node);
     let services = Services::open_or_create(&node, &cfg.prefix)?;
     let commands = transport::subscriber(&services.tension_cmd)?;
     let listener = transport::listener(&services.tension_cmd_event)?;
@@ -136,8 +141,10 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
     let start = now_ns();
     let secs = |t: u64| t.saturating_sub(start) as f64 * 1e-9;
     let mut stats = PlantStats::default();
-    let mut latencies = Vec::with_capacity(1 << 16);
-    let mut step_times = Vec::with_capacity(1 << 16);
+    // Fixed-size histograms, not growing vectors: a plant runs as long as
+    // the sim asks (issue 31: memory bounded whatever the duration).
+    let mut latencies = Histogram::default();
+    let mut step_times = Histogram::default();
     let mut delayed: VecDeque<(u64, TensionCommand)> = VecDeque::new();
     let mut last_cmd: Option<TensionCommand> = None;
     let mut last_cmd_time = start;
@@ -146,7 +153,7 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
     let mut status_sticky = 0u32;
     let mut pending = Vec::with_capacity(16);
     let idle = Duration::from_secs_f64(cfg.idle_period_s.clamp(1e-4, 1.0));
-    let mut peers = super::PeerWatch::new(cfg.peer_timeout_s, start);
+    let mut peers = super::PeerWatch::new(cfg.peer_timeout_s, cfg.peer_start_grace_s, start);
     let faults = cfg.params.faults.clone();
     let mut last_flush = start;
 
@@ -169,7 +176,7 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
         let t = secs(now);
         for cmd in pending.drain(..) {
             stats.commands += 1;
-            latencies.push(now.saturating_sub(cmd.header.stamp_ns));
+            latencies.record(now.saturating_sub(cmd.header.stamp_ns));
             if let Some(prev) = last_cmd {
                 if cmd.header.seq > prev.header.seq + 1 {
                     stats.sequence_gaps += cmd.header.seq - prev.header.seq - 1;
@@ -220,7 +227,7 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
         let ok = model.step((t0 - last_step) as f64 * 1e-9);
         let t1 = now_ns();
         last_step = t0;
-        step_times.push(t1 - t0);
+        step_times.record(t1 - t0);
         stats.steps += 1;
 
         let mut status = status_sticky;
@@ -281,8 +288,8 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
     }
     log.flush()?;
     stats.solve_failures = model.solve_failures;
-    stats.latency_us = Summary::of_ns(&mut latencies);
-    stats.step_us = Summary::of_ns(&mut step_times);
+    stats.latency_us = latencies.summary();
+    stats.step_us = step_times.summary();
     if let Some(path) = &cfg.stats {
         let json = serde_json::to_vec_pretty(&stats).map_err(|e| IpcError::Other(e.to_string()))?;
         super::write_file(path, &json)?;

@@ -8,6 +8,7 @@ use tendril_shared::messages::{command_status, plant_status};
 
 use super::analysis::{self, join, rms_between, steady_states, tracking, Logs, Sample};
 use super::faults::Action;
+use super::oscillation;
 use super::report::{
     FaultKind, FaultRecord, ModelUsed, PathPoint, PlantSummary, Series, SimReport, TensionPoint,
     Verdict,
@@ -22,6 +23,38 @@ use crate::ipc::stats::Summary;
 fn read_json<T: for<'de> serde::Deserialize<'de>>(path: &Path) -> Option<T> {
     let text = std::fs::read(path).ok()?;
     serde_json::from_slice(&text).ok()
+}
+
+/// The highest frequency of the trajectory's own motion, Hz (what the
+/// oscillation test's band starts above): a figure eight moves at twice its
+/// revolution rate, steps at one per dwell; a pose table is taken as slow.
+fn trajectory_hz(shape: &crate::plan::PathShape) -> f64 {
+    use crate::plan::PathShape as S;
+    match shape {
+        S::Circle { freq_hz, .. } | S::Helix { freq_hz, .. } | S::Sweep { freq_hz, .. } => *freq_hz,
+        S::FigureEight { freq_hz, .. } => 2.0 * freq_hz,
+        S::Steps { dwell_s, .. } => 1.0 / dwell_s,
+        S::Hold { .. } | S::Table { .. } => 0.0,
+    }
+}
+
+/// Why the RMS bound does not apply to this run, if it does not: the RMS
+/// of a path with jumps is the jumps' transients, not the loop's accuracy
+/// (its steady states say that), and an injected kill or stuck motor stops
+/// tracking by design (the fault records judge those).
+fn rms_bound_waived(cfg: &SimConfig, events: &[Event]) -> Option<String> {
+    use crate::plan::PathShape as S;
+    if matches!(cfg.planner.shape, S::Steps { .. } | S::Table { .. }) {
+        return Some("a path with jumps: its RMS is the jumps' transients".into());
+    }
+    if events.iter().any(|e| matches!(e.action, Action::Kill(_))) {
+        return Some("a process was killed by fault injection".into());
+    }
+    cfg.plant
+        .params
+        .faults
+        .stuck
+        .map(|_| "a stuck motor was injected (the loop holds by design)".into())
 }
 
 /// The report of a finished run.
@@ -93,6 +126,33 @@ pub fn build_report(
     if track.samples == 0 {
         problems.push("no tracking samples: the tracking statistics measured nothing".into());
     }
+    let oscillation = oscillation::detect(
+        &samples,
+        oscillation::band_from(trajectory_hz(&cfg.planner.shape)),
+    );
+    if let (true, Some(f), Some(r)) = (
+        oscillation.detected,
+        oscillation.frequency_hz,
+        oscillation.tone_rms_mm,
+    ) {
+        problems.push(format!(
+            "the loop oscillates: {f:.2} Hz, {r:.3} mm RMS ({:.3} mm amplitude) in the tracking \
+             error, in {} of {} 2 s windows",
+            r * std::f64::consts::SQRT_2,
+            oscillation.windows_with_tone,
+            oscillation.windows
+        ));
+    }
+    let unbounded = rms_bound_waived(cfg, events);
+    if let Some(rms) = track
+        .rms
+        .filter(|&rms| unbounded.is_none() && rms > cfg.max_rms_mm)
+    {
+        problems.push(format!(
+            "RMS tracking error {rms:.3} mm exceeds the bound {} mm (--max-rms-mm)",
+            cfg.max_rms_mm
+        ));
+    }
     if controller.is_none() {
         problems.push("the controller wrote no statistics".into());
     }
@@ -153,6 +213,10 @@ pub fn build_report(
         tracking_samples: track.samples,
         tracking_window_s: track.window,
         max_steady_state_error_mm: steady.iter().map(|s| s.error_mm).reduce(f64::max),
+        max_rms_mm: cfg.max_rms_mm,
+        max_rms_applied: unbounded.is_none(),
+        max_rms_waived_because: unbounded,
+        oscillation,
         steady_state: steady,
         controller,
         ipc_latency_us,

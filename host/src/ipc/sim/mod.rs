@@ -14,7 +14,9 @@
 
 pub mod analysis;
 pub mod assess;
+pub mod budget;
 pub mod faults;
+pub mod oscillation;
 pub mod report;
 pub mod supervisor;
 pub mod workdir;
@@ -45,6 +47,11 @@ pub const BUILT_IN_NET: &[u8] = include_bytes!("../../../../firmware/vectors/def
 
 /// Integral gain of the correction when it is on, 1/s.
 pub const DEFAULT_KI_PER_S: f64 = 10.0;
+
+/// Default bound on the RMS tracking error of a clean run, mm: twice the
+/// millimetre the nominal circle is held to (tests/tests/hil_loop.rs), far
+/// below what a wrong net or an unstable loop gives (51 mm, issue 31).
+pub const DEFAULT_MAX_RMS_MM: f64 = 2.0;
 
 /// Name of the working directory inside the output directory.
 pub const RUN_DIR: &str = ".sim-run";
@@ -81,8 +88,14 @@ pub enum SimError {
     /// The planner never sent a setpoint.
     #[error("no setpoint from the planner within {0} s")]
     NoSetpoint(f64),
-    /// SIGINT or SIGTERM: the processes were stopped, the outputs left as they were.
-    #[error("interrupted: stopped planner, controller and plant; previous outputs left intact")]
+    /// SIGINT or SIGTERM: the processes were stopped, the run's work
+    /// directory (its logs so far) removed, the outputs left as they were:
+    /// an interrupted run has no report to stand behind its logs
+    /// (PROBES.md: an interrupted run leaves exactly the previous outputs).
+    #[error(
+        "interrupted: stopped planner, controller and plant; this run's logs were discarded \
+         and the previous outputs left as they were"
+    )]
     Interrupted,
 }
 
@@ -148,6 +161,10 @@ pub struct SimConfig {
     pub pin: bool,
     /// Free-form description for the report.
     pub label: String,
+    /// A run whose RMS tracking error exceeds this (mm) is not clean.
+    pub max_rms_mm: f64,
+    /// Cap on the run's estimated log size, GB ([`budget`]).
+    pub max_log_gb: f64,
 }
 
 /// A unique service prefix for one run: parallel sims and tests never share services.
@@ -191,6 +208,7 @@ impl SimConfig {
                     ..Injections::default()
                 },
                 peer_timeout_s: controller.peer_timeout_s,
+                peer_start_grace_s: None,
                 supervised: true,
                 log: None,
                 realtime: true,
@@ -205,6 +223,8 @@ impl SimConfig {
             realtime: true,
             pin: true,
             label: String::new(),
+            max_rms_mm: DEFAULT_MAX_RMS_MM,
+            max_log_gb: budget::DEFAULT_MAX_LOG_GB,
         }
     }
 
@@ -219,6 +239,18 @@ impl SimConfig {
             return Err(SimError::Config(format!(
                 "--duration {}: must be a finite number of seconds > 0",
                 self.duration_s
+            )));
+        }
+        if !(self.max_rms_mm.is_finite() && self.max_rms_mm > 0.0) {
+            return Err(SimError::Config(format!(
+                "--max-rms-mm {}: must be a finite bound > 0 mm",
+                self.max_rms_mm
+            )));
+        }
+        if !(self.max_log_gb.is_finite() && self.max_log_gb > 0.0) {
+            return Err(SimError::Config(format!(
+                "--max-log-gb {}: must be a finite size > 0 GB",
+                self.max_log_gb
             )));
         }
         let settle = self.planner.settle_s;
@@ -298,6 +330,11 @@ pub fn run(cfg: &SimConfig) -> Result<SimReport, SimError> {
     let statics = Statics::new(&robot, crate::statics::SolverSettings::default());
     let family = crate::plan::Family::of(&statics).map_err(IpcError::from)?;
     cfg.planner.shape.check(&family).map_err(IpcError::from)?;
+    budget::check(
+        cfg,
+        robot.max_tensions().len(),
+        budget::free_bytes(&cfg.out),
+    )?;
     install_interrupt_latch();
     check_model(cfg)?;
     let dir = RunDir::create(&cfg.out)?;

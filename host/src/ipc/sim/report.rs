@@ -9,6 +9,7 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
+use super::oscillation::Oscillation;
 use super::supervisor::ProcessRecord;
 use crate::ipc::controller::ControllerStats;
 use crate::ipc::plant::PlantStats;
@@ -46,6 +47,21 @@ pub struct SimReport {
     pub tracking_samples: usize,
     /// First and last tracking sample, s since the first setpoint.
     pub tracking_window_s: Option<[f64; 2]>,
+    /// The bound the RMS tracking error was held to, mm (`--max-rms-mm`):
+    /// above it the run is not clean.
+    #[serde(default)]
+    pub max_rms_mm: f64,
+    /// Whether the bound was applied: not to a path with jumps (steps, a
+    /// pose table) nor after an injected kill or stuck motor.
+    #[serde(default)]
+    pub max_rms_applied: bool,
+    /// Why not, when it was not.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_rms_waived_because: Option<String>,
+    /// The oscillation test of the tracking error and its evidence: a
+    /// sustained tone makes the run not clean.
+    #[serde(default)]
+    pub oscillation: Oscillation,
     /// Every stretch of ≥ 1 s with one target: mean true error over its last 0.5 s.
     pub steady_state: Vec<SteadyState>,
     /// Worst of `steady_state`, mm; `null` when there was no such stretch.
@@ -286,6 +302,27 @@ impl SimReport {
         row(
             "max steady-state error (mm)",
             mm(self.max_steady_state_error_mm),
+        );
+        row(
+            "RMS bound (mm)",
+            match &self.max_rms_waived_because {
+                None => format!("{:.3}", self.max_rms_mm),
+                Some(why) => format!("{:.3} (not applied: {why})", self.max_rms_mm),
+            },
+        );
+        let o = &self.oscillation;
+        row(
+            "oscillation",
+            match (o.detected, o.frequency_hz, o.tone_rms_mm) {
+                (true, Some(f), Some(r)) => format!(
+                    "**yes**: {f:.2} Hz, {r:.3} mm RMS, in {} of {} windows above {:.2} Hz",
+                    o.windows_with_tone, o.windows, o.band_from_hz
+                ),
+                _ => format!(
+                    "no ({} of {} windows above {:.2} Hz hold a tone)",
+                    o.windows_with_tone, o.windows, o.band_from_hz
+                ),
+            },
         );
         match &self.controller {
             Some(c) => {

@@ -150,16 +150,29 @@ pub struct Children {
 }
 
 static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+static HANGUP: AtomicBool = AtomicBool::new(false);
 
-/// Install the SIGINT/SIGTERM latch (idempotent). Call before the first child starts.
-pub fn install_interrupt_latch() {
-    interrupted();
+extern "C" fn on_hangup(_: libc::c_int) {
+    HANGUP.store(true, Ordering::SeqCst);
 }
 
-/// Whether SIGINT or SIGTERM reached this process since the latch was installed.
+/// Install the SIGINT/SIGTERM/SIGHUP latch (idempotent). Call before the
+/// first child starts. iceoryx2's handler latches SIGINT and SIGTERM; SIGHUP
+/// (a closed terminal) gets its own, so that it too ends the run the same
+/// way — children stopped, the work directory removed — instead of killing
+/// the launcher where it stands (issue 31: exit 129 left `.sim-run` behind).
+pub fn install_interrupt_latch() {
+    interrupted();
+    // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
+    unsafe {
+        libc::signal(libc::SIGHUP, on_hangup as *const () as libc::sighandler_t);
+    }
+}
+
+/// Whether SIGINT, SIGTERM or SIGHUP reached this process since the latch was installed.
 pub fn interrupted() -> bool {
     // The handler records the last signal and forgets it when read: keep it.
-    if SignalHandler::termination_requested() {
+    if SignalHandler::termination_requested() || HANGUP.load(Ordering::SeqCst) {
         INTERRUPTED.store(true, Ordering::SeqCst);
     }
     INTERRUPTED.load(Ordering::SeqCst)
@@ -174,12 +187,16 @@ fn role_index(role: Role) -> usize {
 }
 
 /// Between fork and exec: die with the launcher. Only async-signal-safe
-/// calls here (no allocation: the launcher is multi-threaded).
+/// calls here (no allocation: the launcher is multi-threaded). SIGTERM, as
+/// the child asks again itself ([`crate::ipc::die_with_parent`]): until the
+/// child installs its handler the default action ends it as surely as
+/// SIGKILL; after, it stops its loop and releases its and the launcher's
+/// iceoryx2 resources.
 fn die_with_parent(parent: libc::pid_t) -> std::io::Result<()> {
     // SAFETY: prctl with these arguments and getppid only set and read
     // process attributes; both are async-signal-safe.
     unsafe {
-        if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) != 0 {
+        if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
             return Err(std::io::Error::last_os_error());
         }
         // The launcher may have died before the prctl took effect.

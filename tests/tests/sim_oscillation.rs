@@ -1,0 +1,105 @@
+//! A closed loop that oscillates, or tracks worse than its stated bound, is
+//! not a clean run (issue 31).
+//!
+//! The independent fact: the dynamic plant's rod rings at its first bending
+//! mode, the Euler–Bernoulli cantilever's f₁ = 1.8751² √(EI / ρA L⁴) / 2π
+//! (3.61 Hz on the seed robot), and the firmware's integral loop at the
+//! default ki = 10 /s is outside the stability bound of that mode
+//! (tests/tests/dynamic_loop.rs derives ki ≈ 7.8 /s), so it limit-cycles
+//! just below f₁; at ki = 2 /s it is inside the bound and does not.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use serde_json::Value;
+use tendril::robot::repo_robot;
+use tendril_tests::{one_loop_at_a_time, robot, tendril_bin, workspace_root};
+
+const DEFAULT_NET: &str = "firmware/vectors/default.tnet";
+
+/// Run `tendril sim ARGS` into `out` (one loop at a time); the output and the report.
+fn sim(out: &Path, args: &[&str]) -> (Output, Value) {
+    let _one = one_loop_at_a_time();
+    let o = Command::new(tendril_bin())
+        .arg("sim")
+        .arg("--robot")
+        .arg(robot("seed-4t.toml"))
+        .args(["--model", DEFAULT_NET, "--settle", "2", "--duration", "6"])
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .current_dir(workspace_root())
+        .output()
+        .expect("spawn tendril sim");
+    let text = std::fs::read_to_string(out.join("report.json")).expect("report.json");
+    (o, serde_json::from_str(&text).expect("report is JSON"))
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// The seed robot's first bending mode, Hz (Euler–Bernoulli cantilever).
+fn first_mode_hz() -> f64 {
+    let seed = repo_robot("seed-4t.toml");
+    let ei = seed.youngs_modulus * seed.second_moment();
+    let rho_a = seed.density * seed.area();
+    1.8751f64.powi(2) * (ei / (rho_a * seed.length.powi(4))).sqrt() / (2.0 * std::f64::consts::PI)
+}
+
+#[test]
+fn the_dynamic_plant_at_the_default_gain_oscillates_and_the_run_is_not_clean() {
+    let dir = tempfile::tempdir().unwrap();
+    let (o, r) = sim(dir.path(), &["--plant", "dynamic"]);
+    let err = stderr(&o);
+    assert!(!o.status.success(), "an oscillating run exited 0: {err}");
+    assert_eq!(r["verdict"]["clean"], false, "{}", r["verdict"]);
+    assert!(err.contains("the loop oscillates"), "{err}");
+    let osc = &r["oscillation"];
+    assert_eq!(osc["detected"], true, "{osc}");
+    let f = osc["frequency_hz"].as_f64().expect("frequency");
+    let f1 = first_mode_hz();
+    assert!(
+        (0.8 * f1..=1.05 * f1).contains(&f),
+        "limit cycle at {f:.2} Hz, the first mode is at {f1:.2} Hz"
+    );
+    let tone = osc["tone_rms_mm"].as_f64().expect("tone");
+    let rms = r["rms_tracking_error_mm"].as_f64().unwrap();
+    assert!(
+        tone >= 0.1 && tone <= rms * 1.01,
+        "tone {tone} mm RMS against a total of {rms} mm"
+    );
+    let md = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
+    assert!(md.contains("| oscillation | **yes**"), "{md}");
+}
+
+#[test]
+fn the_dynamic_plant_inside_the_stability_bound_stays_clean() {
+    let dir = tempfile::tempdir().unwrap();
+    let (o, r) = sim(dir.path(), &["--plant", "dynamic", "--ki", "2"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(r["verdict"]["clean"], true, "{}", r["verdict"]);
+    assert_eq!(r["oscillation"]["detected"], false, "{}", r["oscillation"]);
+    assert!(r["oscillation"]["windows"].as_u64().unwrap() >= 2);
+}
+
+#[test]
+fn a_nominal_quasi_static_run_is_clean_and_states_its_bound() {
+    let dir = tempfile::tempdir().unwrap();
+    let (o, r) = sim(dir.path(), &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(r["verdict"]["clean"], true, "{}", r["verdict"]);
+    assert_eq!(r["oscillation"]["detected"], false, "{}", r["oscillation"]);
+    assert_eq!(r["max_rms_mm"], 2.0);
+    assert_eq!(r["max_rms_applied"], true);
+}
+
+#[test]
+fn a_run_above_its_stated_rms_bound_is_not_clean() {
+    let dir = tempfile::tempdir().unwrap();
+    let (o, r) = sim(dir.path(), &["--max-rms-mm", "0.001"]);
+    let err = stderr(&o);
+    assert!(!o.status.success(), "{err}");
+    assert_eq!(r["verdict"]["clean"], false);
+    assert!(err.contains("exceeds the bound 0.001 mm"), "{err}");
+}
