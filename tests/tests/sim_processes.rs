@@ -230,11 +230,23 @@ fn a_child_that_fails_at_start_fails_the_run_and_leaves_no_iceoryx2_nodes() {
     let _one = one_sim_at_a_time();
     let _entries = NODE_ENTRIES.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
-    let bad = dir.path().join("bad.tnet");
-    std::fs::write(&bad, b"not a weight file at all").unwrap();
+    // A net `sim` lets through (another robot's, allowed) that the
+    // controller cannot load (six outputs for four tendons): the child fails
+    // after the launcher made its services. (A file that is no net at all is
+    // refused by `sim` itself, before any child starts.)
+    let bad = tendril_tests::workspace_root().join("firmware/vectors/tdcr-2seg.tnet");
     let before = iceoryx2_nodes();
     let out = dir.path().join("out");
-    let o = run_sim(&out, &["--model", bad.to_str().unwrap(), "--duration", "2"]);
+    let o = run_sim(
+        &out,
+        &[
+            "--model",
+            bad.to_str().unwrap(),
+            "--allow-robot-mismatch",
+            "--duration",
+            "2",
+        ],
+    );
     assert!(!o.status.success());
     let err = stderr(&o);
     assert!(
