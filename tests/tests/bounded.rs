@@ -111,6 +111,103 @@ fn an_endless_or_huge_robot_file_is_refused_without_reading_it_all() {
     refused(&out, &["big.toml", "MiB"]);
 }
 
+/// Nets, pose tables and IK inputs that are endless or huge: refused (not a
+/// regular file, too large, a line over 1 MiB) before memory runs out. The
+/// careless-user pass had `ik --model /dev/zero` and `sim --poses /dev/zero`
+/// killed by the kernel at 24 GB, and `ik --input /dev/zero` abort.
+#[test]
+fn endless_nets_pose_tables_and_ik_inputs_are_refused_without_reading_them_all() {
+    let dir = tempfile::tempdir().unwrap();
+    let net = tendril_tests::workspace_root().join("firmware/vectors/default.tnet");
+    let net = net.to_str().unwrap();
+    let pose = "0,0,0.38,1,0,0,0";
+    let cases: [&[&str]; 6] = [
+        &["ik", "--model", "/dev/zero", "--pose", pose],
+        &[
+            "sim",
+            "--model",
+            "/dev/zero",
+            "--duration",
+            "1",
+            "--out",
+            "s",
+        ],
+        &[
+            "sim",
+            "--trajectory",
+            "csv",
+            "--poses",
+            "/dev/zero",
+            "--duration",
+            "1",
+            "--out",
+            "s",
+        ],
+        &[
+            "ik",
+            "--model",
+            net,
+            "--input",
+            "/dev/zero",
+            "--output",
+            "o.csv",
+        ],
+        &["ik", "--exact", "--input", "/dev/zero", "--output", "o.csv"],
+        &["evaluate", "--model", "/dev/zero", "--data", "d.csv"],
+    ];
+    for args in cases {
+        let out = tendril_capped(dir.path(), args);
+        refused(&out, &["/dev/zero"]);
+        let err = stderr(&out);
+        assert!(
+            err.contains("not a regular file") || err.contains("longer than 1 MiB"),
+            "{args:?}: {err}"
+        );
+    }
+    let big = dir.path().join("big.tnet");
+    std::fs::File::create(&big)
+        .unwrap()
+        .set_len(64 << 20)
+        .unwrap();
+    let out = tendril_capped(dir.path(), &["ik", "--model", "big.tnet", "--pose", pose]);
+    refused(&out, &["big.tnet", "MiB"]);
+}
+
+/// `train --out /dev/full` wrote its learning curve into /dev
+/// (`/dev/full.curve.png`) in the careless-user pass.
+#[test]
+fn train_to_a_device_names_where_its_companions_go_and_writes_nothing_beside_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = tendril(
+        dir.path(),
+        &[
+            "generate",
+            "--robot",
+            robot().to_str().unwrap(),
+            "--samples",
+            "200",
+            "--out",
+            "d.csv",
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = tendril(
+        dir.path(),
+        &[
+            "train",
+            "--data",
+            "d.csv",
+            "--out",
+            "/dev/full",
+            "--max-hidden",
+            "1",
+        ],
+    );
+    refused(&out, &["/dev/full", "--plot"]);
+    assert!(!Path::new("/dev/full.curve.png").exists());
+    assert!(!Path::new("/dev/full.log.csv").exists());
+}
+
 #[test]
 fn generate_refuses_the_test_fractions_train_refuses() {
     let dir = tempfile::tempdir().unwrap();

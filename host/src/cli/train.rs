@@ -208,6 +208,17 @@ impl TrainArgs {
 impl TrainArgs {
     /// The training job these arguments describe, on `data` read from `--data`.
     pub fn job<'a>(&self, data: &'a Dataset) -> anyhow::Result<TrainJob<'a>> {
+        // The log, curve and report go beside the net unless named: beside a
+        // device, FIFO or stdout there is no place for them (they would land
+        // in /dev).
+        let beside = self.log.is_none() || self.plot.is_none() || self.report.is_none();
+        if beside && !crate::fsutil::is_regular_output(&self.out).unwrap_or(true) {
+            anyhow::bail!(
+                "--out {} is not a regular file, so the training log, learning curve and \
+                 report have no place beside it: name them with --log, --plot and --report",
+                self.out.display()
+            );
+        }
         let r = job::robot_for_data(
             data,
             &self.data,

@@ -259,7 +259,7 @@ fn row(n: usize, input: &Path, line: usize, result: &RowResult, summary: &mut Su
 /// The input's poses, read a chunk at a time.
 struct PoseReader {
     path: PathBuf,
-    records: csv::StringRecordsIntoIter<std::fs::File>,
+    records: csv::StringRecordsIntoIter<crate::fsutil::LineCapped<std::fs::File>>,
     cols: Vec<usize>,
     line: usize,
 }
@@ -272,8 +272,10 @@ impl PoseReader {
         };
         let mut reader = csv::ReaderBuilder::new()
             .has_headers(true)
-            .from_path(input)
-            .map_err(|e| file_error(e.to_string()))?;
+            // Lines capped: an endless input (`/dev/zero`) fails at once.
+            .from_reader(crate::fsutil::LineCapped::new(
+                std::fs::File::open(input).map_err(|e| file_error(e.to_string()))?,
+            ));
         let header: Vec<String> = reader
             .headers()
             .map_err(|e| file_error(format!("unreadable header: {e}")))?

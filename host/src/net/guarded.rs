@@ -267,8 +267,10 @@ pub fn read_poses(input: &Path) -> Result<Vec<[f64; 7]>, IkError> {
     };
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(true)
-        .from_path(input)
-        .map_err(|e| file_error(e.to_string()))?;
+        // Lines capped: an endless input (`/dev/zero`) fails at once.
+        .from_reader(crate::fsutil::LineCapped::new(
+            std::fs::File::open(input).map_err(|e| file_error(e.to_string()))?,
+        ));
     let header: Vec<String> = reader
         .headers()
         .map_err(|e| file_error(format!("unreadable header: {e}")))?

@@ -24,7 +24,7 @@ pub mod robot_check;
 
 pub use guarded::{read_poses, solve_csv, BatchSummary, GuardedNet, IkAnswer, IkError};
 pub use infer::{infer, infer_batch};
-pub use read::{decode, read_tnet, ReadError};
+pub use read::{decode, read_tnet, read_tnet_bytes, ReadError, MAX_TNET_BYTES};
 pub use robot_check::{
     check_model_robot, decode_with_provenance, load_for_robot, read_model, ModelError, RobotCheck,
     RobotMismatch, CLI_OVERRIDE,

@@ -37,12 +37,23 @@ pub fn decode(bytes: &[u8]) -> Result<Box<McuNet>, TnetError> {
     Ok(net)
 }
 
-/// Read and decode a `.tnet` file; errors name the file and the problem.
-pub fn read_tnet(path: &Path) -> Result<Box<McuNet>, ReadError> {
-    let bytes = std::fs::read(path).map_err(|cause| ReadError::Io {
+/// Largest `.tnet` file read, bytes: the largest net the capacity holds is
+/// 12.6 KiB; anything near this is not a net (and `/dev/zero` is refused as
+/// not a regular file, never read until memory runs out).
+pub const MAX_TNET_BYTES: u64 = 1 << 20;
+
+/// A `.tnet` file's bytes, refusing what cannot be one ([`MAX_TNET_BYTES`],
+/// not a regular file).
+pub fn read_tnet_bytes(path: &Path) -> Result<Vec<u8>, ReadError> {
+    crate::fsutil::read_capped(path, MAX_TNET_BYTES).map_err(|cause| ReadError::Io {
         path: path.display().to_string(),
         cause,
-    })?;
+    })
+}
+
+/// Read and decode a `.tnet` file; errors name the file and the problem.
+pub fn read_tnet(path: &Path) -> Result<Box<McuNet>, ReadError> {
+    let bytes = read_tnet_bytes(path)?;
     decode(&bytes).map_err(|cause| ReadError::Format {
         path: path.display().to_string(),
         cause,

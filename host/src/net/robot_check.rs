@@ -127,10 +127,7 @@ pub fn decode_with_provenance(
 
 /// Read and decode a `.tnet` file with its provenance; errors name the file.
 pub fn read_model(path: &Path) -> Result<(Box<McuNet>, Option<Provenance>), ReadError> {
-    let bytes = std::fs::read(path).map_err(|cause| ReadError::Io {
-        path: path.display().to_string(),
-        cause,
-    })?;
+    let bytes = super::read::read_tnet_bytes(path)?;
     decode_with_provenance(&bytes).map_err(|cause| ReadError::Format {
         path: path.display().to_string(),
         cause,

@@ -55,12 +55,12 @@ pub enum PlanError {
     #[error("{0}")]
     Shape(String),
     /// A pose table could not be read.
-    #[error("{path}: {source}")]
+    #[error("{}: {cause}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
-        /// The cause.
-        source: std::io::Error,
+        /// The cause (in the message, not a `source`: printed once).
+        cause: std::io::Error,
     },
     /// The quick stand-in net could not be fitted.
     #[error(transparent)]

@@ -104,9 +104,15 @@ fn table_feedforward(ik: &ExactIk, rows: &[PoseRow]) -> (Vec<Vec<f64>>, Vec<f64>
 
 /// Read a pose table (`t,px,py,pz,qw,qx,qy,qz`, header line required).
 pub fn read_pose_csv(path: &Path) -> Result<Vec<PoseRow>, PlanError> {
-    let text = std::fs::read_to_string(path).map_err(|source| PlanError::Io {
+    // A pose table at 1 kHz for an hour is ≈ 200 MB; beyond 512 MiB it is
+    // not one (and `/dev/zero` is refused, never read until memory runs out).
+    let bytes = crate::fsutil::read_capped(path, 512 << 20).map_err(|cause| PlanError::Io {
         path: path.to_path_buf(),
-        source,
+        cause,
+    })?;
+    let text = String::from_utf8(bytes).map_err(|e| PlanError::Io {
+        path: path.to_path_buf(),
+        cause: std::io::Error::new(std::io::ErrorKind::InvalidData, e),
     })?;
     let mut rows = Vec::new();
     for (n, line) in text.lines().enumerate().skip(1) {

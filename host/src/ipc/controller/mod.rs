@@ -197,10 +197,13 @@ pub fn load_net(slots: &mut Slots, bytes: &[u8], tendons: usize) -> Result<(), I
 pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
     super::die_with_parent(cfg.supervised)?;
     let robot = Robot::load(&cfg.robot).map_err(|e| IpcError::Other(e.to_string()))?;
-    let bytes = std::fs::read(&cfg.model).map_err(|source| IpcError::Io {
-        path: cfg.model.clone(),
-        source,
-    })?;
+    let bytes =
+        crate::fsutil::read_capped(&cfg.model, crate::net::MAX_TNET_BYTES).map_err(|source| {
+            IpcError::Io {
+                path: cfg.model.clone(),
+                source,
+            }
+        })?;
     let (_, provenance) = crate::net::decode_with_provenance(&bytes)
         .map_err(|e| IpcError::Other(format!("{}: {e}", cfg.model.display())))?;
     crate::net::check_model_robot(

@@ -384,10 +384,13 @@ fn model_file(cfg: &SimConfig, dir: &RunDir) -> Result<(PathBuf, Vec<u8>, ModelU
     };
     Ok(match &cfg.model {
         ModelSource::File(path) => {
-            let bytes = std::fs::read(path).map_err(|source| SimError::Io {
-                path: path.clone(),
-                source,
-            })?;
+            let bytes =
+                crate::fsutil::read_capped(path, crate::net::MAX_TNET_BYTES).map_err(|source| {
+                    SimError::Io {
+                        path: path.clone(),
+                        source,
+                    }
+                })?;
             let used = ModelUsed {
                 path: path.clone(),
                 built_in: false,
