@@ -266,30 +266,7 @@ struct PoseReader {
 
 impl PoseReader {
     fn open(input: &Path) -> Result<PoseReader, IkError> {
-        let file_error = |why: String| IkError::File {
-            path: input.to_path_buf(),
-            why,
-        };
-        let mut reader = csv::ReaderBuilder::new()
-            .has_headers(true)
-            // Lines capped: an endless input (`/dev/zero`) fails at once.
-            .from_reader(crate::fsutil::LineCapped::new(
-                std::fs::File::open(input).map_err(|e| file_error(e.to_string()))?,
-            ));
-        let header: Vec<String> = reader
-            .headers()
-            .map_err(|e| file_error(format!("unreadable header: {e}")))?
-            .iter()
-            .map(|s| s.trim().to_string())
-            .collect();
-        let cols = POSE_COLUMNS
-            .iter()
-            .map(|c| {
-                header.iter().position(|h| h == c).ok_or_else(|| {
-                    file_error(format!("missing column {c} (need px,py,pz,qw,qx,qy,qz)"))
-                })
-            })
-            .collect::<Result<_, _>>()?;
+        let (reader, cols) = crate::net::guarded::open_pose_csv(input)?;
         Ok(PoseReader {
             path: input.to_path_buf(),
             records: reader.into_records(),

@@ -257,27 +257,31 @@ pub struct BatchSummary {
     pub extrapolated: usize,
 }
 
-/// The poses of the CSV at `input` (columns px, py, pz, qw, qx, qy, qz;
-/// others ignored), in file order; the first unreadable row fails it,
-/// naming its line (header = line 1).
-pub fn read_poses(input: &Path) -> Result<Vec<[f64; 7]>, IkError> {
+/// A pose CSV opened for reading: the reader (lines capped: an endless
+/// input such as `/dev/zero` fails at once) and where its pose columns
+/// (px, py, pz, qw, qx, qy, qz) are. Shared by the net's and the exact IK's
+/// batch readers.
+pub(crate) type PoseCsv = csv::Reader<crate::fsutil::LineCapped<std::fs::File>>;
+
+/// Open `input` and find its pose columns.
+pub(crate) fn open_pose_csv(input: &Path) -> Result<(PoseCsv, Vec<usize>), IkError> {
     let file_error = |why: String| IkError::File {
         path: input.to_path_buf(),
         why,
     };
-    let mut reader = csv::ReaderBuilder::new()
-        .has_headers(true)
-        // Lines capped: an endless input (`/dev/zero`) fails at once.
-        .from_reader(crate::fsutil::LineCapped::new(
-            std::fs::File::open(input).map_err(|e| file_error(e.to_string()))?,
-        ));
+    let mut reader =
+        csv::ReaderBuilder::new()
+            .has_headers(true)
+            .from_reader(crate::fsutil::LineCapped::new(
+                std::fs::File::open(input).map_err(|e| file_error(e.to_string()))?,
+            ));
     let header: Vec<String> = reader
         .headers()
         .map_err(|e| file_error(format!("unreadable header: {e}")))?
         .iter()
         .map(|s| s.trim().to_string())
         .collect();
-    let cols: Vec<usize> = POSE_COLUMNS
+    let cols = POSE_COLUMNS
         .iter()
         .map(|c| {
             header.iter().position(|h| h == c).ok_or_else(|| {
@@ -285,6 +289,14 @@ pub fn read_poses(input: &Path) -> Result<Vec<[f64; 7]>, IkError> {
             })
         })
         .collect::<Result<_, _>>()?;
+    Ok((reader, cols))
+}
+
+/// The poses of the CSV at `input` (columns px, py, pz, qw, qx, qy, qz;
+/// others ignored), in file order; the first unreadable row fails it,
+/// naming its line (header = line 1).
+pub fn read_poses(input: &Path) -> Result<Vec<[f64; 7]>, IkError> {
+    let (mut reader, cols) = open_pose_csv(input)?;
     let mut poses = Vec::new();
     for (i, record) in reader.records().enumerate() {
         let row_error = |why: String| IkError::Row {
