@@ -7,6 +7,9 @@
 //! - [`control`]: the pure control step and its [`control::Status`] word;
 //! - [`command`]: the command stage's co-contraction shift (keeps the bend
 //!   when a target leaves the tension range);
+//! - [`period`]: the whole control period around the step (setpoint and
+//!   feedback rules, watchdog, plant-stale, stuck motor, lead, update slices,
+//!   counters), one implementation for the chip and the host;
 //! - [`swap`]: hot swap of the weights (flash default + one RAM slot on the MCU);
 //! - `vectors`, `synth` and `swap_demo` (cargo feature `harness`, off by
 //!   default): the test-vector format and runner shared by the MCU test image
@@ -45,6 +48,7 @@ mod tests;
 pub mod command;
 pub mod control;
 pub mod infer;
+pub mod period;
 #[cfg(target_os = "none")]
 pub mod rt;
 pub mod swap;

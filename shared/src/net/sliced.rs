@@ -104,6 +104,23 @@ impl<'a, const IN: usize, const H: usize, const OUT: usize, const W: usize>
         self.bytes
     }
 
+    /// The same job, continued on `bytes`: the owner of a receive buffer
+    /// keeps the job without a borrow between periods (rebinding to `&[]`)
+    /// and lends the buffer back for each slice. `bytes` must be the bytes
+    /// the job started on, unchanged; the job holds only offsets and a
+    /// running CRC, so other bytes give a wrong verdict, never a panic or
+    /// an out-of-bounds read.
+    pub const fn rebind<'c>(self, bytes: &'c [u8]) -> CheckJob<'c, IN, H, OUT, W> {
+        CheckJob {
+            bytes,
+            stage: self.stage,
+            crc: self.crc,
+            stored_crc: self.stored_crc,
+            header: self.header,
+            spans: self.spans,
+        }
+    }
+
     /// Do one slice of the check: the structure, or up to `budget` bytes
     /// (at least 4) of hashing or of the value scan, or the ranges.
     /// `Pending` until the last slice; then `Ready` with what

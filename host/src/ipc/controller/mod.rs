@@ -16,14 +16,12 @@ use std::borrow::Cow;
 use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
-use tendril_firmware::control::{
-    control_step, ControlConfig, ControlState, Feedback, IntegralConfig, SafeHold,
-    Setpoint as FwSetpoint, Status, StepInput, Tangent as FwTangent,
-};
+use tendril_firmware::control::{ControlConfig, IntegralConfig, SafeHold};
+use tendril_firmware::period::{event, Counters, Events, StuckConfig};
 use tendril_firmware::swap::NetSlots;
 use tendril_shared::messages::{
     command_status, setpoint_flags, Header, PlantState, Setpoint, TensionCommand, WeightUpdate,
-    MAX_TENDONS,
+    MAX_TENDONS, WEIGHT_UPDATE_CAPACITY,
 };
 use tendril_shared::{MAX_HIDDEN, MAX_WEIGHTS, POSE_DIM};
 
@@ -34,13 +32,12 @@ use super::{IpcError, StopWatch};
 use crate::robot::Robot;
 
 mod report;
-mod stuck;
 mod task;
 
-use report::FAULT_KINDS;
-pub use report::{ControllerStats, DetectedFault, FaultKind, FAULT_CAPACITY, FAULT_REPEAT_S};
-use stuck::StuckDetector;
-pub use task::{Controller, Inbox};
+pub use report::{
+    ControllerStats, DetectedFault, FaultKind, FaultLog, FAULT_CAPACITY, FAULT_REPEAT_S,
+};
+pub use task::{feedback_in, period_config, setpoint_in, Controller, HostPeriod, Inbox};
 
 /// The double-buffered net the controller runs, of the one capacity in
 /// `tendril_shared` (the trainer's cap, so every exported net fits).

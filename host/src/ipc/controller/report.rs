@@ -137,3 +137,220 @@ pub struct DetectedFault {
     /// One line for people.
     pub detail: Cow<'static, str>,
 }
+
+/// The controller's fault list: bounded, repeats of a kind thinned to one
+/// per [`FAULT_REPEAT_S`], preallocated so listing never allocates.
+#[derive(Clone, Debug)]
+pub struct FaultLog {
+    start_ns: u64,
+    faults: Vec<DetectedFault>,
+    not_listed: u64,
+    last_listed: [Option<u64>; FAULT_KINDS],
+}
+
+impl FaultLog {
+    /// An empty list; times are reported from `start_ns`.
+    pub fn new(start_ns: u64) -> FaultLog {
+        FaultLog {
+            start_ns,
+            faults: Vec::with_capacity(FAULT_CAPACITY),
+            not_listed: 0,
+            last_listed: [None; FAULT_KINDS],
+        }
+    }
+
+    /// List a fault at `now_ns` (shared monotonic clock).
+    pub fn detect(
+        &mut self,
+        kind: FaultKind,
+        now_ns: u64,
+        tendon: Option<usize>,
+        value: f64,
+        detail: &'static str,
+    ) {
+        let repeat_ns = (FAULT_REPEAT_S * 1e9) as u64;
+        let slot = self.last_listed.get_mut(kind.slot());
+        let recent = slot
+            .as_ref()
+            .and_then(|s| **s)
+            .is_some_and(|t| now_ns.saturating_sub(t) < repeat_ns);
+        if recent || self.faults.len() >= FAULT_CAPACITY {
+            self.not_listed += 1;
+            return;
+        }
+        if let Some(s) = slot {
+            *s = Some(now_ns);
+        }
+        self.faults.push(DetectedFault {
+            kind,
+            t_s: now_ns.saturating_sub(self.start_ns) as f64 * 1e-9,
+            t_ns: now_ns,
+            tendon,
+            value,
+            detail: Cow::Borrowed(detail),
+        });
+    }
+
+    /// List and log what one period of the firmware's controller reported
+    /// (`events`, with its `counters` after that period) at `now_ns`;
+    /// `update_seq` names the weight update in flight.
+    pub fn report(
+        &mut self,
+        ev: &Events,
+        counters: &Counters,
+        now_ns: u64,
+        period_ns: u64,
+        update_seq: u64,
+    ) {
+        if ev.bits == 0 {
+            return;
+        }
+        if ev.has(event::PLANNER_RESTART) {
+            log::info!("controller: setpoint sequence restarted: new planner");
+        }
+        if ev.has(event::SETPOINTS_LOST) {
+            let lost = ev.setpoints_lost as f64;
+            self.detect(
+                FaultKind::SetpointsLost,
+                now_ns,
+                None,
+                lost,
+                "gap in the setpoint sequence",
+            );
+        }
+        if ev.has(event::PLANT_RESTART) {
+            log::info!("controller: plant-state sequence restarted: new plant");
+        }
+        if ev.has(event::PLANT_STATES_LOST) {
+            let lost = ev.plant_states_lost as f64;
+            let detail = "gap in the plant-state sequence";
+            self.detect(FaultKind::PlantStatesLost, now_ns, None, lost, detail);
+        }
+        if ev.has(event::PLANT_RECOVERED) {
+            log::info!("controller: plant state back after a gap");
+        }
+        if ev.has(event::COMMANDS_NOT_APPLIED) {
+            self.detect(
+                FaultKind::CommandsNotApplied,
+                now_ns,
+                None,
+                ev.commands_behind as f64,
+                "the plant had not applied the previous tension command",
+            );
+        }
+        if let (true, Some((tendon, err))) = (ev.has(event::STUCK_MOTOR), ev.stuck) {
+            log::error!("controller: motor {tendon} stuck (tension off by {err:.2} N): safe hold");
+            self.detect(
+                FaultKind::StuckMotor,
+                now_ns,
+                Some(tendon as usize),
+                err as f64,
+                "measured tension left the healthy-motor model: safe hold",
+            );
+        }
+        if ev.has(event::NONFINITE_SETPOINT) {
+            log::warn!("controller: setpoint with NaN/∞ rejected");
+            let n = counters.rejected_nonfinite as f64;
+            self.detect(
+                FaultKind::NonfiniteSetpoint,
+                now_ns,
+                None,
+                n,
+                "setpoint with NaN/∞ rejected",
+            );
+        }
+        if ev.has(event::BAD_QUATERNION) {
+            log::warn!("controller: setpoint with a non-unit quaternion rejected");
+            let n = counters.rejected_quaternion as f64;
+            let detail = "setpoint with a non-unit quaternion rejected";
+            self.detect(FaultKind::BadQuaternion, now_ns, None, n, detail);
+        }
+        if ev.has(event::OUTSIDE_WORKSPACE) {
+            log::warn!(
+                "controller: setpoint outside the workspace held ({} so far)",
+                counters.rejected_workspace
+            );
+            let n = counters.rejected_workspace as f64;
+            let detail = "setpoint outside the net's workspace: target held";
+            self.detect(FaultKind::OutsideWorkspace, now_ns, None, n, detail);
+        }
+        if ev.has(event::WATCHDOG_HOLD) {
+            log::debug!("controller: watchdog trip {}", counters.watchdog_trips);
+            let periods = ev.hold_silence_ns as f64 / period_ns.max(1) as f64;
+            self.detect(
+                FaultKind::WatchdogHold,
+                now_ns,
+                None,
+                periods,
+                "no acceptable setpoint within the watchdog time: safe hold",
+            );
+        }
+        if ev.has(event::TRACKING_RESUMED) {
+            log::info!("controller: setpoints back, tracking resumed");
+        }
+        if ev.has(event::PLANT_STALE) {
+            log::warn!("controller: no plant state for 20 periods");
+            self.detect(
+                FaultKind::PlantStale,
+                now_ns,
+                None,
+                20.0,
+                "no plant state for 20 periods",
+            );
+        }
+        if ev.has(event::WEIGHTS_SWAPPED) {
+            log::info!("controller: new weights swapped in (update #{update_seq})");
+        }
+        if ev.has(event::WEIGHTS_REJECTED) {
+            match ev.update_error {
+                Some(e) => log::warn!(
+                    "controller: weight update #{update_seq} rejected ({e}), old net kept"
+                ),
+                None => {
+                    log::warn!("controller: weight update #{update_seq} rejected, old net kept")
+                }
+            }
+            let detail = "weight update rejected: old net kept";
+            self.detect(
+                FaultKind::WeightsRejected,
+                now_ns,
+                None,
+                update_seq as f64,
+                detail,
+            );
+        }
+    }
+
+    /// Put the list into `stats`.
+    pub fn fill(&self, stats: &mut ControllerStats) {
+        stats.faults_detected = self.faults.clone();
+        stats.faults_not_listed = self.not_listed;
+    }
+}
+
+impl ControllerStats {
+    /// Take the firmware's counts (the period's rules counted them).
+    pub fn fill_counters(&mut self, c: &Counters) {
+        let u = u64::from;
+        self.setpoints = u(c.setpoints);
+        self.setpoints_lost = u(c.setpoints_lost);
+        self.rejected_nonfinite = u(c.rejected_nonfinite);
+        self.rejected_quaternion = u(c.rejected_quaternion);
+        self.rejected_workspace = u(c.rejected_workspace);
+        self.watchdog_trips = u(c.watchdog_trips);
+        self.watchdog_trips_late_planner = u(c.watchdog_trips_late_planner);
+        self.stuck_motor_holds = u(c.stuck_motor_holds);
+        self.hold_cycles = u(c.hold_periods);
+        self.startup_hold_cycles = u(c.startup_hold_periods);
+        self.saturated_cycles = u(c.saturated_periods);
+        self.correction_cycles = u(c.correction_periods);
+        self.weight_swaps = u(c.weight_swaps);
+        self.weight_rejections = u(c.weight_rejections);
+        self.planner_restarts = u(c.planner_restarts);
+        self.plant_restarts = u(c.plant_restarts);
+        self.plant_states_lost = u(c.plant_states_lost);
+        self.commands_not_applied = u(c.commands_not_applied);
+        self.plant_stale_cycles = u(c.plant_stale_periods);
+        self.plant_recoveries = u(c.plant_recoveries);
+    }
+}

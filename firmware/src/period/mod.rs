@@ -1,0 +1,542 @@
+//! The whole control period (docs/design.md §5.5): configured once, then one
+//! [`Period::run`] per tick, on the chip and in the host's controller
+//! process alike. Around the pure [`control_step`] it holds every rule that
+//! decides what the motors get:
+//!
+//! 1. the period's overrun (ticks missed before it);
+//! 2. one bounded slice of a weight update's check or install
+//!    ([`update`]: the old net runs until the new one is whole and checked);
+//! 3. setpoint acceptance: the sender's sequence (gaps counted, a restart =
+//!    a new planner), the motor-lag *lead* (`pose + velocity · lead`), then
+//!    the step's own NaN/∞, quaternion and workspace rules;
+//! 4. plant feedback: its sequence (gaps, restarts), commands the plant had
+//!    not applied, the stuck-motor detector ([`stuck`]) and its latched
+//!    hold, the measured tip led by the same lead (so the integral loop
+//!    still integrates `p_desired(t) − p_measured(t)`);
+//! 5. plant-stale: no feedback for [`PeriodConfig::plant_stale_ns`];
+//! 6. the control step (watchdog → safe hold, integral correction,
+//!    inference, command stage, slew);
+//! 7. the status word, the [`Counters`] and this period's [`Events`].
+//!
+//! Nothing here allocates, panics or reads a clock: time comes in
+//! [`Inputs::now_ns`], so a recorded input trace replays to the same
+//! commands bit for bit on any build.
+
+mod counters;
+mod stuck;
+#[cfg(test)]
+mod tests;
+pub mod update;
+
+pub use counters::Counters;
+pub use stuck::StuckConfig;
+pub use update::{SliceOutcome, Update, UpdateError};
+
+use tendril_shared::messages::command_status as wire;
+use tendril_shared::{MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS, POSE_DIM};
+
+use crate::control::{
+    control_step, ControlConfig, ControlState, Feedback, Setpoint, Status, StepInput, Tangent,
+    Tensions,
+};
+use crate::swap::NetStore;
+use stuck::StuckDetector;
+
+/// Everything a period needs besides the net, fixed at configuration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PeriodConfig {
+    /// The control step's configuration (limits, watchdog, integral loop).
+    pub control: ControlConfig,
+    /// The period, ns.
+    pub period_ns: u64,
+    /// Motor-lag lead: the setpoint is advanced by `velocity · lead_s`, s.
+    pub lead_s: f32,
+    /// No plant feedback for this long marks the plant stale, ns.
+    pub plant_stale_ns: u64,
+    /// Stuck-motor detection.
+    pub stuck: StuckConfig,
+    /// Bytes of an update's check per period (hashing, value scan).
+    pub swap_slice_bytes: usize,
+}
+
+/// A setpoint as the period takes it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SetpointIn {
+    /// The sender's sequence number (1 for its first).
+    pub seq: u64,
+    /// Desired tip pose `px, py, pz` (m), `qw, qx, qy, qz`.
+    pub pose: [f32; POSE_DIM],
+    /// Its time derivative (per s), when the planner sent one: the lead.
+    pub velocity: Option<[f32; POSE_DIM]>,
+    /// The reachable poses about it (for the integral loop), if sent.
+    pub tangent: Option<Tangent>,
+}
+
+/// Plant feedback as the period takes it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FeedbackIn {
+    /// The sender's sequence number (1 for its first).
+    pub seq: u64,
+    /// Sequence number of the last command the plant applied (0 = none).
+    pub command_seq: u64,
+    /// Measured tensions, N.
+    pub tensions: Tensions,
+    /// Measured tip position, m.
+    pub tip: [f32; 3],
+}
+
+/// What arrived since the last period, and when this period runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Inputs {
+    /// This period's time (its tick), ns on the controller's clock.
+    pub now_ns: u64,
+    /// Ticks missed before this one.
+    pub missed_ticks: u32,
+    /// The newest setpoint.
+    pub setpoint: Option<SetpointIn>,
+    /// How many setpoints arrived (the newest is taken).
+    pub setpoints: u32,
+    /// How many of the older ones, superseded before a period saw them,
+    /// had a NaN/∞ pose (never applied; counted as rejected).
+    pub superseded_nonfinite: u32,
+    /// The newest plant feedback.
+    pub feedback: Option<FeedbackIn>,
+    /// How many feedback messages arrived.
+    pub feedbacks: u32,
+}
+
+/// Bits of [`Events::bits`]: what happened this period that a report lists.
+pub mod event {
+    /// Setpoints were lost in a gap of the sequence ([`super::Events::setpoints_lost`]).
+    pub const SETPOINTS_LOST: u32 = 1 << 0;
+    /// The setpoint sequence restarted: a new planner.
+    pub const PLANNER_RESTART: u32 = 1 << 1;
+    /// The plant-state sequence restarted: a new plant.
+    pub const PLANT_RESTART: u32 = 1 << 2;
+    /// Plant states were lost in a gap ([`super::Events::plant_states_lost`]).
+    pub const PLANT_STATES_LOST: u32 = 1 << 3;
+    /// Feedback is back after the plant was stale.
+    pub const PLANT_RECOVERED: u32 = 1 << 4;
+    /// The plant had not applied the previous command ([`super::Events::commands_behind`]).
+    pub const COMMANDS_NOT_APPLIED: u32 = 1 << 5;
+    /// A motor is stuck: hold latched ([`super::Events::stuck`]).
+    pub const STUCK_MOTOR: u32 = 1 << 6;
+    /// A setpoint with NaN/∞ was rejected.
+    pub const NONFINITE_SETPOINT: u32 = 1 << 7;
+    /// A setpoint with a non-unit quaternion was rejected.
+    pub const BAD_QUATERNION: u32 = 1 << 8;
+    /// Setpoints began to lie outside the workspace (first of a run).
+    pub const OUTSIDE_WORKSPACE: u32 = 1 << 9;
+    /// The watchdog's safe hold began ([`super::Events::hold_silence_ns`]).
+    pub const WATCHDOG_HOLD: u32 = 1 << 10;
+    /// Tracking resumed after a hold.
+    pub const TRACKING_RESUMED: u32 = 1 << 11;
+    /// No feedback for the stale time: the correction is frozen.
+    pub const PLANT_STALE: u32 = 1 << 12;
+    /// A new net runs from this period on.
+    pub const WEIGHTS_SWAPPED: u32 = 1 << 13;
+    /// A weight update was refused ([`super::Events::update_error`]).
+    pub const WEIGHTS_REJECTED: u32 = 1 << 14;
+}
+
+/// What happened this period, beyond the status word: [`event`] bits and
+/// their values.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Events {
+    /// [`event`] bits.
+    pub bits: u32,
+    /// Setpoints lost in the gap before this one.
+    pub setpoints_lost: u64,
+    /// Plant states lost in the gap before this one.
+    pub plant_states_lost: u64,
+    /// Commands the plant was behind.
+    pub commands_behind: u64,
+    /// The stuck tendon and its tension error, N.
+    pub stuck: Option<(u8, f32)>,
+    /// Silence since the last acceptable setpoint when the hold began, ns.
+    pub hold_silence_ns: u64,
+    /// Why an update was refused.
+    pub update_error: Option<UpdateError>,
+}
+
+impl Events {
+    /// Whether any bit of `bits` is set.
+    pub const fn has(&self, bits: u32) -> bool {
+        self.bits & bits != 0
+    }
+}
+
+/// The command a period produces.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Command {
+    /// Command sequence number (1 for the first period).
+    pub seq: u64,
+    /// The sender's sequence number of the last setpoint taken (0 = none).
+    pub setpoint_seq: u64,
+    /// Sequence number of the last plant feedback taken (0 = none).
+    pub feedback_seq: u64,
+    /// Tensions, N (the first `count`).
+    pub tensions: Tensions,
+    /// Number of tendons.
+    pub count: usize,
+    /// The status word: the wire bits of
+    /// `tendril_shared::messages::command_status` and the step's detail bits.
+    pub status: u32,
+}
+
+/// One period's result.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Outputs {
+    /// What the motors get.
+    pub command: Command,
+    /// What the report lists.
+    pub events: Events,
+}
+
+/// The controller: configured once ([`Period::new`]), then [`Period::run`]
+/// once per tick. `U` is the weight-update buffer's size, bytes.
+#[derive(Clone, Debug)]
+pub struct Period<const U: usize> {
+    cfg: PeriodConfig,
+    n: usize,
+    state: ControlState,
+    stuck: StuckDetector,
+    update: Update<U>,
+    counters: Counters,
+    cmd: Command,
+    /// The last setpoint taken: sender's sequence and velocity.
+    last_sp: Option<(u64, Option<[f32; POSE_DIM]>)>,
+    last_fb_seq: Option<u64>,
+    local_sp_seq: u64,
+    local_fb_seq: u64,
+    last_feedback_ns: u64,
+    last_setpoint_ns: u64,
+    stale: bool,
+    in_hold: bool,
+    outside: bool,
+    tracking_started: bool,
+    stuck_hold: bool,
+    hold_after_seq: Option<u64>,
+    last_sp_gap: u64,
+}
+
+impl<const U: usize> Period<U> {
+    /// Configure at time `now_ns`, holding the tension floors until the
+    /// first setpoint.
+    pub fn new(cfg: PeriodConfig, now_ns: u64) -> Self {
+        let n = cfg.control.limits.n_tendons();
+        let state = ControlState::new(&cfg.control.limits, &[0.0; MAX_TENDONS], now_ns);
+        Period {
+            cfg,
+            n,
+            state,
+            stuck: StuckDetector::new(),
+            update: Update::new(),
+            counters: Counters::default(),
+            cmd: Command {
+                seq: 0,
+                setpoint_seq: 0,
+                feedback_seq: 0,
+                tensions: state.command,
+                count: n,
+                status: 0,
+            },
+            last_sp: None,
+            last_fb_seq: None,
+            local_sp_seq: 0,
+            local_fb_seq: 0,
+            last_feedback_ns: now_ns,
+            last_setpoint_ns: now_ns,
+            stale: false,
+            in_hold: false,
+            outside: false,
+            tracking_started: false,
+            stuck_hold: false,
+            hold_after_seq: None,
+            last_sp_gap: 0,
+        }
+    }
+
+    /// The configuration.
+    pub const fn config(&self) -> &PeriodConfig {
+        &self.cfg
+    }
+
+    /// The counts so far.
+    pub const fn counters(&self) -> &Counters {
+        &self.counters
+    }
+
+    /// The last command (the floors before the first period).
+    pub const fn last_command(&self) -> &Command {
+        &self.cmd
+    }
+
+    /// Whether a hold is on (watchdog or stuck motor).
+    pub const fn holding(&self) -> bool {
+        self.in_hold || self.stuck_hold
+    }
+
+    /// The weight update in progress, to feed it whole
+    /// ([`Update::offer`]) or in chunks ([`Update::chunk`]); the periods
+    /// check and install it.
+    pub fn update(&mut self) -> &mut Update<U> {
+        &mut self.update
+    }
+
+    /// One period on the net in `store`.
+    pub fn run<S>(&mut self, store: &mut S, input: &Inputs) -> Outputs
+    where
+        S: NetStore<POSE_DIM, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS> + ?Sized,
+    {
+        let now = input.now_ns;
+        let mut ev = Events::default();
+        let mut extra = 0u32;
+        self.counters.periods = self.counters.periods.wrapping_add(1);
+        if input.missed_ticks > 0 {
+            extra |= wire::OVERRUN;
+            self.counters.missed_ticks =
+                self.counters.missed_ticks.wrapping_add(input.missed_ticks);
+        }
+
+        match self
+            .update
+            .slice(store, (POSE_DIM, self.n), self.cfg.swap_slice_bytes)
+        {
+            SliceOutcome::Idle | SliceOutcome::Working => {}
+            SliceOutcome::Swapped => {
+                self.counters.weight_swaps += 1;
+                extra |= wire::WEIGHTS_SWAPPED;
+                ev.bits |= event::WEIGHTS_SWAPPED;
+            }
+            SliceOutcome::Rejected(e) => self.reject_update(&mut ev, &mut extra, e.into()),
+        }
+
+        if input.superseded_nonfinite > 0 {
+            self.counters.rejected_nonfinite += input.superseded_nonfinite;
+            ev.bits |= event::NONFINITE_SETPOINT;
+        }
+        let setpoint = input
+            .setpoint
+            .map(|s| self.take_setpoint(&s, input.setpoints, &mut ev));
+        let feedback = input
+            .feedback
+            .map(|f| self.take_feedback(&f, input.feedbacks, now, &mut ev));
+        if feedback.is_none()
+            && !self.stale
+            && now.saturating_sub(self.last_feedback_ns) > self.cfg.plant_stale_ns
+        {
+            self.stale = true;
+            ev.bits |= event::PLANT_STALE;
+        }
+        if self.stale {
+            self.counters.plant_stale_periods += 1;
+            extra |= wire::PLANT_STALE;
+        }
+
+        let step = StepInput {
+            now_ns: now,
+            setpoint,
+            feedback,
+        };
+        let (next, out) = control_step(&self.cfg.control, store.active(), &self.state, &step);
+        self.state = next;
+        let mut status = out.status;
+        let mut tensions = out.command;
+        if self.stuck_hold {
+            // A stuck motor: hold every tension where it is, latched until
+            // the controller is configured again.
+            status |= Status::SAFE_HOLD;
+            tensions = self.cmd.tensions;
+        }
+        self.account(status, now, &mut ev);
+        self.cmd = Command {
+            seq: self.cmd.seq + 1,
+            setpoint_seq: self.last_sp.map_or(0, |(seq, _)| seq),
+            feedback_seq: self.last_fb_seq.unwrap_or(0),
+            tensions,
+            count: out.count,
+            status: status.bits() | extra,
+        };
+        Outputs {
+            command: self.cmd,
+            events: ev,
+        }
+    }
+
+    /// Count and report an update that was refused (by the check, or as a
+    /// chunk that could not be taken: [`Period::refuse_update`]).
+    fn reject_update(&mut self, ev: &mut Events, extra: &mut u32, e: UpdateError) {
+        self.counters.weight_rejections += 1;
+        *extra |= wire::WEIGHTS_REJECTED;
+        ev.bits |= event::WEIGHTS_REJECTED;
+        ev.update_error = Some(e);
+    }
+
+    /// A weight update (or chunk) the caller could not hand over, counted
+    /// as a rejection: returns the events to merge into the next output.
+    pub fn refuse_update(&mut self, e: UpdateError) -> Events {
+        let mut ev = Events::default();
+        let mut extra = 0;
+        self.reject_update(&mut ev, &mut extra, e);
+        ev
+    }
+
+    fn take_setpoint(&mut self, s: &SetpointIn, count: u32, ev: &mut Events) -> Setpoint {
+        self.counters.setpoints += 1;
+        self.last_sp_gap = 0;
+        match self.last_sp {
+            Some((prev, _)) if s.seq <= prev => {
+                self.counters.planner_restarts += 1;
+                ev.bits |= event::PLANNER_RESTART;
+            }
+            Some((prev, _)) => {
+                // `count` consecutive setpoints arrived, the newest is `s`.
+                let lost = s
+                    .seq
+                    .saturating_sub(prev.saturating_add(u64::from(count.max(1))));
+                self.last_sp_gap = lost;
+                if lost > 0 {
+                    self.counters.setpoints_lost =
+                        self.counters.setpoints_lost.wrapping_add(lost as u32);
+                    ev.bits |= event::SETPOINTS_LOST;
+                    ev.setpoints_lost = lost;
+                }
+            }
+            None => {}
+        }
+        self.local_sp_seq += 1;
+        let mut pose = s.pose;
+        if let Some(v) = s.velocity {
+            for (p, v) in pose.iter_mut().zip(&v) {
+                *p += v * self.cfg.lead_s;
+            }
+        }
+        self.last_sp = Some((s.seq, s.velocity));
+        Setpoint {
+            seq: self.local_sp_seq,
+            pose,
+            tangent: s.tangent,
+        }
+    }
+
+    fn take_feedback(&mut self, f: &FeedbackIn, count: u32, now: u64, ev: &mut Events) -> Feedback {
+        match self.last_fb_seq {
+            Some(prev) if f.seq <= prev => {
+                self.counters.plant_restarts += 1;
+                self.stuck.resync();
+                ev.bits |= event::PLANT_RESTART;
+            }
+            Some(prev) => {
+                let lost = f
+                    .seq
+                    .saturating_sub(prev.saturating_add(u64::from(count.max(1))));
+                if lost > 0 {
+                    self.counters.plant_states_lost =
+                        self.counters.plant_states_lost.wrapping_add(lost as u32);
+                    ev.bits |= event::PLANT_STATES_LOST;
+                    ev.plant_states_lost = lost;
+                }
+            }
+            None => {}
+        }
+        if self.stale {
+            self.stale = false;
+            self.counters.plant_recoveries += 1;
+            self.stuck.resync();
+            ev.bits |= event::PLANT_RECOVERED;
+        }
+        // A plant that has applied commands before should have applied the
+        // one sent a period ago.
+        let behind = self.cmd.seq.saturating_sub(f.command_seq);
+        if behind > 0 && f.command_seq > 0 {
+            self.counters.commands_not_applied += 1;
+            ev.bits |= event::COMMANDS_NOT_APPLIED;
+            ev.commands_behind = behind;
+        }
+        if !self.stuck_hold {
+            if let Some((tendon, err)) = self.stuck.check(
+                &self.cfg.stuck,
+                now,
+                &self.cmd.tensions,
+                &f.tensions,
+                self.n,
+            ) {
+                self.stuck_hold = true;
+                ev.bits |= event::STUCK_MOTOR;
+                ev.stuck = Some((tendon as u8, err));
+            }
+        }
+        self.local_fb_seq += 1;
+        let mut tip = f.tip;
+        // Advance the measurement by the same lead as the setpoint.
+        if let Some((_, Some(v))) = self.last_sp {
+            for (p, v) in tip.iter_mut().zip(&v) {
+                *p += v * self.cfg.lead_s;
+            }
+        }
+        self.last_fb_seq = Some(f.seq);
+        self.last_feedback_ns = now;
+        Feedback {
+            seq: self.local_fb_seq,
+            tip_position: tip,
+        }
+    }
+
+    /// Count what the step's status says; note what the report lists.
+    fn account(&mut self, status: Status, now: u64, ev: &mut Events) {
+        let c = &mut self.counters;
+        if status.contains(Status::NONFINITE_SETPOINT) {
+            c.rejected_nonfinite += 1;
+            ev.bits |= event::NONFINITE_SETPOINT;
+        }
+        if status.contains(Status::BAD_QUATERNION) {
+            c.rejected_quaternion += 1;
+            ev.bits |= event::BAD_QUATERNION;
+        }
+        let outside = status.contains(Status::OUT_OF_WORKSPACE);
+        if outside {
+            c.rejected_workspace += 1;
+            if !self.outside {
+                ev.bits |= event::OUTSIDE_WORKSPACE;
+            }
+        }
+        self.outside = outside;
+        if status.contains(Status::NEW_SETPOINT) {
+            self.tracking_started = true;
+            self.last_setpoint_ns = now;
+        }
+        let hold = status.contains(Status::SAFE_HOLD);
+        if !self.tracking_started {
+            c.startup_hold_periods += 1;
+        } else if hold {
+            c.hold_periods += 1;
+            if !self.in_hold && self.stuck_hold {
+                c.stuck_motor_holds += 1;
+            } else if !self.in_hold {
+                c.watchdog_trips += 1;
+                self.hold_after_seq = self.last_sp.map(|(seq, _)| seq);
+                ev.bits |= event::WATCHDOG_HOLD;
+                ev.hold_silence_ns = now.saturating_sub(self.last_setpoint_ns);
+            }
+        } else if self.in_hold {
+            ev.bits |= event::TRACKING_RESUMED;
+            let resumed_in_sequence = self.last_sp_gap == 0
+                && self
+                    .hold_after_seq
+                    .zip(self.last_sp)
+                    .is_some_and(|(before, (seq, _))| seq > before);
+            if resumed_in_sequence {
+                c.watchdog_trips_late_planner += 1;
+            }
+            self.hold_after_seq = None;
+        }
+        self.in_hold = hold && self.tracking_started;
+        if status.contains(Status::SATURATED) {
+            c.saturated_periods += 1;
+        }
+        if status.contains(Status::CORRECTION) {
+            c.correction_periods += 1;
+        }
+    }
+}

@@ -1,0 +1,440 @@
+//! Unit tests of every rule of the period (they were the host controller's;
+//! each is checked here against what a period must do, independent of any
+//! transport).
+
+use std::boxed::Box;
+use std::vec::Vec;
+
+use tendril_shared::messages::command_status as wire;
+use tendril_shared::{TendonLimits, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS, POSE_DIM};
+
+use super::*;
+use crate::control::{ControlConfig, IntegralConfig, SafeHold};
+use crate::swap::NetSlots;
+use crate::synth::{synthetic_blob, INPUT_HI, INPUT_LO};
+
+type Store = NetSlots<POSE_DIM, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS>;
+type P = Period<32768>;
+
+const T: u64 = 1_000_000; // 1 ms
+
+fn blob(seed: u64, hidden: usize) -> Vec<u8> {
+    let mut buf = std::vec![0u8; 32768];
+    let n = synthetic_blob(seed, hidden, 4, 10.0, &mut buf).unwrap();
+    buf.truncate(n);
+    buf
+}
+
+fn store(seed: u64) -> Box<Store> {
+    let mut s: Box<Store> = Box::default();
+    s.load(&blob(seed, 8), (POSE_DIM, 4)).unwrap();
+    s
+}
+
+fn config() -> PeriodConfig {
+    let limits = TendonLimits::uniform(4, 10.0, 200.0).unwrap();
+    let mut control = ControlConfig::new(limits);
+    control.watchdog_ns = 5 * T / 2;
+    control.max_dt_ns = 5 * T;
+    control.safe_hold = SafeHold::Freeze;
+    PeriodConfig {
+        control,
+        period_ns: T,
+        lead_s: 0.0,
+        plant_stale_ns: 20 * T,
+        stuck: StuckConfig::new(0.02, 0.5, 0.1, T),
+        swap_slice_bytes: 4096,
+    }
+}
+
+/// The middle of the synthetic net's input box (a unit quaternion).
+fn pose() -> [f32; 7] {
+    let mut p = [0.0; 7];
+    for i in 0..3 {
+        p[i] = 0.5 * (INPUT_LO[i] + INPUT_HI[i]);
+    }
+    p[3] = 1.0;
+    p
+}
+
+fn sp(seq: u64) -> SetpointIn {
+    SetpointIn {
+        seq,
+        pose: pose(),
+        velocity: None,
+        tangent: None,
+    }
+}
+
+fn fb(seq: u64, command_seq: u64, tensions: Tensions) -> FeedbackIn {
+    FeedbackIn {
+        seq,
+        command_seq,
+        tensions,
+        tip: [0.0, 0.0, 0.35],
+    }
+}
+
+fn at(k: u64) -> Inputs {
+    Inputs {
+        now_ns: k * T,
+        ..Inputs::default()
+    }
+}
+
+fn with_sp(k: u64, s: SetpointIn) -> Inputs {
+    Inputs {
+        setpoint: Some(s),
+        setpoints: 1,
+        ..at(k)
+    }
+}
+
+#[test]
+fn setpoint_gaps_and_restarts_are_counted() {
+    let mut st = store(1);
+    let mut p = P::new(config(), 0);
+    let o = p.run(&mut *st, &with_sp(1, sp(1)));
+    assert_eq!(o.events.bits, 0);
+    // Three consecutive arrivals ending at 4: nothing lost.
+    let mut i = with_sp(2, sp(4));
+    i.setpoints = 3;
+    assert!(!p.run(&mut *st, &i).events.has(event::SETPOINTS_LOST));
+    // 5..=9 lost.
+    let o = p.run(&mut *st, &with_sp(3, sp(10)));
+    assert!(o.events.has(event::SETPOINTS_LOST));
+    assert_eq!(o.events.setpoints_lost, 5);
+    // A new planner starts again at 1.
+    let o = p.run(&mut *st, &with_sp(4, sp(1)));
+    assert!(o.events.has(event::PLANNER_RESTART));
+    assert!(!o.events.has(event::SETPOINTS_LOST));
+    let c = p.counters();
+    assert_eq!(
+        (c.setpoints, c.setpoints_lost, c.planner_restarts),
+        (4, 5, 1)
+    );
+    assert_eq!(o.command.setpoint_seq, 1);
+}
+
+#[test]
+fn nonfinite_setpoints_are_rejected_and_counted_with_the_superseded_ones() {
+    let mut st = store(1);
+    let mut p = P::new(config(), 0);
+    p.run(&mut *st, &with_sp(1, sp(1)));
+    let before = p.last_command().tensions;
+    let mut bad = sp(2);
+    bad.pose[0] = f32::NAN;
+    let mut i = with_sp(2, bad);
+    i.superseded_nonfinite = 2;
+    i.setpoints = 3;
+    let o = p.run(&mut *st, &i);
+    assert!(o.events.has(event::NONFINITE_SETPOINT));
+    assert_ne!(o.command.status & wire::SETPOINT_REJECTED, 0);
+    assert_eq!(p.counters().rejected_nonfinite, 3);
+    assert!(o.command.tensions.iter().all(|t| t.is_finite()));
+    // The target stayed: the command keeps slewing to the old target, so
+    // after enough periods it is where it would have been anyway.
+    assert!(o.command.tensions[..4]
+        .iter()
+        .zip(&before)
+        .all(|(a, b)| (a - b).abs() <= 0.2 + 1e-6));
+}
+
+#[test]
+fn a_quaternion_off_unit_is_rejected() {
+    let mut st = store(1);
+    let mut p = P::new(config(), 0);
+    let mut bad = sp(1);
+    bad.pose[3] = 0.5;
+    let o = p.run(&mut *st, &with_sp(1, bad));
+    assert!(o.events.has(event::BAD_QUATERNION));
+    assert_eq!(p.counters().rejected_quaternion, 1);
+}
+
+#[test]
+fn outside_the_workspace_is_listed_once_per_run_and_counted_every_period() {
+    let mut st = store(1);
+    let mut p = P::new(config(), 0);
+    p.run(&mut *st, &with_sp(1, sp(1)));
+    let mut far = sp(2);
+    far.pose[0] = 10.0;
+    let o = p.run(&mut *st, &with_sp(2, far));
+    assert!(o.events.has(event::OUTSIDE_WORKSPACE));
+    far.seq = 3;
+    let o = p.run(&mut *st, &with_sp(3, far));
+    assert!(!o.events.has(event::OUTSIDE_WORKSPACE));
+    assert_eq!(p.counters().rejected_workspace, 2);
+    // Back inside, then out again: listed again.
+    p.run(&mut *st, &with_sp(4, sp(4)));
+    far.seq = 5;
+    assert!(p
+        .run(&mut *st, &with_sp(5, far))
+        .events
+        .has(event::OUTSIDE_WORKSPACE));
+}
+
+#[test]
+fn silence_trips_the_watchdog_within_three_periods_and_a_late_planner_resumes() {
+    let mut st = store(1);
+    let mut p = P::new(config(), 0);
+    for k in 1..=50 {
+        p.run(&mut *st, &with_sp(k, sp(k)));
+    }
+    let mut hold_at = None;
+    let mut held = None;
+    for k in 51..=60 {
+        let o = p.run(&mut *st, &at(k));
+        if o.events.has(event::WATCHDOG_HOLD) {
+            hold_at = Some(k);
+            held = Some(o.command.tensions);
+            assert!(o.events.hold_silence_ns >= 5 * T / 2);
+        }
+        if let Some(held) = held {
+            assert_ne!(o.command.status & wire::SAFE_HOLD, 0);
+            assert_eq!(o.command.tensions, held, "a hold freezes the command");
+        }
+    }
+    let hold_at = hold_at.expect("no watchdog hold after 10 silent periods");
+    assert!(
+        hold_at - 50 <= 3,
+        "hold {} periods after the last setpoint",
+        hold_at - 50
+    );
+    assert!(p.holding());
+    // The next setpoint in sequence: a late planner, tracking resumes.
+    let o = p.run(&mut *st, &with_sp(61, sp(51)));
+    assert!(o.events.has(event::TRACKING_RESUMED));
+    let c = p.counters();
+    assert_eq!((c.watchdog_trips, c.watchdog_trips_late_planner), (1, 1));
+    assert!(c.hold_periods >= 7);
+    assert_eq!(c.startup_hold_periods, 0);
+}
+
+#[test]
+fn no_feedback_for_the_stale_time_marks_the_plant_stale_until_it_returns() {
+    let mut st = store(1);
+    let mut p = P::new(config(), 0);
+    let mut stale_at = None;
+    for k in 1..=30 {
+        let o = p.run(&mut *st, &with_sp(k, sp(k)));
+        if o.events.has(event::PLANT_STALE) {
+            stale_at = Some(k);
+        }
+        if stale_at.is_some() {
+            assert_ne!(o.command.status & wire::PLANT_STALE, 0);
+        }
+    }
+    assert_eq!(
+        stale_at,
+        Some(21),
+        "stale after 20 periods without feedback"
+    );
+    let mut i = with_sp(31, sp(31));
+    i.feedback = Some(fb(1, 0, p.last_command().tensions));
+    i.feedbacks = 1;
+    let o = p.run(&mut *st, &i);
+    assert!(o.events.has(event::PLANT_RECOVERED));
+    assert_eq!(o.command.status & wire::PLANT_STALE, 0);
+    assert_eq!(p.counters().plant_stale_periods, 10);
+}
+
+#[test]
+fn feedback_gaps_restarts_and_unapplied_commands_are_seen() {
+    let mut st = store(1);
+    let mut p = P::new(config(), 0);
+    let mut k = 0;
+    let mut run = |p: &mut P, f: FeedbackIn| {
+        k += 1;
+        let mut i = with_sp(k, sp(k));
+        i.feedback = Some(f);
+        i.feedbacks = 1;
+        p.run(&mut *st, &i)
+    };
+    let o = run(&mut p, fb(1, 0, [0.0; MAX_TENDONS]));
+    let o = run(&mut p, fb(2, o.command.seq, o.command.tensions));
+    assert_eq!(o.events.bits, 0);
+    let o = run(&mut p, fb(6, o.command.seq, o.command.tensions));
+    assert!(o.events.has(event::PLANT_STATES_LOST));
+    assert_eq!(o.events.plant_states_lost, 3);
+    // The plant still reports the command before last.
+    let o = run(&mut p, fb(7, o.command.seq - 1, o.command.tensions));
+    assert!(o.events.has(event::COMMANDS_NOT_APPLIED));
+    assert_eq!(o.events.commands_behind, 1);
+    let o = run(&mut p, fb(1, o.command.seq, o.command.tensions));
+    assert!(o.events.has(event::PLANT_RESTART));
+    let c = p.counters();
+    assert_eq!(
+        (
+            c.plant_states_lost,
+            c.commands_not_applied,
+            c.plant_restarts
+        ),
+        (3, 1, 1)
+    );
+}
+
+#[test]
+fn a_motor_that_does_not_follow_is_detected_and_the_hold_latches() {
+    let mut st = store(1);
+    let mut p = P::new(config(), 0);
+    let mut last = *p.last_command();
+    let mut detected = None;
+    for k in 1..=400u64 {
+        // Healthy motors follow exactly; motor 2 pulls 3 N more than
+        // commanded from k = 100 (jammed, dragging its tendon).
+        let mut measured = last.tensions;
+        if k >= 100 {
+            measured[2] += 3.0;
+        }
+        let mut i = with_sp(k, sp(k));
+        i.feedback = Some(fb(k, last.seq, measured));
+        i.feedbacks = 1;
+        let o = p.run(&mut *st, &i);
+        if o.events.has(event::STUCK_MOTOR) {
+            detected = Some((k, o.events.stuck));
+            assert_ne!(o.command.status & wire::SAFE_HOLD, 0);
+            assert_eq!(o.command.tensions, last.tensions, "held where it was");
+        }
+        if detected.is_some() {
+            assert_eq!(o.command.tensions, p.last_command().tensions);
+            assert_ne!(o.command.status & wire::SAFE_HOLD, 0, "latched");
+        }
+        last = o.command;
+    }
+    let (k, stuck) = detected.expect("stuck motor not detected");
+    assert_eq!(stuck.map(|s| s.0), Some(2));
+    assert!((100..=100 + 100 + 5).contains(&k), "detected at period {k}");
+    assert_eq!(p.counters().stuck_motor_holds, 1);
+}
+
+#[test]
+fn the_lead_advances_setpoint_and_measured_tip_alike() {
+    let mut st = store(1);
+    let mut cfg = config();
+    cfg.lead_s = 0.02;
+    let mut led = P::new(cfg, 0);
+    let mut plain = P::new(config(), 0);
+    let v = [0.5, -0.25, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let mut s = sp(1);
+    s.velocity = Some(v);
+    let mut ahead = sp(1);
+    for (p, vv) in ahead.pose.iter_mut().zip(&v) {
+        *p += vv * 0.02;
+    }
+    for k in 1..=40 {
+        s.seq = k;
+        ahead.seq = k;
+        let a = led.run(&mut *st, &with_sp(k, s));
+        let b = plain.run(&mut *st, &with_sp(k, ahead));
+        assert_eq!(a.command.tensions, b.command.tensions, "period {k}");
+    }
+}
+
+fn swap_config() -> PeriodConfig {
+    let mut c = config();
+    c.control.integral = IntegralConfig::OFF;
+    c
+}
+
+#[test]
+fn a_whole_update_swaps_in_slices_without_a_missed_period() {
+    let mut st = store(1);
+    let mut p = P::new(swap_config(), 0);
+    let update = blob(2, 64);
+    assert!(update.len() > 2 * 4096, "takes several slices");
+    assert_eq!(p.update().offer(&update), Ok(false));
+    let mut swapped_at = None;
+    for k in 1..=20 {
+        let o = p.run(&mut *st, &with_sp(k, sp(k)));
+        assert_eq!(o.command.seq, k, "one command per period");
+        if o.events.has(event::WEIGHTS_SWAPPED) {
+            swapped_at = Some(k);
+            assert_ne!(o.command.status & wire::WEIGHTS_SWAPPED, 0);
+        }
+    }
+    let k = swapped_at.expect("not swapped in 20 periods");
+    assert!(k >= 3, "swapped at period {k}: the check takes slices");
+    assert_eq!(st.active().shape().hidden, 64);
+    assert_eq!(p.counters().weight_swaps, 1);
+}
+
+#[test]
+fn a_corrupted_update_is_rejected_and_the_old_net_runs() {
+    let mut st = store(1);
+    let mut p = P::new(swap_config(), 0);
+    let mut update = blob(2, 64);
+    let mid = update.len() / 2;
+    update[mid] ^= 0x40;
+    p.update().offer(&update).unwrap();
+    let mut rejected = false;
+    for k in 1..=20 {
+        let o = p.run(&mut *st, &with_sp(k, sp(k)));
+        if o.events.has(event::WEIGHTS_REJECTED) {
+            rejected = true;
+            assert!(matches!(
+                o.events.update_error,
+                Some(UpdateError::Rejected(_))
+            ));
+        }
+    }
+    assert!(rejected);
+    assert_eq!(st.active().shape().hidden, 8, "the old net runs");
+    assert_eq!(p.counters().weight_rejections, 1);
+}
+
+#[test]
+fn chunks_in_order_make_the_blob_and_a_gap_drops_it() {
+    let mut p = P::new(swap_config(), 0);
+    let update = blob(3, 16);
+    let total = update.len();
+    for (i, c) in update.chunks(100).enumerate() {
+        assert_eq!(p.update().chunk(i * 100, total, c), Ok(false));
+    }
+    assert!(p.update().checking());
+    // A chunk lost in the middle: the rest is refused, nothing is checked.
+    let mut q = P::new(swap_config(), 0);
+    q.update().chunk(0, total, &update[..100]).unwrap();
+    let e = q.update().chunk(200, total, &update[200..300]);
+    assert_eq!(
+        e,
+        Err(UpdateError::OutOfOrder {
+            offset: 200,
+            received: 100
+        })
+    );
+    assert!(!q.update().busy());
+    // Too large for the buffer.
+    let mut small: Period<64> = Period::new(swap_config(), 0);
+    assert!(matches!(
+        small.update().chunk(0, total, &update[..10]),
+        Err(UpdateError::TooLarge { .. })
+    ));
+    // A new blob (offset 0) supersedes one in progress.
+    q.update().chunk(0, total, &update[..100]).unwrap();
+    assert_eq!(q.update().chunk(0, total, &update[..100]), Ok(true));
+}
+
+#[test]
+fn missed_ticks_mark_an_overrun() {
+    let mut st = store(1);
+    let mut p = P::new(config(), 0);
+    let mut i = with_sp(3, sp(1));
+    i.missed_ticks = 2;
+    let o = p.run(&mut *st, &i);
+    assert_ne!(o.command.status & wire::OVERRUN, 0);
+    assert_eq!(p.counters().missed_ticks, 2);
+}
+
+#[test]
+fn the_same_inputs_give_the_same_commands_bit_for_bit() {
+    let mut a = store(1);
+    let mut b = store(1);
+    let mut p = P::new(config(), 0);
+    let mut q = P::new(config(), 0);
+    for k in 1..200 {
+        let mut s = sp(k);
+        s.pose[0] += (k as f32 * 0.01).sin() * 0.05;
+        let i = with_sp(k, s);
+        assert_eq!(p.run(&mut *a, &i), q.run(&mut *b, &i));
+    }
+}
