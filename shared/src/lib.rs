@@ -24,6 +24,7 @@ pub mod activation;
 pub mod capacity;
 pub mod crc32;
 pub mod limits;
+pub mod link;
 pub mod messages;
 pub mod net;
 pub mod tnet;
