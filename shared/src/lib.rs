@@ -22,6 +22,7 @@ extern crate std;
 
 pub mod activation;
 pub mod capacity;
+pub mod counters;
 pub mod crc32;
 pub mod limits;
 pub mod link;

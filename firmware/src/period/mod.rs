@@ -22,14 +22,13 @@
 //! [`Inputs::now_ns`], so a recorded input trace replays to the same
 //! commands bit for bit on any build.
 
-mod counters;
 mod stuck;
 #[cfg(test)]
 mod tests;
 pub mod update;
 
-pub use counters::Counters;
 pub use stuck::StuckConfig;
+pub use tendril_shared::counters::Counters;
 pub use update::{SliceOutcome, Update, UpdateError};
 
 use tendril_shared::messages::command_status as wire;

@@ -29,6 +29,7 @@
 //! outcome is a [`FrameError`] and is counted in [`FrameCounters`].
 
 mod frame;
+pub mod messages;
 
 pub use frame::{
     encode, encode_raw, max_frame_len, FrameCounters, FrameDecoder, FrameError, CRC_LEN,

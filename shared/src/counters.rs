@@ -1,9 +1,9 @@
-//! What the period has counted since it was configured: the numbers the
-//! host's report and the chip's telemetry both carry.
+//! What the firmware's control period has counted since it was configured:
+//! the numbers the host's report and the chip's telemetry both carry.
 
 use serde::{Deserialize, Serialize};
 
-/// Counts kept by [`super::Period`], all since configuration. `u32`: at
+/// Counts kept by the firmware's `period::Period`, all since configuration. `u32`: at
 /// 1 kHz they wrap after 49 days (a controller is reconfigured long before;
 /// wrapping is harmless, they are statistics).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]

@@ -1,0 +1,382 @@
+//! The messages of the host ↔ MCU link (docs/design.md §5.6): postcard
+//! enums, one per direction, carried in the frames of [`super::frame`].
+//!
+//! A session: the host sends [`Down::Hello`]; the chip answers
+//! [`Up::Hello`] with its protocol version, the hash of its built-in net
+//! and the hash of its configuration (0 = none). If the configuration hash
+//! differs from the robot file's, the host sends [`Down::Setup`] (the
+//! controller's whole configuration, nothing on the chip hard-coded) and
+//! the chip answers [`Up::Hello`] again with the new hash. From then on the
+//! host forwards setpoints, plant feedback and weight-update chunks as they
+//! come; the chip runs one period per tick of its own timer and sends a
+//! [`Up::Command`] every period and a [`Up::Telemetry`] every
+//! [`TELEMETRY_EVERY`] periods. A Setup with the configuration the chip
+//! already runs keeps its controller (a host that reconnects does not
+//! reset the loop).
+//!
+//! Sequence numbers are `u32` on the wire (postcard varints: small while
+//! small); a message whose sequence does not advance is out of order and is
+//! dropped and counted by the period's rules.
+
+use serde::{Deserialize, Serialize};
+
+use crate::counters::Counters;
+use crate::link::FrameCounters;
+use crate::MAX_TENDONS;
+
+/// Version of this message set; a chip and host of different versions
+/// refuse to run together (the host says which to rebuild).
+pub const PROTOCOL_VERSION: u16 = 1;
+
+/// The chip sends [`Up::Telemetry`] every this many periods.
+pub const TELEMETRY_EVERY: u32 = 100;
+
+/// Largest weight-update chunk, bytes.
+pub const MAX_CHUNK: usize = 192;
+
+/// The controller's configuration as the host derives it from the robot
+/// file and its options (the chip validates it: limits through
+/// [`crate::TendonLimits`]' own checks).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Setup {
+    /// Tendons.
+    pub n_tendons: u8,
+    /// Tension ceilings, N.
+    pub max_tension: [f32; MAX_TENDONS],
+    /// Tension floors, N.
+    pub min_tension: [f32; MAX_TENDONS],
+    /// Slew-rate limits, N/s.
+    pub slew_rate: [f32; MAX_TENDONS],
+    /// Co-contraction set of each tendon (0 = none).
+    pub cocontraction_sets: [u8; MAX_TENDONS],
+    /// Its weight in its set.
+    pub cocontraction_weights: [f32; MAX_TENDONS],
+    /// The period, ns.
+    pub period_ns: u32,
+    /// Setpoint watchdog, ns.
+    pub watchdog_ns: u32,
+    /// Largest dt the slew limit credits, ns.
+    pub max_dt_ns: u32,
+    /// Allowed `| |q|² − 1 |`.
+    pub quaternion_tolerance: f32,
+    /// Fraction of the net's box a setpoint may lie outside.
+    pub box_margin: f32,
+    /// Integral gain, 1/s (0 = off).
+    pub ki: f32,
+    /// Bound on each correction component, m.
+    pub correction_limit: f32,
+    /// Feedback older than this freezes the correction, ns.
+    pub feedback_timeout_ns: u32,
+    /// Integrate only within this tip error, m.
+    pub correction_window: f32,
+    /// Motor-lag lead, s.
+    pub lead_s: f32,
+    /// No feedback for this long: plant stale, ns.
+    pub plant_stale_ns: u32,
+    /// Stuck-motor detection on.
+    pub stuck_enabled: bool,
+    /// Healthy-motor model's step per period, `1 − exp(−T/τ)`.
+    pub stuck_model_gain: f32,
+    /// Tension error that counts, N.
+    pub stuck_error_n: f32,
+    /// How long it must last, ns.
+    pub stuck_persist_ns: u32,
+}
+
+impl Setup {
+    /// The configuration's hash: CRC-32 of its postcard bytes (never 0,
+    /// which means "no configuration").
+    pub fn hash(&self) -> u32 {
+        let mut buf = [0u8; 256];
+        let bytes = postcard::to_slice(self, &mut buf)
+            .map(|b| &*b)
+            .unwrap_or(&[]);
+        crate::crc32::crc32(bytes).max(1)
+    }
+}
+
+/// The robot's reachable poses about a setpoint (see
+/// [`crate::messages::Setpoint::tangent`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Tangent {
+    /// Valid columns (1..=3).
+    pub dim: u8,
+    /// `∂pose/∂u_j`.
+    pub columns: [[f32; 7]; 3],
+    /// The unit axes a_j.
+    pub axes: [[f32; 3]; 3],
+}
+
+/// A setpoint, host → chip.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Setpoint {
+    /// The planner's sequence number.
+    pub seq: u32,
+    /// Setpoints the planner sent since the last one forwarded (the host
+    /// forwards the newest; 1 normally).
+    pub count: u16,
+    /// Of the ones not forwarded, how many had a NaN/∞ pose.
+    pub superseded_nonfinite: u16,
+    /// Pose `px, py, pz` (m), `qw, qx, qy, qz`.
+    pub pose: [f32; 7],
+    /// Its time derivative, per s (all 7 coordinates: the period leads the
+    /// whole pose).
+    pub velocity: Option<[f32; 7]>,
+    /// The tangent, when it changed (the chip keeps the last one it got
+    /// for the setpoints that come without: it changes slowly along a path
+    /// and costs 120 of the link's bytes).
+    pub tangent: Option<Tangent>,
+}
+
+/// Plant feedback, host → chip.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Feedback {
+    /// The plant's sequence number.
+    pub seq: u32,
+    /// Feedback messages since the last one forwarded.
+    pub count: u16,
+    /// The last command the plant applied.
+    pub command_seq: u32,
+    /// Measured tensions, N.
+    pub tensions: [f32; MAX_TENDONS],
+    /// Measured tip position, m.
+    pub tip: [f32; 3],
+}
+
+/// Host → chip.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Down<'a> {
+    /// Ask for the chip's [`Up::Hello`].
+    Hello {
+        /// The host's [`PROTOCOL_VERSION`].
+        protocol: u16,
+    },
+    /// Configure the controller.
+    Setup(Setup),
+    /// A setpoint.
+    Setpoint(Setpoint),
+    /// Plant feedback.
+    Feedback(Feedback),
+    /// `bytes` of a `total`-byte `.tnet` update at `offset` (offset 0
+    /// starts a new update; the chip checks it in slices once whole).
+    Chunk {
+        /// Where these bytes go.
+        offset: u32,
+        /// The update's length.
+        total: u32,
+        /// At most [`MAX_CHUNK`] bytes.
+        #[serde(borrow)]
+        bytes: &'a [u8],
+    },
+}
+
+/// The chip's identity and state, chip → host.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Hello {
+    /// The chip's [`PROTOCOL_VERSION`].
+    pub protocol: u16,
+    /// CRC-32 of the built-in net's `.tnet`.
+    pub net_hash: u32,
+    /// [`Setup::hash`] of the running configuration (0 = none yet).
+    pub setup_hash: u32,
+    /// Why the last Setup was refused (0 = it was not).
+    pub setup_error: u8,
+}
+
+/// A tension command, chip → host.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Command {
+    /// The period's command sequence number.
+    pub seq: u32,
+    /// The planner's sequence number of the last setpoint taken.
+    pub setpoint_seq: u32,
+    /// The status word (wire bits and the step's detail bits).
+    pub status: u32,
+    /// This period's event bits (the firmware's `period::event`).
+    pub events: u32,
+    /// Tensions, N (the first `n_tendons` valid).
+    pub tensions: [f32; MAX_TENDONS],
+}
+
+/// Counts and health, chip → host, every [`TELEMETRY_EVERY`] periods.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Telemetry {
+    /// The period's counters.
+    pub counters: Counters,
+    /// The chip's receive-side frame counters.
+    pub frames: FrameCounters,
+    /// Received bytes dropped because the receive queue was full.
+    pub rx_overruns: u32,
+    /// Transmit bytes dropped because the transmit queue was full.
+    pub tx_dropped: u32,
+    /// Ticks of the chip's timer since start.
+    pub ticks: u32,
+    /// Frames whose payload was no valid message (dropped by the chip).
+    pub bad_messages: u32,
+    /// Weight-update chunks refused (out of order, too large).
+    pub chunks_refused: u32,
+    /// Longest period so far, µs of the chip's clock.
+    pub worst_period_us: u32,
+}
+
+/// Chip → host.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Up {
+    /// Identity and configuration state.
+    Hello(Hello),
+    /// This period's command.
+    Command(Command),
+    /// Counters.
+    Telemetry(Telemetry),
+}
+
+/// Largest encoded [`Down`] payload (a setpoint with its tangent, or a
+/// chunk), bytes; frame buffers are sized from it.
+pub const MAX_DOWN_PAYLOAD: usize = 320;
+/// Largest encoded [`Up`] payload, bytes.
+pub const MAX_UP_PAYLOAD: usize = 256;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn full_setpoint() -> Setpoint {
+        Setpoint {
+            seq: u32::MAX,
+            count: u16::MAX,
+            superseded_nonfinite: u16::MAX,
+            pose: [f32::MAX; 7],
+            velocity: Some([f32::MAX; 7]),
+            tangent: Some(Tangent {
+                dim: 3,
+                columns: [[f32::MAX; 7]; 3],
+                axes: [[f32::MAX; 3]; 3],
+            }),
+        }
+    }
+
+    #[test]
+    fn the_largest_messages_fit_their_buffers() {
+        let mut buf = [0u8; 1024];
+        let sp = postcard::to_slice(&Down::Setpoint(full_setpoint()), &mut buf)
+            .unwrap()
+            .len();
+        assert!(sp <= MAX_DOWN_PAYLOAD, "setpoint {sp} B");
+        let chunk = [0xFFu8; MAX_CHUNK];
+        let down = Down::Chunk {
+            offset: u32::MAX,
+            total: u32::MAX,
+            bytes: &chunk,
+        };
+        let n = postcard::to_slice(&down, &mut buf).unwrap().len();
+        assert!(n <= MAX_DOWN_PAYLOAD, "chunk {n} B");
+        let setup = Setup {
+            n_tendons: 8,
+            max_tension: [f32::MAX; 8],
+            min_tension: [f32::MAX; 8],
+            slew_rate: [f32::MAX; 8],
+            cocontraction_sets: [u8::MAX; 8],
+            cocontraction_weights: [f32::MAX; 8],
+            period_ns: u32::MAX,
+            watchdog_ns: u32::MAX,
+            max_dt_ns: u32::MAX,
+            quaternion_tolerance: 1.0,
+            box_margin: 1.0,
+            ki: 1.0,
+            correction_limit: 1.0,
+            feedback_timeout_ns: u32::MAX,
+            correction_window: 1.0,
+            lead_s: 1.0,
+            plant_stale_ns: u32::MAX,
+            stuck_enabled: true,
+            stuck_model_gain: 1.0,
+            stuck_error_n: 1.0,
+            stuck_persist_ns: u32::MAX,
+        };
+        let n = postcard::to_slice(&Down::Setup(setup), &mut buf)
+            .unwrap()
+            .len();
+        assert!(n <= 256, "setup {n} B: Setup::hash serialises into 256 bytes");
+        assert_ne!(setup.hash(), 0);
+        let mut counters = Counters::default();
+        // Every field at its largest varint: set through serde's view.
+        let max = postcard::to_slice(&counters, &mut buf).unwrap().len();
+        assert_eq!(max, 22, "one byte per zero counter");
+        counters.periods = u32::MAX;
+        let t = Up::Telemetry(Telemetry {
+            counters: Counters { ..counters },
+            frames: FrameCounters::default(),
+            rx_overruns: u32::MAX,
+            tx_dropped: u32::MAX,
+            ticks: u32::MAX,
+            bad_messages: u32::MAX,
+            chunks_refused: u32::MAX,
+            worst_period_us: u32::MAX,
+        });
+        let n = postcard::to_slice(&t, &mut buf).unwrap().len();
+        // 22 counters + 6 frame counters + 6 fields, 5 bytes each at most.
+        assert!(n <= MAX_UP_PAYLOAD, "telemetry {n} B");
+        let c = Up::Command(Command {
+            seq: u32::MAX,
+            setpoint_seq: u32::MAX,
+            status: u32::MAX,
+            events: u32::MAX,
+            tensions: [f32::MAX; 8],
+        });
+        assert!(postcard::to_slice(&c, &mut buf).unwrap().len() <= MAX_UP_PAYLOAD);
+    }
+
+    #[test]
+    fn a_chunk_round_trips_through_a_frame_borrowing_its_bytes() {
+        let bytes = [1u8, 0, 2, 0, 3];
+        let msg = Down::Chunk {
+            offset: 192,
+            total: 12_000,
+            bytes: &bytes,
+        };
+        let mut buf = [0u8; 512];
+        let frame = crate::link::encode(&msg, &mut buf).unwrap().to_vec();
+        let mut dec = crate::link::FrameDecoder::<512>::new();
+        let mut got = None;
+        for &b in &frame {
+            if let Some(r) = dec.push_raw(b) {
+                let payload = r.unwrap().to_vec();
+                got = Some(payload);
+            }
+        }
+        let payload = got.unwrap();
+        let back: Down<'_> = postcard::from_bytes(&payload).unwrap();
+        assert_eq!(back, msg);
+    }
+
+    #[test]
+    fn different_setups_hash_differently() {
+        let a = Setup {
+            n_tendons: 4,
+            max_tension: [10.0; 8],
+            min_tension: [0.0; 8],
+            slew_rate: [200.0; 8],
+            cocontraction_sets: [0; 8],
+            cocontraction_weights: [0.0; 8],
+            period_ns: 1_000_000,
+            watchdog_ns: 2_500_000,
+            max_dt_ns: 5_000_000,
+            quaternion_tolerance: 1e-2,
+            box_margin: 0.05,
+            ki: 0.0,
+            correction_limit: 0.003,
+            feedback_timeout_ns: 20_000_000,
+            correction_window: 0.002,
+            lead_s: 0.021,
+            plant_stale_ns: 20_000_000,
+            stuck_enabled: true,
+            stuck_model_gain: 0.05,
+            stuck_error_n: 0.5,
+            stuck_persist_ns: 100_000_000,
+        };
+        let mut b = a;
+        b.ki = 2.0;
+        assert_ne!(a.hash(), b.hash());
+        assert_eq!(a.hash(), { a }.hash());
+    }
+}
