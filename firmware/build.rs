@@ -123,17 +123,24 @@ fn workspace_path(manifest: &Path, p: PathBuf) -> PathBuf {
 }
 
 /// The newest `link.x` that cortex-m-rt's build script wrote for this
-/// target (a sibling of this crate's `OUT_DIR`: cargo builds dependencies'
-/// build scripts first, in `<target>/<profile>/build/<crate>-<hash>/out`).
+/// target with its feature `device` (which the PAC's `rt` turns on: the
+/// script then includes the PAC's `device.x`), a sibling of this crate's
+/// `OUT_DIR` (`<target>/<profile>/build/<crate>-<hash>/out`). The MPS2
+/// images' build, without `device`, leaves a second one there.
 fn cortex_m_rt_link_x(out: &Path) -> Option<String> {
     let build = out.parent()?.parent()?;
     let mut best: Option<(std::time::SystemTime, PathBuf)> = None;
     for entry in fs::read_dir(build).ok()?.flatten() {
-        if !entry.file_name().to_string_lossy().starts_with("cortex-m-rt-") {
+        if !entry
+            .file_name()
+            .to_string_lossy()
+            .starts_with("cortex-m-rt-")
+        {
             continue;
         }
         let p = entry.path().join("out").join("link.x");
-        if let Ok(t) = fs::metadata(&p).and_then(|m| m.modified()) {
+        let device = fs::read_to_string(&p).is_ok_and(|x| x.contains("INCLUDE device.x"));
+        if let (true, Ok(t)) = (device, fs::metadata(&p).and_then(|m| m.modified())) {
             if best.as_ref().is_none_or(|(b, _)| t > *b) {
                 best = Some((t, p));
             }

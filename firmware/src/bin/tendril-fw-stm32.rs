@@ -75,9 +75,9 @@ mod mcu {
             if tick.wrapping_sub(next_status) < u32::MAX / 2 {
                 next_status = next_status.wrapping_add(STATUS_EVERY);
                 let mut line: heapless::String<96> = heapless::String::new();
-                let _ = write!(
+                let _ = writeln!(
                     line,
-                    "\x1estatus tick {tick} missed {missed} overruns {} rx {rx} now_us {}\n",
+                    "\x1estatus tick {tick} missed {missed} overruns {} rx {rx} now_us {}",
                     overruns(board),
                     board.now_ns() / 1000
                 );

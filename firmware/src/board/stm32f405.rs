@@ -215,8 +215,13 @@ fn calibrate_timer(tim: &pac::TIM2, syst: &mut cortex_m::peripheral::SYST, syscl
         let t = tim.cnt().read().bits() & 0xFFFF;
         // SysTick counts down (24 bits), TIM2 up (16 bits used here); each
         // wraps far slower than one poll (≥ 0.78 ms).
-        s_sum = s_sum.wrapping_add(s_prev.wrapping_sub(s) & MASK24);
-        t_sum = t_sum.wrapping_add(t.wrapping_sub(t_prev) & 0xFFFF);
+        // A step "backwards" (QEMU's ptimer readout is not monotonic at
+        // these rates) would read as almost a whole wrap: count it as 0;
+        // a poll is far shorter than half a wrap, so no real step is lost.
+        let ds = s_prev.wrapping_sub(s) & MASK24;
+        let dt = t.wrapping_sub(t_prev) & 0xFFFF;
+        s_sum = s_sum.wrapping_add(if ds < MASK24 / 2 { ds } else { 0 });
+        t_sum = t_sum.wrapping_add(if dt < 0x8000 { dt } else { 0 });
         (s_prev, t_prev) = (s, t);
         if s_sum >= window {
             break;
@@ -224,6 +229,7 @@ fn calibrate_timer(tim: &pac::TIM2, syst: &mut cortex_m::peripheral::SYST, syscl
     }
     tim.cr1().write(|w| w.cen().clear_bit());
     syst.disable_counter();
+    log::info!("calibration systick {s_sum} tim2 {t_sum}");
     let raw = (u64::from(t_sum) * u64::from(sysclk_hz))
         .checked_div(u64::from(s_sum))
         .unwrap_or(0);
@@ -258,9 +264,7 @@ impl Stm32f405 {
             w.moder9().alternate();
             w.moder10().alternate()
         });
-        dp.GPIOA
-            .afrl()
-            .modify(|_, w| w.afrl2().af7().afrl3().af7());
+        dp.GPIOA.afrl().modify(|_, w| w.afrl2().af7().afrl3().af7());
         dp.GPIOA
             .afrh()
             .modify(|_, w| w.afrh9().af7().afrh10().af7());
@@ -268,14 +272,13 @@ impl Stm32f405 {
             .pupdr()
             .modify(|_, w| w.pupdr3().pull_up().pupdr10().pull_up());
 
-        let brr = |pclk: u32, baud: u32| u16::try_from((pclk + baud / 2) / baud).unwrap_or(u16::MAX);
+        let brr =
+            |pclk: u32, baud: u32| u16::try_from((pclk + baud / 2) / baud).unwrap_or(u16::MAX);
         dp.USART2
             .brr()
             // SAFETY: any 16-bit divider is a valid BRR (mantissa.fraction).
             .write(|w| unsafe { w.bits(brr(pclk1_hz, LOG_BAUD)) });
-        dp.USART2
-            .cr1()
-            .write(|w| w.ue().enabled().te().enabled());
+        dp.USART2.cr1().write(|w| w.ue().enabled().te().enabled());
         crate::rt::serial_log::init();
 
         // SAFETY: `take` succeeded, so this is the only split of the
