@@ -1,38 +1,49 @@
 //! The STM32F405/F407 board (cargo feature `stm32f405`, MCU builds only),
-//! on the `stm32f4` PAC: the period tick from TIM2, the link on USART1
+//! on the `stm32f4` PAC: the period tick from SysTick, the link on USART1
 //! (interrupt-driven both ways through two `heapless::spsc` queues), and
 //! the `log` records on USART2 ([`crate::rt::serial_log`]).
 //!
-//! **One image for the board and for QEMU `-M netduinoplus2`.** QEMU 7.2
-//! does not model the RCC (an unimplemented device: reads 0), fixes the
-//! core clock at 168 MHz (SysTick on the processor clock counts 168 MHz;
-//! its reference clock is HCLK/8), and clocks TIM2..TIM5 at a fixed 48 MHz
-//! (`stm32f405_soc.c` sets the timers' `clock-frequency` to 48 MHz) while
-//! ignoring the prescaler (`stm32f2xx_timer.c`: a PSC write re-sets the
-//! ptimer to the unscaled frequency) and masking ARR to 16 bits. A real
-//! board clocks TIM2 at 2 × PCLK1 = 84 MHz. So [`Stm32f405::take`] does not
-//! assume the timer clock: it runs TIM2 free with PSC = 0 for 5 ms of
-//! SysTick (whose clock, the core clock, is known: 168 MHz from the PLL, or
-//! 16 MHz on HSI if the crystal never started) and sets ARR from the rate
-//! it measured, rounded to whole MHz (every STM32 timer clock is a whole
-//! number of MHz; the rounding absorbs QEMU's host jitter during the 5 ms).
-//! 1 kHz then needs ARR = 47 999 under QEMU and 83 999 on the board (TIM2
-//! is 32-bit there; both fit).
+//! **One image for the board and for QEMU 7.2 `-M netduinoplus2`.**
+//! - RCC: QEMU 7.2 does not model it (an unimplemented device that reads
+//!   0) and runs the core at a fixed 168 MHz (the netduinoplus2 board's
+//!   `sysclk`). [`setup_clocks`] reads RCC_CR first: 0 is impossible on a
+//!   chip (HSION and HSIRDY are set out of reset), so it means "no RCC
+//!   model" ([`ClockSource::NoRcc`], 168 MHz); on a chip it starts HSE 8 MHz
+//!   → PLL 168 MHz with bounded waits, or stays on HSI 16 MHz.
+//! - Why SysTick and not TIM2 paces the period: QEMU 7.2's TIM2..TIM5
+//!   (`hw/timer/stm32f2xx_timer.c`, SoC `clock-frequency` 1 GHz, not a bus
+//!   clock) cannot make a periodic update interrupt: `set_alarm` computes
+//!   `hit_time` as an absolute virtual time and then arms the timer at
+//!   `now + hit_time`, so every next update comes after the whole uptime
+//!   again (the first one after ~the boot time, then ever later), and CNT
+//!   reads a free-running 1 GHz/(PSC+1) count that never wraps at ARR.
+//!   Measured here: a TIM2 calibrated at boot against SysTick read 465 to
+//!   987 "MHz" and its update interrupt never paced anything. (A patch
+//!   series rewriting the model on ptimer, with 48 MHz, was posted for
+//!   later QEMU versions.) SysTick is modelled right in 7.2: on the
+//!   processor clock it counts the board's 168 MHz, as on the chip, so
+//!   reload = SYSCLK / 1000 − 1 gives 1 kHz on both with one image, at the
+//!   highest exception priority. TIM2..TIM5 stay free for PWM (the motors).
 //!
-//! **Transmit is TXE-interrupt driven** (not a drain per period): the line
-//! runs while the period logic runs, and a 150-byte frame at 2 Mbaud takes
-//! 750 µs, which a per-period drain could only do by spinning. Under QEMU
-//! every DR write is synchronous (TXE always reads set), so the interrupt
-//! empties the queue at once, up to [`ISR_BURST`] bytes per entry.
-//!
-//! Interrupt priorities: TIM2 highest (the tick is never late behind link
-//! bytes), USART1 below it.
+//! **Transmit: TXE interrupt, plus a bounded drain in [`Board::wait_tick`]
+//! and [`Board::link_write`].** On the chip the TXE interrupt sends the
+//! queue while the period logic runs (a 150-byte frame at 2 Mbaud takes
+//! 750 µs, which a per-period drain could only do by spinning). QEMU 7.2's
+//! USART (`hw/char/stm32f2xx_usart.c`) raises its interrupt only for RXNE
+//! (CR1 TXEIE is stored but never raises it; later versions fixed that),
+//! and every DR write is synchronous (TXE always reads set; the write
+//! blocks the emulator until the host socket takes the byte). So the main
+//! context also drains: with interrupts masked, while TXE is set, at most
+//! [`DRAIN_BURST`] bytes. On the chip that loop stops after one or two
+//! bytes (TXE clears while a character shifts out) and the interrupt does
+//! the rest; under QEMU it sends the queue.
 
 use core::ptr::addr_of_mut;
 use core::sync::atomic::{AtomicU32, Ordering};
 
 use cortex_m::peripheral::syst::SystClkSource;
-use cortex_m::peripheral::NVIC;
+use cortex_m::peripheral::{scb::SystemHandler, NVIC, SCB, SYST};
+use cortex_m_rt::exception;
 use heapless::spsc::{Consumer, Producer, Queue};
 use stm32f4::stm32f405::{self as pac, interrupt, Interrupt};
 use tendril_shared::MAX_TENDONS;
@@ -55,6 +66,10 @@ pub const LOG_BAUD: u32 = 115_200;
 /// Bytes the USART1 interrupt moves per entry in each direction (bounds
 /// its time: 32 bytes is a few µs of register accesses).
 pub const ISR_BURST: usize = 32;
+
+/// Bytes one main-context drain writes at most (see the module doc): under
+/// QEMU a whole transmit queue; on the chip TXE stops it after ~2 bytes.
+pub const DRAIN_BURST: usize = TX_QUEUE;
 
 /// Iterations of a wait on an RCC ready bit before giving up. HSE start-up
 /// is ≤ 2 ms on HSI (16 MHz: ~32 000 cycles; a poll iteration is a few
@@ -86,10 +101,9 @@ pub struct Clocks {
     pub pclk1_hz: u32,
     /// APB2 clock (USART1), Hz.
     pub pclk2_hz: u32,
-    /// TIM2's counting rate as measured against SysTick at boot, Hz.
-    pub timer_hz: u32,
-    /// TIM2 auto-reload value of the period.
-    pub arr: u32,
+    /// SysTick reload value of the period (SysTick counts `reload + 1`
+    /// core cycles per tick).
+    pub reload: u32,
 }
 
 /// Link and tick counters since start.
@@ -118,7 +132,31 @@ static mut TX_Q: Queue<u8, TX_QUEUE> = Queue::new();
 /// The interrupt's ends of the queues: written once before USART1's
 /// interrupt is unmasked, then touched only by that interrupt.
 static mut RX_IN: Option<Producer<'static, u8>> = None;
+/// The main context also uses `TX_OUT`, inside critical sections only
+/// ([`drain_tx`]).
 static mut TX_OUT: Option<Consumer<'static, u8>> = None;
+
+/// Send queued bytes while TXE is set, at most `budget`, with interrupts
+/// masked (exclusive use of the queue's consumer end and of DR).
+fn drain_tx(budget: usize) {
+    cortex_m::interrupt::free(|_| {
+        // SAFETY: interrupts are masked, so the USART1 handler (the other
+        // user of TX_OUT and DR) cannot run.
+        let (usart, tx_out) = unsafe { (&*pac::USART1::ptr(), &mut *addr_of_mut!(TX_OUT)) };
+        for _ in 0..budget {
+            if usart.sr().read().txe().bit_is_clear() {
+                break;
+            }
+            match tx_out.as_mut().and_then(|q| q.dequeue()) {
+                Some(b) => {
+                    usart.dr().write(|w| w.dr().set(u16::from(b)));
+                    TX_BYTES.fetch_add(1, Ordering::Relaxed);
+                }
+                None => break,
+            }
+        }
+    });
+}
 
 /// The STM32F405 board: owns the device peripherals it drives and the
 /// main-context ends of the link queues.
@@ -191,68 +229,18 @@ fn setup_clocks(rcc: &pac::RCC, flash: &pac::FLASH) -> (ClockSource, u32, u32, u
     (ClockSource::Pll, 168_000_000, 42_000_000, 84_000_000)
 }
 
-/// TIM2's counting rate, Hz: TIM2 free-running (PSC 0, ARR 0xFFFF) timed
-/// against SysTick on the core clock over 5 ms, rounded to whole MHz.
-/// Bounded: the loop ends after 5 ms of SysTick or 10⁷ polls.
-fn calibrate_timer(tim: &pac::TIM2, syst: &mut cortex_m::peripheral::SYST, sysclk_hz: u32) -> u32 {
-    const MASK24: u32 = 0x00FF_FFFF;
-    syst.set_clock_source(SystClkSource::Core);
-    syst.set_reload(MASK24);
-    syst.clear_current();
-    syst.enable_counter();
-    tim.psc().write(|w| w.psc().set(0));
-    tim.arr().write(|w| w.arr().set(0xFFFF));
-    tim.cnt().write(|w| w.cnt().set(0));
-    tim.cr1().write(|w| w.cen().set_bit());
-    let window = sysclk_hz / 200;
-    let (mut s_prev, mut t_prev) = (
-        cortex_m::peripheral::SYST::get_current(),
-        tim.cnt().read().bits() & 0xFFFF,
-    );
-    let (mut s_sum, mut t_sum) = (0u32, 0u32);
-    for _ in 0..10_000_000u32 {
-        let s = cortex_m::peripheral::SYST::get_current();
-        let t = tim.cnt().read().bits() & 0xFFFF;
-        // SysTick counts down (24 bits), TIM2 up (16 bits used here); each
-        // wraps far slower than one poll (≥ 0.78 ms).
-        // A step "backwards" (QEMU's ptimer readout is not monotonic at
-        // these rates) would read as almost a whole wrap: count it as 0;
-        // a poll is far shorter than half a wrap, so no real step is lost.
-        let ds = s_prev.wrapping_sub(s) & MASK24;
-        let dt = t.wrapping_sub(t_prev) & 0xFFFF;
-        s_sum = s_sum.wrapping_add(if ds < MASK24 / 2 { ds } else { 0 });
-        t_sum = t_sum.wrapping_add(if dt < 0x8000 { dt } else { 0 });
-        (s_prev, t_prev) = (s, t);
-        if s_sum >= window {
-            break;
-        }
-    }
-    tim.cr1().write(|w| w.cen().clear_bit());
-    syst.disable_counter();
-    log::info!("calibration systick {s_sum} tim2 {t_sum}");
-    let raw = (u64::from(t_sum) * u64::from(sysclk_hz))
-        .checked_div(u64::from(s_sum))
-        .unwrap_or(0);
-    let mhz = (raw + 500_000) / 1_000_000;
-    u32::try_from(mhz.saturating_mul(1_000_000))
-        .unwrap_or(u32::MAX)
-        .max(1_000_000)
-}
-
 impl Stm32f405 {
     /// Bring the board up: clocks, GPIO, the log UART (and the `log`
-    /// logger on it), the link UART, then TIM2 calibrated and ticking at
+    /// logger on it), the link UART, then SysTick ticking at
     /// [`PERIOD_HZ`]. `None` if the peripherals were already taken. Takes
-    /// about 5 ms (the timer calibration) plus the clock start-up.
+    /// the clock start-up (≤ a few ms on a chip, nothing under QEMU).
     pub fn take() -> Option<Self> {
         let dp = pac::Peripherals::take()?;
         let mut cp = cortex_m::Peripherals::take()?;
         let (source, sysclk_hz, pclk1_hz, pclk2_hz) = setup_clocks(&dp.RCC, &dp.FLASH);
 
         dp.RCC.ahb1enr().modify(|_, w| w.gpioaen().set_bit());
-        dp.RCC
-            .apb1enr()
-            .modify(|_, w| w.tim2en().set_bit().usart2en().set_bit());
+        dp.RCC.apb1enr().modify(|_, w| w.usart2en().set_bit());
         dp.RCC.apb2enr().modify(|_, w| w.usart1en().set_bit());
         // PA2/PA3 (USART2) and PA9/PA10 (USART1): alternate function 7;
         // pull-ups on the RX pins so an unconnected line reads idle.
@@ -302,37 +290,32 @@ impl Stm32f405 {
             w.rxneie().enabled()
         });
 
-        let timer_hz = calibrate_timer(&dp.TIM2, &mut cp.SYST, sysclk_hz);
-        let arr = (timer_hz / PERIOD_HZ).saturating_sub(1);
-        let tim = &dp.TIM2;
-        tim.arr().write(|w| w.arr().set(arr));
-        tim.cnt().write(|w| w.cnt().set(0));
-        tim.sr().write(|w| w.uif().clear());
-        tim.dier().write(|w| w.uie().set_bit());
-        tim.cr1().write(|w| w.cen().set_bit());
-        // SAFETY: priorities set before unmasking; the handlers below only
-        // touch their own statics.
+        let reload = sysclk_hz / PERIOD_HZ - 1;
+        let syst = &mut cp.SYST;
+        syst.set_clock_source(SystClkSource::Core);
+        syst.set_reload(reload);
+        syst.clear_current();
+        // SAFETY: priorities set before the tick and the link interrupt
+        // start; their handlers only touch their own statics.
         unsafe {
-            cp.NVIC.set_priority(Interrupt::TIM2, 0x00);
+            cp.SCB.set_priority(SystemHandler::SysTick, 0x00);
             cp.NVIC.set_priority(Interrupt::USART1, 0x40);
-            NVIC::unpend(Interrupt::TIM2);
-            NVIC::unmask(Interrupt::TIM2);
             NVIC::unmask(Interrupt::USART1);
         }
+        syst.enable_interrupt();
+        syst.enable_counter();
         let clocks = Clocks {
             source,
             sysclk_hz,
             pclk1_hz,
             pclk2_hz,
-            timer_hz,
-            arr,
+            reload,
         };
         log::info!(
-            "board stm32f405 clock {:?} sysclk {} timer {} arr {}",
+            "board stm32f405 clock {:?} sysclk {} systick reload {}",
             source,
             sysclk_hz,
-            timer_hz,
-            arr
+            reload
         );
         Some(Self {
             clocks,
@@ -371,6 +354,7 @@ impl Stm32f405 {
 impl Board for Stm32f405 {
     fn wait_tick(&mut self) -> u32 {
         loop {
+            drain_tx(DRAIN_BURST);
             // Check and sleep with interrupts masked: a tick that lands
             // between the check and the WFI still wakes the WFI (a pending
             // interrupt ends it even when masked), so no period is slept
@@ -392,22 +376,22 @@ impl Board for Stm32f405 {
     }
 
     fn now_ns(&self) -> u64 {
-        // SAFETY: reads of TIM2's counter and status, which the TIM2
-        // interrupt only clears (UIF).
-        let tim = unsafe { &*pac::TIM2::ptr() };
-        let (ticks, cnt) = cortex_m::interrupt::free(|_| {
+        let reload = self.clocks.reload;
+        let (ticks, cvr) = cortex_m::interrupt::free(|_| {
             let ticks = TICKS.load(Ordering::Relaxed);
-            let cnt = tim.cnt().read().bits();
-            // A wrap not yet counted (its interrupt waits for this critical
+            let cvr = SYST::get_current();
+            // A wrap not yet counted (its exception waits for this critical
             // section): read the counter again, after the wrap.
-            if tim.sr().read().uif().bit_is_set() {
-                (ticks.wrapping_add(1), tim.cnt().read().bits())
+            if SCB::is_pendst_pending() {
+                (ticks.wrapping_add(1), SYST::get_current())
             } else {
-                (ticks, cnt)
+                (ticks, cvr)
             }
         });
+        // SysTick counts down from `reload`.
+        let into = u64::from(reload.saturating_sub(cvr));
         u64::from(ticks) * self.period_ns
-            + u64::from(cnt) * 1_000_000_000 / u64::from(self.clocks.timer_hz.max(1))
+            + into * 1_000_000_000 / u64::from(self.clocks.sysclk_hz.max(1))
     }
 
     fn set_tensions(&mut self, tensions: &[f32]) {
@@ -443,20 +427,16 @@ impl Board for Stm32f405 {
             // also modifies (it clears TXEIE): done with interrupts masked.
             let usart = unsafe { &*pac::USART1::ptr() };
             cortex_m::interrupt::free(|_| usart.cr1().modify(|_, w| w.txeie().enabled()));
+            drain_tx(DRAIN_BURST);
         }
         n
     }
 }
 
-/// The period tick: count it and clear the flag.
-#[interrupt]
-fn TIM2() {
-    // SAFETY: TIM2's status register; the main context only reads it.
-    let tim = unsafe { &*pac::TIM2::ptr() };
-    if tim.sr().read().uif().bit_is_set() {
-        tim.sr().write(|w| w.uif().clear());
-        TICKS.fetch_add(1, Ordering::Relaxed);
-    }
+/// The period tick: count it (the flag clears itself on exception entry).
+#[exception]
+fn SysTick() {
+    TICKS.fetch_add(1, Ordering::Relaxed);
 }
 
 /// The link UART: received bytes into the receive queue (a full queue or
