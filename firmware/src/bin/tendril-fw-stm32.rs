@@ -46,7 +46,7 @@ mod mcu {
     /// Bytes held for sending when the transmit queue is full: the echo
     /// reads no more than this per period, so nothing is dropped here
     /// (back-pressure shows up as receive overruns, which are counted).
-    const HOLD: usize = 256;
+    const HOLD: usize = 1024;
 
     /// The bring-up loop: echo, and a status line every [`STATUS_EVERY`]
     /// ticks. `overruns` reads the board's receive-overrun counter (not

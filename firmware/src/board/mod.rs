@@ -48,10 +48,12 @@ pub trait Board {
     fn set_tensions(&mut self, tensions: &[f32]);
 
     /// Move up to `buf.len()` received link bytes into `buf`, oldest first,
-    /// and return the count (0 when nothing arrived). Never blocks. Bytes
-    /// that arrived while the receive queue was full were dropped by the
-    /// receive interrupt and counted (see the board's overrun counter); the
-    /// frame layer above resynchronises on its own delimiters.
+    /// and return the count (0 when nothing arrived). Never blocks. While
+    /// the receive queue is full the board stops taking bytes (flow control
+    /// where the line has it, as QEMU's socket does; otherwise the UART
+    /// overruns), and lost bytes are counted (see the board's overrun
+    /// counter); the frame layer above resynchronises on its own
+    /// delimiters.
     fn link_read(&mut self, buf: &mut [u8]) -> usize;
 
     /// Queue `bytes` for transmission and return how many were queued, a

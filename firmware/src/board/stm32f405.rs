@@ -411,6 +411,14 @@ impl Board for Stm32f405 {
                 None => break,
             }
         }
+        if n > 0 {
+            // Room again: let the receive interrupt take bytes (it stops
+            // itself when the queue is full). CR1 is shared with the
+            // interrupt: modified with interrupts masked.
+            // SAFETY: USART1's CR1, read-modify-write in a critical section.
+            let usart = unsafe { &*pac::USART1::ptr() };
+            cortex_m::interrupt::free(|_| usart.cr1().modify(|_, w| w.rxneie().enabled()));
+        }
         n
     }
 
@@ -469,6 +477,14 @@ fn USART1() {
                 Some(Ok(())) => RX_BYTES.fetch_add(1, Ordering::Relaxed),
                 _ => RX_OVERRUNS.fetch_add(1, Ordering::Relaxed),
             };
+        }
+        // Queue full: stop taking bytes until `link_read` makes room. The
+        // next byte then waits in DR: QEMU holds the rest back (it offers
+        // a byte only while RXNE is clear), a chip overruns (ORE, counted)
+        // if the period logic does not read in time.
+        if !rx_in.as_ref().is_some_and(|q| q.ready()) {
+            usart.cr1().modify(|_, w| w.rxneie().disabled());
+            break;
         }
     }
     if usart.cr1().read().txeie().is_enabled() {
