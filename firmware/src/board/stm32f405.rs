@@ -412,12 +412,11 @@ impl Board for Stm32f405 {
             }
         }
         if n > 0 {
-            // Room again: let the receive interrupt take bytes (it stops
-            // itself when the queue is full). CR1 is shared with the
-            // interrupt: modified with interrupts masked.
-            // SAFETY: USART1's CR1, read-modify-write in a critical section.
-            let usart = unsafe { &*pac::USART1::ptr() };
-            cortex_m::interrupt::free(|_| usart.cr1().modify(|_, w| w.rxneie().enabled()));
+            // Room again: let the receive interrupt run (it masks itself
+            // when the queue is full).
+            // SAFETY: unmasking the link interrupt, whose handler only
+            // touches its own statics.
+            unsafe { NVIC::unmask(Interrupt::USART1) };
         }
         n
     }
@@ -463,6 +462,16 @@ fn USART1() {
         )
     };
     for _ in 0..ISR_BURST {
+        // Queue full: stop taking bytes until `link_read` makes room, by
+        // masking this interrupt (not RXNEIE: QEMU 7.2 lowers its USART
+        // line only on a DR read, so a level left high would re-enter this
+        // handler forever). The next byte then waits in DR: QEMU holds the
+        // rest back (it offers a byte only while RXNE is clear), a chip
+        // overruns (ORE, counted) if the period logic does not read in time.
+        if !rx_in.as_ref().is_some_and(|q| q.ready()) {
+            NVIC::mask(Interrupt::USART1);
+            break;
+        }
         let sr = usart.sr().read();
         if sr.rxne().bit_is_clear() && sr.ore().bit_is_clear() {
             break;
@@ -477,14 +486,6 @@ fn USART1() {
                 Some(Ok(())) => RX_BYTES.fetch_add(1, Ordering::Relaxed),
                 _ => RX_OVERRUNS.fetch_add(1, Ordering::Relaxed),
             };
-        }
-        // Queue full: stop taking bytes until `link_read` makes room. The
-        // next byte then waits in DR: QEMU holds the rest back (it offers
-        // a byte only while RXNE is clear), a chip overruns (ORE, counted)
-        // if the period logic does not read in time.
-        if !rx_in.as_ref().is_some_and(|q| q.ready()) {
-            usart.cr1().modify(|_, w| w.rxneie().disabled());
-            break;
         }
     }
     if usart.cr1().read().txeie().is_enabled() {

@@ -22,6 +22,18 @@ pub use console::{init_logger, Console};
 
 use cortex_m_semihosting::debug;
 
+/// The start and end every MPS2 test image shares: route `log` to the
+/// semihosting console, open the result [`Console`], run the image, write
+/// what is buffered, and exit with its verdict ([`exit`]). The STM32F405
+/// image does not use this (no semihosting there).
+pub fn semihosted(run: impl FnOnce(&mut Console) -> bool) -> ! {
+    init_logger();
+    let mut out = Console::new();
+    let ok = run(&mut out);
+    out.flush();
+    exit(ok)
+}
+
 /// End the run through semihosting with exit code 0 (`ok`) or 1, which
 /// QEMU passes on as its own exit status (how the QEMU tests read the
 /// verdict). Does not return; on a board without a debugger attached the
