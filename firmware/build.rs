@@ -12,7 +12,7 @@
 //!    `TENDRIL_FW_VECTORS` (default `firmware/vectors`), so a parity run can
 //!    embed vectors made for the net it checks (any tendon count).
 //! 3. For the MCU build only (`target_os = "none"`): put the workspace's
-//!    `memory.x` where cortex-m-rt's `link.x` finds it and link the binary
+//!    `memory.x` (with the feature `stm32f405`: `boards/stm32f405/memory.x`) where cortex-m-rt's `link.x` finds it and link the binary
 //!    with `link.x` (as cortex-m-quickstart does).
 
 use std::env;
@@ -122,6 +122,33 @@ fn workspace_path(manifest: &Path, p: PathBuf) -> PathBuf {
     }
 }
 
+/// The newest `link.x` that cortex-m-rt's build script wrote for this
+/// target with its feature `device` (which the PAC's `rt` turns on: the
+/// script then includes the PAC's `device.x`), a sibling of this crate's
+/// `OUT_DIR` (`<target>/<profile>/build/<crate>-<hash>/out`). The MPS2
+/// images' build, without `device`, leaves a second one there.
+fn cortex_m_rt_link_x(out: &Path) -> Option<String> {
+    let build = out.parent()?.parent()?;
+    let mut best: Option<(std::time::SystemTime, PathBuf)> = None;
+    for entry in fs::read_dir(build).ok()?.flatten() {
+        if !entry
+            .file_name()
+            .to_string_lossy()
+            .starts_with("cortex-m-rt-")
+        {
+            continue;
+        }
+        let p = entry.path().join("out").join("link.x");
+        let device = fs::read_to_string(&p).is_ok_and(|x| x.contains("INCLUDE device.x"));
+        if let (true, Ok(t)) = (device, fs::metadata(&p).and_then(|m| m.modified())) {
+            if best.as_ref().is_none_or(|(b, _)| t > *b) {
+                best = Some((t, p));
+            }
+        }
+    }
+    fs::read_to_string(best?.1).ok()
+}
+
 fn main() {
     let manifest = PathBuf::from(env::var_os("CARGO_MANIFEST_DIR").unwrap_or_default());
     let out = PathBuf::from(env::var_os("OUT_DIR").unwrap_or_default());
@@ -159,7 +186,14 @@ fn main() {
         }
     }
 
-    let memory_x = manifest.join("..").join("memory.x");
+    // The STM32F405 board (feature `stm32f405`) has its own memory map; the
+    // MPS2 images keep the workspace's.
+    println!("cargo:rerun-if-env-changed=CARGO_FEATURE_STM32F405");
+    let memory_x = if env::var_os("CARGO_FEATURE_STM32F405").is_some() {
+        manifest.join("boards").join("stm32f405").join("memory.x")
+    } else {
+        manifest.join("..").join("memory.x")
+    };
     println!("cargo:rerun-if-changed={}", memory_x.display());
     if env::var("CARGO_CFG_TARGET_OS").as_deref() != Ok("none") {
         return;
@@ -168,5 +202,30 @@ fn main() {
         panic!("cannot copy {} to OUT_DIR: {e}", memory_x.display());
     }
     println!("cargo:rustc-link-search={}", out.display());
-    println!("cargo:rustc-link-arg-bins=-Tlink.x");
+    if env::var_os("CARGO_FEATURE_STM32F405").is_none() {
+        println!("cargo:rustc-link-arg-bins=-Tlink.x");
+        return;
+    }
+    // cortex-m-rt's link.x says `INCLUDE memory.x`, and the linker looks in
+    // its working directory (the workspace root, where the MPS2 memory.x
+    // lives) before the search path: the board's memory.x would lose. So
+    // the board links with a copy of cortex-m-rt's generated link.x whose
+    // INCLUDE names the board's map by its absolute path.
+    let board_x = out.join("stm32f405-link.x");
+    match cortex_m_rt_link_x(&out) {
+        Some(link_x) => {
+            let script = link_x.replace(
+                "INCLUDE memory.x",
+                &format!("INCLUDE \"{}\"", memory_x.display()),
+            );
+            if let Err(e) = fs::write(&board_x, script) {
+                panic!("cannot write {}: {e}", board_x.display());
+            }
+        }
+        None => panic!(
+            "stm32f405: cortex-m-rt's link.x not found next to {}",
+            out.display()
+        ),
+    }
+    println!("cargo:rustc-link-arg-bins=-T{}", board_x.display());
 }

@@ -3,6 +3,8 @@
 //! control step with its safety limits. Plain `no_std` Rust, no allocation,
 //! testable on the host.
 //!
+//! - [`board`]: the board contract (period tick, clock, motors, link bytes)
+//!   and the STM32F405 board (cargo feature `stm32f405`, MCU builds only);
 //! - [`mod@infer`]: pose → tensions through a decoded [`tendril_shared::CascadeNet`];
 //! - [`control`]: the pure control step and its [`control::Status`] word;
 //! - [`command`]: the command stage's co-contraction shift (keeps the bend
@@ -45,6 +47,7 @@ mod swap_tests;
 #[cfg(test)]
 mod tests;
 
+pub mod board;
 pub mod command;
 pub mod control;
 pub mod infer;

@@ -16,6 +16,7 @@ pub mod interrupt;
 pub mod inverse;
 pub mod ipc;
 pub mod learn;
+pub mod mcu;
 pub mod net;
 pub mod numerics;
 pub mod pipeline;

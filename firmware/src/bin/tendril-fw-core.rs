@@ -66,57 +66,59 @@ mod mcu {
     #[entry]
     fn main() -> ! {
         static mut RAM_NET: McuNet = McuNet::empty();
-        rt::init_logger();
-        let n = DEFAULT_NET.shape().outputs;
-        // The seed robots' co-contraction sets: opposite pairs.
-        let limits = TendonLimits::uniform(n, 10.0, 500.0)
-            .and_then(|l| l.with_cocontraction(CoContraction::opposite_pairs(n)));
-        let ok = match limits {
-            Ok(limits) => {
-                let cfg = ControlConfig::new(limits);
-                let mut store = McuSlots::new(&DEFAULT_NET, &mut *RAM_NET);
-                let mut swap = McuSwap::new();
-                let mut state = ControlState::new(&cfg.limits, &[0.0; MAX_TENDONS], 0);
-                for k in 1..=STEPS {
-                    // SAFETY: single-threaded; the mailboxes are plain data
-                    // read and written whole, volatile so the compiler keeps
-                    // the "bus" accesses.
-                    let (update, (seq, pose)) = unsafe {
-                        (
-                            read_volatile(addr_of!(UPDATE)),
-                            read_volatile(addr_of!(SETPOINT)),
-                        )
-                    };
-                    if update.1 != 0 {
-                        // SAFETY: the bus driver keeps the blob unchanged
-                        // while UPDATE_BUSY reads true (or until it hands
-                        // over a newer one), see the mailbox.
-                        let blob: &'static [u8] =
-                            unsafe { core::slice::from_raw_parts(update.0 as *const u8, update.1) };
-                        let _ = swap.offer(blob, (POSE_DIM, n));
-                        unsafe { write_volatile(addr_of_mut!(UPDATE), (0, 0)) };
+        rt::semihosted(|_| {
+            let n = DEFAULT_NET.shape().outputs;
+            // The seed robots' co-contraction sets: opposite pairs.
+            let limits = TendonLimits::uniform(n, 10.0, 500.0)
+                .and_then(|l| l.with_cocontraction(CoContraction::opposite_pairs(n)));
+            let ok = match limits {
+                Ok(limits) => {
+                    let cfg = ControlConfig::new(limits);
+                    let mut store = McuSlots::new(&DEFAULT_NET, &mut *RAM_NET);
+                    let mut swap = McuSwap::new();
+                    let mut state = ControlState::new(&cfg.limits, &[0.0; MAX_TENDONS], 0);
+                    for k in 1..=STEPS {
+                        // SAFETY: single-threaded; the mailboxes are plain data
+                        // read and written whole, volatile so the compiler keeps
+                        // the "bus" accesses.
+                        let (update, (seq, pose)) = unsafe {
+                            (
+                                read_volatile(addr_of!(UPDATE)),
+                                read_volatile(addr_of!(SETPOINT)),
+                            )
+                        };
+                        if update.1 != 0 {
+                            // SAFETY: the bus driver keeps the blob unchanged
+                            // while UPDATE_BUSY reads true (or until it hands
+                            // over a newer one), see the mailbox.
+                            let blob: &'static [u8] = unsafe {
+                                core::slice::from_raw_parts(update.0 as *const u8, update.1)
+                            };
+                            let _ = swap.offer(blob, (POSE_DIM, n));
+                            unsafe { write_volatile(addr_of_mut!(UPDATE), (0, 0)) };
+                        }
+                        let input = StepInput {
+                            now_ns: u64::from(k) * PERIOD_NS,
+                            setpoint: (seq != 0).then_some(Setpoint {
+                                seq,
+                                pose,
+                                tangent: None,
+                            }),
+                            feedback: None,
+                        };
+                        let (next, out) = control_step(&cfg, store.active(), &state, &input);
+                        state = next;
+                        unsafe { write_volatile(addr_of_mut!(COMMAND), out.command) };
+                        // Between this step and the next: one bounded slice of
+                        // an update in progress (the outcome is logged).
+                        let _ = swap.slice(&mut store, SWAP_SLICE_BYTES);
+                        unsafe { write_volatile(addr_of_mut!(UPDATE_BUSY), swap.busy()) };
                     }
-                    let input = StepInput {
-                        now_ns: u64::from(k) * PERIOD_NS,
-                        setpoint: (seq != 0).then_some(Setpoint {
-                            seq,
-                            pose,
-                            tangent: None,
-                        }),
-                        feedback: None,
-                    };
-                    let (next, out) = control_step(&cfg, store.active(), &state, &input);
-                    state = next;
-                    unsafe { write_volatile(addr_of_mut!(COMMAND), out.command) };
-                    // Between this step and the next: one bounded slice of
-                    // an update in progress (the outcome is logged).
-                    let _ = swap.slice(&mut store, SWAP_SLICE_BYTES);
-                    unsafe { write_volatile(addr_of_mut!(UPDATE_BUSY), swap.busy()) };
+                    true
                 }
-                true
-            }
-            Err(_) => false,
-        };
-        rt::exit(ok)
+                Err(_) => false,
+            };
+            ok
+        })
     }
 }

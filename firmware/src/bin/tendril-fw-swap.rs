@@ -49,11 +49,7 @@ mod mcu {
         static mut RAM_NET: McuNet = McuNet::empty();
         // The blobs as a bus driver would hold them: one receive buffer each.
         static mut BLOBS: [[u8; BLOB_LEN]; 4] = [[0; BLOB_LEN]; 4];
-        rt::init_logger();
-        let mut out = Console::new();
-        let ok = run(RAM_NET, BLOBS, &mut out);
-        out.flush();
-        rt::exit(ok)
+        rt::semihosted(|out| run(RAM_NET, BLOBS, out))
     }
 
     /// The run; whether it completed.

@@ -206,26 +206,25 @@ mod mcu {
     fn main() -> ! {
         // The hot-swap RAM slot: all zeros, so it sits in .bss.
         static mut RAM_NET: McuNet = McuNet::empty();
-        let stack = rt::stack::paint();
-        rt::init_logger();
-        let mut out = Console::new();
-        let ok = {
-            let mut store = McuSlots::new(&DEFAULT_NET, &mut *RAM_NET);
-            match vectors::run(&mut store, &BLOBS, VECTORS, &mut out) {
-                Ok(_) => true,
-                Err(e) => {
-                    let _ = writeln!(out, "error {e}");
-                    false
+        rt::semihosted(|out| {
+            let stack = rt::stack::paint();
+            let ok = {
+                let mut store = McuSlots::new(&DEFAULT_NET, &mut *RAM_NET);
+                match vectors::run(&mut store, &BLOBS, VECTORS, out) {
+                    Ok(_) => true,
+                    Err(e) => {
+                        let _ = writeln!(out, "error {e}");
+                        false
+                    }
                 }
+            };
+            // Stack of the run itself (control steps, inference, printing).
+            let _ = writeln!(out, "stack_run {}", stack.high_water());
+            if ok {
+                bench(&DEFAULT_NET, RAM_NET, out);
             }
-        };
-        // Stack of the run itself (control steps, inference, printing).
-        let _ = writeln!(out, "stack_run {}", stack.high_water());
-        if ok {
-            bench(&DEFAULT_NET, RAM_NET, &mut out);
-        }
-        let _ = writeln!(out, "stack_total {}", stack.high_water());
-        out.flush();
-        rt::exit(ok)
+            let _ = writeln!(out, "stack_total {}", stack.high_water());
+            ok
+        })
     }
 }

@@ -1,0 +1,230 @@
+//! Start and stop QEMU with the chip image; build the image.
+
+use std::fs;
+use std::io::Read;
+use std::os::unix::process::CommandExt;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+
+/// The emulator binary.
+pub const QEMU: &str = "qemu-system-arm";
+/// The chip's Rust target.
+pub const TARGET: &str = "thumbv7em-none-eabihf";
+/// The chip's log line once the board is up (`Stm32f405::take`).
+const READY_LINE: &str = "board stm32f405";
+/// How long QEMU may take to create the link socket.
+const SOCKET_WAIT: Duration = Duration::from_secs(5);
+
+/// A running QEMU `netduinoplus2` with a chip image. Dropping it kills
+/// and reaps QEMU and removes the socket and the log file; QEMU also dies
+/// with the process that started it (`PR_SET_PDEATHSIG`), so a killed test
+/// leaves no emulator running.
+pub struct Chip {
+    child: Child,
+    socket: PathBuf,
+    log: PathBuf,
+}
+
+/// Whether `program` is on `PATH`.
+fn on_path(program: &str) -> bool {
+    std::env::var_os("PATH")
+        .is_some_and(|paths| std::env::split_paths(&paths).any(|dir| dir.join(program).is_file()))
+}
+
+/// One line saying what to install, if QEMU is missing.
+fn check_qemu() -> Result<()> {
+    if !on_path(QEMU) {
+        bail!("{QEMU} not found: install it with `apt-get install qemu-system-arm`");
+    }
+    Ok(())
+}
+
+impl Chip {
+    /// Start `qemu-system-arm -M netduinoplus2 -nographic -kernel IMAGE`
+    /// with USART1 on a listening Unix socket at `socket` (a stale file
+    /// there is removed first) and USART2 (the chip's log) written to
+    /// `socket` + `.log`. Returns once the socket exists; connect with
+    /// [`super::McuLink::connect`]. Until a client connects, what the chip
+    /// sends is dropped (QEMU's `wait=off`).
+    pub fn start(image: &Path, socket: &Path) -> Result<Chip> {
+        check_qemu()?;
+        if !image.is_file() {
+            bail!("chip image {} not found", image.display());
+        }
+        if fs::symlink_metadata(socket).is_ok() {
+            fs::remove_file(socket)
+                .with_context(|| format!("removing stale socket {}", socket.display()))?;
+        }
+        let mut log = socket.as_os_str().to_owned();
+        log.push(".log");
+        let log = PathBuf::from(log);
+        let mut serial = std::ffi::OsString::from("unix:");
+        serial.push(socket);
+        serial.push(",server=on,wait=off");
+        let mut log_serial = std::ffi::OsString::from("file:");
+        log_serial.push(&log);
+        let mut cmd = Command::new(QEMU);
+        cmd.args(["-M", "netduinoplus2", "-nographic", "-monitor", "none"])
+            .arg("-kernel")
+            .arg(image)
+            .arg("-serial")
+            .arg(&serial)
+            .arg("-serial")
+            .arg(&log_serial)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped());
+        // SAFETY: prctl is async-signal-safe; nothing else runs between
+        // fork and exec.
+        unsafe {
+            cmd.pre_exec(|| {
+                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                // The parent may have died before the prctl took effect.
+                if libc::getppid() == 1 {
+                    return Err(std::io::Error::other("parent exited"));
+                }
+                Ok(())
+            });
+        }
+        let child = cmd.spawn().with_context(|| format!("starting {QEMU}"))?;
+        let mut chip = Chip {
+            child,
+            socket: socket.to_path_buf(),
+            log,
+        };
+        let t0 = Instant::now();
+        while !socket.exists() {
+            if let Some(status) = chip.child.try_wait()? {
+                let mut err = String::new();
+                if let Some(mut e) = chip.child.stderr.take() {
+                    let _ = e.read_to_string(&mut err);
+                }
+                bail!(
+                    "{QEMU} exited ({status}) before opening its socket: {}",
+                    err.trim()
+                );
+            }
+            if t0.elapsed() > SOCKET_WAIT {
+                bail!(
+                    "{QEMU} did not create {} within {SOCKET_WAIT:?}",
+                    socket.display()
+                );
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        Ok(chip)
+    }
+
+    /// The link socket's path.
+    pub fn socket(&self) -> &Path {
+        &self.socket
+    }
+
+    /// What the chip logged on USART2 so far (`log <level> <message>`
+    /// lines; empty if nothing yet).
+    pub fn log(&self) -> String {
+        fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    /// Wait until the chip has brought its board up (its log has the
+    /// board's start-up line, written once USART1 receives), at most
+    /// `timeout`. Bytes sent before that are lost: QEMU's USART drops what
+    /// arrives while the UART is not enabled yet.
+    pub fn wait_ready(&mut self, timeout: Duration) -> Result<()> {
+        let t0 = Instant::now();
+        while !self.log().contains(READY_LINE) {
+            if !self.is_running() {
+                bail!(
+                    "{QEMU} exited before the chip came up; log: {}",
+                    self.log().trim()
+                );
+            }
+            if t0.elapsed() > timeout {
+                bail!(
+                    "the chip did not come up within {timeout:?}; log: {}",
+                    self.log().trim()
+                );
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        Ok(())
+    }
+
+    /// Whether QEMU is still running.
+    pub fn is_running(&mut self) -> bool {
+        matches!(self.child.try_wait(), Ok(None))
+    }
+}
+
+impl Drop for Chip {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        let _ = fs::remove_file(&self.socket);
+        let _ = fs::remove_file(&self.log);
+    }
+}
+
+/// Build the chip image (`tendril-fw-stm32`, release) into
+/// `$CARGO_TARGET_DIR` (or `<workspace>/target`) + `/thumbv7em-chip` — a
+/// target directory of its own, so a build from inside `cargo test` does
+/// not wait on the outer build's lock — and return its path. Fails with
+/// one line naming what to install when QEMU or the Rust target is
+/// missing.
+pub fn locate_image() -> Result<PathBuf> {
+    check_qemu()?;
+    let workspace = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .context("host crate has no parent directory")?
+        .to_path_buf();
+    let rustc = std::env::var_os("RUSTC").unwrap_or_else(|| "rustc".into());
+    let sysroot = Command::new(&rustc)
+        .args(["--print", "sysroot"])
+        .output()
+        .context("running rustc --print sysroot")?;
+    let sysroot = PathBuf::from(String::from_utf8_lossy(&sysroot.stdout).trim());
+    if !sysroot.join("lib/rustlib").join(TARGET).is_dir() {
+        bail!("Rust target {TARGET} not installed: install it with `rustup target add {TARGET}`");
+    }
+    let base = std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| workspace.join("target"));
+    let dir = base.join("thumbv7em-chip");
+    let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
+    let out = Command::new(cargo)
+        .current_dir(&workspace)
+        .args([
+            "build",
+            "-p",
+            "tendril-firmware",
+            "--features",
+            "stm32f405",
+            "--bin",
+            "tendril-fw-stm32",
+            "--release",
+            "--target",
+            TARGET,
+        ])
+        .env("CARGO_TARGET_DIR", &dir)
+        .stdin(Stdio::null())
+        .output()
+        .context("running cargo build for the chip image")?;
+    if !out.status.success() {
+        let err = String::from_utf8_lossy(&out.stderr);
+        let first = err
+            .lines()
+            .find(|l| l.starts_with("error"))
+            .unwrap_or("(no error line)");
+        bail!("building tendril-fw-stm32 failed: {first}");
+    }
+    let image = dir.join(TARGET).join("release").join("tendril-fw-stm32");
+    if !image.is_file() {
+        bail!("cargo built no {}", image.display());
+    }
+    Ok(image)
+}

@@ -1,0 +1,113 @@
+//! The serial link to the chip: QEMU's USART1 socket.
+
+use std::io::{Read, Write};
+use std::net::Shutdown;
+use std::os::unix::net::UnixStream;
+use std::path::Path;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{self, Receiver};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+
+/// A connection to the chip's link UART. A reader thread drains the socket
+/// continuously into a channel: QEMU's USART transmit blocks the whole
+/// emulator while the socket's buffer is full, so a host that wrote
+/// without reading would deadlock with QEMU (the chip would stop echoing,
+/// the host's write would stop draining).
+pub struct McuLink {
+    stream: UnixStream,
+    rx: Receiver<Vec<u8>>,
+    reader: Option<JoinHandle<()>>,
+    sent: u64,
+    received: Arc<AtomicU64>,
+}
+
+impl McuLink {
+    /// Connect to the chip's socket, retrying until `timeout`.
+    pub fn connect(socket: &Path, timeout: Duration) -> Result<McuLink> {
+        let t0 = Instant::now();
+        let stream = loop {
+            match UnixStream::connect(socket) {
+                Ok(s) => break s,
+                Err(e) if t0.elapsed() >= timeout => {
+                    return Err(e).with_context(|| {
+                        format!("connecting to {} for {timeout:?}", socket.display())
+                    })
+                }
+                Err(_) => std::thread::sleep(Duration::from_millis(5)),
+            }
+        };
+        let mut reading = stream.try_clone().context("cloning the link socket")?;
+        let received = Arc::new(AtomicU64::new(0));
+        let count = Arc::clone(&received);
+        let (tx, rx) = mpsc::channel();
+        let reader = std::thread::Builder::new()
+            .name("mcu-link-reader".into())
+            .spawn(move || {
+                let mut buf = [0u8; 4096];
+                loop {
+                    match reading.read(&mut buf) {
+                        Ok(0) | Err(_) => break,
+                        Ok(n) => {
+                            count.fetch_add(n as u64, Ordering::Relaxed);
+                            if tx.send(buf.get(..n).unwrap_or(&[]).to_vec()).is_err() {
+                                break;
+                            }
+                        }
+                    }
+                }
+            })
+            .context("starting the link reader thread")?;
+        Ok(McuLink {
+            stream,
+            rx,
+            reader: Some(reader),
+            sent: 0,
+            received,
+        })
+    }
+
+    /// Send `bytes` (blocks while the socket is full: the chip reads one
+    /// byte at a time as its receive register frees).
+    pub fn send(&mut self, bytes: &[u8]) -> Result<()> {
+        self.stream
+            .write_all(bytes)
+            .context("writing to the chip")?;
+        self.sent += bytes.len() as u64;
+        Ok(())
+    }
+
+    /// The next chunk received, waiting at most `timeout`; `None` on
+    /// timeout or when the chip closed the link.
+    pub fn recv(&self, timeout: Duration) -> Option<Vec<u8>> {
+        self.rx.recv_timeout(timeout).ok()
+    }
+
+    /// The next chunk received, if one is waiting.
+    pub fn try_recv(&self) -> Option<Vec<u8>> {
+        self.rx.try_recv().ok()
+    }
+
+    /// Bytes sent so far.
+    pub fn bytes_sent(&self) -> u64 {
+        self.sent
+    }
+
+    /// Bytes the reader thread has received so far (including chunks not
+    /// yet taken with [`McuLink::recv`]).
+    pub fn bytes_received(&self) -> u64 {
+        self.received.load(Ordering::Relaxed)
+    }
+}
+
+impl Drop for McuLink {
+    fn drop(&mut self) {
+        let _ = self.stream.shutdown(Shutdown::Both);
+        if let Some(t) = self.reader.take() {
+            let _ = t.join();
+        }
+    }
+}

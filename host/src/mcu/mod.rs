@@ -1,0 +1,14 @@
+//! The robot controller's chip as the host sees it: an STM32F405 image
+//! (`tendril-fw-stm32`, firmware crate feature `stm32f405`) running under
+//! QEMU's `netduinoplus2` ([`Chip`]), and the serial link to it over a Unix
+//! socket ([`McuLink`]): USART1 is QEMU's first `-serial`, the chip's log
+//! (USART2) its second, written to a file ([`Chip::log`]).
+//!
+//! [`locate_image`] builds the image; when QEMU or the Rust target is
+//! missing it fails with one line saying what to install.
+
+mod chip;
+mod link;
+
+pub use chip::{locate_image, Chip, QEMU, TARGET};
+pub use link::McuLink;
