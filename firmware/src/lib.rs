@@ -51,6 +51,7 @@ pub mod board;
 pub mod command;
 pub mod control;
 pub mod infer;
+pub mod node;
 pub mod period;
 #[cfg(target_os = "none")]
 pub mod rt;
@@ -102,4 +103,4 @@ mod default_net {
     include!(concat!(env!("OUT_DIR"), "/default_net.rs"));
 }
 
-pub use default_net::{DEFAULT_NET, DEFAULT_NET_FILE};
+pub use default_net::{DEFAULT_NET, DEFAULT_NET_CRC, DEFAULT_NET_FILE};

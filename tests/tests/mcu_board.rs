@@ -11,7 +11,7 @@ use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use tendril::mcu::{locate_image, Chip, McuLink};
+use tendril::mcu::{locate_bringup_image, Chip, McuLink};
 
 /// The tests run one QEMU at a time: timing is measured, and the machine
 /// has few cores.
@@ -25,7 +25,7 @@ fn serial() -> MutexGuard<'static, ()> {
 }
 
 fn image() -> PathBuf {
-    match locate_image() {
+    match locate_bringup_image() {
         Ok(p) => p,
         Err(e) => panic!("{e:#}"),
     }

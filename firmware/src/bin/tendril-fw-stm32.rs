@@ -1,17 +1,11 @@
-//! Bring-up image of the STM32F405/F407 board (QEMU `-M netduinoplus2`, or
-//! a board flashed with it: the same image). Over the board contract only
-//! ([`tendril_firmware::board::Board`]) it echoes every received link byte
-//! back in order and, every [`STATUS_EVERY`] ticks, sends a status line
+//! The controller image of the STM32F405/F407 (what a user flashes, and
+//! what `tendril controller --mcu` runs under QEMU's `netduinoplus2`): the
+//! controller node ([`tendril_firmware::node`]: the whole control period,
+//! fed and read over the link) on the board ([`Stm32f405`]), the built-in
+//! net in flash and one RAM slot for updates sent over the link.
 //!
-//! `\x1estatus tick <n> missed <m> overruns <o> rx <bytes> now_us <t>\n`
-//!
-//! (the leading ASCII record separator 0x1E marks it for a reader that also
-//! receives echoed bytes; echo traffic that should stay parseable avoids
-//! 0x1E). Link: USART1 (QEMU's first `-serial`); logs: USART2 (the second).
-//! No semihosting: a board without a debugger runs it as QEMU does.
-//!
-//! The controller node replaces [`run`]: `main` is one call into a function
-//! over `&mut impl Board`.
+//! `main` is the thin shell: take the board, then one node tick per tick
+//! of the board's timer. Link: USART1; log: USART2. No semihosting.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 #![deny(
     clippy::unwrap_used,
@@ -25,79 +19,36 @@
 
 #[cfg(not(target_os = "none"))]
 fn main() {
-    // MCU only: the host side of this image is tests/tests/mcu_board.rs.
+    // MCU only: the host runs the same period in `tendril controller`.
 }
-
-/// Ticks between status lines (1 s at 1 kHz).
-#[cfg(target_os = "none")]
-const STATUS_EVERY: u32 = 1000;
 
 #[cfg(target_os = "none")]
 mod mcu {
-    use core::fmt::Write;
-
     use cortex_m_rt::entry;
-    use tendril_firmware::board::stm32f405::Stm32f405;
+    use tendril_firmware::board::stm32f405::{Stm32f405, PERIOD_HZ};
     use tendril_firmware::board::Board;
-    use tendril_firmware::rt;
-
-    use super::STATUS_EVERY;
-
-    /// Bytes held for sending when the transmit queue is full: the echo
-    /// reads no more than this per period, so nothing is dropped here
-    /// (back-pressure shows up as receive overruns, which are counted).
-    const HOLD: usize = 1024;
-
-    /// The bring-up loop: echo, and a status line every [`STATUS_EVERY`]
-    /// ticks. `overruns` reads the board's receive-overrun counter (not
-    /// part of the contract: a board-specific statistic).
-    pub fn run<B: Board>(board: &mut B, overruns: impl Fn(&B) -> u32) -> ! {
-        let mut hold = [0u8; HOLD];
-        let mut held = 0usize;
-        let (mut tick, mut missed, mut rx, mut next_status) = (0u32, 0u32, 0u32, STATUS_EVERY);
-        loop {
-            let m = board.wait_tick();
-            missed = missed.wrapping_add(m);
-            tick = tick.wrapping_add(m).wrapping_add(1);
-            // Send what is held, keep the rest at the front.
-            let sent = board.link_write(hold.get(..held).unwrap_or(&[]));
-            hold.copy_within(sent..held, 0);
-            held -= sent;
-            // Echo: read only what the hold can keep if it cannot be sent.
-            if let Some(room) = hold.get_mut(held..) {
-                let n = board.link_read(room);
-                rx = rx.wrapping_add(n as u32);
-                let end = held + n;
-                let sent = board.link_write(hold.get(held..end).unwrap_or(&[]));
-                hold.copy_within(held + sent..end, held);
-                held = end - sent;
-            }
-            if tick.wrapping_sub(next_status) < u32::MAX / 2 {
-                next_status = next_status.wrapping_add(STATUS_EVERY);
-                let mut line: heapless::String<96> = heapless::String::new();
-                let _ = writeln!(
-                    line,
-                    "\x1estatus tick {tick} missed {missed} overruns {} rx {rx} now_us {}",
-                    overruns(board),
-                    board.now_ns() / 1000
-                );
-                let bytes = line.as_bytes();
-                if let Some(room) = hold.get_mut(held..held + bytes.len()) {
-                    room.copy_from_slice(bytes);
-                    held += bytes.len();
-                }
-            }
-        }
-    }
+    use tendril_firmware::node::{Node, MCU_UPDATE_CAPACITY};
+    use tendril_firmware::{rt, McuNet, McuSlots, DEFAULT_NET, DEFAULT_NET_CRC};
 
     #[entry]
     fn main() -> ! {
-        match Stm32f405::take() {
-            Some(mut board) => run(&mut board, |b| b.stats().rx_overruns),
+        // The hot-swap RAM slot and the node (with its update buffer) are
+        // statics, not on the stack.
+        static mut RAM_NET: McuNet = McuNet::empty();
+        // (Its initial value is not all zeros — `Option`'s niche — so it
+        // is in .data: 14.6 KB of flash for its initialiser, within budget.)
+        static mut NODE: Node<MCU_UPDATE_CAPACITY> =
+            Node::new(DEFAULT_NET_CRC, 1_000_000_000 / PERIOD_HZ);
+        let Some(mut board) = Stm32f405::take() else {
             // Only if something took the peripherals before `main`.
-            None => loop {
+            loop {
                 cortex_m::asm::wfi();
-            },
+            }
+        };
+        let mut store = McuSlots::new(&DEFAULT_NET, RAM_NET);
+        loop {
+            let missed = board.wait_tick();
+            NODE.tick(&mut board, &mut store, missed);
         }
     }
 

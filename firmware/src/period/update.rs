@@ -57,6 +57,14 @@ enum State {
     },
 }
 
+/// `dst ← src` for slices of one length (a zip: `copy_from_slice` links a
+/// length-mismatch panic the controller image must not carry).
+fn copy(dst: &mut [u8], src: &[u8]) {
+    for (d, s) in dst.iter_mut().zip(src) {
+        *d = *s;
+    }
+}
+
 /// Incoming-update buffer of `U` bytes and its check.
 #[derive(Clone, Debug)]
 pub struct Update<const U: usize> {
@@ -117,7 +125,7 @@ impl<const U: usize> Update<U> {
                 len: blob.len(),
                 capacity: U,
             })?;
-        dst.copy_from_slice(blob);
+        copy(dst, blob);
         self.len = blob.len();
         self.start_check();
         Ok(superseded)
@@ -165,7 +173,7 @@ impl<const U: usize> Update<U> {
             self.state = State::Idle;
             return Err(UpdateError::OutOfOrder { offset, received });
         };
-        dst.copy_from_slice(bytes);
+        copy(dst, bytes);
         self.len = end;
         if end == total {
             self.start_check();

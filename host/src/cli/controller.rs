@@ -182,6 +182,23 @@ pub struct ControllerArgs {
     /// Pin to this CPU.
     #[arg(long)]
     pub cpu: Option<usize>,
+    /// Put the chip in the loop: start the STM32F405 controller image
+    /// under QEMU (netduinoplus2) and bridge the services to its serial
+    /// link; the chip runs every rule of the period on its own timer.
+    #[arg(long)]
+    pub mcu: bool,
+    /// With --mcu: a chip already running behind this link socket (QEMU's
+    /// `-serial unix:SOCKET,server=on`) instead of starting one.
+    #[arg(long, requires = "mcu")]
+    pub mcu_socket: Option<PathBuf>,
+    /// With --mcu: the controller image to start (default: built from
+    /// this checkout).
+    #[arg(long, requires = "mcu")]
+    pub mcu_image: Option<PathBuf>,
+    /// With --mcu: inject a burst of garbage bytes on the link every this
+    /// many ms (the link's fault test).
+    #[arg(long, requires = "mcu")]
+    pub link_garbage_every_ms: Option<u64>,
 }
 
 impl ControllerArgs {
@@ -204,6 +221,21 @@ impl ControllerArgs {
         cfg.log = self.log;
         cfg.stats = self.stats;
         cfg.cpu = self.cpu;
+        if self.mcu {
+            if let Some(ms) = self.link_garbage_every_ms {
+                check(
+                    "--link-garbage-every-ms",
+                    ms as f64,
+                    ms > 0,
+                    "a number of ms > 0",
+                )?;
+            }
+            cfg.mcu = Some(crate::mcu::bridge::McuOptions {
+                socket: self.mcu_socket,
+                image: self.mcu_image,
+                garbage_every_ms: self.link_garbage_every_ms,
+            });
+        }
         Ok(cfg)
     }
 }

@@ -90,6 +90,32 @@ pub struct SimArgs {
     /// Planner fault: out-of-workspace setpoints from these times (s), 50 ms each.
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     pub inject_outside_at: Vec<f64>,
+    /// Who runs the control period: the host process, or the STM32F405
+    /// controller image under QEMU, bridged over its serial link.
+    #[arg(long, value_enum, default_value_t = ControllerKind::Host)]
+    pub controller: ControllerKind,
+    /// With --controller mcu: the image to run (default: built from this checkout).
+    #[arg(long)]
+    pub mcu_image: Option<PathBuf>,
+    /// With --controller mcu: inject garbage bytes on the link every this many ms.
+    #[arg(long)]
+    pub link_garbage_every_ms: Option<u64>,
+    /// With --controller mcu: kill the bridge at this time (s): the link
+    /// goes silent and the chip must hold on its own.
+    #[arg(long, allow_hyphen_values = true)]
+    pub cut_link_at: Option<f64>,
+    /// Start a new bridge this long after the cut (s).
+    #[arg(long, allow_hyphen_values = true)]
+    pub restore_link_after: Option<f64>,
+}
+
+/// Who runs the control period in a sim.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ControllerKind {
+    /// The host controller process.
+    Host,
+    /// The chip (QEMU netduinoplus2), bridged over its serial link.
+    Mcu,
 }
 
 impl SimArgs {
@@ -131,10 +157,35 @@ impl SimArgs {
             restart_plant_after: self.restart_plant_after,
             corrupt_weights_at: self.corrupt_weights_at,
             swap_weights_at: self.swap_weights_at,
+            cut_link_at: self.cut_link_at,
+            restore_link_after: self.restore_link_after,
         };
+        let chip_options = self.mcu_image.is_some()
+            || self.link_garbage_every_ms.is_some()
+            || self.cut_link_at.is_some();
+        if self.controller == ControllerKind::Host && chip_options {
+            anyhow::bail!(
+                "--mcu-image, --link-garbage-every-ms and --cut-link-at need the chip in the loop: add --controller mcu"
+            );
+        }
+        if let Some(ms) = self.link_garbage_every_ms {
+            super::controller::check(
+                "--link-garbage-every-ms",
+                ms as f64,
+                ms > 0,
+                "a number of ms > 0",
+            )?;
+        }
+        if self.controller == ControllerKind::Mcu {
+            cfg.mcu = Some(crate::ipc::sim::SimMcu {
+                image: self.mcu_image,
+                garbage_every_ms: self.link_garbage_every_ms,
+            });
+        }
         cfg.label = format!(
-            "trajectory {:?}, correction {:?} (ki {}/s), lead {} ms, motor τ {} ms, noise {} mm, \
-             {} s, real-time {}, pinned {:?}",
+            "controller {:?}, trajectory {:?}, correction {:?} (ki {}/s), lead {} ms, motor τ {} ms, \
+             noise {} mm, {} s, real-time {}, pinned {:?}",
+            self.controller,
             self.traj.trajectory,
             self.tuning.correction,
             self.tuning.ki,

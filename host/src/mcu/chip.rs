@@ -170,13 +170,25 @@ impl Drop for Chip {
     }
 }
 
-/// Build the chip image (`tendril-fw-stm32`, release) into
+/// Build the controller image (`tendril-fw-stm32`, release): see
+/// [`build_image`].
+pub fn locate_image() -> Result<PathBuf> {
+    build_image("tendril-fw-stm32")
+}
+
+/// Build the board's bring-up image (`tendril-fw-bringup`: echo and
+/// status lines, tests/tests/mcu_board.rs).
+pub fn locate_bringup_image() -> Result<PathBuf> {
+    build_image("tendril-fw-bringup")
+}
+
+/// Build the chip image `bin` (release) into
 /// `$CARGO_TARGET_DIR` (or `<workspace>/target`) + `/thumbv7em-chip` — a
 /// target directory of its own, so a build from inside `cargo test` does
 /// not wait on the outer build's lock — and return its path. Fails with
 /// one line naming what to install when QEMU or the Rust target is
 /// missing.
-pub fn locate_image() -> Result<PathBuf> {
+pub fn build_image(bin: &str) -> Result<PathBuf> {
     check_qemu()?;
     let workspace = Path::new(env!("CARGO_MANIFEST_DIR"))
         .parent()
@@ -205,7 +217,7 @@ pub fn locate_image() -> Result<PathBuf> {
             "--features",
             "stm32f405",
             "--bin",
-            "tendril-fw-stm32",
+            bin,
             "--release",
             "--target",
             TARGET,
@@ -220,9 +232,9 @@ pub fn locate_image() -> Result<PathBuf> {
             .lines()
             .find(|l| l.starts_with("error"))
             .unwrap_or("(no error line)");
-        bail!("building tendril-fw-stm32 failed: {first}");
+        bail!("building {bin} failed: {first}");
     }
-    let image = dir.join(TARGET).join("release").join("tendril-fw-stm32");
+    let image = dir.join(TARGET).join("release").join(bin);
     if !image.is_file() {
         bail!("cargo built no {}", image.display());
     }

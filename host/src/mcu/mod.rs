@@ -4,11 +4,14 @@
 //! socket ([`McuLink`]): USART1 is QEMU's first `-serial`, the chip's log
 //! (USART2) its second, written to a file ([`Chip::log`]).
 //!
+//! [`bridge`] puts the chip in the loop (`tendril controller --mcu`).
+//!
 //! [`locate_image`] builds the image; when QEMU or the Rust target is
 //! missing it fails with one line saying what to install.
 
+pub mod bridge;
 mod chip;
 mod link;
 
-pub use chip::{locate_image, Chip, QEMU, TARGET};
+pub use chip::{build_image, locate_bringup_image, locate_image, Chip, QEMU, TARGET};
 pub use link::McuLink;

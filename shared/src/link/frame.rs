@@ -8,8 +8,9 @@
 //! works on a complete buffer, whereas the decoder here runs the CRC
 //! incrementally, one byte behind the COBS decoder, so a frame costs no
 //! extra pass; and (3) its incremental `update`/`finish` API drops straight
-//! into a serialiser [`Flavor`] wrapped around postcard's own
-//! [`ser_flavors::Cobs`], so encoding is still one postcard pass.
+//! into a serialiser [`Flavor`] that COBS-encodes as it goes, so encoding
+//! is one postcard pass. (Not postcard's own `ser_flavors::Cobs`: it
+//! indexes its slice and so links a panic path into the controller image.)
 //!
 //! Decoding uses the `cobs` crate's byte-at-a-time [`DecoderState`] (the
 //! crate postcard's own COBS flavours are built on) rather than postcard's
@@ -19,7 +20,7 @@
 //! oversized one instead of dropping up to the next `0x00`.
 
 use cobs::{DecodeResult, DecoderState};
-use postcard::ser_flavors::{self, Flavor};
+use postcard::ser_flavors::Flavor;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
@@ -112,10 +113,78 @@ impl FrameCounters {
     }
 }
 
+/// COBS encoding on the fly into a slice, every write bounds-checked
+/// (`get_mut`): postcard's own `Cobs<Slice>` flavour indexes its slice and
+/// so links a panic path, which the controller image must not
+/// (scripts/check-panic-free). Written here because it is ten lines.
+struct CobsSlice<'a> {
+    buf: &'a mut [u8],
+    /// Where the current block's code byte goes.
+    code_at: usize,
+    /// The current block's code: 1 + its non-zero bytes so far.
+    code: u8,
+    /// Next free byte.
+    at: usize,
+}
+
+impl<'a> CobsSlice<'a> {
+    fn new(buf: &'a mut [u8]) -> Result<Self, FrameError> {
+        if buf.is_empty() {
+            return Err(FrameError::BufferTooSmall);
+        }
+        Ok(CobsSlice {
+            buf,
+            code_at: 0,
+            code: 1,
+            at: 1,
+        })
+    }
+
+    fn put(&mut self, at: usize, b: u8) -> postcard::Result<()> {
+        *self
+            .buf
+            .get_mut(at)
+            .ok_or(postcard::Error::SerializeBufferFull)? = b;
+        Ok(())
+    }
+
+    /// Close the current block and open the next at `at`.
+    fn close_block(&mut self) -> postcard::Result<()> {
+        self.put(self.code_at, self.code)?;
+        self.code_at = self.at;
+        self.code = 1;
+        self.at += 1;
+        Ok(())
+    }
+
+    fn push(&mut self, b: u8) -> postcard::Result<()> {
+        if b == 0 {
+            return self.close_block();
+        }
+        self.put(self.at, b)?;
+        self.at += 1;
+        self.code += 1;
+        if self.code == 0xFF {
+            self.close_block()?;
+        }
+        Ok(())
+    }
+
+    /// Write the last code byte and the terminating 0x00.
+    fn finish(mut self) -> postcard::Result<&'a mut [u8]> {
+        self.put(self.code_at, self.code)?;
+        self.put(self.at, 0)?;
+        let end = self.at + 1;
+        self.buf
+            .get_mut(..end)
+            .ok_or(postcard::Error::SerializeBufferFull)
+    }
+}
+
 /// A postcard serialiser flavour: CRC-32 of everything serialised, appended
-/// little-endian at `finalize`, all passed through postcard's COBS flavour.
+/// little-endian at `finalize`, all COBS-encoded ([`CobsSlice`]).
 struct CrcCobs<'a> {
-    cobs: ser_flavors::Cobs<ser_flavors::Slice<'a>>,
+    cobs: CobsSlice<'a>,
     crc: Crc32,
 }
 
@@ -124,25 +193,25 @@ impl<'a> Flavor for CrcCobs<'a> {
 
     fn try_push(&mut self, data: u8) -> postcard::Result<()> {
         self.crc.update(&[data]);
-        self.cobs.try_push(data)
+        self.cobs.push(data)
     }
 
     fn try_extend(&mut self, data: &[u8]) -> postcard::Result<()> {
         self.crc.update(data);
-        self.cobs.try_extend(data)
+        data.iter().try_for_each(|&b| self.cobs.push(b))
     }
 
     fn finalize(mut self) -> postcard::Result<Self::Output> {
-        self.cobs.try_extend(&self.crc.finish().to_le_bytes())?;
-        // Cobs::finalize writes the last code byte and the 0x00 terminator.
-        self.cobs.finalize()
+        for b in self.crc.finish().to_le_bytes() {
+            self.cobs.push(b)?;
+        }
+        self.cobs.finish()
     }
 }
 
 fn crc_cobs(buf: &mut [u8]) -> Result<CrcCobs<'_>, FrameError> {
     Ok(CrcCobs {
-        cobs: ser_flavors::Cobs::try_new(ser_flavors::Slice::new(buf))
-            .map_err(|_| FrameError::BufferTooSmall)?,
+        cobs: CobsSlice::new(buf)?,
         crc: Crc32::new(),
     })
 }

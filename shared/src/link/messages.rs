@@ -107,6 +107,95 @@ pub struct Tangent {
     pub axes: [[f32; 3]; 3],
 }
 
+/// Fixed-point units of the link (docs/design.md §5.6): the emulated
+/// USART carries ~13 kB/s, so a setpoint and a feedback must fit in well
+/// under 130 bytes per 10 ms period. Every quantity is an integer of a unit
+/// far below what matters to the loop (a micron, 1e-4 of a quaternion, a
+/// millinewton), sent as a postcard varint; the chip turns it back into
+/// `f32`. NaN/∞ travel as the type's minimum (the chip must see a bad
+/// setpoint to reject it).
+pub mod units {
+    /// Metres per position unit: 1 µm.
+    pub const POSITION_M: f32 = 1e-6;
+    /// Quaternion component per unit.
+    pub const QUATERNION: f32 = 1e-4;
+    /// Pose derivative per unit: 1e-4 m/s (or 1/s for the quaternion).
+    pub const VELOCITY: f32 = 1e-4;
+    /// Newtons per tension unit: 1 mN.
+    pub const TENSION_N: f32 = 1e-3;
+
+    /// `v / unit` rounded, saturated; NaN/∞ → `i32::MIN`.
+    pub fn to_i32(v: f32, unit: f32) -> i32 {
+        if !v.is_finite() {
+            return i32::MIN;
+        }
+        let q = libm::roundf(v / unit);
+        // Saturate one short of MIN, which means NaN.
+        if q >= i32::MAX as f32 {
+            i32::MAX
+        } else if q <= -(i32::MAX as f32) {
+            -i32::MAX
+        } else {
+            q as i32
+        }
+    }
+
+    /// `to_i32`'s inverse (`i32::MIN` → NaN).
+    pub fn from_i32(q: i32, unit: f32) -> f32 {
+        if q == i32::MIN {
+            f32::NAN
+        } else {
+            q as f32 * unit
+        }
+    }
+
+    /// `v / unit` rounded, saturated; NaN/∞ → `i16::MIN`.
+    pub fn to_i16(v: f32, unit: f32) -> i16 {
+        if !v.is_finite() {
+            return i16::MIN;
+        }
+        libm::roundf(v / unit).clamp(-(i16::MAX as f32), i16::MAX as f32) as i16
+    }
+
+    /// `to_i16`'s inverse (`i16::MIN` → NaN).
+    pub fn from_i16(q: i16, unit: f32) -> f32 {
+        if q == i16::MIN {
+            f32::NAN
+        } else {
+            f32::from(q) * unit
+        }
+    }
+}
+
+/// A pose on the link: position in µm, quaternion in 1e-4.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct WirePose {
+    /// `px, py, pz`, µm.
+    pub position: [i32; 3],
+    /// `qw, qx, qy, qz`, 1e-4.
+    pub quaternion: [i16; 4],
+}
+
+impl WirePose {
+    /// Quantise `px, py, pz, qw, qx, qy, qz` (m).
+    pub fn from_pose(p: &[f32; 7]) -> WirePose {
+        let [x, y, z, w, qx, qy, qz] = *p;
+        WirePose {
+            position: [x, y, z].map(|v| units::to_i32(v, units::POSITION_M)),
+            quaternion: [w, qx, qy, qz].map(|v| units::to_i16(v, units::QUATERNION)),
+        }
+    }
+
+    /// Back to `f32` (m).
+    pub fn pose(&self) -> [f32; 7] {
+        let [x, y, z] = self.position.map(|q| units::from_i32(q, units::POSITION_M));
+        let [w, qx, qy, qz] = self
+            .quaternion
+            .map(|q| units::from_i16(q, units::QUATERNION));
+        [x, y, z, w, qx, qy, qz]
+    }
+}
+
 /// A setpoint, host → chip.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Setpoint {
@@ -117,19 +206,32 @@ pub struct Setpoint {
     pub count: u16,
     /// Of the ones not forwarded, how many had a NaN/∞ pose.
     pub superseded_nonfinite: u16,
-    /// Pose `px, py, pz` (m), `qw, qx, qy, qz`.
-    pub pose: [f32; 7],
-    /// Its time derivative, per s (all 7 coordinates: the period leads the
-    /// whole pose).
-    pub velocity: Option<[f32; 7]>,
+    /// The pose.
+    pub pose: WirePose,
+    /// Its time derivative, 1e-4 per s (all 7 coordinates: the period
+    /// leads the whole pose).
+    pub velocity: Option<[i16; 7]>,
     /// The tangent, when it changed (the chip keeps the last one it got
     /// for the setpoints that come without: it changes slowly along a path
     /// and costs 120 of the link's bytes).
     pub tangent: Option<Tangent>,
 }
 
+impl Setpoint {
+    /// The velocity in `f32`, per s.
+    pub fn velocity(&self) -> Option<[f32; 7]> {
+        self.velocity
+            .map(|v| v.map(|q| units::from_i16(q, units::VELOCITY)))
+    }
+
+    /// Quantise a velocity (per s).
+    pub fn wire_velocity(v: &[f32; 7]) -> [i16; 7] {
+        v.map(|x| units::to_i16(x, units::VELOCITY))
+    }
+}
+
 /// Plant feedback, host → chip.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Feedback {
     /// The plant's sequence number.
     pub seq: u32,
@@ -137,14 +239,30 @@ pub struct Feedback {
     pub count: u16,
     /// The last command the plant applied.
     pub command_seq: u32,
-    /// Measured tensions, N.
-    pub tensions: [f32; MAX_TENDONS],
-    /// Measured tip position, m.
-    pub tip: [f32; 3],
+    /// Measured tensions of the robot's tendons, mN.
+    pub tensions: heapless::Vec<i32, MAX_TENDONS>,
+    /// Measured tip position, µm.
+    pub tip: [i32; 3],
+}
+
+impl Feedback {
+    /// The tensions in N, padded with zeros.
+    pub fn tensions_n(&self) -> [f32; MAX_TENDONS] {
+        let mut out = [0.0f32; MAX_TENDONS];
+        for (o, &q) in out.iter_mut().zip(&self.tensions) {
+            *o = units::from_i32(q, units::TENSION_N);
+        }
+        out
+    }
+
+    /// The tip in m.
+    pub fn tip_m(&self) -> [f32; 3] {
+        self.tip.map(|q| units::from_i32(q, units::POSITION_M))
+    }
 }
 
 /// Host → chip.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum Down<'a> {
     /// Ask for the chip's [`Up::Hello`].
     Hello {
@@ -184,7 +302,7 @@ pub struct Hello {
 }
 
 /// A tension command, chip → host.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Command {
     /// The period's command sequence number.
     pub seq: u32,
@@ -194,8 +312,8 @@ pub struct Command {
     pub status: u32,
     /// This period's event bits (the firmware's `period::event`).
     pub events: u32,
-    /// Tensions, N (the first `n_tendons` valid).
-    pub tensions: [f32; MAX_TENDONS],
+    /// Tensions of the robot's tendons, N (exact: the chip's own output).
+    pub tensions: heapless::Vec<f32, MAX_TENDONS>,
 }
 
 /// Counts and health, chip → host, every [`TELEMETRY_EVERY`] periods.
@@ -217,10 +335,15 @@ pub struct Telemetry {
     pub chunks_refused: u32,
     /// Longest period so far, µs of the chip's clock.
     pub worst_period_us: u32,
+    /// The tick at which the last watchdog hold began (0 = none): a bridge
+    /// that connects after a link cut learns from it when the chip held.
+    pub last_hold_tick: u32,
+    /// Silence before that hold, µs (time since the last acceptable setpoint).
+    pub last_hold_silence_us: u32,
 }
 
 /// Chip → host.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum Up {
     /// Identity and configuration state.
     Hello(Hello),
@@ -245,8 +368,11 @@ mod tests {
             seq: u32::MAX,
             count: u16::MAX,
             superseded_nonfinite: u16::MAX,
-            pose: [f32::MAX; 7],
-            velocity: Some([f32::MAX; 7]),
+            pose: WirePose {
+                position: [i32::MAX; 3],
+                quaternion: [i16::MAX; 4],
+            },
+            velocity: Some([i16::MAX; 7]),
             tangent: Some(Tangent {
                 dim: 3,
                 columns: [[f32::MAX; 7]; 3],
@@ -296,7 +422,10 @@ mod tests {
         let n = postcard::to_slice(&Down::Setup(setup), &mut buf)
             .unwrap()
             .len();
-        assert!(n <= 256, "setup {n} B: Setup::hash serialises into 256 bytes");
+        assert!(
+            n <= 256,
+            "setup {n} B: Setup::hash serialises into 256 bytes"
+        );
         assert_ne!(setup.hash(), 0);
         let mut counters = Counters::default();
         // Every field at its largest varint: set through serde's view.
@@ -312,16 +441,17 @@ mod tests {
             bad_messages: u32::MAX,
             chunks_refused: u32::MAX,
             worst_period_us: u32::MAX,
+            last_hold_tick: u32::MAX,
+            last_hold_silence_us: u32::MAX,
         });
         let n = postcard::to_slice(&t, &mut buf).unwrap().len();
-        // 22 counters + 6 frame counters + 6 fields, 5 bytes each at most.
         assert!(n <= MAX_UP_PAYLOAD, "telemetry {n} B");
         let c = Up::Command(Command {
             seq: u32::MAX,
             setpoint_seq: u32::MAX,
             status: u32::MAX,
             events: u32::MAX,
-            tensions: [f32::MAX; 8],
+            tensions: heapless::Vec::from_slice(&[f32::MAX; 8]).unwrap(),
         });
         assert!(postcard::to_slice(&c, &mut buf).unwrap().len() <= MAX_UP_PAYLOAD);
     }
@@ -347,6 +477,54 @@ mod tests {
         let payload = got.unwrap();
         let back: Down<'_> = postcard::from_bytes(&payload).unwrap();
         assert_eq!(back, msg);
+    }
+
+    #[test]
+    fn a_typical_setpoint_and_feedback_fit_the_emulated_link() {
+        // The default robot's circle: 15 mm off the axis, 0.19 m/s tops.
+        let sp = Down::Setpoint(Setpoint {
+            seq: 123_456,
+            count: 1,
+            superseded_nonfinite: 0,
+            pose: WirePose::from_pose(&[0.015, -0.002, 0.195, 0.99, 0.1, -0.05, 0.0]),
+            velocity: Some(Setpoint::wire_velocity(&[
+                0.019, 0.004, -0.001, -0.01, 0.03, 0.02, 0.0,
+            ])),
+            tangent: None,
+        });
+        let fb = Down::Feedback(Feedback {
+            seq: 123_400,
+            count: 1,
+            command_seq: 123_399,
+            tensions: heapless::Vec::from_slice(&[4200, 0, 1500, 7800]).unwrap(),
+            tip: [15_012, -1_998, 194_950],
+        });
+        let mut buf = [0u8; 512];
+        let a = crate::link::encode(&sp, &mut buf).unwrap().len();
+        let b = crate::link::encode(&fb, &mut buf).unwrap().len();
+        // 13 kB/s at 100 Hz is 130 B per period: leave half for bursts,
+        // chunks and tangents.
+        assert!(a + b <= 80, "setpoint {a} B + feedback {b} B per period");
+    }
+
+    #[test]
+    fn quantisation_keeps_a_micron_and_nan() {
+        let h = core::f32::consts::FRAC_1_SQRT_2;
+        let p = [0.0123456, -0.1, 0.3, h, 0.0, h, 0.0];
+        let back = WirePose::from_pose(&p).pose();
+        for i in 0..3 {
+            assert!((back[i] - p[i]).abs() <= 0.5e-6 + 1e-7, "{i}");
+        }
+        for i in 3..7 {
+            assert!((back[i] - p[i]).abs() <= 0.5e-4 + 1e-7, "{i}");
+        }
+        let mut bad = p;
+        bad[1] = f32::NAN;
+        bad[4] = f32::INFINITY;
+        let back = WirePose::from_pose(&bad).pose();
+        assert!(back[1].is_nan() && back[4].is_nan());
+        // Far outside the workspace stays far outside (saturated, not wrapped).
+        assert!(WirePose::from_pose(&[1e9, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]).pose()[0] > 2000.0);
     }
 
     #[test]

@@ -99,6 +99,9 @@ pub struct ControllerConfig {
     pub log: Option<PathBuf>,
     /// Statistics JSON written at exit.
     pub stats: Option<PathBuf>,
+    /// The chip in the loop: the bridge runs instead of the host period
+    /// ([`crate::mcu::bridge`]).
+    pub mcu: Option<crate::mcu::bridge::McuOptions>,
 }
 
 /// When a motor counts as stuck: its measured tension leaves the tension a
@@ -162,6 +165,7 @@ impl ControllerConfig {
             supervised: false,
             log: None,
             stats: None,
+            mcu: None,
         }
     }
 }
@@ -213,6 +217,9 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
     .map_err(|e| IpcError::Other(e.to_string()))?;
     // Validate everything before touching shared memory.
     Controller::new(cfg, &robot, &bytes, 0)?;
+    if let Some(mcu) = &cfg.mcu {
+        return crate::mcu::bridge::run(cfg, &robot, &bytes, mcu);
+    }
 
     let node = transport::node("tendril-controller")?;
     let _orphan = transport::ReleaseIfOrphaned(&node);

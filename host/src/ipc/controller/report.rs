@@ -75,6 +75,9 @@ pub struct ControllerStats {
     pub faults_detected: Vec<DetectedFault>,
     /// Detections left out of `faults_detected` (list full or repeats).
     pub faults_not_listed: u64,
+    /// With the chip in the loop (`--mcu`): the link's statistics and the
+    /// chip's own telemetry.
+    pub link: Option<crate::mcu::bridge::LinkStats>,
 }
 
 /// Room for detected faults (preallocated: the loop never allocates).

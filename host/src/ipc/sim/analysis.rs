@@ -11,6 +11,7 @@ use std::path::Path;
 use tendril_shared::messages::{command_status, plant_status, setpoint_flags};
 
 use super::report::SteadyState;
+use super::supervisor::Role;
 use super::SimError;
 use crate::ipc::planner::LOG_INJECTED;
 use crate::ipc::stats::{column, read_log};
@@ -99,8 +100,14 @@ struct LogFile {
 
 impl Logs {
     /// Read every log in `dir`: `planner-G.csv`, `plant-G.csv` for the
-    /// generations started, and `controller.csv`.
-    pub fn read(dir: &Path, planners: usize, plants: usize) -> Result<Logs, SimError> {
+    /// generations started, and `controller.csv` (with `controller-G.csv`
+    /// of bridges restarted after a link cut).
+    pub fn read(
+        dir: &Path,
+        planners: usize,
+        plants: usize,
+        controllers: usize,
+    ) -> Result<Logs, SimError> {
         let mut logs = Logs::default();
         for f in logs_of(dir, "planner", planners)? {
             let (it, ifl, ix) = (
@@ -136,18 +143,19 @@ impl Logs {
             }));
         }
         logs.plant.sort_by(|a, b| a.t_ns.total_cmp(&b.t_ns));
-        let controller = dir.join("controller.csv");
-        let controller_log = if controller.exists() {
-            let (header, rows) = read_log(&controller)?;
-            vec![LogFile {
-                path: controller,
-                generation: 0,
-                header,
-                rows,
-            }]
-        } else {
-            Vec::new()
-        };
+        let mut controller_log = Vec::new();
+        for g in 0..controllers.max(1) {
+            let controller = dir.join(format!("{}.csv", super::workdir::stem(Role::Controller, g)));
+            if controller.exists() {
+                let (header, rows) = read_log(&controller)?;
+                controller_log.push(LogFile {
+                    path: controller,
+                    generation: g,
+                    header,
+                    rows,
+                });
+            }
+        }
         for f in controller_log {
             let (it, ist, isp, ips) = (
                 column(&f.header, "t_ns", &f.path)?,
@@ -162,6 +170,7 @@ impl Logs {
                 state_seq: r[ips],
             }));
         }
+        logs.controller.sort_by(|a, b| a.t_ns.total_cmp(&b.t_ns));
         Ok(logs)
     }
 

@@ -70,11 +70,12 @@ pub fn build_report(
 ) -> Result<SimReport, SimError> {
     let planners = children.started(Role::Planner);
     let plants = children.started(Role::Plant);
-    let logs = Logs::read(&dir.work, planners, plants)?;
+    let controllers = children.started(Role::Controller);
+    let logs = Logs::read(&dir.work, planners, plants, controllers)?;
     let samples = join(&logs, t0);
     let track = tracking(&samples);
     let steady = steady_states(&samples);
-    let controller: Option<ControllerStats> = read_json(&dir.file("controller.json"));
+    let controller = controller_stats(dir, controllers);
     let mut plant = PlantSummary::default();
     let mut latencies: Vec<Summary> = Vec::new();
     for g in 0..plants {
@@ -226,6 +227,28 @@ pub fn build_report(
     })
 }
 
+/// The controller's statistics: one generation's, or with the chip in the
+/// loop and the link cut and restored, the last bridge's (the chip's counts
+/// run on across bridges) with every generation's fault list.
+fn controller_stats(dir: &RunDir, generations: usize) -> Option<ControllerStats> {
+    let all: Vec<ControllerStats> = (0..generations.max(1))
+        .filter_map(|g| {
+            let stem = super::workdir::stem(Role::Controller, g);
+            read_json(&dir.file(&format!("{stem}.json")))
+        })
+        .collect();
+    let mut faults: Vec<DetectedFault> = all
+        .iter()
+        .flat_map(|c| c.faults_detected.iter().cloned())
+        .collect();
+    faults.sort_by_key(|f| f.t_ns);
+    let not_listed = all.iter().map(|c| c.faults_not_listed).sum();
+    let mut last = all.into_iter().last()?;
+    last.faults_detected = faults;
+    last.faults_not_listed = not_listed;
+    Some(last)
+}
+
 /// Every injected fault with what the loop did about it.
 fn analyse_faults(
     cfg: &SimConfig,
@@ -265,6 +288,40 @@ fn analyse_faults(
             }
             Action::Restart(Role::Planner) => {
                 let mut f = FaultRecord::new(FaultKind::PlannerRestarted, Some(t_s), String::new());
+                f.resumed_after_s = logs
+                    .controller
+                    .iter()
+                    .find(|r| r.t_ns > te && r.status & command_status::SAFE_HOLD == 0)
+                    .map(|r| (r.t_ns - te) * 1e-9);
+                f.rms_after_recovery_mm = rms_between(samples, t_s + 1.5, end);
+                f
+            }
+            Action::Kill(Role::Controller) => {
+                let restore = cfg.faults.restore_link_after.is_some();
+                let detail = if restore {
+                    pid
+                } else {
+                    format!(
+                        "{pid}; not restored: no bridge reports what the chip did after the cut"
+                    )
+                };
+                let mut f = FaultRecord::new(FaultKind::LinkCut, Some(t_s), detail);
+                // The restored bridge lists the chip's hold during the cut
+                // (from the chip's telemetry: when, and after how much silence).
+                let hold = controller.and_then(|c| {
+                    c.faults_detected.iter().find(|d| {
+                        d.kind == Detected::WatchdogHold && d.t_ns as f64 >= te - period_ns
+                    })
+                });
+                f.detect(
+                    hold.map(|h| ((h.t_ns as f64 - te) * 1e-9).max(0.0)),
+                    "the chip's safe hold (its watchdog), from its telemetry",
+                );
+                f.hold_periods_after_last_setpoint = hold.map(|h| h.value.round() as u64);
+                f
+            }
+            Action::Restart(Role::Controller) => {
+                let mut f = FaultRecord::new(FaultKind::LinkRestored, Some(t_s), String::new());
                 f.resumed_after_s = logs
                     .controller
                     .iter()

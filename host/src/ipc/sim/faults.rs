@@ -25,6 +25,12 @@ pub struct SimFaults {
     pub corrupt_weights_at: Vec<f64>,
     /// Publish the model again (a valid hot swap) at these times.
     pub swap_weights_at: Vec<f64>,
+    /// With the chip in the loop: SIGKILL the bridge (the link to the chip
+    /// goes silent; the chip must hold on its own) at this time.
+    pub cut_link_at: Option<f64>,
+    /// Start a new bridge this long after the cut (it reconnects to the
+    /// running chip, which keeps its configuration).
+    pub restore_link_after: Option<f64>,
 }
 
 /// One launcher action.
@@ -49,6 +55,8 @@ impl SimFaults {
             ("restart-planner-after", self.restart_planner_after),
             ("kill-plant-at", self.kill_plant_at),
             ("restart-plant-after", self.restart_plant_after),
+            ("cut-link-at", self.cut_link_at),
+            ("restore-link-after", self.restore_link_after),
         ];
         let lists = [
             ("corrupt-weights-at", &self.corrupt_weights_at),
@@ -76,6 +84,11 @@ impl SimFaults {
                 "--restart-plant-after needs --kill-plant-at".into(),
             ));
         }
+        if self.restore_link_after.is_some() && self.cut_link_at.is_none() {
+            return Err(SimError::Config(
+                "--restore-link-after needs --cut-link-at".into(),
+            ));
+        }
         Ok(())
     }
 
@@ -89,6 +102,7 @@ impl SimFaults {
                 Role::Planner,
             ),
             (self.kill_plant_at, self.restart_plant_after, Role::Plant),
+            (self.cut_link_at, self.restore_link_after, Role::Controller),
         ] {
             if let Some(t) = kill {
                 plan.push((t, Action::Kill(role)));

@@ -165,6 +165,19 @@ pub struct SimConfig {
     pub max_rms_mm: f64,
     /// Cap on the run's estimated log size, GB ([`budget`]).
     pub max_log_gb: f64,
+    /// The chip in the loop instead of the host controller: the launcher
+    /// starts it (so it outlives a bridge killed by a link cut) and the
+    /// controller process bridges to it.
+    pub mcu: Option<SimMcu>,
+}
+
+/// The chip in a sim.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct SimMcu {
+    /// The controller image (None: built from this checkout).
+    pub image: Option<PathBuf>,
+    /// Inject garbage on the link every this many ms.
+    pub garbage_every_ms: Option<u64>,
 }
 
 /// A unique service prefix for one run: parallel sims and tests never share services.
@@ -225,6 +238,7 @@ impl SimConfig {
             label: String::new(),
             max_rms_mm: DEFAULT_MAX_RMS_MM,
             max_log_gb: budget::DEFAULT_MAX_LOG_GB,
+            mcu: None,
         }
     }
 
@@ -269,6 +283,11 @@ impl SimConfig {
             return Err(SimError::Config(format!(
                 "injection time {t}: must be a finite number of seconds ≥ 0"
             )));
+        }
+        if self.mcu.is_none() && self.faults.cut_link_at.is_some() {
+            return Err(SimError::Config(
+                "--cut-link-at needs the chip in the loop (--controller mcu)".into(),
+            ));
         }
         self.faults.validate()
     }
@@ -439,12 +458,30 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
     } else {
         (None, None)
     };
+    // The chip, owned by the launcher: a link cut kills the bridge, not the chip.
+    let chip = match &cfg.mcu {
+        Some(m) => {
+            let image = match &m.image {
+                Some(i) => i.clone(),
+                None => {
+                    crate::mcu::locate_image().map_err(|e| SimError::Config(format!("{e:#}")))?
+                }
+            };
+            let socket = std::env::temp_dir().join(format!("{prefix}.chip.sock"));
+            Some(
+                crate::mcu::Chip::start(&image, &socket)
+                    .map_err(|e| SimError::Config(format!("starting the chip: {e:#}")))?,
+            )
+        }
+        None => None,
+    };
     let configs = Configs {
         cfg,
         dir,
         prefix: prefix.clone(),
         model: model_path,
         cpus,
+        chip_socket: chip.as_ref().map(|c| c.socket().to_path_buf()),
     };
 
     // Services first, then the peers (see the module docs of `transport`).

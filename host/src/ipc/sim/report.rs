@@ -154,6 +154,11 @@ pub enum FaultKind {
     DroppedCommands,
     /// The plant delays the commands.
     DelayedCommands,
+    /// The bridge to the chip killed: the link goes silent and the chip
+    /// must hold on its own.
+    LinkCut,
+    /// A new bridge reconnected to the running chip.
+    LinkRestored,
 }
 
 /// One injected fault and what the loop made of it.

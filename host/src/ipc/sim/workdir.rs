@@ -58,7 +58,7 @@ impl RunDir {
         for entry in std::fs::read_dir(&self.out).map_err(io(self.out.clone()))? {
             let entry = entry.map_err(io(self.out.clone()))?;
             let name = entry.file_name().to_string_lossy().into_owned();
-            let process_file = ["planner-", "plant-", "controller."]
+            let process_file = ["planner-", "plant-", "controller.", "controller-"]
                 .iter()
                 .any(|p| name.starts_with(p))
                 && (name.ends_with(".csv") || name.ends_with(".json"));
@@ -106,13 +106,16 @@ pub struct Configs<'a> {
     pub model: PathBuf,
     /// CPUs for controller and plant, and for the planner.
     pub cpus: (Option<usize>, Option<usize>),
+    /// The chip's link socket, when the chip is in the loop.
+    pub chip_socket: Option<PathBuf>,
 }
 
 /// File stem of a process's config, log and statistics: `plant-1`,
-/// `planner-0`, and `controller` (there is only ever one).
+/// `planner-0`, and `controller` (a restarted bridge, after a link cut:
+/// `controller-1`).
 pub fn stem(role: Role, generation: usize) -> String {
     match role {
-        Role::Controller => "controller".into(),
+        Role::Controller if generation == 0 => "controller".into(),
         _ => format!("{}-{generation}", role.name()),
     }
 }
@@ -149,6 +152,13 @@ impl Configs<'_> {
                 c.realtime = self.cfg.realtime;
                 c.supervised = true;
                 c.duration_s = None;
+                if let Some(socket) = &self.chip_socket {
+                    c.mcu = Some(crate::mcu::bridge::McuOptions {
+                        socket: Some(socket.clone()),
+                        image: None,
+                        garbage_every_ms: self.cfg.mcu.as_ref().and_then(|m| m.garbage_every_ms),
+                    });
+                }
                 write_json(&path, &c)?;
             }
             Role::Planner => {

@@ -1,0 +1,428 @@
+//! The controller node: the whole control period ([`crate::period`]) on a
+//! [`Board`], fed and read over the link (docs/design.md §5.6). One
+//! [`Node::tick`] per tick of the board's timer:
+//!
+//! 1. drain the link's received bytes (bounded by the receive queue) into
+//!    the frame decoder; act on every whole message: a Hello is answered,
+//!    a Setup configures (or, if it is the running configuration, keeps)
+//!    the controller, the newest setpoint and feedback wait for the
+//!    period, an update chunk goes into the period's update buffer;
+//! 2. run the period (once configured) and apply its tensions;
+//! 3. send the command, and every [`TELEMETRY_EVERY`] periods the counters.
+//!
+//! Before a configuration arrives the motors get nothing and the node
+//! announces itself with a Hello every [`TELEMETRY_EVERY`] ticks. Garbage,
+//! truncated, oversized or undecodable frames are counted and dropped by
+//! the frame layer and here; none of them costs more than its bytes.
+
+use tendril_shared::link::messages::{
+    Command, Down, Feedback, Hello, Setpoint, Setup, Telemetry, Up, MAX_DOWN_PAYLOAD,
+    MAX_UP_PAYLOAD, PROTOCOL_VERSION, TELEMETRY_EVERY,
+};
+use tendril_shared::link::{encode, max_frame_len, FrameDecoder};
+use tendril_shared::{CoContraction, TendonLimits, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS, POSE_DIM};
+
+use crate::board::Board;
+use crate::control::{ControlConfig, IntegralConfig, SafeHold, Tangent};
+use crate::period::{FeedbackIn, Inputs, Period, PeriodConfig, SetpointIn, StuckConfig};
+use crate::swap::NetStore;
+
+/// Receive frame buffer: the largest host → chip frame.
+pub const RX_FRAME: usize = max_frame_len(MAX_DOWN_PAYLOAD);
+/// Transmit frame buffer: the largest chip → host frame (plus the 0x00
+/// sent ahead of a frame after a partial write).
+pub const TX_FRAME: usize = max_frame_len(MAX_UP_PAYLOAD) + 1;
+
+/// Why a Setup was refused ([`Hello::setup_error`]).
+pub mod setup_error {
+    /// Tendon count 0 or above the capacity.
+    pub const TENDONS: u8 = 1;
+    /// The tension limits do not validate (floors above ceilings, NaN…).
+    pub const LIMITS: u8 = 2;
+    /// The co-contraction sets do not validate.
+    pub const COCONTRACTION: u8 = 3;
+    /// A time or gain out of range (zero period, negative gain, NaN).
+    pub const TIMING: u8 = 4;
+}
+
+/// The chip's weight-update buffer: the largest net a controller accepts
+/// (7 inputs, [`MAX_HIDDEN`] hidden units, [`MAX_TENDONS`] outputs, with
+/// its provenance), no more: RAM is the chip's scarcest resource.
+pub const MCU_UPDATE_CAPACITY: usize = tendril_shared::NetShape {
+    inputs: POSE_DIM,
+    hidden: MAX_HIDDEN,
+    outputs: MAX_TENDONS,
+}
+.encoded_len_v2();
+
+/// Bytes of a weight update's check per period on the chip.
+pub const SWAP_SLICE_BYTES: usize = crate::SWAP_SLICE_BYTES;
+
+/// The first `n` entries.
+fn first(a: &[f32; MAX_TENDONS], n: usize) -> &[f32] {
+    a.get(..n).unwrap_or(&[])
+}
+
+/// The period's configuration from a Setup, validated.
+pub fn period_config(s: &Setup) -> Result<PeriodConfig, u8> {
+    let n = usize::from(s.n_tendons);
+    if n == 0 || n > MAX_TENDONS {
+        return Err(setup_error::TENDONS);
+    }
+    let limits = TendonLimits::new(first(&s.max_tension, n), first(&s.slew_rate, n))
+        .and_then(|l| l.with_min_tension(first(&s.min_tension, n)))
+        .map_err(|_| setup_error::LIMITS)?;
+    let limits = if s.cocontraction_sets.iter().take(n).any(|&c| c != 0) {
+        let sets = CoContraction::new(
+            s.cocontraction_sets.get(..n).unwrap_or(&[]),
+            s.cocontraction_weights.get(..n).unwrap_or(&[]),
+        )
+        .map_err(|_| setup_error::COCONTRACTION)?;
+        limits
+            .with_cocontraction(sets)
+            .map_err(|_| setup_error::COCONTRACTION)?
+    } else {
+        limits
+    };
+    let finite_pos = |v: f32| v.is_finite() && v >= 0.0;
+    let times_ok = s.period_ns > 0 && s.watchdog_ns > 0 && s.max_dt_ns > 0;
+    let gains_ok = [
+        s.quaternion_tolerance,
+        s.box_margin,
+        s.ki,
+        s.correction_limit,
+        s.lead_s,
+        s.stuck_model_gain,
+        s.stuck_error_n,
+    ]
+    .into_iter()
+    .all(finite_pos)
+        && (finite_pos(s.correction_window) || s.correction_window == f32::INFINITY);
+    if !times_ok || !gains_ok {
+        return Err(setup_error::TIMING);
+    }
+    let mut control = ControlConfig::new(limits);
+    control.watchdog_ns = u64::from(s.watchdog_ns);
+    control.max_dt_ns = u64::from(s.max_dt_ns);
+    control.quaternion_tolerance = s.quaternion_tolerance;
+    control.box_margin = s.box_margin;
+    control.safe_hold = SafeHold::Freeze;
+    if s.ki > 0.0 {
+        control.integral = IntegralConfig {
+            ki: s.ki,
+            limit: s.correction_limit,
+            feedback_timeout_ns: u64::from(s.feedback_timeout_ns),
+            window: s.correction_window,
+        };
+    }
+    let stuck = if s.stuck_enabled {
+        StuckConfig {
+            enabled: true,
+            model_gain: s.stuck_model_gain,
+            tension_error_n: s.stuck_error_n,
+            persist_ns: u64::from(s.stuck_persist_ns),
+        }
+    } else {
+        StuckConfig::OFF
+    };
+    Ok(PeriodConfig {
+        control,
+        period_ns: u64::from(s.period_ns),
+        lead_s: s.lead_s,
+        plant_stale_ns: u64::from(s.plant_stale_ns),
+        stuck,
+        swap_slice_bytes: SWAP_SLICE_BYTES,
+    })
+}
+
+/// What arrived since the last period.
+#[derive(Clone, Copy, Debug, Default)]
+struct Pending {
+    inputs: Inputs,
+    hello_asked: bool,
+}
+
+/// The node's state besides the frame decoder (split so a decoded payload,
+/// borrowed from the decoder, can be acted on).
+#[derive(Debug)]
+struct Core<const U: usize> {
+    period: Option<Period<U>>,
+    setup_hash: u32,
+    setup_error: u8,
+    net_hash: u32,
+    pending: Pending,
+    last_tangent: Option<Tangent>,
+    /// Events of refused chunks, for the next command.
+    refused_events: u32,
+    bad_messages: u32,
+    chunks_refused: u32,
+    tx_dropped: u32,
+    tx_broken: bool,
+    ticks: u32,
+    /// The board's tick, ns.
+    tick_ns: u32,
+    /// Ticks since the last period.
+    since_period: u32,
+    worst_period_ns: u64,
+    last_hold_tick: u32,
+    last_hold_silence_us: u32,
+}
+
+/// The controller node; `U` is the weight-update buffer's size, bytes.
+pub struct Node<const U: usize> {
+    rx: FrameDecoder<RX_FRAME>,
+    core: Core<U>,
+}
+
+fn tangent_in(t: &tendril_shared::link::messages::Tangent) -> Tangent {
+    Tangent {
+        dim: usize::from(t.dim),
+        columns: t.columns,
+        axes: t.axes,
+    }
+}
+
+impl<const U: usize> Node<U> {
+    /// Unconfigured; `net_hash` identifies the built-in net (CRC-32 of
+    /// its `.tnet`) in the Hello; the board ticks every `tick_ns`. The
+    /// link is served every tick; the period runs every
+    /// `period_ns / tick_ns` ticks (the Setup's period, a whole number of
+    /// ticks: a 100 Hz loop on a 1 kHz board).
+    pub const fn new(net_hash: u32, tick_ns: u32) -> Self {
+        Node {
+            rx: FrameDecoder::new(),
+            core: Core {
+                period: None,
+                setup_hash: 0,
+                setup_error: 0,
+                net_hash,
+                pending: Pending {
+                    inputs: Inputs {
+                        now_ns: 0,
+                        missed_ticks: 0,
+                        setpoint: None,
+                        setpoints: 0,
+                        superseded_nonfinite: 0,
+                        feedback: None,
+                        feedbacks: 0,
+                    },
+                    hello_asked: false,
+                },
+                last_tangent: None,
+                refused_events: 0,
+                bad_messages: 0,
+                chunks_refused: 0,
+                tx_dropped: 0,
+                tx_broken: false,
+                ticks: 0,
+                tick_ns,
+                since_period: 0,
+                worst_period_ns: 0,
+                last_hold_tick: 0,
+                last_hold_silence_us: 0,
+            },
+        }
+    }
+
+    /// The running period, once configured.
+    pub fn period(&self) -> Option<&Period<U>> {
+        self.core.period.as_ref()
+    }
+
+    /// One tick: `missed` ticks were missed before it (from
+    /// [`Board::wait_tick`]); `store` holds the running net.
+    pub fn tick<B, S>(&mut self, board: &mut B, store: &mut S, missed: u32)
+    where
+        B: Board,
+        S: NetStore<POSE_DIM, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS> + ?Sized,
+    {
+        let t0 = board.now_ns();
+        let core = &mut self.core;
+        core.ticks = core.ticks.wrapping_add(1).wrapping_add(missed);
+        // 1. The link: every byte that arrived, bounded by the queue size.
+        let mut buf = [0u8; 64];
+        loop {
+            let n = board.link_read(&mut buf);
+            for &b in buf.get(..n).unwrap_or(&[]) {
+                if let Some(Ok(payload)) = self.rx.push_raw(b) {
+                    match postcard::from_bytes::<Down<'_>>(payload) {
+                        Ok(msg) => core.handle(&msg, t0),
+                        Err(_) => core.bad_messages = core.bad_messages.wrapping_add(1),
+                    }
+                }
+            }
+            if n < buf.len() {
+                break;
+            }
+        }
+        if core.pending.hello_asked || (core.period.is_none() && core.ticks % TELEMETRY_EVERY == 1)
+        {
+            core.pending.hello_asked = false;
+            let hello = Up::Hello(Hello {
+                protocol: PROTOCOL_VERSION,
+                net_hash: core.net_hash,
+                setup_hash: core.setup_hash,
+                setup_error: core.setup_error,
+            });
+            core.send(board, &hello);
+        }
+        // 2. The period, every `per` ticks.
+        let Some(period) = core.period.as_mut() else {
+            core.pending.inputs = Inputs::default();
+            return;
+        };
+        let per =
+            (period.config().period_ns / u64::from(core.tick_ns.max(1))).clamp(1, 1 << 16) as u32;
+        core.since_period = core.since_period.saturating_add(1).saturating_add(missed);
+        if core.since_period < per {
+            return;
+        }
+        let missed_periods = core.since_period / per - 1;
+        core.since_period %= per;
+        let mut input = core.pending.inputs;
+        input.now_ns = t0;
+        input.missed_ticks = missed_periods;
+        core.pending.inputs = Inputs::default();
+        let out = period.run(store, &input);
+        if out.events.has(crate::period::event::WATCHDOG_HOLD) {
+            core.last_hold_tick = core.ticks;
+            core.last_hold_silence_us = (out.events.hold_silence_ns / 1000) as u32;
+        }
+        let c = out.command;
+        board.set_tensions(c.tensions.get(..c.count).unwrap_or(&[]));
+        // 3. The command, and now and then the counters.
+        let cmd = Up::Command(Command {
+            seq: c.seq as u32,
+            setpoint_seq: c.setpoint_seq as u32,
+            status: c.status,
+            events: out.events.bits | core.refused_events,
+            tensions: heapless::Vec::from_slice(c.tensions.get(..c.count).unwrap_or(&[]))
+                .unwrap_or_default(),
+        });
+        core.refused_events = 0;
+        let counters = *period.counters();
+        core.send(board, &cmd);
+        if counters.periods % TELEMETRY_EVERY == 0 {
+            let t = Up::Telemetry(Telemetry {
+                counters,
+                frames: self.rx.counters(),
+                rx_overruns: 0,
+                tx_dropped: core.tx_dropped,
+                ticks: core.ticks,
+                bad_messages: core.bad_messages,
+                chunks_refused: core.chunks_refused,
+                worst_period_us: (core.worst_period_ns / 1000) as u32,
+                last_hold_tick: core.last_hold_tick,
+                last_hold_silence_us: core.last_hold_silence_us,
+            });
+            core.send(board, &t);
+        }
+        let took = board.now_ns().saturating_sub(t0);
+        core.worst_period_ns = core.worst_period_ns.max(took);
+    }
+}
+
+impl<const U: usize> Core<U> {
+    fn handle(&mut self, msg: &Down<'_>, now_ns: u64) {
+        match msg {
+            Down::Hello { .. } => self.pending.hello_asked = true,
+            Down::Setup(s) => {
+                self.pending.hello_asked = true;
+                let hash = s.hash();
+                if self.period.is_some() && hash == self.setup_hash {
+                    return; // the running configuration: keep the loop
+                }
+                match period_config(s) {
+                    Ok(cfg) => {
+                        self.period = Some(Period::new(cfg, now_ns));
+                        self.since_period = 0;
+                        self.setup_hash = hash;
+                        self.setup_error = 0;
+                        self.last_tangent = None;
+                    }
+                    Err(e) => self.setup_error = e,
+                }
+            }
+            Down::Setpoint(s) => self.setpoint(s),
+            Down::Feedback(f) => self.feedback(f),
+            Down::Chunk {
+                offset,
+                total,
+                bytes,
+            } => {
+                let Some(period) = self.period.as_mut() else {
+                    self.chunks_refused = self.chunks_refused.wrapping_add(1);
+                    return;
+                };
+                if let Err(e) = period
+                    .update()
+                    .chunk(*offset as usize, *total as usize, bytes)
+                {
+                    self.chunks_refused = self.chunks_refused.wrapping_add(1);
+                    self.refused_events |= period.refuse_update(e).bits;
+                }
+            }
+        }
+    }
+
+    fn setpoint(&mut self, s: &Setpoint) {
+        if let Some(t) = &s.tangent {
+            self.last_tangent = Some(tangent_in(t));
+        }
+        let i = &mut self.pending.inputs;
+        // Several in one period: the newest is taken, the others counted.
+        i.setpoints = i.setpoints.saturating_add(u32::from(s.count.max(1)));
+        i.superseded_nonfinite = i
+            .superseded_nonfinite
+            .saturating_add(u32::from(s.superseded_nonfinite));
+        if let Some(prev) = &i.setpoint {
+            if prev.pose.iter().any(|v| !v.is_finite()) {
+                i.superseded_nonfinite = i.superseded_nonfinite.saturating_add(1);
+            }
+        }
+        i.setpoint = Some(SetpointIn {
+            seq: u64::from(s.seq),
+            pose: s.pose.pose(),
+            velocity: s.velocity(),
+            tangent: self.last_tangent,
+        });
+    }
+
+    fn feedback(&mut self, f: &Feedback) {
+        let i = &mut self.pending.inputs;
+        i.feedbacks = i.feedbacks.saturating_add(u32::from(f.count.max(1)));
+        i.feedback = Some(FeedbackIn {
+            seq: u64::from(f.seq),
+            command_seq: u64::from(f.command_seq),
+            tensions: f.tensions_n(),
+            tip: f.tip_m(),
+        });
+    }
+
+    /// Frame and queue one message; a frame the queue cannot take whole is
+    /// dropped and counted, and the next frame starts with a 0x00 so the
+    /// host drops the fragment instead of the next frame.
+    fn send<B: Board>(&mut self, board: &mut B, msg: &Up) {
+        let mut buf = [0u8; TX_FRAME];
+        let (lead, rest) = buf.split_at_mut(1);
+        let Ok(frame) = encode(msg, rest) else {
+            self.tx_dropped = self.tx_dropped.wrapping_add(1);
+            return;
+        };
+        let len = frame.len();
+        let start = if self.tx_broken {
+            if let Some(b) = lead.first_mut() {
+                *b = 0;
+            }
+            0
+        } else {
+            1
+        };
+        let out = buf.get(start..1 + len).unwrap_or(&[]);
+        let sent = board.link_write(out);
+        self.tx_broken = sent < out.len();
+        if self.tx_broken {
+            self.tx_dropped = self.tx_dropped.wrapping_add(1);
+        }
+    }
+}

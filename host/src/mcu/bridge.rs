@@ -1,0 +1,586 @@
+//! The bridge: the controller process with the chip in the loop
+//! (`tendril controller --mcu`, `tendril sim --controller mcu`). The chip
+//! runs the whole control period on its own timer; the bridge maps the
+//! iceoryx2 services to link frames and back:
+//!
+//! planner → setpoint → frame → chip → command frame → tension command → plant
+//!
+//! and the plant's state → feedback frame → chip. It forwards the newest
+//! setpoint and plant state as soon as they arrive (polling every
+//! [`POLL_US`] µs), a weight update as chunks, and publishes every command
+//! the chip sends, raising the plant's event. It decides nothing: every
+//! rule runs on the chip, and the report's counts are the chip's own
+//! (telemetry), its fault list built from the events each command carries.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{anyhow, bail, Result};
+use serde::{Deserialize, Serialize};
+use tendril_firmware::period::{Counters, Events, PeriodConfig};
+use tendril_shared::link::messages::{
+    units, Command, Down, Feedback, Hello, Setpoint as LinkSetpoint, Setup, Tangent as LinkTangent,
+    Telemetry, Up, WirePose, MAX_CHUNK, MAX_UP_PAYLOAD, PROTOCOL_VERSION,
+};
+use tendril_shared::link::{encode, max_frame_len, FrameCounters, FrameDecoder};
+use tendril_shared::messages::{
+    setpoint_flags, Header, PlantState, Setpoint, TensionCommand, WeightUpdate, MAX_TENDONS,
+};
+
+use super::{locate_image, Chip, McuLink};
+use crate::ipc::clock::now_ns;
+use crate::ipc::controller::{
+    log_header, period_config, ControllerConfig, ControllerStats, FaultLog,
+};
+use crate::ipc::stats::{CsvLog, Histogram, Summary};
+use crate::ipc::transport::{self, Services};
+use crate::ipc::{IpcError, PeerWatch, StopWatch};
+use crate::robot::Robot;
+
+/// How often the bridge looks for messages, µs.
+pub const POLL_US: u64 = 100;
+
+/// Where the chip is: started by the bridge (an image) or already running
+/// (a socket some launcher owns).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct McuOptions {
+    /// A running chip's link socket; None: start QEMU with `image`.
+    pub socket: Option<PathBuf>,
+    /// The controller image (None: built by [`locate_image`]).
+    pub image: Option<PathBuf>,
+    /// Inject a garbage burst on the link every this many ms (fault test).
+    pub garbage_every_ms: Option<u64>,
+}
+
+/// The link's statistics in the controller's report.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[serde(default)]
+pub struct LinkStats {
+    /// Commands the chip sent and the bridge published.
+    pub commands: u64,
+    /// Gaps in the chip's command sequence (periods whose command was lost
+    /// on the link).
+    pub commands_lost: u64,
+    /// Setpoint forwarded → the first command that used it, µs (host clock,
+    /// both ends).
+    pub setpoint_to_command_us: Summary,
+    /// The same in periods (p50, p99).
+    pub setpoint_to_command_periods: (f64, f64),
+    /// The bridge's receive-side frame counters.
+    pub frames_up: FrameCounters,
+    /// The chip's receive-side frame counters (its last telemetry).
+    pub frames_down: FrameCounters,
+    /// Bytes sent to / received from the chip.
+    pub bytes_down: u64,
+    /// Bytes received from the chip.
+    pub bytes_up: u64,
+    /// Garbage bytes injected (fault test).
+    pub garbage_bytes_sent: u64,
+    /// Weight updates sent / chunks sent.
+    pub updates_sent: u64,
+    /// Chunks sent.
+    pub chunks_sent: u64,
+    /// The chip's last telemetry.
+    pub chip: Option<Telemetry>,
+    /// The chip's telemetry when the bridge connected (a chip that ran
+    /// before: its counts before this bridge).
+    pub chip_at_connect: Option<Telemetry>,
+}
+
+/// The chip's configuration for `cfg` and the robot: the host controller's
+/// own period configuration, flattened for the link.
+pub fn setup_for(cfg: &ControllerConfig, robot: &Robot) -> Result<Setup, IpcError> {
+    let p = period_config(cfg, robot)?;
+    Ok(setup_of(&p))
+}
+
+/// Flatten a period configuration for the link.
+pub fn setup_of(p: &PeriodConfig) -> Setup {
+    let l = &p.control.limits;
+    let n = l.n_tendons();
+    let pad = |a: &[f32]| {
+        let mut out = [0.0f32; MAX_TENDONS];
+        for (d, v) in out.iter_mut().zip(a) {
+            *d = *v;
+        }
+        out
+    };
+    let mut sets = [0u8; MAX_TENDONS];
+    sets[..n].copy_from_slice(&l.cocontraction().sets()[..n]);
+    let ns = |v: u64| v.min(u64::from(u32::MAX)) as u32;
+    let ic = p.control.integral;
+    Setup {
+        n_tendons: n as u8,
+        max_tension: pad(l.max_tension()),
+        min_tension: pad(l.min_tension()),
+        slew_rate: pad(l.slew_rate()),
+        cocontraction_sets: sets,
+        cocontraction_weights: *l.cocontraction().weights(),
+        period_ns: ns(p.period_ns),
+        watchdog_ns: ns(p.control.watchdog_ns),
+        max_dt_ns: ns(p.control.max_dt_ns),
+        quaternion_tolerance: p.control.quaternion_tolerance,
+        box_margin: p.control.box_margin,
+        ki: ic.ki,
+        correction_limit: ic.limit,
+        feedback_timeout_ns: ns(ic.feedback_timeout_ns),
+        correction_window: ic.window,
+        lead_s: p.lead_s,
+        plant_stale_ns: ns(p.plant_stale_ns),
+        stuck_enabled: p.stuck.enabled,
+        stuck_model_gain: p.stuck.model_gain,
+        stuck_error_n: p.stuck.tension_error_n,
+        stuck_persist_ns: ns(p.stuck.persist_ns),
+    }
+}
+
+/// The planner's setpoint as a link message; the tangent only when it
+/// differs from `last` (the chip keeps the last one).
+pub fn link_setpoint(
+    s: &Setpoint,
+    count: usize,
+    superseded_nonfinite: usize,
+    last: &mut Option<LinkTangent>,
+) -> LinkSetpoint {
+    let tangent = (s.flags & setpoint_flags::HAS_TANGENT != 0).then_some(LinkTangent {
+        dim: s.tangent_dim.min(3) as u8,
+        columns: s.tangent,
+        axes: s.tangent_axes,
+    });
+    let send_tangent = match (tangent, *last) {
+        (Some(t), Some(l)) => !close(&t, &l),
+        (Some(_), None) => true,
+        _ => false,
+    };
+    if send_tangent {
+        *last = tangent;
+    }
+    LinkSetpoint {
+        seq: s.header.seq as u32,
+        count: count.min(u16::MAX as usize) as u16,
+        superseded_nonfinite: superseded_nonfinite.min(u16::MAX as usize) as u16,
+        pose: WirePose::from_pose(&s.pose),
+        velocity: (s.flags & setpoint_flags::HAS_VELOCITY != 0)
+            .then(|| LinkSetpoint::wire_velocity(&s.velocity)),
+        tangent: if send_tangent { tangent } else { None },
+    }
+}
+
+/// Whether two tangents agree to 1 % (the tangent is a first-order model
+/// of the reachable poses: a 1 % change moves a correction of at most 3 mm
+/// by at most 30 µm, and sending it on every setpoint would take 120 of the
+/// ~130 bytes the emulated link carries per period).
+fn close(a: &LinkTangent, b: &LinkTangent) -> bool {
+    a.dim == b.dim
+        && a.columns
+            .iter()
+            .flatten()
+            .chain(a.axes.iter().flatten())
+            .zip(b.columns.iter().flatten().chain(b.axes.iter().flatten()))
+            .all(|(x, y)| (x - y).abs() <= 1e-2 * (1.0 + x.abs().max(y.abs())))
+}
+
+/// The plant's state as a link message.
+pub fn link_feedback(f: &PlantState, count: usize, n: usize) -> Feedback {
+    let mut tensions = heapless::Vec::new();
+    for &t in f.tensions.iter().take(n) {
+        let _ = tensions.push(units::to_i32(t, units::TENSION_N));
+    }
+    Feedback {
+        seq: f.header.seq as u32,
+        count: count.min(u16::MAX as usize) as u16,
+        command_seq: f.command_seq as u32,
+        tensions,
+        tip: [0, 1, 2].map(|i| units::to_i32(f.tip_pose[i], units::POSITION_M)),
+    }
+}
+
+/// The link to a configured chip: frames out, messages in.
+pub struct ChipLink {
+    link: McuLink,
+    rx: FrameDecoder<{ max_frame_len(MAX_UP_PAYLOAD) }>,
+    inbox: Vec<Up>,
+    buf: Vec<u8>,
+    /// The chip's Hello after configuration.
+    pub hello: Hello,
+}
+
+impl ChipLink {
+    /// Connect, check the protocol, and configure the chip with `setup`
+    /// (kept if it already runs it). Then send `model` if it is not the
+    /// chip's built-in net.
+    pub fn open(link: McuLink, setup: &Setup) -> Result<ChipLink> {
+        let mut me = ChipLink {
+            link,
+            rx: FrameDecoder::new(),
+            inbox: Vec::new(),
+            buf: vec![0; 1024],
+            hello: Hello {
+                protocol: 0,
+                net_hash: 0,
+                setup_hash: 0,
+                setup_error: 0,
+            },
+        };
+        // A 0x00 first: whatever the chip's decoder holds from an earlier
+        // host is dropped, not merged with the first frame.
+        me.link.send(&[0])?;
+        me.send(&Down::Hello {
+            protocol: PROTOCOL_VERSION,
+        })?;
+        let hello = me.wait_hello(Duration::from_secs(10), |_| true)?;
+        if hello.protocol != PROTOCOL_VERSION {
+            bail!(
+                "the chip speaks link protocol {}, this tendril {}: rebuild the image (it is built by `tendril controller --mcu` from this checkout)",
+                hello.protocol,
+                PROTOCOL_VERSION
+            );
+        }
+        let want = setup.hash();
+        if hello.setup_hash != want {
+            me.send(&Down::Setup(*setup))?;
+            let h = me.wait_hello(Duration::from_secs(5), |h| {
+                h.setup_hash == want || h.setup_error != 0
+            })?;
+            if h.setup_error != 0 {
+                bail!(
+                    "the chip refused the controller's configuration (error {})",
+                    h.setup_error
+                );
+            }
+            me.hello = h;
+        } else {
+            me.hello = hello;
+        }
+        Ok(me)
+    }
+
+    fn wait_hello(&mut self, timeout: Duration, ok: impl Fn(&Hello) -> bool) -> Result<Hello> {
+        let t0 = std::time::Instant::now();
+        while t0.elapsed() < timeout {
+            self.poll(Duration::from_millis(20));
+            let found = self.inbox.iter().rev().find_map(|m| match m {
+                Up::Hello(h) if ok(h) => Some(*h),
+                _ => None,
+            });
+            self.inbox.clear();
+            if let Some(h) = found {
+                return Ok(h);
+            }
+        }
+        Err(anyhow!("no answer from the chip in {timeout:?}"))
+    }
+
+    /// Send one message.
+    pub fn send(&mut self, msg: &Down<'_>) -> Result<()> {
+        let frame = encode(msg, &mut self.buf).map_err(|e| anyhow!("link frame: {e}"))?;
+        self.link.send(frame)
+    }
+
+    /// Send raw bytes (garbage injection).
+    pub fn send_raw(&mut self, bytes: &[u8]) -> Result<()> {
+        self.link.send(bytes)
+    }
+
+    /// Decode what arrived within `timeout` into the inbox.
+    pub fn poll(&mut self, timeout: Duration) {
+        let mut first = self.link.recv(timeout);
+        while let Some(bytes) = first.take().or_else(|| self.link.try_recv()) {
+            for b in bytes {
+                if let Some(Ok(msg)) = self.rx.push::<Up>(b) {
+                    self.inbox.push(msg);
+                }
+            }
+        }
+    }
+
+    /// Messages decoded so far (drained).
+    pub fn drain(&mut self) -> std::vec::Drain<'_, Up> {
+        self.inbox.drain(..)
+    }
+
+    /// The bridge's frame counters.
+    pub fn counters(&self) -> FrameCounters {
+        self.rx.counters()
+    }
+
+    /// Bytes sent and received.
+    pub fn bytes(&self) -> (u64, u64) {
+        (self.link.bytes_sent(), self.link.bytes_received())
+    }
+}
+
+/// Run the controller with the chip in the loop until stopped.
+pub fn run(
+    cfg: &ControllerConfig,
+    robot: &Robot,
+    model: &[u8],
+    mcu: &McuOptions,
+) -> Result<ControllerStats, IpcError> {
+    let other = |e: anyhow::Error| IpcError::Other(format!("{e:#}"));
+    let setup = setup_for(cfg, robot)?;
+    // The chip: started here, or already running behind a socket.
+    let (_chip, socket) = match &mcu.socket {
+        Some(s) => (None, s.clone()),
+        None => {
+            let image = match &mcu.image {
+                Some(i) => i.clone(),
+                None => locate_image().map_err(other)?,
+            };
+            let socket =
+                std::env::temp_dir().join(format!("tendril-chip-{}.sock", std::process::id()));
+            let chip = Chip::start(&image, &socket).map_err(other)?;
+            (Some(chip), socket)
+        }
+    };
+    let link = McuLink::connect(&socket, Duration::from_secs(10)).map_err(other)?;
+    let mut chip = ChipLink::open(link, &setup).map_err(other)?;
+    let model_hash = tendril_shared::crc32::crc32(model);
+    let mut update: Option<(Vec<u8>, usize, u64)> =
+        (chip.hello.net_hash != model_hash).then(|| (model.to_vec(), 0, 0));
+
+    let node = transport::node("tendril-controller")?;
+    let _orphan = transport::ReleaseIfOrphaned(&node);
+    let services = Services::open_or_create(&node, &cfg.prefix)?;
+    let setpoints = transport::subscriber(&services.setpoint)?;
+    let states = transport::subscriber(&services.plant_state)?;
+    let weights = transport::subscriber(&services.weights)?;
+    let commands = transport::publisher(&services.tension_cmd)?;
+    let notifier = transport::notifier(&services.tension_cmd_event)?;
+    let stop = StopWatch::new(&services)?;
+    let n = robot.n_tendons();
+    let mut log = CsvLog::create(cfg.log.as_deref(), &log_header(n))?;
+
+    let period_ns = u64::from(setup.period_ns);
+    let start = now_ns();
+    let mut faults = FaultLog::new(start);
+    let mut stats = LinkStats::default();
+    let mut latency = Histogram::default();
+    let mut peers = PeerWatch::new(cfg.peer_timeout_s, cfg.peer_start_grace_s, start);
+    let mut last_tangent = None;
+    // Setpoints forwarded and not yet seen in a command: (seq, sent at).
+    let mut in_flight: std::collections::VecDeque<(u32, u64)> = Default::default();
+    let mut last_cmd_seq = 0u32;
+    let mut counters = Counters::default();
+    let mut update_seq = 0u64;
+    let mut last_garbage = start;
+    let mut last_flush = start;
+    let mut row = vec![0.0f64; 6 + n];
+    let outcome: Result<(), IpcError> = loop {
+        let now = now_ns();
+        let mut nonfinite = 0;
+        let (sp, n_sp) = transport::latest_inspecting(&setpoints, |s: &Setpoint| {
+            if s.pose.iter().any(|v| !v.is_finite()) {
+                nonfinite += 1;
+            }
+        })?;
+        if let Some(s) = &sp {
+            // The newest is forwarded: its own NaN is the chip's to find.
+            let older = nonfinite - usize::from(s.pose.iter().any(|v| !v.is_finite()));
+            let msg = link_setpoint(s, n_sp, older, &mut last_tangent);
+            chip.send(&Down::Setpoint(msg)).map_err(other)?;
+            in_flight.push_back((msg.seq, now));
+            if in_flight.len() > 64 {
+                in_flight.pop_front();
+            }
+        }
+        let (st, n_st): (Option<PlantState>, usize) = transport::latest(&states)?;
+        if let Some(f) = &st {
+            chip.send(&Down::Feedback(link_feedback(f, n_st, n)))
+                .map_err(other)?;
+        }
+        let (w, _): (Option<WeightUpdate>, usize) = transport::latest(&weights)?;
+        if let Some(w) = w {
+            update_seq = w.header.seq;
+            match w.payload() {
+                Some(bytes) => update = Some((bytes.to_vec(), 0, w.header.seq)),
+                None => log::warn!(
+                    "controller: weight update #{} has a bad length: not sent",
+                    w.header.seq
+                ),
+            }
+        }
+        // One chunk per poll: ~2 kB per ms, well under what the link carries.
+        if let Some((blob, at, _)) = &mut update {
+            let end = (*at + MAX_CHUNK).min(blob.len());
+            let chunk = Down::Chunk {
+                offset: *at as u32,
+                total: blob.len() as u32,
+                bytes: &blob[*at..end],
+            };
+            chip.send(&chunk).map_err(other)?;
+            stats.chunks_sent += 1;
+            if *at == 0 {
+                stats.updates_sent += 1;
+            }
+            *at = end;
+            if end >= blob.len() {
+                update = None;
+            }
+        }
+        if let Some(every) = mcu.garbage_every_ms {
+            if now.saturating_sub(last_garbage) >= every * 1_000_000 {
+                last_garbage = now;
+                // Bytes a noisy line might carry, ending mid-frame: the
+                // next real frame must still arrive (the decoder drops the
+                // burst at its 0x00).
+                let burst = [0x55u8, 0xAA, 0x13, 0x00, 0xFF, 0x02, 0x99, 0x42, 0x07];
+                chip.send_raw(&burst).map_err(other)?;
+                stats.garbage_bytes_sent += burst.len() as u64;
+            }
+        }
+
+        chip.poll(Duration::from_micros(POLL_US));
+        let t_rx = now_ns();
+        let mut published = false;
+        for msg in chip.drain() {
+            match msg {
+                Up::Command(c) => {
+                    if last_cmd_seq > 0 && c.seq > last_cmd_seq + 1 {
+                        stats.commands_lost += u64::from(c.seq - last_cmd_seq - 1);
+                    }
+                    last_cmd_seq = c.seq;
+                    stats.commands += 1;
+                    while let Some(&(seq, t)) = in_flight.front() {
+                        if seq > c.setpoint_seq {
+                            break;
+                        }
+                        in_flight.pop_front();
+                        if seq == c.setpoint_seq {
+                            latency.record(t_rx.saturating_sub(t));
+                        }
+                    }
+                    publish(&commands, &c, n)?;
+                    published = true;
+                    let ev = Events {
+                        bits: c.events,
+                        ..Events::default()
+                    };
+                    faults.report(&ev, &counters, t_rx, period_ns, update_seq);
+                    row[0] = t_rx as f64;
+                    row[3] = f64::from(c.status);
+                    row[4] = f64::from(c.setpoint_seq);
+                    row[5] = st.as_ref().map_or(0.0, |s| s.header.seq as f64);
+                    for (d, t) in row[6..].iter_mut().zip(c.tensions.iter()) {
+                        *d = f64::from(*t);
+                    }
+                    log.row(&row)?;
+                }
+                Up::Telemetry(t) => {
+                    counters = t.counters;
+                    if stats.chip_at_connect.is_none() {
+                        stats.chip_at_connect = Some(t);
+                        report_past(&mut faults, &t, t_rx, start, period_ns);
+                    }
+                    stats.chip = Some(t);
+                }
+                Up::Hello(_) => {}
+            }
+        }
+        if published {
+            notifier
+                .notify()
+                .map_err(|e| IpcError::Send(format!("tension_cmd event: {e:?}")))?;
+        }
+        let t_done = now_ns();
+        if t_done - last_flush > 100_000_000 {
+            log.flush()?;
+            last_flush = t_done;
+        }
+        if stop.requested()
+            || cfg
+                .duration_s
+                .is_some_and(|d| (t_done - start) as f64 * 1e-9 >= d)
+        {
+            break Ok(());
+        }
+        if sp.is_some() || st.is_some() {
+            peers.heard(t_done);
+        } else if peers.lost(t_done) {
+            break Err(IpcError::PeersLost(format!(
+                "controller: no setpoint and no plant state for {:.1} s",
+                peers.silence_s(t_done)
+            )));
+        }
+    };
+    log.flush()?;
+    // The chip's last counts.
+    chip.poll(Duration::from_millis(150));
+    for msg in chip.drain() {
+        if let Up::Telemetry(t) = msg {
+            stats.chip = Some(t);
+        }
+    }
+    let mut report = ControllerStats::default();
+    if let Some(t) = &stats.chip {
+        report.fill_counters(&t.counters);
+        report.cycles = u64::from(t.counters.periods);
+        report.skipped = u64::from(t.counters.missed_ticks);
+        stats.frames_down = t.frames;
+    }
+    faults.fill(&mut report);
+    stats.frames_up = chip.counters();
+    (stats.bytes_down, stats.bytes_up) = chip.bytes();
+    stats.setpoint_to_command_us = latency.summary();
+    let per = period_ns as f64 * 1e-3;
+    stats.setpoint_to_command_periods = (
+        stats.setpoint_to_command_us.p50 / per,
+        stats.setpoint_to_command_us.p99 / per,
+    );
+    report.link = Some(stats);
+    if let Some(path) = &cfg.stats {
+        let json =
+            serde_json::to_vec_pretty(&report).map_err(|e| IpcError::Other(e.to_string()))?;
+        crate::ipc::write_file(path, &json)?;
+    }
+    outcome.map(|()| report)
+}
+
+/// A hold the chip made before this bridge connected (the link was cut):
+/// listed at its time on the host clock, estimated from the chip's ticks.
+fn report_past(faults: &mut FaultLog, t: &Telemetry, t_rx: u64, start: u64, period_ns: u64) {
+    if t.last_hold_tick == 0 || t.counters.watchdog_trips == 0 {
+        return;
+    }
+    let ago = u64::from(t.ticks.wrapping_sub(t.last_hold_tick)) * period_ns;
+    let at = t_rx.saturating_sub(ago);
+    if at >= start {
+        return; // this bridge's own time: its commands carry it
+    }
+    let periods = f64::from(t.last_hold_silence_us) * 1e3 / period_ns.max(1) as f64;
+    log::warn!(
+        "controller: the chip went to a safe hold {:.1} s before this bridge connected, \
+         {periods:.1} periods after its last setpoint (the link was cut)",
+        ago as f64 * 1e-9
+    );
+    faults.detect(
+        crate::ipc::controller::FaultKind::WatchdogHold,
+        at,
+        None,
+        periods,
+        "the chip held on its own while no bridge was connected (link cut)",
+    );
+}
+
+fn publish(
+    commands: &transport::Pub<TensionCommand>,
+    c: &Command,
+    n: usize,
+) -> Result<(), IpcError> {
+    let mut tensions = [0.0f32; MAX_TENDONS];
+    for (d, &t) in tensions.iter_mut().zip(c.tensions.iter()) {
+        *d = t;
+    }
+    let cmd = TensionCommand {
+        header: Header {
+            seq: u64::from(c.seq),
+            stamp_ns: now_ns(),
+        },
+        setpoint_seq: u64::from(c.setpoint_seq),
+        count: n as u32,
+        status: c.status,
+        tensions,
+    };
+    transport::send(commands, cmd)
+}
