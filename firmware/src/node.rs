@@ -8,7 +8,7 @@
 //!    the controller, the newest setpoint and feedback wait for the
 //!    period, an update chunk goes into the period's update buffer;
 //! 2. run the period (once configured) and apply its tensions;
-//! 3. send the command, and every [`TELEMETRY_EVERY`] periods the counters.
+//! 3. send the command, and every [`TELEMETRY_EVERY`] ticks the counters.
 //!
 //! Before a configuration arrives the motors get nothing and the node
 //! announces itself with a Hello every [`TELEMETRY_EVERY`] ticks. Garbage,
@@ -166,6 +166,7 @@ struct Core<const U: usize> {
     worst_period_ns: u64,
     last_hold_tick: u32,
     last_hold_silence_us: u32,
+    last_telemetry_tick: u32,
 }
 
 /// The controller node; `U` is the weight-update buffer's size, bytes.
@@ -220,6 +221,7 @@ impl<const U: usize> Node<U> {
                 worst_period_ns: 0,
                 last_hold_tick: 0,
                 last_hold_silence_us: 0,
+                last_telemetry_tick: 0,
             },
         }
     }
@@ -302,7 +304,8 @@ impl<const U: usize> Node<U> {
         core.refused_events = 0;
         let counters = *period.counters();
         core.send(board, &cmd);
-        if counters.periods % TELEMETRY_EVERY == 0 {
+        if core.ticks.wrapping_sub(core.last_telemetry_tick) >= TELEMETRY_EVERY {
+            core.last_telemetry_tick = core.ticks;
             let t = Up::Telemetry(Telemetry {
                 counters,
                 frames: self.rx.counters(),

@@ -17,12 +17,16 @@ pub enum OnOff {
     Off,
 }
 
+/// The control rate without `--rate`, Hz.
+pub const DEFAULT_RATE_HZ: f64 = 1000.0;
+
 /// Loop and tuning options (shared with `tendril sim`).
 #[derive(Args, Clone, Debug)]
 pub struct LoopOpts {
-    /// Control rate, Hz.
-    #[arg(long, default_value_t = 1000.0)]
-    pub rate: f64,
+    /// Control rate, Hz [default: 1000; 100 with the chip in the loop, whose
+    /// emulated serial link carries ~13 kB/s: see docs/design.md §5.6].
+    #[arg(long)]
+    pub rate: Option<f64>,
     /// Spin this long before each deadline instead of sleeping, µs (0 = pure sleep).
     #[arg(long, default_value_t = 50.0)]
     pub spin_us: f64,
@@ -97,7 +101,7 @@ pub(crate) fn peer_timeout(flag: Option<f64>) -> anyhow::Result<(Option<f64>, Op
 impl LoopOpts {
     /// Refuse values no loop can run with, naming the flag.
     pub fn check(&self) -> anyhow::Result<()> {
-        let r = self.rate;
+        let r = self.rate_hz();
         check("--rate", r, r > 0.0 && r <= MAX_RATE_HZ, "in (0, 20000] Hz")?;
         let period_us = 1e6 / r;
         check(
@@ -122,9 +126,20 @@ impl LoopOpts {
         check("--slew", self.slew, self.slew > 0.0, "a rate > 0 N/s")
     }
 
+    /// The control rate: `--rate`, else 1000 Hz.
+    pub fn rate_hz(&self) -> f64 {
+        self.rate.unwrap_or(DEFAULT_RATE_HZ)
+    }
+
+    /// The rate with the chip in the loop: `--rate`, else
+    /// [`crate::mcu::bridge::MCU_RATE_HZ`].
+    pub fn mcu_rate_hz(&self) -> f64 {
+        self.rate.unwrap_or(crate::mcu::bridge::MCU_RATE_HZ)
+    }
+
     /// Fill the loop fields of a controller config.
     pub fn apply(&self, cfg: &mut ControllerConfig) {
-        cfg.rate_hz = self.rate;
+        cfg.rate_hz = self.rate_hz();
         cfg.spin_us = self.spin_us;
         cfg.realtime = self.realtime == Some(OnOff::On);
         cfg.watchdog_periods = self.watchdog_periods;
@@ -222,6 +237,7 @@ impl ControllerArgs {
         cfg.stats = self.stats;
         cfg.cpu = self.cpu;
         if self.mcu {
+            cfg.rate_hz = self.tuning.mcu_rate_hz();
             if let Some(ms) = self.link_garbage_every_ms {
                 check(
                     "--link-garbage-every-ms",

@@ -74,9 +74,9 @@ pub struct TrajectoryOpts {
     /// Pose table for `--trajectory csv`.
     #[arg(long)]
     pub poses: Option<PathBuf>,
-    /// Setpoint rate, Hz.
-    #[arg(long, default_value_t = 1000.0)]
-    pub planner_rate: f64,
+    /// Setpoint rate, Hz [default: 1000; under `sim`, the controller's rate].
+    #[arg(long)]
+    pub planner_rate: Option<f64>,
     /// Initial hold at the first pose, s.
     #[arg(long, default_value_t = 2.0)]
     pub settle: f64,
@@ -105,7 +105,7 @@ fn pair(s: &str, what: &str) -> anyhow::Result<[f64; 2]> {
 impl TrajectoryOpts {
     /// Refuse rates, times and sizes no trajectory can have, naming the flag.
     pub fn check(&self) -> anyhow::Result<()> {
-        let r = self.planner_rate;
+        let r = self.planner_rate.unwrap_or(1000.0);
         check(
             "--planner-rate",
             r,
@@ -273,7 +273,7 @@ impl PlannerArgs {
             robot: self.robot,
             prefix: self.prefix,
             shape: self.traj.shape()?,
-            rate_hz: self.traj.planner_rate,
+            rate_hz: self.traj.planner_rate.unwrap_or(1000.0),
             settle_s: self.traj.settle,
             duration_s: self.duration,
             inject: Injections {

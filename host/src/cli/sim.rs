@@ -133,7 +133,11 @@ impl SimArgs {
         cfg.max_rms_mm = self.max_rms_mm;
         cfg.max_log_gb = self.max_log_gb;
         cfg.planner.shape = self.traj.shape()?;
-        cfg.planner.rate_hz = self.traj.planner_rate;
+        let rate = match self.controller {
+            ControllerKind::Host => self.tuning.rate_hz(),
+            ControllerKind::Mcu => self.tuning.mcu_rate_hz(),
+        };
+        cfg.planner.rate_hz = self.traj.planner_rate.unwrap_or(rate);
         cfg.planner.settle_s = self.traj.settle;
         cfg.planner.inject = Injections {
             nan_at_s: self.inject_nan_at,
@@ -142,6 +146,7 @@ impl SimArgs {
         };
         self.tuning.check()?;
         self.tuning.apply(&mut cfg.controller);
+        cfg.controller.rate_hz = rate;
         cfg.controller.allow_robot_mismatch = self.allow_robot_mismatch;
         // Real-time scheduling is on by default under `sim` (`--realtime
         // off` to disable): it keeps the 1 kHz loop on time on a busy machine.

@@ -37,6 +37,23 @@ use crate::ipc::transport::{self, Services};
 use crate::ipc::{IpcError, PeerWatch, StopWatch};
 use crate::robot::Robot;
 
+/// The loop's rate with the chip in the loop unless told otherwise, Hz:
+/// QEMU 7.2's STM32 USART takes one received byte per hand-off between its
+/// vCPU and main-loop threads (~75 µs), ~13 kB/s; a setpoint and a
+/// feedback frame take ~70 bytes, so 100 periods a second use about half
+/// of it and leave room for weight-update chunks and tangents. A real board
+/// at 2 Mbaud carries 1 kHz.
+pub const MCU_RATE_HZ: f64 = 100.0;
+
+/// Bytes of a weight-update chunk the bridge sends, and how often (ms):
+/// ~3.4 kB/s with framing, beside the ~7 kB/s of setpoints and feedback at
+/// [`MCU_RATE_HZ`], well inside what the emulated link carries (a 12 kB
+/// net takes ~4 s; the chip checks it in slices once it is whole). Twice
+/// as fast doubled the setpoint-to-command p99 in a loaded sim.
+pub const CHUNK_BYTES: usize = 192;
+/// See [`CHUNK_BYTES`].
+pub const CHUNK_EVERY_MS: u64 = 60;
+
 /// How often the bridge looks for messages, µs.
 pub const POLL_US: u64 = 100;
 
@@ -331,6 +348,9 @@ pub fn run(
             let socket =
                 std::env::temp_dir().join(format!("tendril-chip-{}.sock", std::process::id()));
             let chip = Chip::start(&image, &socket).map_err(other)?;
+            if cfg.realtime {
+                chip.make_realtime(crate::ipc::clock::CONTROLLER_PRIORITY);
+            }
             (Some(chip), socket)
         }
     };
@@ -365,6 +385,7 @@ pub fn run(
     let mut counters = Counters::default();
     let mut update_seq = 0u64;
     let mut last_garbage = start;
+    let mut last_chunk = 0u64;
     let mut last_flush = start;
     let mut row = vec![0.0f64; 6 + n];
     let outcome: Result<(), IpcError> = loop {
@@ -376,9 +397,9 @@ pub fn run(
             }
         })?;
         if let Some(s) = &sp {
-            // The newest is forwarded: its own NaN is the chip's to find.
-            let older = nonfinite - usize::from(s.pose.iter().any(|v| !v.is_finite()));
-            let msg = link_setpoint(s, n_sp, older, &mut last_tangent);
+            // The newest is forwarded (its own NaN is the chip's to find);
+            // `nonfinite` counted only the ones it superseded.
+            let msg = link_setpoint(s, n_sp, nonfinite, &mut last_tangent);
             chip.send(&Down::Setpoint(msg)).map_err(other)?;
             in_flight.push_back((msg.seq, now));
             if in_flight.len() > 64 {
@@ -401,9 +422,11 @@ pub fn run(
                 ),
             }
         }
-        // One chunk per poll: ~2 kB per ms, well under what the link carries.
-        if let Some((blob, at, _)) = &mut update {
-            let end = (*at + MAX_CHUNK).min(blob.len());
+        // Paced chunks: the link's spare bandwidth, not more.
+        let chunk_due = now.saturating_sub(last_chunk) >= CHUNK_EVERY_MS * 1_000_000;
+        if let (true, Some((blob, at, _))) = (chunk_due, &mut update) {
+            last_chunk = now;
+            let end = (*at + CHUNK_BYTES.min(MAX_CHUNK)).min(blob.len());
             let chunk = Down::Chunk {
                 offset: *at as u32,
                 total: blob.len() as u32,
@@ -422,10 +445,13 @@ pub fn run(
         if let Some(every) = mcu.garbage_every_ms {
             if now.saturating_sub(last_garbage) >= every * 1_000_000 {
                 last_garbage = now;
-                // Bytes a noisy line might carry, ending mid-frame: the
-                // next real frame must still arrive (the decoder drops the
-                // burst at its 0x00).
-                let burst = [0x55u8, 0xAA, 0x13, 0x00, 0xFF, 0x02, 0x99, 0x42, 0x07];
+                // Bytes a noisy line might carry: the decoder drops them
+                // at their 0x00 and counts them; no period is missed.
+                // It ends in a 0x00, as garbage between two frames does
+                // on a line (a burst inside a frame corrupts that frame: it
+                // is dropped and counted like this one, and a lost chunk
+                // abandons its update; docs/design.md §5.6).
+                let burst = [0x55u8, 0xAA, 0x13, 0x00, 0xFF, 0x02, 0x99, 0x42, 0x07, 0x00];
                 chip.send_raw(&burst).map_err(other)?;
                 stats.garbage_bytes_sent += burst.len() as u64;
             }
@@ -506,7 +532,7 @@ pub fn run(
     };
     log.flush()?;
     // The chip's last counts.
-    chip.poll(Duration::from_millis(150));
+    chip.poll(Duration::from_millis(250));
     for msg in chip.drain() {
         if let Up::Telemetry(t) = msg {
             stats.chip = Some(t);

@@ -28,7 +28,8 @@ use crate::MAX_TENDONS;
 /// refuse to run together (the host says which to rebuild).
 pub const PROTOCOL_VERSION: u16 = 1;
 
-/// The chip sends [`Up::Telemetry`] every this many periods.
+/// The chip sends [`Up::Telemetry`] every this many ticks of its timer
+/// (100 ms at 1 kHz), and a Hello as often while unconfigured.
 pub const TELEMETRY_EVERY: u32 = 100;
 
 /// Largest weight-update chunk, bytes.
@@ -316,7 +317,7 @@ pub struct Command {
     pub tensions: heapless::Vec<f32, MAX_TENDONS>,
 }
 
-/// Counts and health, chip → host, every [`TELEMETRY_EVERY`] periods.
+/// Counts and health, chip → host, every [`TELEMETRY_EVERY`] ticks.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Telemetry {
     /// The period's counters.

@@ -468,10 +468,14 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
                 }
             };
             let socket = std::env::temp_dir().join(format!("{prefix}.chip.sock"));
-            Some(
-                crate::mcu::Chip::start(&image, &socket)
-                    .map_err(|e| SimError::Config(format!("starting the chip: {e:#}")))?,
-            )
+            let chip = crate::mcu::Chip::start(&image, &socket)
+                .map_err(|e| SimError::Config(format!("starting the chip: {e:#}")))?;
+            if cfg.realtime && chip.make_realtime(super::clock::CONTROLLER_PRIORITY) == 0 {
+                log::warn!(
+                    "sim: SCHED_FIFO refused for the chip (QEMU), running it with normal priority"
+                );
+            }
+            Some(chip)
         }
         None => None,
     };
