@@ -16,7 +16,7 @@
 //! the frame layer and here; none of them costs more than its bytes.
 
 use tendril_shared::link::messages::{
-    Command, Down, Feedback, Hello, Setpoint, Setup, Telemetry, Up, MAX_DOWN_PAYLOAD,
+    Command, Down, EventDetail, Feedback, Hello, Setpoint, Setup, Telemetry, Up, MAX_DOWN_PAYLOAD,
     MAX_UP_PAYLOAD, PROTOCOL_VERSION, TELEMETRY_EVERY,
 };
 use tendril_shared::link::{encode, max_frame_len, FrameDecoder};
@@ -298,6 +298,7 @@ impl<const U: usize> Node<U> {
             setpoint_seq: c.setpoint_seq as u32,
             status: c.status,
             events: out.events.bits | core.refused_events,
+            detail: detail_of(&out.events),
             tensions: heapless::Vec::from_slice(c.tensions.get(..c.count).unwrap_or(&[]))
                 .unwrap_or_default(),
         });
@@ -312,6 +313,7 @@ impl<const U: usize> Node<U> {
                 rx_overruns: 0,
                 tx_dropped: core.tx_dropped,
                 ticks: core.ticks,
+                tick_ns: core.tick_ns,
                 bad_messages: core.bad_messages,
                 chunks_refused: core.chunks_refused,
                 worst_period_us: (core.worst_period_ns / 1000) as u32,
@@ -322,6 +324,18 @@ impl<const U: usize> Node<U> {
         }
         let took = board.now_ns().saturating_sub(t0);
         core.worst_period_ns = core.worst_period_ns.max(took);
+    }
+}
+
+/// The values of `e` for the wire (saturated to `u32`).
+fn detail_of(e: &crate::period::Events) -> EventDetail {
+    let sat = |v: u64| u32::try_from(v).unwrap_or(u32::MAX);
+    EventDetail {
+        setpoints_lost: sat(e.setpoints_lost),
+        plant_states_lost: sat(e.plant_states_lost),
+        commands_behind: sat(e.commands_behind),
+        stuck: e.stuck,
+        hold_silence_us: sat(e.hold_silence_ns / 1000),
     }
 }
 

@@ -45,14 +45,18 @@ use crate::robot::Robot;
 /// at 2 Mbaud carries 1 kHz.
 pub const MCU_RATE_HZ: f64 = 100.0;
 
-/// Bytes of a weight-update chunk the bridge sends, and how often (ms):
-/// ~3.4 kB/s with framing, beside the ~7 kB/s of setpoints and feedback at
-/// [`MCU_RATE_HZ`], well inside what the emulated link carries (a 12 kB
-/// net takes ~4 s; the chip checks it in slices once it is whole). Twice
-/// as fast doubled the setpoint-to-command p99 in a loaded sim.
+/// Bytes of a weight-update chunk the bridge sends. A chunk goes only
+/// when the link has no backlog ([`CHUNK_MAX_BACKLOG`]) and at most every
+/// [`CHUNK_EVERY_MS`]: setpoints and feedback never wait behind an update
+/// (with fixed pacing alone, a loaded sim's setpoint-to-command p99 grew
+/// to 26 periods while an update went through). A 12 kB net takes a few
+/// seconds; the chip checks it in slices once it is whole.
 pub const CHUNK_BYTES: usize = 192;
 /// See [`CHUNK_BYTES`].
-pub const CHUNK_EVERY_MS: u64 = 60;
+pub const CHUNK_EVERY_MS: u64 = 20;
+/// Bytes the link may still hold unread for a chunk to be sent (~3 ms of
+/// the emulated link).
+pub const CHUNK_MAX_BACKLOG: usize = 256;
 
 /// How often the bridge looks for messages, µs.
 pub const POLL_US: u64 = 100;
@@ -322,6 +326,11 @@ impl ChipLink {
         self.rx.counters()
     }
 
+    /// Bytes sent but not yet read by the chip.
+    pub fn backlog(&self) -> usize {
+        self.link.backlog()
+    }
+
     /// Bytes sent and received.
     pub fn bytes(&self) -> (u64, u64) {
         (self.link.bytes_sent(), self.link.bytes_received())
@@ -423,7 +432,8 @@ pub fn run(
             }
         }
         // Paced chunks: the link's spare bandwidth, not more.
-        let chunk_due = now.saturating_sub(last_chunk) >= CHUNK_EVERY_MS * 1_000_000;
+        let chunk_due = now.saturating_sub(last_chunk) >= CHUNK_EVERY_MS * 1_000_000
+            && chip.backlog() <= CHUNK_MAX_BACKLOG;
         if let (true, Some((blob, at, _))) = (chunk_due, &mut update) {
             last_chunk = now;
             let end = (*at + CHUNK_BYTES.min(MAX_CHUNK)).min(blob.len());
@@ -479,9 +489,15 @@ pub fn run(
                     }
                     publish(&commands, &c, n)?;
                     published = true;
+                    let d = c.detail;
                     let ev = Events {
                         bits: c.events,
-                        ..Events::default()
+                        setpoints_lost: u64::from(d.setpoints_lost),
+                        plant_states_lost: u64::from(d.plant_states_lost),
+                        commands_behind: u64::from(d.commands_behind),
+                        stuck: d.stuck,
+                        hold_silence_ns: u64::from(d.hold_silence_us) * 1000,
+                        update_error: None,
                     };
                     faults.report(&ev, &counters, t_rx, period_ns, update_seq);
                     row[0] = t_rx as f64;
@@ -569,7 +585,7 @@ fn report_past(faults: &mut FaultLog, t: &Telemetry, t_rx: u64, start: u64, peri
     if t.last_hold_tick == 0 || t.counters.watchdog_trips == 0 {
         return;
     }
-    let ago = u64::from(t.ticks.wrapping_sub(t.last_hold_tick)) * period_ns;
+    let ago = u64::from(t.ticks.wrapping_sub(t.last_hold_tick)) * u64::from(t.tick_ns);
     let at = t_rx.saturating_sub(ago);
     if at >= start {
         return; // this bridge's own time: its commands carry it

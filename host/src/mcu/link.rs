@@ -91,6 +91,20 @@ impl McuLink {
         self.rx.try_recv().ok()
     }
 
+    /// Bytes written but not yet read by QEMU (the socket's send queue,
+    /// `TIOCOUTQ`): the link's backlog, what a new frame waits behind.
+    pub fn backlog(&self) -> usize {
+        use std::os::fd::AsRawFd;
+        let mut n: libc::c_int = 0;
+        // SAFETY: TIOCOUTQ writes one int through a valid pointer.
+        let ok = unsafe { libc::ioctl(self.stream.as_raw_fd(), libc::TIOCOUTQ, &mut n) } == 0;
+        if ok {
+            usize::try_from(n).unwrap_or(0)
+        } else {
+            0
+        }
+    }
+
     /// Bytes sent so far.
     pub fn bytes_sent(&self) -> u64 {
         self.sent

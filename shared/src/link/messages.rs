@@ -302,6 +302,21 @@ pub struct Hello {
     pub setup_error: u8,
 }
 
+/// The values of a period's events (the firmware's `period::Events`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct EventDetail {
+    /// Setpoints lost in the gap before this one.
+    pub setpoints_lost: u32,
+    /// Plant states lost in the gap before this one.
+    pub plant_states_lost: u32,
+    /// Commands the plant was behind.
+    pub commands_behind: u32,
+    /// The stuck tendon and its tension error, N.
+    pub stuck: Option<(u8, f32)>,
+    /// Silence before a watchdog hold, µs.
+    pub hold_silence_us: u32,
+}
+
 /// A tension command, chip → host.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Command {
@@ -313,6 +328,9 @@ pub struct Command {
     pub status: u32,
     /// This period's event bits (the firmware's `period::event`).
     pub events: u32,
+    /// The values those events carry (zeros and `None` when none: a byte
+    /// each on the wire).
+    pub detail: EventDetail,
     /// Tensions of the robot's tendons, N (exact: the chip's own output).
     pub tensions: heapless::Vec<f32, MAX_TENDONS>,
 }
@@ -330,6 +348,8 @@ pub struct Telemetry {
     pub tx_dropped: u32,
     /// Ticks of the chip's timer since start.
     pub ticks: u32,
+    /// The tick's length, ns.
+    pub tick_ns: u32,
     /// Frames whose payload was no valid message (dropped by the chip).
     pub bad_messages: u32,
     /// Weight-update chunks refused (out of order, too large).
@@ -439,6 +459,7 @@ mod tests {
             rx_overruns: u32::MAX,
             tx_dropped: u32::MAX,
             ticks: u32::MAX,
+            tick_ns: u32::MAX,
             bad_messages: u32::MAX,
             chunks_refused: u32::MAX,
             worst_period_us: u32::MAX,
@@ -452,6 +473,13 @@ mod tests {
             setpoint_seq: u32::MAX,
             status: u32::MAX,
             events: u32::MAX,
+            detail: EventDetail {
+                setpoints_lost: u32::MAX,
+                plant_states_lost: u32::MAX,
+                commands_behind: u32::MAX,
+                stuck: Some((u8::MAX, f32::MAX)),
+                hold_silence_us: u32::MAX,
+            },
             tensions: heapless::Vec::from_slice(&[f32::MAX; 8]).unwrap(),
         });
         assert!(postcard::to_slice(&c, &mut buf).unwrap().len() <= MAX_UP_PAYLOAD);

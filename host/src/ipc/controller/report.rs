@@ -269,10 +269,7 @@ impl FaultLog {
             self.detect(FaultKind::BadQuaternion, now_ns, None, n, detail);
         }
         if ev.has(event::OUTSIDE_WORKSPACE) {
-            log::warn!(
-                "controller: setpoint outside the workspace held ({} so far)",
-                counters.rejected_workspace
-            );
+            log::warn!("controller: setpoint outside the workspace held");
             let n = counters.rejected_workspace as f64;
             let detail = "setpoint outside the net's workspace: target held";
             self.detect(FaultKind::OutsideWorkspace, now_ns, None, n, detail);
