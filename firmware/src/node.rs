@@ -12,9 +12,10 @@
 //!
 //! **Lock-step mode** (docs/design.md §5.7): a [`Down::Step`] runs one
 //! period at once, at the Step's time, on what arrived before it, and
-//! from then on the timer runs no periods (until a new Setup). A Step that
-//! is the first since the Setup also starts the period's clock at its
-//! time, so no input of a period comes from the chip's own clock.
+//! from then on the timer runs no periods (until a new Setup). The first
+//! Step since a Setup starts the period afresh at its time (keeping any
+//! update chunks): what the timer ran before it is dropped, so no input of
+//! a period comes from the chip's own clock.
 //!
 //! Before a configuration arrives the motors get nothing and the node
 //! announces itself with a Hello every [`TELEMETRY_EVERY`] ticks. Garbage,
@@ -325,10 +326,11 @@ impl<const U: usize> Core<U> {
             self.bad_messages = self.bad_messages.wrapping_add(1);
             return;
         };
-        if period.counters().periods == 0 {
-            // The Setup configured the period at the chip's clock, which
-            // the host does not know: start it at the Step's time instead,
-            // keeping any update chunks that came meanwhile.
+        if !self.lockstep {
+            // The Setup configured the period at the chip's clock, and the
+            // timer may have run periods since, neither of which the host
+            // knows: start afresh at the Step's time instead, keeping any
+            // update chunks that came meanwhile.
             let mut fresh = Period::new(*period.config(), now_ns);
             core::mem::swap(fresh.update(), period.update());
             *period = fresh;
@@ -404,7 +406,10 @@ impl<const U: usize> Core<U> {
                 self.pending.hello_asked = true;
                 let hash = s.hash();
                 if self.period.is_some() && hash == self.setup_hash {
-                    return; // the running configuration: keep the loop
+                    // The running configuration: keep the loop (and forget
+                    // a refusal before it: the last Setup was not refused).
+                    self.setup_error = 0;
+                    return;
                 }
                 match period_config(s) {
                     Ok(cfg) => {
