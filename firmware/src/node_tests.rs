@@ -313,7 +313,7 @@ fn setups_refused_kept_and_replaced() {
 fn garbage_and_truncated_frames_between_messages_are_counted_and_cost_no_period() {
     let mut r = configured();
     let mut bad_messages = 0;
-    for k in 0..u32::try_from(TELEMETRY_EVERY).unwrap() {
+    for k in 0..TELEMETRY_EVERY {
         r.send(&setpoint(k + 1));
         match k % 4 {
             // Garbage ended by a delimiter.
@@ -343,7 +343,7 @@ fn garbage_and_truncated_frames_between_messages_are_counted_and_cost_no_period(
             k + 1,
             "the setpoint before the Step is taken"
         );
-        if k + 1 == u32::try_from(TELEMETRY_EVERY).unwrap() {
+        if k + 1 == TELEMETRY_EVERY {
             let t = telemetry(&ups).unwrap();
             assert_eq!(t.frames.cobs_errors + t.frames.crc_errors, 50, "{t:?}");
             assert_eq!(t.bad_messages, bad_messages, "{t:?}");
