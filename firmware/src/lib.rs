@@ -43,6 +43,8 @@
 extern crate std;
 
 #[cfg(test)]
+mod node_tests;
+#[cfg(test)]
 mod swap_tests;
 #[cfg(test)]
 mod tests;

@@ -10,6 +10,13 @@
 //! 2. run the period (once configured) and apply its tensions;
 //! 3. send the command, and every [`TELEMETRY_EVERY`] ticks the counters.
 //!
+//! **Lock-step mode** (docs/design.md §5.7): a [`Down::Step`] runs one
+//! period at once, at the Step's time, on what arrived before it, and
+//! from then on the timer runs no periods (until a new Setup). The first
+//! Step since a Setup starts the period afresh at its time (keeping any
+//! update chunks): what the timer ran before it is dropped, so no input of
+//! a period comes from the chip's own clock.
+//!
 //! Before a configuration arrives the motors get nothing and the node
 //! announces itself with a Hello every [`TELEMETRY_EVERY`] ticks. Garbage,
 //! truncated, oversized or undecodable frames are counted and dropped by
@@ -19,7 +26,7 @@ use tendril_shared::link::messages::{
     Command, Down, EventDetail, Feedback, Hello, Setpoint, Setup, Telemetry, Up, MAX_DOWN_PAYLOAD,
     MAX_UP_PAYLOAD, PROTOCOL_VERSION, TELEMETRY_EVERY,
 };
-use tendril_shared::link::{encode, max_frame_len, FrameDecoder};
+use tendril_shared::link::{encode, max_frame_len, FrameCounters, FrameDecoder};
 use tendril_shared::{CoContraction, TendonLimits, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS, POSE_DIM};
 
 use crate::board::Board;
@@ -167,6 +174,8 @@ struct Core<const U: usize> {
     last_hold_tick: u32,
     last_hold_silence_us: u32,
     last_telemetry_tick: u32,
+    /// A Step came since the last Setup: the timer runs no periods.
+    lockstep: bool,
 }
 
 /// The controller node; `U` is the weight-update buffer's size, bytes.
@@ -222,8 +231,15 @@ impl<const U: usize> Node<U> {
                 last_hold_tick: 0,
                 last_hold_silence_us: 0,
                 last_telemetry_tick: 0,
+                lockstep: false,
             },
         }
+    }
+
+    /// Whether the node is in lock-step mode (a [`Down::Step`] came since
+    /// the last Setup).
+    pub fn lockstep(&self) -> bool {
+        self.core.lockstep
     }
 
     /// The running period, once configured.
@@ -246,11 +262,18 @@ impl<const U: usize> Node<U> {
         loop {
             let n = board.link_read(&mut buf);
             for &b in buf.get(..n).unwrap_or(&[]) {
+                let mut step = None;
                 if let Some(Ok(payload)) = self.rx.push_raw(b) {
                     match postcard::from_bytes::<Down<'_>>(payload) {
+                        Ok(Down::Step { now_ns }) => step = Some(now_ns),
                         Ok(msg) => core.handle(&msg, t0),
                         Err(_) => core.bad_messages = core.bad_messages.wrapping_add(1),
                     }
+                }
+                // Run at once, so the messages after the Step (already in
+                // this read) go to the next period, as the host meant.
+                if let Some(now_ns) = step {
+                    core.step(board, store, now_ns, self.rx.counters());
                 }
             }
             if n < buf.len() {
@@ -268,11 +291,14 @@ impl<const U: usize> Node<U> {
             });
             core.send(board, &hello);
         }
-        // 2. The period, every `per` ticks.
-        let Some(period) = core.period.as_mut() else {
+        // 2. The period, every `per` ticks (none in lock-step mode).
+        let Some(period) = core.period.as_ref() else {
             core.pending.inputs = Inputs::default();
             return;
         };
+        if core.lockstep {
+            return;
+        }
         let per =
             (period.config().period_ns / u64::from(core.tick_ns.max(1))).clamp(1, 1 << 16) as u32;
         core.since_period = core.since_period.saturating_add(1).saturating_add(missed);
@@ -285,7 +311,59 @@ impl<const U: usize> Node<U> {
         input.now_ns = t0;
         input.missed_ticks = missed_periods;
         core.pending.inputs = Inputs::default();
-        let out = period.run(store, &input);
+        core.run_period(board, store, &input, self.rx.counters(), t0);
+    }
+}
+
+impl<const U: usize> Core<U> {
+    /// A [`Down::Step`]: one period now, at `now_ns`.
+    fn step<B, S>(&mut self, board: &mut B, store: &mut S, now_ns: u64, frames: FrameCounters)
+    where
+        B: Board,
+        S: NetStore<POSE_DIM, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS> + ?Sized,
+    {
+        let t0 = board.now_ns();
+        let Some(period) = self.period.as_mut() else {
+            // Nothing to step before a configuration.
+            self.bad_messages = self.bad_messages.wrapping_add(1);
+            return;
+        };
+        if !self.lockstep {
+            // The Setup configured the period at the chip's clock, and the
+            // timer may have run periods since, neither of which the host
+            // knows: start afresh at the Step's time instead, keeping any
+            // update chunks that came meanwhile.
+            let mut fresh = Period::new(*period.config(), now_ns);
+            core::mem::swap(fresh.update(), period.update());
+            *period = fresh;
+        }
+        self.lockstep = true;
+        self.since_period = 0;
+        let mut input = self.pending.inputs;
+        input.now_ns = now_ns;
+        input.missed_ticks = 0;
+        self.pending.inputs = Inputs::default();
+        self.run_period(board, store, &input, frames, t0);
+    }
+
+    /// Run the period on `input`, apply and send its command, and now and
+    /// then the counters; `t0` is when the work began (the board's clock).
+    fn run_period<B, S>(
+        &mut self,
+        board: &mut B,
+        store: &mut S,
+        input: &Inputs,
+        frames: FrameCounters,
+        t0: u64,
+    ) where
+        B: Board,
+        S: NetStore<POSE_DIM, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS> + ?Sized,
+    {
+        let core = self;
+        let Some(period) = core.period.as_mut() else {
+            return;
+        };
+        let out = period.run(store, input);
         if out.events.has(crate::period::event::WATCHDOG_HOLD) {
             core.last_hold_tick = core.ticks;
             core.last_hold_silence_us = (out.events.hold_silence_ns / 1000) as u32;
@@ -309,7 +387,7 @@ impl<const U: usize> Node<U> {
             core.last_telemetry_tick = core.ticks;
             let t = Up::Telemetry(Telemetry {
                 counters,
-                frames: self.rx.counters(),
+                frames,
                 rx_overruns: 0,
                 tx_dropped: core.tx_dropped,
                 ticks: core.ticks,
@@ -325,21 +403,7 @@ impl<const U: usize> Node<U> {
         let took = board.now_ns().saturating_sub(t0);
         core.worst_period_ns = core.worst_period_ns.max(took);
     }
-}
 
-/// The values of `e` for the wire (saturated to `u32`).
-fn detail_of(e: &crate::period::Events) -> EventDetail {
-    let sat = |v: u64| u32::try_from(v).unwrap_or(u32::MAX);
-    EventDetail {
-        setpoints_lost: sat(e.setpoints_lost),
-        plant_states_lost: sat(e.plant_states_lost),
-        commands_behind: sat(e.commands_behind),
-        stuck: e.stuck,
-        hold_silence_us: sat(e.hold_silence_ns / 1000),
-    }
-}
-
-impl<const U: usize> Core<U> {
     fn handle(&mut self, msg: &Down<'_>, now_ns: u64) {
         match msg {
             Down::Hello { .. } => self.pending.hello_asked = true,
@@ -347,7 +411,10 @@ impl<const U: usize> Core<U> {
                 self.pending.hello_asked = true;
                 let hash = s.hash();
                 if self.period.is_some() && hash == self.setup_hash {
-                    return; // the running configuration: keep the loop
+                    // The running configuration: keep the loop (and forget
+                    // a refusal before it: the last Setup was not refused).
+                    self.setup_error = 0;
+                    return;
                 }
                 match period_config(s) {
                     Ok(cfg) => {
@@ -356,11 +423,14 @@ impl<const U: usize> Core<U> {
                         self.setup_hash = hash;
                         self.setup_error = 0;
                         self.last_tangent = None;
+                        self.lockstep = false;
                     }
                     Err(e) => self.setup_error = e,
                 }
             }
             Down::Setpoint(s) => self.setpoint(s),
+            // Taken by `Node::tick`, which has the board and the store.
+            Down::Step { .. } => {}
             Down::Feedback(f) => self.feedback(f),
             Down::Chunk {
                 offset,
@@ -441,5 +511,17 @@ impl<const U: usize> Core<U> {
         if self.tx_broken {
             self.tx_dropped = self.tx_dropped.wrapping_add(1);
         }
+    }
+}
+
+/// The values of `e` for the wire (saturated to `u32`).
+fn detail_of(e: &crate::period::Events) -> EventDetail {
+    let sat = |v: u64| u32::try_from(v).unwrap_or(u32::MAX);
+    EventDetail {
+        setpoints_lost: sat(e.setpoints_lost),
+        plant_states_lost: sat(e.plant_states_lost),
+        commands_behind: sat(e.commands_behind),
+        stuck: e.stuck,
+        hold_silence_us: sat(e.hold_silence_ns / 1000),
     }
 }

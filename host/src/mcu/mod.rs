@@ -12,6 +12,7 @@
 pub mod bridge;
 mod chip;
 mod link;
+pub mod trace;
 
 pub use chip::{build_image, locate_bringup_image, locate_image, Chip, QEMU, TARGET};
 pub use link::McuLink;

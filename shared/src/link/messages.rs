@@ -26,7 +26,12 @@ use crate::MAX_TENDONS;
 
 /// Version of this message set; a chip and host of different versions
 /// refuse to run together (the host says which to rebuild).
-pub const PROTOCOL_VERSION: u16 = 1;
+///
+/// 2: [`Down::Step`] (lock-step mode). It is appended as the last variant,
+/// so every older message keeps its postcard tag, but a version-1 chip
+/// would count a Step as a bad message and keep running on its timer: the
+/// host must know the chip understands it, hence the bump.
+pub const PROTOCOL_VERSION: u16 = 2;
 
 /// The chip sends [`Up::Telemetry`] every this many ticks of its timer
 /// (100 ms at 1 kHz), and a Hello as often while unconfigured.
@@ -286,6 +291,15 @@ pub enum Down<'a> {
         /// At most [`MAX_CHUNK`] bytes.
         #[serde(borrow)]
         bytes: &'a [u8],
+    },
+    /// Lock-step: run one period now, at `now_ns`, on what arrived before
+    /// this message, and send its [`Up::Command`]; from the first Step on
+    /// the chip's timer no longer runs periods (until a new Setup). The
+    /// host then decides every input of every period, messages and times,
+    /// so a recorded trace replays bit for bit (docs/design.md §5.7).
+    Step {
+        /// The period's time, ns (the host's clock, not the chip's).
+        now_ns: u64,
     },
 }
 

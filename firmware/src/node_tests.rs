@@ -1,0 +1,417 @@
+//! Unit tests of the controller node ([`crate::node`]) on an in-process
+//! board: lock-step mode, Setup handling, garbage between messages, and a
+//! weight update sent in chunks. The board is a byte queue each way and a
+//! clock the test advances, so every input is the test's.
+
+use std::boxed::Box;
+use std::collections::VecDeque;
+use std::vec::Vec;
+
+use tendril_shared::link::messages::{
+    Command, Down, Feedback, Hello, Setpoint, Setup, Telemetry, Up, WirePose, MAX_CHUNK,
+    MAX_UP_PAYLOAD, PROTOCOL_VERSION, TELEMETRY_EVERY,
+};
+use tendril_shared::link::{encode, encode_raw, max_frame_len, FrameDecoder};
+
+use crate::board::Board;
+use crate::node::{setup_error, Node, MCU_UPDATE_CAPACITY};
+use crate::period::event;
+use crate::{McuNet, McuSlots, DEFAULT_NET, DEFAULT_NET_CRC};
+
+const TICK: u32 = 1_000_000;
+
+#[derive(Default)]
+struct TestBoard {
+    rx: VecDeque<u8>,
+    tx: Vec<u8>,
+    now: u64,
+    tensions: Vec<f32>,
+}
+
+impl Board for TestBoard {
+    fn wait_tick(&mut self) -> u32 {
+        self.now += u64::from(TICK);
+        0
+    }
+    fn now_ns(&self) -> u64 {
+        self.now
+    }
+    fn set_tensions(&mut self, tensions: &[f32]) {
+        self.tensions = tensions.to_vec();
+    }
+    fn link_read(&mut self, buf: &mut [u8]) -> usize {
+        let n = buf.len().min(self.rx.len());
+        for (d, s) in buf.iter_mut().zip(self.rx.drain(..n)) {
+            *d = s;
+        }
+        n
+    }
+    fn link_write(&mut self, bytes: &[u8]) -> usize {
+        self.tx.extend_from_slice(bytes);
+        bytes.len()
+    }
+}
+
+struct Rig {
+    node: Box<Node<MCU_UPDATE_CAPACITY>>,
+    board: TestBoard,
+    ram: Box<McuNet>,
+    up: FrameDecoder<{ max_frame_len(MAX_UP_PAYLOAD) }>,
+}
+
+impl Rig {
+    fn new() -> Rig {
+        Rig {
+            node: Box::new(Node::new(DEFAULT_NET_CRC, TICK)),
+            board: TestBoard::default(),
+            ram: Box::new(McuNet::empty()),
+            up: FrameDecoder::new(),
+        }
+    }
+
+    fn send(&mut self, msg: &Down<'_>) {
+        let mut buf = [0u8; 512];
+        let f = encode(msg, &mut buf).unwrap();
+        self.board.rx.extend(f.iter().copied());
+    }
+
+    /// One tick; what the node sent.
+    fn tick(&mut self) -> Vec<Up> {
+        let missed = self.board.wait_tick();
+        let mut store = McuSlots::new(&DEFAULT_NET, &mut self.ram);
+        self.node.tick(&mut self.board, &mut store, missed);
+        let mut out = Vec::new();
+        for b in self.board.tx.drain(..) {
+            if let Some(r) = self.up.push::<Up>(b) {
+                out.push(r.unwrap());
+            }
+        }
+        out
+    }
+
+    fn step(&mut self, now_ns: u64) -> Vec<Up> {
+        self.send(&Down::Step { now_ns });
+        self.tick()
+    }
+}
+
+fn commands(ups: &[Up]) -> Vec<Command> {
+    ups.iter()
+        .filter_map(|u| match u {
+            Up::Command(c) => Some(c.clone()),
+            _ => None,
+        })
+        .collect()
+}
+
+fn hello(ups: &[Up]) -> Option<Hello> {
+    ups.iter().rev().find_map(|u| match u {
+        Up::Hello(h) => Some(*h),
+        _ => None,
+    })
+}
+
+fn telemetry(ups: &[Up]) -> Option<Telemetry> {
+    ups.iter().find_map(|u| match u {
+        Up::Telemetry(t) => Some(*t),
+        _ => None,
+    })
+}
+
+/// A 1 kHz configuration of the default net's four tendons.
+fn setup() -> Setup {
+    Setup {
+        n_tendons: 4,
+        max_tension: [10.0; 8],
+        min_tension: [0.0; 8],
+        slew_rate: [200.0; 8],
+        cocontraction_sets: [0; 8],
+        cocontraction_weights: [0.0; 8],
+        period_ns: TICK,
+        watchdog_ns: 5 * TICK / 2 * 10,
+        max_dt_ns: 5 * TICK,
+        quaternion_tolerance: 1e-2,
+        box_margin: 0.05,
+        ki: 0.0,
+        correction_limit: 0.003,
+        feedback_timeout_ns: 20 * TICK,
+        correction_window: 0.002,
+        lead_s: 0.0,
+        plant_stale_ns: 20 * TICK,
+        stuck_enabled: false,
+        stuck_model_gain: 0.05,
+        stuck_error_n: 0.5,
+        stuck_persist_ns: 100 * TICK,
+    }
+}
+
+/// The middle of the default net's input box, its quaternion normalised.
+fn pose() -> [f32; 7] {
+    let lo = DEFAULT_NET.input_lo();
+    let hi = DEFAULT_NET.input_hi();
+    let mut p = [0.0f32; 7];
+    for (i, v) in p.iter_mut().enumerate() {
+        *v = 0.5 * (lo[i] + hi[i]);
+    }
+    let n = p[3..].iter().map(|v| v * v).sum::<f32>().sqrt();
+    for v in &mut p[3..] {
+        *v /= n;
+    }
+    p
+}
+
+fn setpoint(seq: u32) -> Down<'static> {
+    Down::Setpoint(Setpoint {
+        seq,
+        count: 1,
+        superseded_nonfinite: 0,
+        pose: WirePose::from_pose(&pose()),
+        velocity: None,
+        tangent: None,
+    })
+}
+
+fn feedback(seq: u32, command_seq: u32) -> Down<'static> {
+    Down::Feedback(Feedback {
+        seq,
+        count: 1,
+        command_seq,
+        tensions: heapless::Vec::from_slice(&[1000, 1000, 1000, 1000]).unwrap(),
+        tip: [0, 0, 390_000],
+    })
+}
+
+/// Configured (the Setup answered with a Hello), not yet stepped.
+fn configured() -> Rig {
+    let mut r = Rig::new();
+    r.send(&Down::Hello {
+        protocol: PROTOCOL_VERSION,
+    });
+    r.send(&Down::Setup(setup()));
+    let h = hello(&r.tick()).unwrap();
+    assert_eq!(h.setup_hash, setup().hash());
+    assert_eq!(h.setup_error, 0);
+    assert_eq!(h.net_hash, DEFAULT_NET_CRC);
+    r
+}
+
+#[test]
+fn a_step_runs_one_period_at_its_time_and_stops_the_timer() {
+    let mut r = configured();
+    // On the timer: a command every tick (1 ms period, 1 ms tick).
+    let timer: Vec<Command> = (0..5).flat_map(|_| commands(&r.tick())).collect();
+    assert_eq!(timer.len(), 5);
+    assert!(!r.node.lockstep());
+    // The first Step starts the period afresh: its command is the first.
+    r.send(&setpoint(1));
+    let c = commands(&r.step(1_000_000_000));
+    assert_eq!(c.len(), 1, "one command per Step");
+    assert_eq!((c[0].seq, c[0].setpoint_seq), (1, 1));
+    assert!(r.node.lockstep());
+    assert_eq!(r.node.period().unwrap().counters().periods, 1);
+    // The timer runs nothing any more, however long.
+    for _ in 0..50 {
+        assert!(commands(&r.tick()).is_empty());
+    }
+    // The period's time is the Step's: 50 ticks of silence on the board's
+    // clock are no silence for the watchdog (25 ms), the Step's 1 ms is.
+    r.send(&setpoint(2));
+    let c = commands(&r.step(1_001_000_000));
+    assert_eq!((c[0].seq, c[0].setpoint_seq), (2, 2));
+    assert_eq!(c[0].events & event::WATCHDOG_HOLD, 0);
+    // Silence in the Steps' time trips it.
+    let c = commands(&r.step(1_100_000_000));
+    assert_ne!(c[0].events & event::WATCHDOG_HOLD, 0, "{c:?}");
+    // Two Steps in one read: two periods, the messages between them going
+    // to the second.
+    r.send(&Down::Step {
+        now_ns: 1_101_000_000,
+    });
+    r.send(&setpoint(3));
+    r.send(&Down::Step {
+        now_ns: 1_102_000_000,
+    });
+    let c = commands(&r.tick());
+    assert_eq!(c.len(), 2);
+    assert_eq!((c[0].seq, c[0].setpoint_seq), (4, 2));
+    assert_eq!((c[1].seq, c[1].setpoint_seq), (5, 3));
+}
+
+#[test]
+fn the_same_inputs_in_lock_step_give_the_same_commands_whatever_the_board_clock() {
+    let run = |idle_ticks: usize| {
+        let mut r = configured();
+        for _ in 0..idle_ticks {
+            r.tick();
+        }
+        let mut out = Vec::new();
+        for k in 0..300u32 {
+            if k % 3 == 0 {
+                r.send(&setpoint(k + 1));
+            }
+            r.send(&feedback(k + 1, k));
+            out.extend(commands(&r.step(5_000_000 + u64::from(k) * 1_000_000)));
+            // The board's clock runs on at its own pace.
+            for _ in 0..(k as usize % 4) {
+                r.tick();
+            }
+        }
+        out
+    };
+    let a = run(0);
+    let b = run(37);
+    assert_eq!(a.len(), 300);
+    assert_eq!(a, b);
+}
+
+#[test]
+fn setups_refused_kept_and_replaced() {
+    let mut r = configured();
+    for k in 0..10 {
+        r.send(&setpoint(k + 1));
+        r.step(u64::from(k) * 1_000_000);
+    }
+    // Refused: the Hello says why, the running period goes on.
+    let mut bad = setup();
+    bad.n_tendons = 0;
+    r.send(&Down::Setup(bad));
+    let h = hello(&r.tick()).unwrap();
+    assert_eq!(h.setup_error, setup_error::TENDONS);
+    assert_eq!(h.setup_hash, setup().hash());
+    let mut bad = setup();
+    bad.max_tension[1] = f32::NAN;
+    r.send(&Down::Setup(bad));
+    assert_eq!(hello(&r.tick()).unwrap().setup_error, setup_error::LIMITS);
+    let mut bad = setup();
+    bad.period_ns = 0;
+    r.send(&Down::Setup(bad));
+    assert_eq!(hello(&r.tick()).unwrap().setup_error, setup_error::TIMING);
+    let c = commands(&r.step(10_000_000));
+    assert_eq!(c[0].seq, 11, "a refused Setup keeps the running period");
+    // The same Setup: kept, still in lock-step, counters keep counting.
+    r.send(&Down::Setup(setup()));
+    let h = hello(&r.tick()).unwrap();
+    assert_eq!((h.setup_hash, h.setup_error), (setup().hash(), 0));
+    assert!(r.node.lockstep());
+    let c = commands(&r.step(11_000_000));
+    assert_eq!(c[0].seq, 12);
+    assert_eq!(r.node.period().unwrap().counters().periods, 12);
+    // A different one: a new period, back on the timer until a Step.
+    let mut other = setup();
+    other.slew_rate = [150.0; 8];
+    r.send(&Down::Setup(other));
+    let ups = r.tick();
+    assert_eq!(hello(&ups).unwrap().setup_hash, other.hash());
+    assert!(!r.node.lockstep());
+    let c = commands(&r.tick());
+    assert_eq!(c.len(), 1, "timer-driven again");
+    let c = commands(&r.step(50_000_000));
+    assert_eq!(c[0].seq, 1, "the first Step after a Setup starts afresh");
+}
+
+#[test]
+fn garbage_and_truncated_frames_between_messages_are_counted_and_cost_no_period() {
+    let mut r = configured();
+    let (mut bad_messages, mut frame_errors, mut seen) = (0, 0, 0);
+    // Telemetry comes every TELEMETRY_EVERY ticks: run until two came.
+    for k in 0..3 * TELEMETRY_EVERY {
+        r.send(&setpoint(k + 1));
+        match k % 4 {
+            // Garbage ended by a delimiter.
+            0 => {
+                r.board.rx.extend([0x55, 0x13, 0xFF, 0x02, 0x00]);
+                frame_errors += 1;
+            }
+            // A truncated frame: the next frame's delimiter ends it.
+            1 => {
+                let mut buf = [0u8; 512];
+                let f = encode(&feedback(k, k), &mut buf).unwrap();
+                let cut = f.len() / 2;
+                r.board.rx.extend(f[..cut].iter().copied());
+                r.board.rx.push_back(0);
+                frame_errors += 1;
+            }
+            // A good frame whose payload is no message (variant 200).
+            2 => {
+                let mut buf = [0u8; 512];
+                let f = encode_raw(&[200, 1, 2], &mut buf).unwrap();
+                r.board.rx.extend(f.iter().copied());
+                bad_messages += 1;
+            }
+            _ => {}
+        }
+        let ups = r.step(u64::from(k) * 1_000_000);
+        let c = commands(&ups);
+        assert_eq!(c.len(), 1, "period {k}");
+        assert_eq!(
+            c[0].setpoint_seq,
+            k + 1,
+            "the setpoint before the Step is taken"
+        );
+        if let Some(t) = telemetry(&ups) {
+            seen += 1;
+            assert_eq!(
+                t.frames.cobs_errors + t.frames.crc_errors,
+                frame_errors,
+                "{t:?}"
+            );
+            assert_eq!(t.bad_messages, bad_messages, "{t:?}");
+            assert_eq!(t.counters.periods, k + 1, "one period per Step");
+        }
+    }
+    assert!(seen >= 2, "{seen} telemetry messages");
+}
+
+fn send_update(r: &mut Rig, blob: &[u8], first_period: u64) -> Vec<Command> {
+    let mut out = Vec::new();
+    let total = u32::try_from(blob.len()).unwrap();
+    for (i, chunk) in blob.chunks(MAX_CHUNK).enumerate() {
+        r.send(&Down::Chunk {
+            offset: u32::try_from(i * MAX_CHUNK).unwrap(),
+            total,
+            bytes: chunk,
+        });
+        out.extend(commands(&r.step((first_period + i as u64) * 1_000_000)));
+    }
+    for k in 0..20 {
+        let at = first_period + (blob.len() / MAX_CHUNK) as u64 + 1 + k;
+        out.extend(commands(&r.step(at * 1_000_000)));
+    }
+    out
+}
+
+#[test]
+fn a_chunked_update_is_swapped_in_and_a_corrupted_one_rejected() {
+    let blob: &[u8] = include_bytes!("../vectors/default.tnet");
+    let mut r = configured();
+    r.step(0);
+    // Corrupted in the middle (weights): the check refuses it.
+    let mut bad = blob.to_vec();
+    let mid = bad.len() / 2;
+    bad[mid] ^= 0x5A;
+    let c = send_update(&mut r, &bad, 1);
+    let ev = c.iter().fold(0, |a, c| a | c.events);
+    assert_ne!(ev & event::WEIGHTS_REJECTED, 0);
+    assert_eq!(ev & event::WEIGHTS_SWAPPED, 0);
+    // An out-of-order chunk is refused at once, in the next command.
+    r.send(&Down::Chunk {
+        offset: 999,
+        total: u32::try_from(blob.len()).unwrap(),
+        bytes: &blob[..10],
+    });
+    let c = commands(&r.step(500_000_000));
+    assert_ne!(c[0].events & event::WEIGHTS_REJECTED, 0);
+    // The valid one swaps in.
+    let c = send_update(&mut r, blob, 501);
+    let swaps = c
+        .iter()
+        .filter(|c| c.events & event::WEIGHTS_SWAPPED != 0)
+        .count();
+    assert_eq!(
+        swaps,
+        1,
+        "{:?}",
+        c.iter().map(|c| c.events).collect::<Vec<_>>()
+    );
+    assert_eq!(r.node.period().unwrap().counters().weight_swaps, 1);
+}
