@@ -135,6 +135,8 @@ fn the_chip_settles_steps_to_fifty_microns() {
 #[test]
 fn the_chip_rejects_bad_inputs_and_swaps_nets_over_a_noisy_link() {
     let (r, _d, stderr) = sim(&[
+        // An update takes ~3.5 s over the emulated link (its chunks use
+        // the link's spare bytes): the second must not supersede the first.
         "--controller",
         "mcu",
         "--trajectory",
@@ -142,15 +144,15 @@ fn the_chip_rejects_bad_inputs_and_swaps_nets_over_a_noisy_link() {
         "--settle",
         "1",
         "--duration",
-        "8",
+        "11",
+        "--corrupt-weights-at",
+        "1.5",
         "--inject-nan-at",
         "2.0",
-        "--corrupt-weights-at",
-        "2.5",
         "--inject-outside-at",
         "4.0",
         "--swap-weights-at",
-        "5.5",
+        "6.0",
         "--link-garbage-every-ms",
         "250",
     ]);
