@@ -250,6 +250,12 @@ pub fn build_image(bin: &str) -> Result<PathBuf> {
             TARGET,
         ])
         .env("CARGO_TARGET_DIR", &dir)
+        // Built as .ci/run prebuilds it: plain rustc (CI's test build runs
+        // through clippy-driver, which would make this a second build), and
+        // the built-in net of the checkout.
+        .env_remove("RUSTC_WORKSPACE_WRAPPER")
+        .env_remove("RUSTC_WRAPPER")
+        .env_remove("TENDRIL_FW_NET")
         .stdin(Stdio::null())
         .output()
         .context("running cargo build for the chip image")?;
