@@ -115,7 +115,95 @@ pub fn closed_loop_section(
             }
         }
     }
+    if let Some(run) = runs.first() {
+        let (row, section) = chip_run(&exe, robot_file, model, out, run, quick_s)?;
+        summary.push_str(&row);
+        sections.push(section);
+    }
     summary.push('\n');
     summary.push_str(&sections.join("\n"));
     Ok(summary)
+}
+
+/// The first run once more with the chip in the loop: the controller image
+/// on an STM32F405 under QEMU, bridged over its serial link, at
+/// [`crate::mcu::bridge::MCU_RATE_HZ`] (docs/design.md §5.6). Without QEMU
+/// or the Rust target its row says what to install; the other runs stand.
+fn chip_run(
+    exe: &Path,
+    robot_file: &Path,
+    model: &Path,
+    out: &Path,
+    run: &LoopRun,
+    quick_s: Option<f64>,
+) -> anyhow::Result<(String, String)> {
+    let dir = format!("{}-mcu", run_dir(run, true));
+    let what = format!("{}, with the correction, the chip in the loop", run.label);
+    let title = format!("### 5z. {what}");
+    if let Err(e) = crate::mcu::locate_image() {
+        let why = format!("{e:#}");
+        log::warn!("closed loop {dir}: not run: {why}");
+        return Ok((
+            format!(
+                "| {} ({dir}) | on, chip | not run: {why} | | |\n",
+                run.label
+            ),
+            format!("{title}\n\nNot run: {why}.\n"),
+        ));
+    }
+    let mut sim = SimConfig::new(
+        exe.to_path_buf(),
+        robot_file.to_path_buf(),
+        ModelSource::File(model.to_path_buf()),
+        out.join(&dir),
+    );
+    sim.duration_s = quick_s.map_or(run.duration_s, |q| q.min(run.duration_s));
+    sim.planner.shape = run.shape.clone();
+    sim.set_correction(true);
+    sim.controller.rate_hz = crate::mcu::bridge::MCU_RATE_HZ;
+    sim.planner.rate_hz = crate::mcu::bridge::MCU_RATE_HZ;
+    sim.mcu = Some(crate::ipc::sim::SimMcu::default());
+    sim.label = what.clone();
+    Ok(match crate::ipc::sim::run(&sim) {
+        Ok(r) => {
+            let num = length_mm_or_dash;
+            let verdict = if r.verdict.clean {
+                String::new()
+            } else {
+                format!(" (failed: {})", r.verdict.problems.join("; "))
+            };
+            let latency =
+                r.controller
+                    .as_ref()
+                    .and_then(|c| c.link.as_ref())
+                    .map_or(String::new(), |l| {
+                        format!(
+                            "; setpoint → command p50 {:.2}, p99 {:.2} periods",
+                            l.setpoint_to_command_periods.0, l.setpoint_to_command_periods.1
+                        )
+                    });
+            (
+                format!(
+                    "| {} ({dir}), chip in the loop at {} Hz | on | {} | {} | {}{verdict}{latency} |\n",
+                    run.label,
+                    crate::mcu::bridge::MCU_RATE_HZ,
+                    num(r.rms_tracking_error_mm),
+                    num(r.max_tracking_error_mm),
+                    num(r.max_steady_state_error_mm)
+                ),
+                format!("{title}\n\n{}\n\n![sim]({dir}/sim.png)\n", r.markdown().trim()),
+            )
+        }
+        Err(e @ SimError::Interrupted) => return Err(e.into()),
+        Err(e) => {
+            log::error!("closed loop {dir}: {e}");
+            (
+                format!(
+                    "| {} ({dir}), chip in the loop | on | failed | | |\n",
+                    run.label
+                ),
+                format!("{title}\n\nThe sim failed: {e}.\n"),
+            )
+        }
+    })
 }

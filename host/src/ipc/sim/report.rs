@@ -344,6 +344,46 @@ impl SimReport {
                 let lateness = Some(c.lateness_us);
                 row("lateness p50 (µs)", us(&lateness, |s| s.p50));
                 row("lateness p99 (µs)", us(&lateness, |s| s.p99));
+                if let Some(l) = &c.link {
+                    // The chip in the loop: its link and its own counts.
+                    let (p50, p99) = l.setpoint_to_command_periods;
+                    row(
+                        "setpoint → command through the link (periods)",
+                        format!("p50 {p50:.2}, p99 {p99:.2}"),
+                    );
+                    row(
+                        "chip commands (lost on the link)",
+                        format!("{} ({})", l.commands, l.commands_lost),
+                    );
+                    if let Some(t) = &l.chip {
+                        row(
+                            "chip periods (missed ticks)",
+                            format!("{} ({})", t.counters.periods, t.counters.missed_ticks),
+                        );
+                        let f = &t.frames;
+                        row(
+                            "chip frames received (dropped: CRC, COBS, decode, oversized)",
+                            format!(
+                                "{} ({}, {}, {}, {})",
+                                f.frames_ok,
+                                f.crc_errors,
+                                f.cobs_errors,
+                                f.decode_errors,
+                                f.oversized
+                            ),
+                        );
+                    }
+                    if l.garbage_bytes_sent > 0 {
+                        row(
+                            "garbage bytes injected on the link",
+                            l.garbage_bytes_sent.to_string(),
+                        );
+                    }
+                    row(
+                        "bytes to / from the chip",
+                        format!("{} / {}", l.bytes_down, l.bytes_up),
+                    );
+                }
             }
             None => row("controller statistics", "– (none written)".into()),
         }
