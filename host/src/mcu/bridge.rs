@@ -58,6 +58,10 @@ pub const CHUNK_EVERY_MS: u64 = 20;
 /// the emulated link).
 pub const CHUNK_MAX_BACKLOG: usize = 256;
 
+/// A link backlog this large (bytes) means the loop's rate is more than
+/// the link carries: said once.
+pub const BACKLOG_WARN_BYTES: usize = 2048;
+
 /// How often the bridge looks for messages, µs.
 pub const POLL_US: u64 = 100;
 
@@ -395,6 +399,7 @@ pub fn run(
     let mut update_seq = 0u64;
     let mut last_garbage = start;
     let mut last_chunk = 0u64;
+    let mut backlog_warned = false;
     let mut last_flush = start;
     let mut row = vec![0.0f64; 6 + n];
     let outcome: Result<(), IpcError> = loop {
@@ -467,6 +472,17 @@ pub fn run(
             }
         }
 
+        let backlog = chip.backlog();
+        if backlog > BACKLOG_WARN_BYTES && !backlog_warned {
+            backlog_warned = true;
+            log::warn!(
+                "controller: the link to the chip is falling behind ({backlog} bytes waiting): \
+                 at {:.0} Hz the loop needs ~{:.0} kB/s, the emulated link carries ~10 kB/s \
+                 (lower --rate)",
+                1e9 / period_ns as f64,
+                70.0 * 1e9 / period_ns as f64 / 1e3
+            );
+        }
         chip.poll(Duration::from_micros(POLL_US));
         let t_rx = now_ns();
         let mut published = false;

@@ -157,6 +157,9 @@ pub fn build_report(
     if controller.is_none() {
         problems.push("the controller wrote no statistics".into());
     }
+    if let Some(link) = controller.as_ref().and_then(|c| c.link.as_ref()) {
+        problems.extend(link_problems(link));
+    }
     if plant.commands_checked == 0 {
         problems.push("the plant range-checked no command".into());
     }
@@ -226,6 +229,40 @@ pub fn build_report(
         series,
     })
 }
+
+/// What says the chip's link could not carry the loop: commands lost,
+/// periods the chip missed, or setpoints waiting more than
+/// [`LINK_P99_MAX_PERIODS`] for their command (a rate the link cannot
+/// carry: the frames queue up).
+fn link_problems(link: &crate::mcu::bridge::LinkStats) -> Vec<String> {
+    let mut out = Vec::new();
+    if link.commands_lost > 0 {
+        out.push(format!(
+            "{} of the chip's commands were lost on the link",
+            link.commands_lost
+        ));
+    }
+    if let Some(t) = &link.chip {
+        if t.counters.missed_ticks > 0 {
+            out.push(format!(
+                "the chip missed {} periods",
+                t.counters.missed_ticks
+            ));
+        }
+    }
+    let p99 = link.setpoint_to_command_periods.1;
+    if p99 > LINK_P99_MAX_PERIODS {
+        out.push(format!(
+            "setpoints waited up to {p99:.1} periods (p99) for the chip's command: the link \
+             cannot carry this rate (lower --rate; docs/design.md §5.6)"
+        ));
+    }
+    out
+}
+
+/// See [`link_problems`]: 2 periods is the target, a swap over the link
+/// may take one more; beyond 5 the link is saturated.
+pub const LINK_P99_MAX_PERIODS: f64 = 5.0;
 
 /// The controller's statistics: one generation's, or with the chip in the
 /// loop and the link cut and restored, the last bridge's (the chip's counts
