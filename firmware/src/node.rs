@@ -388,7 +388,7 @@ impl<const U: usize> Core<U> {
             let t = Up::Telemetry(Telemetry {
                 counters,
                 frames,
-                rx_overruns: 0,
+                rx_overruns: board.link_overruns(),
                 tx_dropped: core.tx_dropped,
                 ticks: core.ticks,
                 tick_ns: core.tick_ns,

@@ -5,8 +5,10 @@
 //! The controller's period logic is written over `&mut impl Board`, so the
 //! same code runs on every chip that implements it
 //! ([`stm32f405::Stm32f405`], cargo feature `stm32f405`, MCU builds only).
-//! There is no in-process host double: the host board is the iceoryx2
-//! plant process, which talks to the controller through the link.
+//! On the host the same period runs in the iceoryx2 controller process
+//! (no board: its clock and transport stand in for one); the node's unit
+//! tests and the trace replay drive the node through an in-process byte
+//! board, the host build of the very code the chip runs.
 //!
 //! **Feedback comes over the link.** The chip has no sensor inputs in this
 //! contract: measured tensions and the tip pose are measured by the plant
@@ -62,4 +64,11 @@ pub trait Board {
     /// whole frames only: check the free space first with a frame-sized
     /// write, or drop the frame).
     fn link_write(&mut self, bytes: &[u8]) -> usize;
+
+    /// Received bytes the board had to drop (receive queue full or a
+    /// hardware overrun) since start: reported in the node's telemetry. A
+    /// board that cannot lose bytes keeps the default, 0.
+    fn link_overruns(&self) -> u32 {
+        0
+    }
 }

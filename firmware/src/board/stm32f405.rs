@@ -352,6 +352,10 @@ impl Stm32f405 {
 }
 
 impl Board for Stm32f405 {
+    fn link_overruns(&self) -> u32 {
+        RX_OVERRUNS.load(Ordering::Relaxed)
+    }
+
     fn wait_tick(&mut self) -> u32 {
         loop {
             drain_tx(DRAIN_BURST);

@@ -24,7 +24,7 @@ pub const DEFAULT_RATE_HZ: f64 = 1000.0;
 #[derive(Args, Clone, Debug)]
 pub struct LoopOpts {
     /// Control rate, Hz [default: 1000; 100 with the chip in the loop, whose
-    /// emulated serial link carries ~13 kB/s: see docs/design.md §5.6].
+    /// emulated serial link carries ~10 kB/s in a loaded loop: docs/design.md §5.6].
     #[arg(long)]
     pub rate: Option<f64>,
     /// Spin this long before each deadline instead of sleeping, µs (0 = pure sleep).

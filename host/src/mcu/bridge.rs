@@ -38,11 +38,13 @@ use crate::ipc::{IpcError, PeerWatch, StopWatch};
 use crate::robot::Robot;
 
 /// The loop's rate with the chip in the loop unless told otherwise, Hz:
-/// QEMU 7.2's STM32 USART takes one received byte per hand-off between its
-/// vCPU and main-loop threads (~75 µs), ~13 kB/s; a setpoint and a
-/// feedback frame take ~70 bytes, so 100 periods a second use about half
-/// of it and leave room for weight-update chunks and tangents. A real board
-/// at 2 Mbaud carries 1 kHz.
+/// QEMU 7.2's STM32 USART takes one received byte at a time (12.6 kB/s
+/// with multi-threaded TCG, 74 kB/s single-threaded in an echo test, about
+/// 10–12 kB/s usable in a loaded closed loop); a setpoint and a feedback
+/// frame take ~70 bytes, so 100 periods a second use about two thirds of
+/// it and leave room for weight-update chunks and tangents. At 1 kHz the
+/// link saturates (measured: the chip missed periods and its stuck-motor
+/// rule fired on stale feedback). A real board at 2 Mbaud carries 1 kHz.
 pub const MCU_RATE_HZ: f64 = 100.0;
 
 /// Bytes of a weight-update chunk the bridge sends. A chunk goes only

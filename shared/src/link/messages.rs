@@ -15,8 +15,9 @@
 //! reset the loop).
 //!
 //! Sequence numbers are `u32` on the wire (postcard varints: small while
-//! small); a message whose sequence does not advance is out of order and is
-//! dropped and counted by the period's rules.
+//! small). A sequence that does not advance is taken as a restart of its
+//! sender (a new planner or plant) by the period's rules and counted; a gap
+//! is counted as lost messages.
 
 use serde::{Deserialize, Serialize};
 
@@ -114,7 +115,7 @@ pub struct Tangent {
 }
 
 /// Fixed-point units of the link (docs/design.md §5.6): the emulated
-/// USART carries ~13 kB/s, so a setpoint and a feedback must fit in well
+/// USART carries 10–70 kB/s (docs/design.md §5.6), so a setpoint and a feedback must fit in well
 /// under 130 bytes per 10 ms period. Every quantity is an integer of a unit
 /// far below what matters to the loop (a micron, 1e-4 of a quaternion, a
 /// millinewton), sent as a postcard varint; the chip turns it back into
