@@ -24,7 +24,7 @@
 #![no_std]
 #![deny(missing_docs)]
 // Panic freedom is checked, not promised: no unwrap/expect/panic/indexing
-// outside tests (CI also checks that `tendril-fw-core` links no
+// outside tests (CI also checks that the controller image `tendril-fw-stm32` links no
 // `core::panicking` symbol: scripts/check-panic-free).
 #![cfg_attr(
     not(test),
