@@ -82,8 +82,13 @@ fn the_chip_tracks_the_circle_like_the_host_controller() {
         f(&mcu["rms_tracking_error_mm"]),
     );
     println!("circle RMS: host {rh:.4} mm, chip {rm:.4} mm");
+    // Not worse than the host controller by more than 0.05 mm. (Better is
+    // allowed: at 100 Hz the host's own RMS spreads over 0.08–0.15 mm from
+    // run to run, cause not pinned down (its tick's phase against the
+    // planner's is the suspect), while the chip's stays at 0.085–0.10 mm;
+    // BENCHMARKS.md.)
     assert!(
-        (rm - rh).abs() <= 0.05,
+        rm <= rh + 0.05,
         "chip in the loop {rm} mm vs host controller {rh} mm"
     );
     assert!(host["controller"]["link"].is_null());
