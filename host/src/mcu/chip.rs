@@ -54,6 +54,7 @@ impl Chip {
         if !image.is_file() {
             bail!("chip image {} not found", image.display());
         }
+        check_arm_elf(image)?;
         if fs::symlink_metadata(socket).is_ok() {
             fs::remove_file(socket)
                 .with_context(|| format!("removing stale socket {}", socket.display()))?;
@@ -195,6 +196,27 @@ impl Drop for Chip {
         let _ = fs::remove_file(&self.socket);
         let _ = fs::remove_file(&self.log);
     }
+}
+
+/// Refuse what is not a 32-bit ARM ELF executable (QEMU would load any
+/// file as raw code and the chip would simply never answer).
+fn check_arm_elf(image: &Path) -> Result<()> {
+    let mut head = [0u8; 20];
+    let read = fs::File::open(image)
+        .and_then(|mut f| f.read_exact(&mut head))
+        .with_context(|| format!("reading chip image {}", image.display()));
+    let ok = read.is_ok()
+        && head.starts_with(b"\x7fELF")
+        && head[4] == 1 // 32-bit
+        && u16::from_le_bytes([head[18], head[19]]) == 40; // EM_ARM
+    if !ok {
+        bail!(
+            "{} is not an ARM ELF image (build the controller with `cargo build -p \
+             tendril-firmware --features stm32f405 --bin tendril-fw-stm32 --release --target {TARGET}`)",
+            image.display()
+        );
+    }
+    Ok(())
 }
 
 /// Build the controller image (`tendril-fw-stm32`, release): see
