@@ -441,6 +441,8 @@ mod mcu {
         let mut worst_slice = 0u64;
         let mut worst_chunk = 0u64;
         let mut worst_plain = 0u64;
+        // The period whose slice installed the 7-64-4 net.
+        let mut install = 0u64;
         let mut slice_periods = 0u32;
         let mut chunk_periods = 0u32;
         let mut stack_high = 0usize;
@@ -532,6 +534,9 @@ mod mcu {
             if host.last_events & (event::WEIGHTS_SWAPPED | event::WEIGHTS_REJECTED) != 0 {
                 checking = false;
             }
+            if host.last_events & event::WEIGHTS_SWAPPED != 0 {
+                install = n;
+            }
             *slot = n.min(u64::from(u32::MAX)) as u32;
             worst = worst.max(n);
             if slice {
@@ -553,11 +558,12 @@ mod mcu {
         }
         instr.sort_unstable();
         let p50 = instr.get(instr.len() / 2).copied().unwrap_or(0);
-        let lines: [(&str, u64); 20] = [
+        let lines: [(&str, u64); 21] = [
             ("periods", u64::from(PERIODS)),
             ("worst_period_instructions", worst),
             ("p50_period_instructions", u64::from(p50)),
             ("worst_swap_slice_period_instructions", worst_slice),
+            ("install_period_instructions", install),
             ("worst_chunk_period_instructions", worst_chunk),
             ("worst_plain_period_instructions", worst_plain),
             ("swap_slice_periods", u64::from(slice_periods)),
