@@ -31,8 +31,9 @@ use tendril_shared::{CoContraction, TendonLimits, MAX_HIDDEN, MAX_TENDONS, MAX_W
 
 use crate::board::Board;
 use crate::control::{ControlConfig, IntegralConfig, SafeHold, Tangent};
-use crate::period::{FeedbackIn, Inputs, Period, PeriodConfig, SetpointIn, StuckConfig};
+use crate::period::{FeedbackIn, Inputs, Period, PeriodConfig, SetpointIn, StuckConfig, Update};
 use crate::swap::NetStore;
+use tendril_shared::counters::Counters;
 
 /// Receive frame buffer: the largest host → chip frame.
 pub const RX_FRAME: usize = max_frame_len(MAX_DOWN_PAYLOAD);
@@ -153,7 +154,10 @@ struct Pending {
 /// borrowed from the decoder, can be acted on).
 #[derive(Debug)]
 struct Core<const U: usize> {
-    period: Option<Period<U>>,
+    period: Option<Period>,
+    /// The weight update being received and checked (the chip's largest
+    /// buffer: never moved, never on the stack).
+    update: Update<U>,
     setup_hash: u32,
     setup_error: u8,
     net_hash: u32,
@@ -203,6 +207,7 @@ impl<const U: usize> Node<U> {
             rx: FrameDecoder::new(),
             core: Core {
                 period: None,
+                update: Update::new(),
                 setup_hash: 0,
                 setup_error: 0,
                 net_hash,
@@ -243,7 +248,7 @@ impl<const U: usize> Node<U> {
     }
 
     /// The running period, once configured.
-    pub fn period(&self) -> Option<&Period<U>> {
+    pub fn period(&self) -> Option<&Period> {
         self.core.period.as_ref()
     }
 
@@ -264,11 +269,7 @@ impl<const U: usize> Node<U> {
             for &b in buf.get(..n).unwrap_or(&[]) {
                 let mut step = None;
                 if let Some(Ok(payload)) = self.rx.push_raw(b) {
-                    match postcard::from_bytes::<Down<'_>>(payload) {
-                        Ok(Down::Step { now_ns }) => step = Some(now_ns),
-                        Ok(msg) => core.handle(&msg, t0),
-                        Err(_) => core.bad_messages = core.bad_messages.wrapping_add(1),
-                    }
+                    step = core.receive(payload, t0);
                 }
                 // Run at once, so the messages after the Step (already in
                 // this read) go to the next period, as the host meant.
@@ -317,6 +318,12 @@ impl<const U: usize> Node<U> {
 
 impl<const U: usize> Core<U> {
     /// A [`Down::Step`]: one period now, at `now_ns`.
+    // Not inlined: its locals (a decoded Setup, a new period's
+    // configuration, a frame buffer) then take stack only while it runs,
+    // not in every caller's frame through the whole period (tests/tests/
+    // mcu_budget.rs measures the stack: 19 KB → 6 KB with the update buffer
+    // out of the period, less with these).
+    #[inline(never)]
     fn step<B, S>(&mut self, board: &mut B, store: &mut S, now_ns: u64, frames: FrameCounters)
     where
         B: Board,
@@ -333,9 +340,7 @@ impl<const U: usize> Core<U> {
             // timer may have run periods since, neither of which the host
             // knows: start afresh at the Step's time instead, keeping any
             // update chunks that came meanwhile.
-            let mut fresh = Period::new(*period.config(), now_ns);
-            core::mem::swap(fresh.update(), period.update());
-            *period = fresh;
+            restart(period, now_ns);
         }
         self.lockstep = true;
         self.since_period = 0;
@@ -363,7 +368,7 @@ impl<const U: usize> Core<U> {
         let Some(period) = core.period.as_mut() else {
             return;
         };
-        let out = period.run(store, input);
+        let out = period.run(store, &mut core.update, input);
         if out.events.has(crate::period::event::WATCHDOG_HOLD) {
             core.last_hold_tick = core.ticks;
             core.last_hold_silence_us = (out.events.hold_silence_ns / 1000) as u32;
@@ -384,24 +389,56 @@ impl<const U: usize> Core<U> {
         let counters = *period.counters();
         core.send(board, &cmd);
         if core.ticks.wrapping_sub(core.last_telemetry_tick) >= TELEMETRY_EVERY {
-            core.last_telemetry_tick = core.ticks;
-            let t = Up::Telemetry(Telemetry {
-                counters,
-                frames,
-                rx_overruns: board.link_overruns(),
-                tx_dropped: core.tx_dropped,
-                ticks: core.ticks,
-                tick_ns: core.tick_ns,
-                bad_messages: core.bad_messages,
-                chunks_refused: core.chunks_refused,
-                worst_period_us: (core.worst_period_ns / 1000) as u32,
-                last_hold_tick: core.last_hold_tick,
-                last_hold_silence_us: core.last_hold_silence_us,
-            });
-            core.send(board, &t);
+            core.send_telemetry(board, counters, frames);
         }
         let took = board.now_ns().saturating_sub(t0);
         core.worst_period_ns = core.worst_period_ns.max(took);
+    }
+
+    // Not inlined: its locals (a decoded Setup, a new period's
+    // configuration, a frame buffer) then take stack only while it runs,
+    // not in every caller's frame through the whole period (tests/tests/
+    // mcu_budget.rs measures the stack: 19 KB → 6 KB with the update buffer
+    // out of the period, less with these).
+    #[inline(never)]
+    fn send_telemetry<B: Board>(
+        &mut self,
+        board: &mut B,
+        counters: Counters,
+        frames: FrameCounters,
+    ) {
+        self.last_telemetry_tick = self.ticks;
+        let t = Up::Telemetry(Telemetry {
+            counters,
+            frames,
+            rx_overruns: board.link_overruns(),
+            tx_dropped: self.tx_dropped,
+            ticks: self.ticks,
+            tick_ns: self.tick_ns,
+            bad_messages: self.bad_messages,
+            chunks_refused: self.chunks_refused,
+            worst_period_us: (self.worst_period_ns / 1000) as u32,
+            last_hold_tick: self.last_hold_tick,
+            last_hold_silence_us: self.last_hold_silence_us,
+        });
+        self.send(board, &t);
+    }
+
+    /// Decode one frame's payload and act on it; a Step's time is returned
+    /// (the caller runs the period at once).
+    #[inline(never)]
+    fn receive(&mut self, payload: &[u8], now_ns: u64) -> Option<u64> {
+        match postcard::from_bytes::<Down<'_>>(payload) {
+            Ok(Down::Step { now_ns: at }) => Some(at),
+            Ok(msg) => {
+                self.handle(&msg, now_ns);
+                None
+            }
+            Err(_) => {
+                self.bad_messages = self.bad_messages.wrapping_add(1);
+                None
+            }
+        }
     }
 
     fn handle(&mut self, msg: &Down<'_>, now_ns: u64) {
@@ -419,6 +456,7 @@ impl<const U: usize> Core<U> {
                 match period_config(s) {
                     Ok(cfg) => {
                         self.period = Some(Period::new(cfg, now_ns));
+                        self.update.reset();
                         self.since_period = 0;
                         self.setup_hash = hash;
                         self.setup_error = 0;
@@ -441,10 +479,7 @@ impl<const U: usize> Core<U> {
                     self.chunks_refused = self.chunks_refused.wrapping_add(1);
                     return;
                 };
-                if let Err(e) = period
-                    .update()
-                    .chunk(*offset as usize, *total as usize, bytes)
-                {
+                if let Err(e) = self.update.chunk(*offset as usize, *total as usize, bytes) {
                     self.chunks_refused = self.chunks_refused.wrapping_add(1);
                     self.refused_events |= period.refuse_update(e).bits;
                 }
@@ -489,6 +524,12 @@ impl<const U: usize> Core<U> {
     /// Frame and queue one message; a frame the queue cannot take whole is
     /// dropped and counted, and the next frame starts with a 0x00 so the
     /// host drops the fragment instead of the next frame.
+    // Not inlined: its locals (a decoded Setup, a new period's
+    // configuration, a frame buffer) then take stack only while it runs,
+    // not in every caller's frame through the whole period (tests/tests/
+    // mcu_budget.rs measures the stack: 19 KB → 6 KB with the update buffer
+    // out of the period, less with these).
+    #[inline(never)]
     fn send<B: Board>(&mut self, board: &mut B, msg: &Up) {
         let mut buf = [0u8; TX_FRAME];
         let (lead, rest) = buf.split_at_mut(1);
@@ -512,6 +553,14 @@ impl<const U: usize> Core<U> {
             self.tx_dropped = self.tx_dropped.wrapping_add(1);
         }
     }
+}
+
+/// `period` afresh at `now_ns`, same configuration. Not inlined: the new
+/// period (~1 KB) is built in this frame, which is gone before the period
+/// runs.
+#[inline(never)]
+fn restart(period: &mut Period, now_ns: u64) {
+    *period = Period::new(*period.config(), now_ns);
 }
 
 /// The values of `e` for the wire (saturated to `u32`).

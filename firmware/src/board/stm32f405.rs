@@ -51,8 +51,9 @@ use tendril_shared::MAX_TENDONS;
 use super::Board;
 
 /// Receive queue, bytes (the spsc queue holds one byte less). At 2 Mbaud
-/// it takes 5 ms of line time to fill: five periods of slack.
-pub const RX_QUEUE: usize = 1024;
+/// it takes 2.5 ms of line time to fill; the node drains it every 1 ms
+/// tick (the emulated link brings at most ~75 B per ms).
+pub const RX_QUEUE: usize = 512;
 /// Transmit queue, bytes: three periods' worth of ~150-byte frames.
 pub const TX_QUEUE: usize = 512;
 /// Period tick rate, Hz.

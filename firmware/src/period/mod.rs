@@ -193,14 +193,17 @@ pub struct Outputs {
 }
 
 /// The controller: configured once ([`Period::new`]), then [`Period::run`]
-/// once per tick. `U` is the weight-update buffer's size, bytes.
+/// once per tick. The weight update in progress is the caller's
+/// ([`Update`], lent to each run): it is the receive buffer, kilobytes the
+/// period's own state (about 1 KB) should not carry — a `Period` is built
+/// on the stack when configured, an `Update` lives in a `static` on the
+/// chip.
 #[derive(Clone, Debug)]
-pub struct Period<const U: usize> {
+pub struct Period {
     cfg: PeriodConfig,
     n: usize,
     state: ControlState,
     stuck: StuckDetector,
-    update: Update<U>,
     counters: Counters,
     cmd: Command,
     /// The last setpoint taken: sender's sequence and velocity.
@@ -219,7 +222,7 @@ pub struct Period<const U: usize> {
     last_sp_gap: u64,
 }
 
-impl<const U: usize> Period<U> {
+impl Period {
     /// Configure at time `now_ns`, holding the tension floors until the
     /// first setpoint.
     pub fn new(cfg: PeriodConfig, now_ns: u64) -> Self {
@@ -230,7 +233,6 @@ impl<const U: usize> Period<U> {
             n,
             state,
             stuck: StuckDetector::new(),
-            update: Update::new(),
             counters: Counters::default(),
             cmd: Command {
                 seq: 0,
@@ -276,15 +278,15 @@ impl<const U: usize> Period<U> {
         self.in_hold || self.stuck_hold
     }
 
-    /// The weight update in progress, to feed it whole
-    /// ([`Update::offer`]) or in chunks ([`Update::chunk`]); the periods
-    /// check and install it.
-    pub fn update(&mut self) -> &mut Update<U> {
-        &mut self.update
-    }
-
-    /// One period on the net in `store`.
-    pub fn run<S>(&mut self, store: &mut S, input: &Inputs) -> Outputs
+    /// One period on the net in `store`; `update` is the weight update in
+    /// progress (fed whole with [`Update::offer`] or in chunks with
+    /// [`Update::chunk`]), of which this period checks or installs one slice.
+    pub fn run<S, const U: usize>(
+        &mut self,
+        store: &mut S,
+        update: &mut Update<U>,
+        input: &Inputs,
+    ) -> Outputs
     where
         S: NetStore<POSE_DIM, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS> + ?Sized,
     {
@@ -298,10 +300,7 @@ impl<const U: usize> Period<U> {
                 self.counters.missed_ticks.wrapping_add(input.missed_ticks);
         }
 
-        match self
-            .update
-            .slice(store, (POSE_DIM, self.n), self.cfg.swap_slice_bytes)
-        {
+        match update.slice(store, (POSE_DIM, self.n), self.cfg.swap_slice_bytes) {
             SliceOutcome::Idle | SliceOutcome::Working => {}
             SliceOutcome::Swapped => {
                 self.counters.weight_swaps += 1;

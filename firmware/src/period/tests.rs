@@ -14,7 +14,38 @@ use crate::swap::NetSlots;
 use crate::synth::{synthetic_blob, INPUT_HI, INPUT_LO};
 
 type Store = NetSlots<POSE_DIM, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS>;
-type P = Period<32768>;
+/// A period with its update buffer, as the node and the host hold them.
+struct P {
+    period: Period,
+    update: Box<Update<32768>>,
+}
+
+impl P {
+    fn new(cfg: PeriodConfig, now_ns: u64) -> P {
+        P {
+            period: Period::new(cfg, now_ns),
+            update: Box::default(),
+        }
+    }
+    fn run<S>(&mut self, store: &mut S, input: &Inputs) -> Outputs
+    where
+        S: crate::swap::NetStore<POSE_DIM, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS> + ?Sized,
+    {
+        self.period.run(store, &mut *self.update, input)
+    }
+    fn update(&mut self) -> &mut Update<32768> {
+        &mut self.update
+    }
+    fn counters(&self) -> &Counters {
+        self.period.counters()
+    }
+    fn last_command(&self) -> &Command {
+        self.period.last_command()
+    }
+    fn holding(&self) -> bool {
+        self.period.holding()
+    }
+}
 
 const T: u64 = 1_000_000; // 1 ms
 
@@ -404,9 +435,9 @@ fn chunks_in_order_make_the_blob_and_a_gap_drops_it() {
     );
     assert!(!q.update().busy());
     // Too large for the buffer.
-    let mut small: Period<64> = Period::new(swap_config(), 0);
+    let mut small: Update<64> = Update::new();
     assert!(matches!(
-        small.update().chunk(0, total, &update[..10]),
+        small.chunk(0, total, &update[..10]),
         Err(UpdateError::TooLarge { .. })
     ));
     // A new blob (offset 0) supersedes one in progress.

@@ -102,6 +102,13 @@ impl<const U: usize> Update<U> {
         }
     }
 
+    /// Drop whatever is in progress (a new configuration: the update was
+    /// for the old one). In place: the buffer is never moved.
+    pub fn reset(&mut self) {
+        self.state = State::Idle;
+        self.len = 0;
+    }
+
     /// Whether a blob is being received or checked.
     pub const fn busy(&self) -> bool {
         !matches!(self.state, State::Idle)

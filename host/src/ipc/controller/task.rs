@@ -5,7 +5,7 @@
 //! its transport and its statistics.
 
 use tendril_firmware::control::Tangent as FwTangent;
-use tendril_firmware::period::{FeedbackIn, Inputs, Period, SetpointIn, UpdateError};
+use tendril_firmware::period::{FeedbackIn, Inputs, Period, SetpointIn, Update, UpdateError};
 
 use super::*;
 
@@ -13,9 +13,11 @@ use super::*;
 /// ones, a planner late by a few periods, only in the report.
 const LONG_HOLD_PERIODS: u64 = 20;
 
-/// The host controller's period, with an update buffer as large as the
-/// iceoryx2 weight-update message.
-pub type HostPeriod = Period<WEIGHT_UPDATE_CAPACITY>;
+/// The host controller's period (the firmware's, unchanged).
+pub type HostPeriod = Period;
+
+/// The host's weight-update buffer: as large as the iceoryx2 message.
+pub type HostUpdate = Update<WEIGHT_UPDATE_CAPACITY>;
 
 /// Messages that arrived since the last period (the newest of each kind).
 #[derive(Clone, Copy, Debug, Default)]
@@ -125,6 +127,7 @@ pub fn period_config(
 /// preallocated, the log row a fixed array.
 pub struct Controller {
     period: Box<HostPeriod>,
+    update: Box<HostUpdate>,
     slots: Box<Slots>,
     n: usize,
     period_ns: u64,
@@ -160,6 +163,7 @@ impl Controller {
         let period = Box::new(HostPeriod::new(pcfg, start_ns));
         Ok(Controller {
             period,
+            update: Box::default(),
             slots,
             n,
             period_ns: pcfg.period_ns,
@@ -201,7 +205,7 @@ impl Controller {
         if let Some(w) = inbox.weights {
             self.update_seq = w.header.seq;
             let taken = match w.payload() {
-                Some(bytes) => self.period.update().offer(bytes),
+                Some(bytes) => self.update.offer(bytes),
                 None => Err(UpdateError::TooLarge {
                     len: w.len as usize,
                     capacity: WEIGHT_UPDATE_CAPACITY,
@@ -235,7 +239,7 @@ impl Controller {
         if let Some(f) = &inbox.state {
             self.last_state_seq = f.header.seq;
         }
-        let out = self.period.run(&mut *self.slots, &input);
+        let out = self.period.run(&mut *self.slots, &mut *self.update, &input);
         let counters = *self.period.counters();
         if let Some(ev) = refused {
             self.faults
