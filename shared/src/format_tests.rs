@@ -571,3 +571,31 @@ proptest! {
         prop_assert_eq!(d.shape(), net.shape);
     }
 }
+
+#[test]
+fn a_decode_over_any_earlier_net_equals_a_fresh_decode() {
+    // The decode zeroes only what its rows do not write when all inputs
+    // are present (the hot swap's install: net.rs clear_for); whatever the
+    // slot held before, the result must be the fresh decode's, bit for bit.
+    let shapes = [
+        (7, 8, 4),
+        (7, 3, 2),
+        (7, 0, 1),
+        (6, 8, 4),
+        (5, 6, 3),
+        (7, 1, 4),
+    ];
+    for &(ai, ah, ao) in &shapes {
+        for &(bi, bh, bo) in &shapes {
+            let mut slot = Net::decode(&Owned::new(ai, ah, ao).blob()).unwrap();
+            let blob = Owned::new(bi, bh, bo).blob();
+            let checked = Net::check(&blob).unwrap();
+            slot.decode_checked(&checked).unwrap();
+            assert_eq!(
+                slot,
+                Net::decode(&blob).unwrap(),
+                "{ai}-{ah}-{ao} then {bi}-{bh}-{bo}"
+            );
+        }
+    }
+}

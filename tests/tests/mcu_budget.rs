@@ -269,11 +269,6 @@ fn static_ram_and_stack_within_32_kb() {
 }
 
 #[test]
-#[ignore = "MISSED: worst period 92,760 instructions: the period whose swap slice installs the \
-            7-64-4 net (the install decodes the whole net in one slice, not bounded by \
-            SWAP_SLICE_BYTES); p50 36,600, worst plain period 40,640, worst chunk period 54,120; \
-            fix: a sliced install, which needs a second RAM slot (the running RAM net cannot \
-            be overwritten while it runs) or a glitch to the flash net (BENCHMARKS.md)"]
 fn worst_period_within_80000_instructions() {
     let b = budget();
     let worst = b.get("worst_period_instructions");
