@@ -132,9 +132,9 @@ impl Trace {
         postcard::from_bytes(bytes).context("decoding the trace")
     }
 
-    /// Write to `path`.
+    /// Write to `path` (atomically: the project's one output path).
     pub fn save(&self, path: &Path) -> Result<()> {
-        std::fs::write(path, self.to_bytes()?)
+        crate::fsutil::write_atomic(path, &self.to_bytes()?)
             .with_context(|| format!("writing {}", path.display()))
     }
 
