@@ -192,6 +192,25 @@ pub struct IntegralConfig {
     /// lateral error without a tangent) is at most this, m
     /// (`f32::INFINITY`: always).
     pub window: f32,
+    /// Time constant of the first-order low-pass filter on the error before
+    /// it is integrated, s (0 = none): it takes the first bending mode's
+    /// resonance and the tracker's jitter out of the loop (docs/design.md
+    /// §6.3, the loop analysis).
+    pub filter_tau_s: f32,
+    /// Adaptation gain of the *error map*, 1/s (0 = off): besides the
+    /// constant correction `c`, the loop learns how the robot's error
+    /// varies with where it is sent, `c(x) = c + M x` (x the setpoint's
+    /// position along the axes, from where tracking began). A robot stiffer
+    /// than its model or with its tendons off errs in proportion to how far
+    /// it bends: a map, which a constant correction can only chase around a
+    /// circle, but which, once learned, holds everywhere (normalised LMS:
+    /// `M += map_gain · ē xᵀ dt / (map_scale² + |x|²)`).
+    pub map_gain: f32,
+    /// Length scale of the map's normalisation, m (> 0 when `map_gain` is).
+    pub map_scale: f32,
+    /// Bound on each entry of the map (dimensionless: 0.5 = the robot
+    /// goes half again as far as asked).
+    pub map_limit: f32,
 }
 
 impl IntegralConfig {
@@ -201,6 +220,10 @@ impl IntegralConfig {
         limit: 0.0,
         feedback_timeout_ns: 0,
         window: f32::INFINITY,
+        filter_tau_s: 0.0,
+        map_gain: 0.0,
+        map_scale: 1.0,
+        map_limit: 0.0,
     };
 }
 
@@ -305,13 +328,19 @@ pub struct Setpoint {
     pub tangent: Option<Tangent>,
 }
 
-/// Measured tip position from the plant.
+/// One tracker sample of the tip, as the integral loop takes it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Feedback {
-    /// Sender's sequence number; must increase to count as fresh.
+    /// Sample number; must increase to count as fresh (a sample is
+    /// integrated once, however many periods it stays the newest).
     pub seq: u64,
-    /// Measured tip position, m.
+    /// Measured tip position, m (already advanced along the path for its
+    /// age and the motor lag by the caller: docs/design.md §5.5).
     pub tip_position: [f32; 3],
+    /// Time this sample stands for: since the previous sample was taken,
+    /// s (0 for the first). The loop integrates `ki · e · interval_s`, so
+    /// its gain is the same whatever the tracker's rate.
+    pub interval_s: f32,
 }
 
 /// Inputs of one step.
@@ -352,6 +381,15 @@ pub struct ControlState {
     /// Integral correction, m: c_j along the tangent's axes (first k
     /// entries), or of the position without a tangent.
     pub correction: [f32; 3],
+    /// The low-pass filtered error, m, in the same coordinates as
+    /// `correction` ([`IntegralConfig::filter_tau_s`]).
+    pub filtered_error: [f32; 3],
+    /// The error map M ([`IntegralConfig::map_gain`]): row j, the
+    /// correction along axis j per metre of setpoint along axis i.
+    pub error_map: [[f32; 3]; 3],
+    /// Where the map's x is measured from: the first accepted setpoint's
+    /// position, m.
+    pub map_origin: [f32; 3],
     /// Sequence number of the last feedback used.
     pub last_feedback_seq: u64,
     /// Time of the last fresh feedback, ns.
@@ -387,6 +425,9 @@ impl ControlState {
             has_setpoint: false,
             watchdog: false,
             correction: [0.0; 3],
+            filtered_error: [0.0; 3],
+            error_map: [[0.0; 3]; 3],
+            map_origin: [0.0; 3],
             last_feedback_seq: 0,
             last_feedback_ns: now_ns,
         }
@@ -487,6 +528,9 @@ pub fn control_step<const H: usize, const OUT: usize, const W: usize>(
         } else {
             st.last_setpoint_seq = sp.seq;
             st.last_setpoint_ns = now;
+            if !st.has_setpoint {
+                st.map_origin = [sp.pose[0], sp.pose[1], sp.pose[2]];
+            }
             st.pose = sp.pose;
             st.tangent = sp.tangent.filter(Tangent::is_valid);
             st.has_setpoint = true;
@@ -517,12 +561,16 @@ pub fn control_step<const H: usize, const OUT: usize, const W: usize>(
                 st.last_feedback_seq = fb.seq;
                 st.last_feedback_ns = now;
                 fresh = true;
-                let before = st.correction;
-                if !st.slew_limited {
-                    integrate(&mut st, &fb.tip_position, ic, dt);
-                }
+                let before = (st.correction, st.error_map);
+                let interval = fb.interval_s.is_finite().then_some(fb.interval_s);
+                let interval = clamp(
+                    interval.unwrap_or(0.0),
+                    0.0,
+                    ic.feedback_timeout_ns as f32 * 1e-9,
+                );
+                integrate(&mut st, &fb.tip_position, ic, interval);
                 if !in_box(net, &corrected_pose(&st), cfg.box_margin) {
-                    st.correction = before;
+                    (st.correction, st.error_map) = before;
                 }
             }
         }
@@ -613,10 +661,14 @@ pub fn control_step<const H: usize, const OUT: usize, const W: usize>(
     )
 }
 
-/// One integration of the correction on the measured tip `tip` (module
-/// docs of [`IntegralConfig`]): e_j = a_j · (p_set − p_meas) along the
-/// tangent's k axes, or the position error without a tangent (windowed on
-/// its lateral part); nothing when the error is outside the window.
+/// One sample into the correction on the measured tip `tip` (module docs
+/// of [`IntegralConfig`]): e_j = a_j · (p_set − p_meas) along the
+/// tangent's k axes, or the position error without a tangent; the error
+/// low-pass filtered over the sample's `dt` (backward Euler,
+/// `ē += dt/(τ_f + dt) (e − ē)`, stable for any dt), then integrated,
+/// `c_j += ki ē_j dt` — neither while the command is still slewing or the
+/// raw error is outside the window (on its lateral part without a
+/// tangent): transients, not IK error.
 fn integrate(st: &mut ControlState, tip: &[f32; 3], ic: IntegralConfig, dt: f32) {
     let mut error = [0.0f32; 3];
     for ((e, &p), &m) in error.iter_mut().zip(&st.pose).zip(tip) {
@@ -638,11 +690,32 @@ fn integrate(st: &mut ControlState, tip: &[f32; 3], ic: IntegralConfig, dt: f32)
         .iter()
         .take(windowed)
         .fold(0.0f32, |sum, e| sum + e * e);
-    if size2 > ic.window * ic.window {
+    if st.slew_limited || size2 > ic.window * ic.window {
+        // The filter holds too: after the transient it resumes from the
+        // error before it, not from the transient's tail.
         return;
     }
-    for (c, &e) in st.correction.iter_mut().zip(&along).take(axes) {
+    if ic.filter_tau_s > 0.0 {
+        let a = dt / (ic.filter_tau_s + dt);
+        for (f, &e) in st.filtered_error.iter_mut().zip(&along).take(axes) {
+            *f += a * (e - *f);
+        }
+    } else {
+        st.filtered_error = along;
+    }
+    for (c, &e) in st.correction.iter_mut().zip(&st.filtered_error).take(axes) {
         *c = clamp(*c + ic.ki * e * dt, -ic.limit, ic.limit);
+    }
+    if ic.map_gain > 0.0 {
+        let x = map_coordinates(st);
+        let x2 = x.iter().take(axes).fold(0.0f32, |s, v| s + v * v);
+        let step = ic.map_gain * dt / (ic.map_scale * ic.map_scale + x2);
+        let e = st.filtered_error;
+        for (row, &ej) in st.error_map.iter_mut().zip(&e).take(axes) {
+            for (m, &xi) in row.iter_mut().zip(&x).take(axes) {
+                *m = clamp(*m + step * ej * xi, -ic.map_limit, ic.map_limit);
+            }
+        }
     }
 }
 
@@ -652,7 +725,7 @@ fn integrate(st: &mut ControlState, tip: &[f32; 3], ic: IntegralConfig, dt: f32)
 /// millimetre corrections), else to the position alone.
 pub(crate) fn corrected_pose(st: &ControlState) -> [f32; POSE_DIM] {
     let mut p = st.pose;
-    let c = st.correction;
+    let c = total_correction(st);
     match st.tangent {
         Some(t) => {
             // Σ_j c_j T_j first, then added: for k = 2 the same roundings
@@ -674,4 +747,37 @@ pub(crate) fn corrected_pose(st: &ControlState) -> [f32; POSE_DIM] {
         }
     }
     p
+}
+
+/// The setpoint's position along the loop's axes (the tangent's, or x, y, z
+/// without one), from [`ControlState::map_origin`], m.
+fn map_coordinates(st: &ControlState) -> [f32; 3] {
+    let d = [
+        st.pose[0] - st.map_origin[0],
+        st.pose[1] - st.map_origin[1],
+        st.pose[2] - st.map_origin[2],
+    ];
+    match st.tangent {
+        Some(t) => {
+            let mut x = [0.0f32; 3];
+            for (v, a) in x.iter_mut().zip(&t.axes).take(t.dim) {
+                *v = a[0] * d[0] + a[1] * d[1] + a[2] * d[2];
+            }
+            x
+        }
+        None => d,
+    }
+}
+
+/// The correction at the current setpoint: `c + M x`. With the map off
+/// (all zero) exactly `c`.
+fn total_correction(st: &ControlState) -> [f32; 3] {
+    let mut c = st.correction;
+    if st.error_map.iter().flatten().any(|&m| m != 0.0) {
+        let x = map_coordinates(st);
+        for (cj, row) in c.iter_mut().zip(&st.error_map) {
+            *cj += row[0] * x[0] + row[1] * x[1] + row[2] * x[2];
+        }
+    }
+    c
 }

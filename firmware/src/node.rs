@@ -102,11 +102,18 @@ pub fn period_config(s: &Setup) -> Result<PeriodConfig, u8> {
         s.lead_s,
         s.stuck_model_gain,
         s.stuck_error_n,
+        s.correction_filter_tau_s,
+        s.correction_map_gain,
+        s.correction_map_limit,
     ]
     .into_iter()
     .all(finite_pos)
         && (finite_pos(s.correction_window) || s.correction_window == f32::INFINITY);
-    if !times_ok || !gains_ok {
+    let map_ok = s.correction_map_scale.is_finite()
+        && s.correction_map_scale > 0.0
+        && s.jump_m.is_finite()
+        && s.jump_m > 0.0;
+    if !times_ok || !gains_ok || !map_ok {
         return Err(setup_error::TIMING);
     }
     let mut control = ControlConfig::new(limits);
@@ -121,6 +128,10 @@ pub fn period_config(s: &Setup) -> Result<PeriodConfig, u8> {
             limit: s.correction_limit,
             feedback_timeout_ns: u64::from(s.feedback_timeout_ns),
             window: s.correction_window,
+            filter_tau_s: s.correction_filter_tau_s,
+            map_gain: s.correction_map_gain,
+            map_scale: s.correction_map_scale,
+            map_limit: s.correction_map_limit,
         };
     }
     let stuck = if s.stuck_enabled {
@@ -140,6 +151,8 @@ pub fn period_config(s: &Setup) -> Result<PeriodConfig, u8> {
         plant_stale_ns: u64::from(s.plant_stale_ns),
         stuck,
         swap_slice_bytes: SWAP_SLICE_BYTES,
+        jump_m: s.jump_m,
+        settle_after_jump_ns: u64::from(s.settle_after_jump_ns),
     })
 }
 
@@ -518,6 +531,8 @@ impl<const U: usize> Core<U> {
             command_seq: u64::from(f.command_seq),
             tensions: f.tensions_n(),
             tip: f.tip_m(),
+            tip_seq: f.tip_seq,
+            tip_age_ns: u64::from(f.tip_age_us) * 1000,
         });
     }
 

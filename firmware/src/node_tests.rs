@@ -136,6 +136,12 @@ fn setup() -> Setup {
         correction_limit: 0.003,
         feedback_timeout_ns: 20 * TICK,
         correction_window: 0.002,
+        correction_filter_tau_s: 0.0,
+        correction_map_gain: 0.0,
+        correction_map_scale: 0.01,
+        correction_map_limit: 0.0,
+        jump_m: 1e-3,
+        settle_after_jump_ns: 100 * TICK,
         lead_s: 0.0,
         plant_stale_ns: 20 * TICK,
         stuck_enabled: false,
@@ -178,6 +184,8 @@ fn feedback(seq: u32, command_seq: u32) -> Down<'static> {
         command_seq,
         tensions: heapless::Vec::from_slice(&[1000, 1000, 1000, 1000]).unwrap(),
         tip: [0, 0, 390_000],
+        tip_seq: seq,
+        tip_age_us: 0,
     })
 }
 

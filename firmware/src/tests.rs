@@ -341,6 +341,7 @@ fn run_biased(
             feedback: Some(Feedback {
                 seq: k,
                 tip_position: tip,
+                interval_s: 1_000_000_f32 * 1e-9,
             }),
         };
         let slewing = st.slew_limited;
@@ -373,6 +374,10 @@ fn run_biased(
 fn integral_cfg() -> ControlConfig {
     let mut cfg = cfg4();
     cfg.integral = IntegralConfig {
+        filter_tau_s: 0.0,
+        map_gain: 0.0,
+        map_scale: 1.0,
+        map_limit: 0.0,
         ki: 50.0,
         limit: 0.01,
         feedback_timeout_ns: 5_000_000,
@@ -502,6 +507,10 @@ fn tangents_of_no_dimension_or_too_many_are_ignored() {
 fn integral_loop_waits_out_large_errors_and_slewing() {
     let mut cfg = cfg4();
     cfg.integral = IntegralConfig {
+        filter_tau_s: 0.0,
+        map_gain: 0.0,
+        map_scale: 1.0,
+        map_limit: 0.0,
         ki: 50.0,
         limit: 0.01,
         feedback_timeout_ns: 5_000_000,
@@ -535,6 +544,10 @@ fn integral_loop_removes_a_constant_plant_offset() {
     // constant bias. The integrator must converge to exactly that bias.
     let mut cfg = cfg4();
     cfg.integral = IntegralConfig {
+        filter_tau_s: 0.0,
+        map_gain: 0.0,
+        map_scale: 1.0,
+        map_limit: 0.0,
         ki: 50.0,
         limit: 0.01,
         feedback_timeout_ns: 5_000_000,
@@ -557,6 +570,7 @@ fn integral_loop_removes_a_constant_plant_offset() {
             feedback: Some(Feedback {
                 seq: k,
                 tip_position: tip,
+                interval_s: 1_000_000_f32 * 1e-9,
             }),
         };
         let (s, o) = control_step(&cfg, &net, &st, &inp);
@@ -803,6 +817,10 @@ fn config_strategy() -> impl Strategy<Value = ControlConfig> {
                 c.safe_hold = SafeHold::Ramp([max_t * 0.5; MAX_TENDONS]);
             }
             c.integral = IntegralConfig {
+                filter_tau_s: 0.0,
+                map_gain: 0.0,
+                map_scale: 1.0,
+                map_limit: 0.0,
                 ki,
                 limit: 0.02,
                 feedback_timeout_ns: 4_000_000,
@@ -843,7 +861,7 @@ proptest! {
                     pose,
                     tangent: None,
                 }),
-                feedback: ev.feedback.map(|tip| Feedback { seq: now, tip_position: tip }),
+                feedback: ev.feedback.map(|tip| Feedback { seq: now, tip_position: tip, interval_s: 1e-3 }),
             };
             let (s, o) = control_step(&cfg, &net, &st, &inp);
             let dt = now.saturating_sub(prev_now).min(cfg.max_dt_ns) as f32 * 1e-9;

@@ -226,6 +226,10 @@ impl VecHeader {
             limit: self.integral_limit,
             feedback_timeout_ns: self.feedback_timeout_ns,
             window: f32::INFINITY,
+            filter_tau_s: 0.0,
+            map_gain: 0.0,
+            map_scale: 1.0,
+            map_limit: 0.0,
         };
         Ok(cfg)
     }
@@ -389,6 +393,12 @@ where
             feedback: (rec.flags & HAS_FEEDBACK != 0).then_some(Feedback {
                 seq: i as u64 + 1,
                 tip_position: rec.tip,
+                // One sample per step: it stands for the step's own dt.
+                interval_s: rec
+                    .now_ns
+                    .saturating_sub(state.last_step_ns)
+                    .min(cfg.max_dt_ns) as f32
+                    * 1e-9,
             }),
         };
         let (next, output) = control_step(&cfg, net, &state, &input);

@@ -22,6 +22,8 @@ pub mod numerics;
 pub mod pipeline;
 pub mod plan;
 pub mod plot;
+pub mod reality;
 pub mod robot;
+pub mod robustness;
 pub mod statics;
 pub mod units;

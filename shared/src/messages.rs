@@ -164,14 +164,21 @@ pub struct PlantState {
     pub command_seq: u64,
     /// Measured tendon tensions (N); entries past `count` are zero.
     pub tensions: [f32; MAX_TENDONS],
-    /// Measured tip pose (sensor, with noise): `px, py, pz` (m), `qw..qz`.
+    /// The tracker's newest tip pose: `px, py, pz` (m), `qw..qz`, with its
+    /// noise, sampled at `tip_stamp_ns` (docs/design.md §6.2: a tracker
+    /// samples at its own rate and delivers late; this is its last delivered
+    /// sample, repeated until the next arrives).
     pub tip_pose: [f32; 7],
     /// Number of valid entries in `tensions`.
     pub count: u32,
     /// [`plant_status`] bits.
     pub status: u32,
-    /// Explicit padding; zero.
-    pub reserved: u32,
+    /// The tracker's frame number of `tip_pose` (1 for its first; 0 = no
+    /// sample yet): a controller integrates each frame once.
+    pub tip_seq: u32,
+    /// When the tracker sampled `tip_pose`, ns on the sender's clock (the
+    /// monotonic clock the processes share).
+    pub tip_stamp_ns: u64,
 }
 
 /// A new `.tnet` for the running controller (hot swap, docs/design.md §5): the

@@ -11,8 +11,12 @@
 //!    the step's own NaN/∞, quaternion and workspace rules;
 //! 4. plant feedback: its sequence (gaps, restarts), commands the plant had
 //!    not applied, the stuck-motor detector ([`stuck`]) and its latched
-//!    hold, the measured tip led by the same lead (so the integral loop
-//!    still integrates `p_desired(t) − p_measured(t)`);
+//!    hold; and the tracker's tip, only when a new frame arrived (a tracker
+//!    at 40 Hz gives one frame in 25 periods at 1 kHz: the others must not
+//!    integrate it again), led along the path by the motor lag *and its
+//!    own age* (so the integral loop integrates `p_desired(t) −
+//!    p_measured(t)` for the time the frame was taken), with the time
+//!    since the previous frame as its integration interval;
 //! 5. plant-stale: no feedback for [`PeriodConfig::plant_stale_ns`];
 //! 6. the control step (watchdog → safe hold, integral correction,
 //!    inference, command stage, slew);
@@ -56,7 +60,19 @@ pub struct PeriodConfig {
     pub stuck: StuckConfig,
     /// Bytes of an update's check per period (hashing, value scan).
     pub swap_slice_bytes: usize,
+    /// A setpoint whose position moved more than this since the last one is
+    /// a *jump* (a step target, not a path), m.
+    pub jump_m: f32,
+    /// Tracker frames sampled within this long after a jump are not
+    /// integrated: the robot is still on its way (motor lag, the rod's
+    /// swing), and its error then is the step's, not the model's, ns.
+    pub settle_after_jump_ns: u64,
 }
+
+/// Largest frame age the lead compensates, ns: an older frame is led as if
+/// it were this old (a tracker delivering later than this is broken, and
+/// extrapolating along the path further would be a guess).
+pub const MAX_TIP_AGE_NS: u64 = 200_000_000;
 
 /// A setpoint as the period takes it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -80,8 +96,15 @@ pub struct FeedbackIn {
     pub command_seq: u64,
     /// Measured tensions, N.
     pub tensions: Tensions,
-    /// Measured tip position, m.
+    /// The tracker's newest tip position, m.
     pub tip: [f32; 3],
+    /// Its frame number (0 = none yet): a frame is integrated once, in the
+    /// first period that sees it.
+    pub tip_seq: u32,
+    /// How long before this period the tracker sampled `tip`, ns (its
+    /// latency plus the transport's): the sample is compared with the
+    /// path where the robot was then ([`Period`] docs, step 4).
+    pub tip_age_ns: u64,
 }
 
 /// What arrived since the last period, and when this period runs.
@@ -209,6 +232,12 @@ pub struct Period {
     /// The last setpoint taken: sender's sequence and velocity.
     last_sp: Option<(u64, Option<[f32; POSE_DIM]>)>,
     last_fb_seq: Option<u64>,
+    /// The last tracker frame taken: its number and when it was sampled, ns.
+    last_tip: Option<(u32, u64)>,
+    /// The last setpoint's position, m.
+    last_sp_position: Option<[f32; 3]>,
+    /// Frames sampled before this are not integrated (after a jump), ns.
+    quiet_until_ns: u64,
     local_sp_seq: u64,
     local_fb_seq: u64,
     last_feedback_ns: u64,
@@ -244,6 +273,9 @@ impl Period {
             },
             last_sp: None,
             last_fb_seq: None,
+            last_tip: None,
+            last_sp_position: None,
+            quiet_until_ns: 0,
             local_sp_seq: 0,
             local_fb_seq: 0,
             last_feedback_ns: now_ns,
@@ -271,6 +303,12 @@ impl Period {
     /// The last command (the floors before the first period).
     pub const fn last_command(&self) -> &Command {
         &self.cmd
+    }
+
+    /// The integral correction and its error map so far
+    /// ([`crate::control::IntegralConfig`]).
+    pub const fn correction(&self) -> ([f32; 3], [[f32; 3]; 3]) {
+        (self.state.correction, self.state.error_map)
     }
 
     /// Whether a hold is on (watchdog or stuck motor).
@@ -316,11 +354,11 @@ impl Period {
         }
         let setpoint = input
             .setpoint
-            .map(|s| self.take_setpoint(&s, input.setpoints, &mut ev));
+            .map(|s| self.take_setpoint(&s, input.setpoints, now, &mut ev));
         let feedback = input
             .feedback
-            .map(|f| self.take_feedback(&f, input.feedbacks, now, &mut ev));
-        if feedback.is_none()
+            .and_then(|f| self.take_feedback(&f, input.feedbacks, now, &mut ev));
+        if input.feedback.is_none()
             && !self.stale
             && now.saturating_sub(self.last_feedback_ns) > self.cfg.plant_stale_ns
         {
@@ -380,7 +418,21 @@ impl Period {
         ev
     }
 
-    fn take_setpoint(&mut self, s: &SetpointIn, count: u32, ev: &mut Events) -> Setpoint {
+    fn take_setpoint(&mut self, s: &SetpointIn, count: u32, now: u64, ev: &mut Events) -> Setpoint {
+        let position = [s.pose[0], s.pose[1], s.pose[2]];
+        if let Some(before) = self.last_sp_position {
+            let d2 = position
+                .iter()
+                .zip(&before)
+                .fold(0.0f32, |sum, (a, b)| sum + (a - b) * (a - b));
+            // NaN positions compare false: not a jump (they are refused).
+            if d2 > self.cfg.jump_m * self.cfg.jump_m {
+                self.quiet_until_ns = now.saturating_add(self.cfg.settle_after_jump_ns);
+            }
+        }
+        if position.iter().all(|v| v.is_finite()) {
+            self.last_sp_position = Some(position);
+        }
         self.counters.setpoints += 1;
         self.last_sp_gap = 0;
         match self.last_sp {
@@ -418,7 +470,15 @@ impl Period {
         }
     }
 
-    fn take_feedback(&mut self, f: &FeedbackIn, count: u32, now: u64, ev: &mut Events) -> Feedback {
+    /// Plant feedback: sequence, staleness, stuck motors; the tip to
+    /// integrate when `f` carries a tracker frame not taken before.
+    fn take_feedback(
+        &mut self,
+        f: &FeedbackIn,
+        count: u32,
+        now: u64,
+        ev: &mut Events,
+    ) -> Option<Feedback> {
         match self.last_fb_seq {
             Some(prev) if f.seq <= prev => {
                 self.counters.plant_restarts += 1;
@@ -465,20 +525,35 @@ impl Period {
                 ev.stuck = Some((tendon as u8, err));
             }
         }
-        self.local_fb_seq += 1;
-        let mut tip = f.tip;
-        // Advance the measurement by the same lead as the setpoint.
-        if let Some((_, Some(v))) = self.last_sp {
-            for (p, v) in tip.iter_mut().zip(&v) {
-                *p += v * self.cfg.lead_s;
-            }
-        }
         self.last_fb_seq = Some(f.seq);
         self.last_feedback_ns = now;
-        Feedback {
+        if f.tip_seq == 0 || self.last_tip.is_some_and(|(seq, _)| seq == f.tip_seq) {
+            return None; // no frame yet, or one already integrated
+        }
+        // Any other number is a new frame (a restarted tracker counts from 1).
+        let sampled = now.saturating_sub(f.tip_age_ns);
+        let interval_ns = self
+            .last_tip
+            .map_or(0, |(_, before)| sampled.saturating_sub(before));
+        self.last_tip = Some((f.tip_seq, sampled));
+        if sampled < self.quiet_until_ns {
+            return None; // taken while the robot was still on its way to a jump
+        }
+        self.local_fb_seq += 1;
+        let mut tip = f.tip;
+        // Advance the frame along the path by the setpoint's lead and by its
+        // own age: it is then compared with the setpoint of its own time.
+        let age_s = f.tip_age_ns.min(MAX_TIP_AGE_NS) as f32 * 1e-9;
+        if let Some((_, Some(v))) = self.last_sp {
+            for (p, v) in tip.iter_mut().zip(&v) {
+                *p += v * (self.cfg.lead_s + age_s);
+            }
+        }
+        Some(Feedback {
             seq: self.local_fb_seq,
             tip_position: tip,
-        }
+            interval_s: interval_ns as f32 * 1e-9,
+        })
     }
 
     /// Count what the step's status says; note what the report lists.

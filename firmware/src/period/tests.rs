@@ -75,6 +75,8 @@ fn config() -> PeriodConfig {
         plant_stale_ns: 20 * T,
         stuck: StuckConfig::new(0.02, 0.5, 0.1, T),
         swap_slice_bytes: 4096,
+        jump_m: 1e-3,
+        settle_after_jump_ns: 100 * T,
     }
 }
 
@@ -103,6 +105,8 @@ fn fb(seq: u64, command_seq: u64, tensions: Tensions) -> FeedbackIn {
         command_seq,
         tensions,
         tip: [0.0, 0.0, 0.35],
+        tip_seq: seq as u32,
+        tip_age_ns: 0,
     }
 }
 
@@ -468,4 +472,147 @@ fn the_same_inputs_give_the_same_commands_bit_for_bit() {
         let i = with_sp(k, s);
         assert_eq!(p.run(&mut *a, &i), q.run(&mut *b, &i));
     }
+}
+
+/// A period with the integral loop on (gain 10 /s, no filter, no window),
+/// the slew limit out of the way (a slewing command pauses the loop).
+fn integral_config() -> PeriodConfig {
+    let mut cfg = config();
+    cfg.control.limits = TendonLimits::uniform(4, 10.0, 1e9).unwrap();
+    cfg.control.integral = IntegralConfig {
+        ki: 10.0,
+        limit: 0.01,
+        feedback_timeout_ns: 1_000_000_000,
+        window: f32::INFINITY,
+        filter_tau_s: 0.0,
+        map_gain: 0.0,
+        map_scale: 1.0,
+        map_limit: 0.0,
+    };
+    cfg
+}
+
+#[test]
+fn a_tracker_frame_is_integrated_once_over_the_time_since_the_last() {
+    // A 40 Hz tracker under a 1 kHz loop: the plant reports every period,
+    // a new frame every 25th. The tip sits 1 mm short in x.
+    let mut st = store(1);
+    let mut p = P::new(integral_config(), 0);
+    let mut changes = 0;
+    let mut before = p.period.correction().0;
+    // From 1 s on, so that the first frame's age does not reach before 0.
+    for k in 1001..=1100u64 {
+        let frame = (k - 1001) / 25 + 1;
+        let mut f = fb(k, k.saturating_sub(1), [0.0; MAX_TENDONS]);
+        f.tip = [pose()[0] - 1e-3, pose()[1], pose()[2]];
+        f.tip_seq = frame as u32;
+        f.tip_age_ns = 20 * T;
+        let input = Inputs {
+            feedback: Some(f),
+            feedbacks: 1,
+            ..with_sp(k, sp(k))
+        };
+        p.run(&mut *st, &input);
+        let now = p.period.correction().0;
+        if now != before {
+            changes += 1;
+            assert_eq!(
+                (k - 1001) % 25,
+                0,
+                "the correction moved at period {k}, between frames"
+            );
+        }
+        before = now;
+    }
+    // Frames 2, 3 and 4 each stand for the 25 ms since the one before
+    // (the first for nothing): 10 /s × 1 mm × 75 ms.
+    assert_eq!(changes, 3);
+    let c = p.period.correction().0[0];
+    assert!((c - 0.75e-3).abs() < 1e-7, "correction {c}");
+}
+
+#[test]
+fn a_late_frame_is_compared_with_the_path_where_it_was_taken() {
+    // The setpoint moves at 10 mm/s; the tracker sees the tip exactly on
+    // the path but 30 ms late. Led by its age, the frame shows no error;
+    // taken as current, it would show 0.3 mm.
+    let mut st = store(1);
+    let v = [0.01, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let mut run = |age_known: bool| {
+        let mut p = P::new(integral_config(), 0);
+        for k in 1..=200u64 {
+            let t = k as f32 * 1e-3;
+            let mut s = sp(k);
+            s.pose[0] += v[0] * t;
+            s.velocity = Some(v);
+            let mut f = fb(k, k - 1, [0.0; MAX_TENDONS]);
+            f.tip = [pose()[0] + v[0] * (t - 0.03), pose()[1], pose()[2]];
+            f.tip_seq = k as u32;
+            f.tip_age_ns = if age_known { 30 * T } else { 0 };
+            let input = Inputs {
+                feedback: Some(f),
+                feedbacks: 1,
+                ..with_sp(k, s)
+            };
+            p.run(&mut *st, &input);
+        }
+        p.period.correction().0[0]
+    };
+    let led = run(true);
+    let unled = run(false);
+    assert!(led.abs() < 2e-6, "led by its age: {led}");
+    // 10 /s × 0.3 mm × 0.2 s ≈ 0.6 mm without.
+    assert!(unled > 0.5e-3, "taken as current: {unled}");
+}
+
+#[test]
+fn the_error_map_learns_an_error_proportional_to_the_bend() {
+    // A robot that goes 10 % further than asked along x: the error is
+    // −0.1 x. The constant correction alone leaves an error that follows
+    // the setpoint around; with the map the error goes (almost) away.
+    let mut st = store(1);
+    let residual = |map_gain: f32, st: &mut Store| {
+        let mut cfg = integral_config();
+        cfg.control.integral.ki = 2.0;
+        cfg.control.integral.map_gain = map_gain;
+        cfg.control.integral.map_scale = 1e-3;
+        cfg.control.integral.map_limit = 0.5;
+        let mut p = P::new(cfg, 0);
+        let mut last = 0.0f32;
+        for k in 1..=20_000u64 {
+            let t = k as f32 * 1e-3;
+            // ±2 mm about the middle at 0.2 Hz: stays inside the small box.
+            let x = 2e-3 * (core::f32::consts::TAU * 0.2 * t).sin();
+            let mut s = sp(k);
+            s.pose[0] += x;
+            let (c, m) = p.period.correction();
+            // The plant: it reaches the corrected setpoint stretched by 10 %.
+            let sent = x + c[0] + m[0][0] * x;
+            let mut f = fb(k, k - 1, [0.0; MAX_TENDONS]);
+            f.tip = [pose()[0] + 1.1 * sent, pose()[1], pose()[2]];
+            f.tip_seq = k as u32;
+            let input = Inputs {
+                feedback: Some(f),
+                feedbacks: 1,
+                ..with_sp(k, s)
+            };
+            p.run(&mut *st, &input);
+            if k > 15_000 {
+                last = last.max((1.1 * sent - x).abs());
+            }
+        }
+        (last, p.period.correction().1[0][0])
+    };
+    let (without, _) = residual(0.0, &mut st);
+    let (with, m) = residual(2.0, &mut st);
+    assert!(
+        without > 0.05e-3,
+        "a constant correction chases the error: {without}"
+    );
+    assert!(
+        with < 0.2 * without,
+        "with the map {with} against {without}"
+    );
+    // It learned the inverse stretch: 1.1 (1 + m) = 1.
+    assert!((m - (1.0 / 1.1 - 1.0)).abs() < 0.01, "map {m}");
 }

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::bail;
 use clap::{Args, ValueEnum};
 
-use crate::ipc::controller::ControllerConfig;
+use crate::ipc::controller::{correction, ControllerConfig};
 
 /// On/off switch.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -43,18 +43,31 @@ pub struct LoopOpts {
     /// position only otherwise). `off` = IK alone.
     #[arg(long, value_enum, default_value_t = OnOff::On)]
     pub correction: OnOff,
-    /// Integral gain of the correction, 1/s.
-    #[arg(long, default_value_t = 10.0)]
+    /// Integral gain of the correction, 1/s (docs/design.md §6.3: stable
+    /// with the dynamic rod's first mode, the motors and a 40 Hz tracker).
+    #[arg(long, default_value_t = correction::KI_PER_S)]
     pub ki: f64,
-    /// Bound on the correction per axis, mm (a few times the IK net's
-    /// largest error is enough; the shift along the reachable poses is first
-    /// order, accurate to ~2 µm at 1 mm).
-    #[arg(long, default_value_t = 3.0)]
+    /// Bound on the correction per axis, mm (above the model errors of a
+    /// real robot: ±10 % stiffness moves the default robot's tip ≈ 3 mm;
+    /// the shift along the reachable poses is first order, accurate to
+    /// ~2 µm at 1 mm, and the loop removes the rest).
+    #[arg(long, default_value_t = correction::LIMIT_M * 1e3)]
     pub correction_limit_mm: f64,
     /// Integrate only while the lateral tip error is at most this, mm
     /// (integral separation: larger errors are transients, not IK error).
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = correction::WINDOW_M * 1e3)]
     pub correction_window_mm: f64,
+    /// Time constant of the low-pass filter on the tip error before it is
+    /// integrated, ms (0 = none).
+    #[arg(long, default_value_t = correction::FILTER_TAU_S * 1e3)]
+    pub correction_filter_ms: f64,
+    /// Adaptation gain of the correction's error map, 1/s (0 = a constant
+    /// correction only).
+    #[arg(long, default_value_t = correction::MAP_GAIN_PER_S)]
+    pub correction_map_gain: f64,
+    /// No tracker frame for this long freezes the correction, ms.
+    #[arg(long, default_value_t = correction::TRACKER_TIMEOUT_S * 1e3)]
+    pub tracker_timeout_ms: f64,
     /// Motor-lag lead: setpoints are advanced by velocity × lead, ms
     /// (≈ motor time constant + half a period; 0 = off).
     #[arg(long, default_value_t = 20.5)]
@@ -116,6 +129,27 @@ impl LoopOpts {
         let (l, win) = (self.correction_limit_mm, self.correction_window_mm);
         check("--correction-limit-mm", l, l >= 0.0, "≥ 0 mm")?;
         check("--correction-window-mm", win, win >= 0.0, "≥ 0 mm")?;
+        let f = self.correction_filter_ms;
+        check(
+            "--correction-filter-ms",
+            f,
+            (0.0..=10_000.0).contains(&f),
+            "in [0, 10000] ms",
+        )?;
+        let g = self.correction_map_gain;
+        check(
+            "--correction-map-gain",
+            g,
+            (0.0..=100.0).contains(&g),
+            "in [0, 100] /s",
+        )?;
+        let t = self.tracker_timeout_ms;
+        check(
+            "--tracker-timeout-ms",
+            t,
+            t > 0.0 && t <= 60_000.0,
+            "in (0, 60000] ms",
+        )?;
         let lead = self.lead_ms;
         check(
             "--lead-ms",
@@ -150,6 +184,9 @@ impl LoopOpts {
         };
         cfg.correction_limit_m = self.correction_limit_mm * 1e-3;
         cfg.correction_window_m = self.correction_window_mm * 1e-3;
+        cfg.correction_filter_tau_s = self.correction_filter_ms * 1e-3;
+        cfg.tracker_timeout_s = self.tracker_timeout_ms * 1e-3;
+        cfg.correction_map_gain_per_s = self.correction_map_gain;
         cfg.lead_s = self.lead_ms * 1e-3;
         cfg.slew_n_per_s = self.slew;
     }

@@ -14,6 +14,7 @@ pub mod generate;
 pub mod ik;
 mod planner;
 mod plant;
+mod robustness;
 mod run;
 mod sim;
 pub mod train;
@@ -77,6 +78,8 @@ enum Command {
     Evaluate(evaluate::EvaluateArgs),
     /// Dynamic step response: tip trajectory (CSV) and figure after a tension step.
     Dynamics(dynamics::DynamicsArgs),
+    /// The closed loop against every reality (a plant unlike its model): table and figure.
+    Robustness(robustness::RobustnessArgs),
 }
 
 /// Run the subcommand `cli` names (the whole pipeline without one).
@@ -96,5 +99,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Some(Command::Ik(a)) => ik::run(a),
         Some(Command::Evaluate(a)) => evaluate::run(a),
         Some(Command::Dynamics(a)) => dynamics::run(a),
+        Some(Command::Robustness(a)) => robustness::run(a),
     }
 }

@@ -40,6 +40,14 @@ pub struct PlantOpts {
     /// Fault: delay commands by MS milliseconds between S0 and S1: "MS@S0..S1".
     #[arg(long)]
     pub delay: Option<String>,
+    /// How the real robot differs from its robot file and how it is seen:
+    /// a reality file, or a built-in's name (ideal, em-tracker,
+    /// optical-tracker, stiffer-10pct, softer-10pct, geometry, friction,
+    /// dynamic-light-damping, everything; docs/design.md §6.2). Only the
+    /// plant knows it. Its [motors], [tracker] and [dynamics] take the
+    /// place of --motor-tau-ms, --noise-mm and the plant model.
+    #[arg(long)]
+    pub reality: Option<PathBuf>,
 }
 
 fn window(spec: &str, what: &str) -> anyhow::Result<(f64, f64, f64)> {
@@ -129,6 +137,11 @@ impl PlantOpts {
             seed: self.seed,
             statics_steps: self.statics_steps,
             faults: PlantFaults { stuck, drop, delay },
+            reality: self
+                .reality
+                .as_deref()
+                .map(crate::reality::Reality::load)
+                .transpose()?,
             ..PlantParams::default()
         })
     }

@@ -153,6 +153,13 @@ impl SimArgs {
         cfg.realtime = self.tuning.realtime != Some(OnOff::Off);
         cfg.plant.params = self.plant.params()?;
         cfg.plant.params.model = self.plant_model;
+        if let Some(reality) = &cfg.plant.params.reality {
+            // Refused here, before any process starts, if it does not fit.
+            let robot = crate::robot::Robot::load(&cfg.robot)?;
+            reality
+                .real_robot(&robot)
+                .map_err(|e| anyhow::anyhow!("--reality {}: {e}", reality.name))?;
+        }
         cfg.plant.spin = self.plant.spin;
         cfg.pin = self.pin == OnOff::On;
         cfg.faults = SimFaults {
@@ -187,16 +194,23 @@ impl SimArgs {
                 garbage_every_ms: self.link_garbage_every_ms,
             });
         }
+        let reality = cfg.plant.params.reality.as_ref().map_or_else(
+            || {
+                format!(
+                    "motor τ {} ms, noise {} mm",
+                    self.plant.motor_tau_ms, self.plant.noise_mm
+                )
+            },
+            |r| format!("reality {} ({})", r.name, r.summary()),
+        );
         cfg.label = format!(
-            "controller {:?}, trajectory {:?}, correction {:?} (ki {}/s), lead {} ms, motor τ {} ms, \
-             noise {} mm, {} s, real-time {}, pinned {:?}",
+            "controller {:?}, trajectory {:?}, correction {:?} (ki {}/s), lead {} ms, {reality}, \
+             {} s, real-time {}, pinned {:?}",
             self.controller,
             self.traj.trajectory,
             self.tuning.correction,
             self.tuning.ki,
             self.tuning.lead_ms,
-            self.plant.motor_tau_ms,
-            self.plant.noise_mm,
             self.duration,
             if cfg.realtime { "on" } else { "off" },
             self.pin

@@ -153,6 +153,12 @@ pub fn setup_of(p: &PeriodConfig) -> Setup {
         correction_limit: ic.limit,
         feedback_timeout_ns: ns(ic.feedback_timeout_ns),
         correction_window: ic.window,
+        correction_filter_tau_s: ic.filter_tau_s,
+        correction_map_gain: ic.map_gain,
+        correction_map_scale: ic.map_scale,
+        correction_map_limit: ic.map_limit,
+        jump_m: p.jump_m,
+        settle_after_jump_ns: ns(p.settle_after_jump_ns),
         lead_s: p.lead_s,
         plant_stale_ns: ns(p.plant_stale_ns),
         stuck_enabled: p.stuck.enabled,
@@ -208,8 +214,9 @@ fn close(a: &LinkTangent, b: &LinkTangent) -> bool {
             .all(|(x, y)| (x - y).abs() <= 1e-2 * (1.0 + x.abs().max(y.abs())))
 }
 
-/// The plant's state as a link message.
-pub fn link_feedback(f: &PlantState, count: usize, n: usize) -> Feedback {
+/// The plant's state as a link message, sent at `now_ns` (the tracker
+/// frame's age is measured to it: the chip's clock is not the host's).
+pub fn link_feedback(f: &PlantState, count: usize, n: usize, now_ns: u64) -> Feedback {
     let mut tensions = heapless::Vec::new();
     for &t in f.tensions.iter().take(n) {
         let _ = tensions.push(units::to_i32(t, units::TENSION_N));
@@ -220,6 +227,8 @@ pub fn link_feedback(f: &PlantState, count: usize, n: usize) -> Feedback {
         command_seq: f.command_seq as u32,
         tensions,
         tip: [0, 1, 2].map(|i| units::to_i32(f.tip_pose[i], units::POSITION_M)),
+        tip_seq: f.tip_seq,
+        tip_age_us: (now_ns.saturating_sub(f.tip_stamp_ns) / 1000).min(u64::from(u32::MAX)) as u32,
     }
 }
 
@@ -424,7 +433,7 @@ pub fn run(
         }
         let (st, n_st): (Option<PlantState>, usize) = transport::latest(&states)?;
         if let Some(f) = &st {
-            chip.send(&Down::Feedback(link_feedback(f, n_st, n)))
+            chip.send(&Down::Feedback(link_feedback(f, n_st, n, now_ns())))
                 .map_err(other)?;
         }
         let (w, _): (Option<WeightUpdate>, usize) = transport::latest(&weights)?;

@@ -590,6 +590,10 @@ pub fn synthetic(setup: &Setup, update: &[u8], periods: usize, seed: u64) -> Res
                     command_seq: cmd.seq,
                     tensions,
                     tip,
+                    // A tracker slower than the loop: a new frame every
+                    // fourth period, delivered 2–20 ms late.
+                    tip_seq: (k / 4) as u32 + 1,
+                    tip_age_us: rng.random_range(2_000..20_000),
                 }));
             }
         }

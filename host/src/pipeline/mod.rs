@@ -9,7 +9,7 @@
 //! into the output directory only when the whole run is done: an
 //! interrupted or failed run leaves exactly the previous run's outputs.
 
-mod closed_loop;
+pub mod closed_loop;
 pub mod staging;
 
 pub use closed_loop::run_dir;

@@ -387,7 +387,7 @@ impl Validator<'_> {
 /// Best-effort dotted name of the field a TOML error points at: the table
 /// header governing the error's line (`tendon[2]` for the third
 /// `[[tendon]]`) plus the key on that line, or the missing field's name.
-fn toml_error_field(text: &str, e: &toml::de::Error) -> String {
+pub(crate) fn toml_error_field(text: &str, e: &toml::de::Error) -> String {
     let missing = e
         .message()
         .split("missing field `")

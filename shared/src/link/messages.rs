@@ -32,7 +32,7 @@ use crate::MAX_TENDONS;
 /// so every older message keeps its postcard tag, but a version-1 chip
 /// would count a Step as a bad message and keep running on its timer: the
 /// host must know the chip understands it, hence the bump.
-pub const PROTOCOL_VERSION: u16 = 2;
+pub const PROTOCOL_VERSION: u16 = 3;
 
 /// The chip sends [`Up::Telemetry`] every this many ticks of its timer
 /// (100 ms at 1 kHz), and a Hello as often while unconfigured.
@@ -76,6 +76,18 @@ pub struct Setup {
     pub feedback_timeout_ns: u32,
     /// Integrate only within this tip error, m.
     pub correction_window: f32,
+    /// Time constant of the error's low-pass filter, s (0 = none).
+    pub correction_filter_tau_s: f32,
+    /// Adaptation gain of the error map, 1/s (0 = off).
+    pub correction_map_gain: f32,
+    /// The map's normalisation length, m.
+    pub correction_map_scale: f32,
+    /// Bound on each entry of the map.
+    pub correction_map_limit: f32,
+    /// A setpoint moving more than this in one message is a jump, m.
+    pub jump_m: f32,
+    /// Frames sampled this soon after a jump are not integrated, ns.
+    pub settle_after_jump_ns: u32,
     /// Motor-lag lead, s.
     pub lead_s: f32,
     /// No feedback for this long: plant stale, ns.
@@ -248,8 +260,12 @@ pub struct Feedback {
     pub command_seq: u32,
     /// Measured tensions of the robot's tendons, mN.
     pub tensions: heapless::Vec<i32, MAX_TENDONS>,
-    /// Measured tip position, µm.
+    /// The tracker's newest tip position, µm.
     pub tip: [i32; 3],
+    /// Its frame number (0 = none yet).
+    pub tip_seq: u32,
+    /// Its age when the host sent this message, µs (saturating).
+    pub tip_age_us: u32,
 }
 
 impl Feedback {
@@ -448,6 +464,12 @@ mod tests {
             correction_limit: 1.0,
             feedback_timeout_ns: u32::MAX,
             correction_window: 1.0,
+            correction_filter_tau_s: 0.08,
+            correction_map_gain: 2.0,
+            correction_map_scale: 0.01,
+            correction_map_limit: 0.5,
+            jump_m: 1e-3,
+            settle_after_jump_ns: 300_000_000,
             lead_s: 1.0,
             plant_stale_ns: u32::MAX,
             stuck_enabled: true,
@@ -542,6 +564,8 @@ mod tests {
             command_seq: 123_399,
             tensions: heapless::Vec::from_slice(&[4200, 0, 1500, 7800]).unwrap(),
             tip: [15_012, -1_998, 194_950],
+            tip_seq: 7,
+            tip_age_us: 21_000,
         });
         let mut buf = [0u8; 512];
         let a = crate::link::encode(&sp, &mut buf).unwrap().len();
@@ -589,6 +613,12 @@ mod tests {
             correction_limit: 0.003,
             feedback_timeout_ns: 20_000_000,
             correction_window: 0.002,
+            correction_filter_tau_s: 0.08,
+            correction_map_gain: 2.0,
+            correction_map_scale: 0.01,
+            correction_map_limit: 0.5,
+            jump_m: 1e-3,
+            settle_after_jump_ns: 300_000_000,
             lead_s: 0.021,
             plant_stale_ns: 20_000_000,
             stuck_enabled: true,

@@ -34,6 +34,52 @@ use crate::robot::Robot;
 mod report;
 mod task;
 
+/// The integral correction's defaults: one set for every robot file, plant
+/// and reality (docs/design.md §6.3 derives them from the loop: the first
+/// bending mode, the motor lag and the tracker's delay).
+pub mod correction {
+    /// Integral gain, 1/s.
+    pub const KI_PER_S: f64 = 4.0;
+    /// Time constant of the error's low-pass filter, s (corner 2 Hz).
+    pub const FILTER_TAU_S: f64 = 0.08;
+    /// Bound on the correction per axis, m: above the model errors a real
+    /// robot has (±10 % stiffness moves the default robot's sag by ≈ 3 mm).
+    pub const LIMIT_M: f64 = 0.02;
+    /// Integrate only while the tip error is at most this, m: a guard
+    /// against a robot far off (the jumps of step targets are left out by
+    /// [`SETTLE_AFTER_JUMP_S`]), above the largest model error a reality
+    /// makes (≈ 9 mm on the two-segment robot with its tendons ±3° off).
+    pub const WINDOW_M: f64 = 0.02;
+    /// A setpoint that moves more than this in one period is a jump, m
+    /// (a path at 0.2 Hz on a 15 mm radius moves 0.02 mm per ms).
+    pub const JUMP_M: f64 = 1e-3;
+    /// Tracker frames sampled within this after a jump are not integrated,
+    /// s: the motors (20 ms) and the rod's swing settle first.
+    pub const SETTLE_AFTER_JUMP_S: f64 = 0.3;
+    /// No tracker frame for this long freezes the correction, s.
+    pub const TRACKER_TIMEOUT_S: f64 = 0.25;
+    /// Adaptation gain of the error map, 1/s.
+    pub const MAP_GAIN_PER_S: f64 = 2.0;
+    /// The map's normalisation length, m (a setpoint this far from where
+    /// tracking began adapts the map at half the gain).
+    pub const MAP_SCALE_M: f64 = 0.01;
+    /// Bound on each entry of the map: the robot moves up to 50 % more or
+    /// less than its model says.
+    pub const MAP_LIMIT: f64 = 0.5;
+    /// The first bending mode the gains are set for, Hz (the default
+    /// robot's, from its robot file: [`crate::reality::first_bending_mode_rad_s`]).
+    pub const REFERENCE_MODE_HZ: f64 = 3.6;
+
+    /// The factor on the loop's bandwidth for `robot`: its first bending
+    /// mode over [`REFERENCE_MODE_HZ`], at most 1 (a stiffer robot keeps the
+    /// default gains: above the mode, the motor lag and the tracker's delay
+    /// bound the loop, and they do not scale).
+    pub fn mode_scale(robot: &crate::robot::Robot) -> f64 {
+        let f1 = crate::reality::first_bending_mode_rad_s(robot) / std::f64::consts::TAU;
+        (f1 / REFERENCE_MODE_HZ).min(1.0)
+    }
+}
+
 pub use report::{
     ControllerStats, DetectedFault, FaultKind, FaultLog, FAULT_CAPACITY, FAULT_REPEAT_S,
 };
@@ -77,6 +123,20 @@ pub struct ControllerConfig {
     /// most this, m (integral separation; see
     /// [`tendril_firmware::control::IntegralConfig`]).
     pub correction_window_m: f64,
+    /// Time constant of the low-pass filter on the tip error before it is
+    /// integrated, s (docs/design.md §6.3).
+    pub correction_filter_tau_s: f64,
+    /// Adaptation gain of the correction's error map, 1/s (0 = a constant
+    /// correction only; docs/design.md §6.3).
+    pub correction_map_gain_per_s: f64,
+    /// Scale the correction's bandwidth (ki, the map's gain, the filter's
+    /// corner) down for a robot whose first bending mode, from its robot
+    /// file, is below the default robot's ([`correction::REFERENCE_MODE_HZ`]):
+    /// the gains are the default robot's, the loop keeps its margins.
+    pub scale_gains_to_mode: bool,
+    /// No tracker frame for this long freezes the correction, s (longer
+    /// than the slowest tracker's frame interval plus a dropout or two).
+    pub tracker_timeout_s: f64,
     /// Motor-lag lead: advance the setpoint by velocity · lead, s.
     pub lead_s: f64,
     /// Slew-rate limit per tendon, N/s.
@@ -153,8 +213,12 @@ impl ControllerConfig {
             cpu: None,
             watchdog_periods: 2.5,
             ki_per_s: 0.0,
-            correction_limit_m: 0.003,
-            correction_window_m: 0.002,
+            correction_limit_m: correction::LIMIT_M,
+            correction_window_m: correction::WINDOW_M,
+            correction_filter_tau_s: correction::FILTER_TAU_S,
+            correction_map_gain_per_s: correction::MAP_GAIN_PER_S,
+            scale_gains_to_mode: true,
+            tracker_timeout_s: correction::TRACKER_TIMEOUT_S,
             lead_s: 0.021,
             slew_n_per_s: 200.0,
             box_margin: 0.05,

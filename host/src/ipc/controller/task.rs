@@ -54,13 +54,16 @@ pub fn setpoint_in(s: &Setpoint) -> SetpointIn {
     }
 }
 
-/// The firmware's feedback from the plant's message.
-pub fn feedback_in(f: &PlantState) -> FeedbackIn {
+/// The firmware's feedback from the plant's message, for a period at
+/// `now_ns` (the tracker frame's age is measured to it).
+pub fn feedback_in(f: &PlantState, now_ns: u64) -> FeedbackIn {
     FeedbackIn {
         seq: f.header.seq,
         command_seq: f.command_seq,
         tensions: f.tensions,
         tip: [f.tip_pose[0], f.tip_pose[1], f.tip_pose[2]],
+        tip_seq: f.tip_seq,
+        tip_age_ns: now_ns.saturating_sub(f.tip_stamp_ns),
     }
 }
 
@@ -76,12 +79,17 @@ pub fn period_config(
         )));
     }
     if !(cfg.ki_per_s >= 0.0
+        && cfg.correction_filter_tau_s >= 0.0
+        && cfg.correction_map_gain_per_s >= 0.0
+        && cfg.tracker_timeout_s > 0.0
         && cfg.lead_s >= 0.0
         && cfg.slew_n_per_s > 0.0
         && cfg.watchdog_periods > 0.0)
     {
         return Err(IpcError::Config(
-            "controller: ki and lead must be ≥ 0, slew rate and watchdog > 0".into(),
+            "controller: ki, the correction's filter and lead must be ≥ 0, slew rate, \
+             watchdog and tracker timeout > 0"
+                .into(),
         ));
     }
     let limits = crate::command_stage::limits_for(robot, cfg.slew_n_per_s)
@@ -93,11 +101,20 @@ pub fn period_config(
     fw.box_margin = cfg.box_margin as f32;
     fw.safe_hold = SafeHold::Freeze;
     if cfg.ki_per_s > 0.0 {
+        let scale = if cfg.scale_gains_to_mode {
+            correction::mode_scale(robot)
+        } else {
+            1.0
+        };
         fw.integral = IntegralConfig {
-            ki: cfg.ki_per_s as f32,
+            ki: (cfg.ki_per_s * scale) as f32,
             limit: cfg.correction_limit_m as f32,
-            feedback_timeout_ns: 20 * period_ns,
+            feedback_timeout_ns: ((cfg.tracker_timeout_s * 1e9) as u64).max(2 * period_ns),
             window: cfg.correction_window_m as f32,
+            filter_tau_s: (cfg.correction_filter_tau_s / scale) as f32,
+            map_gain: (cfg.correction_map_gain_per_s * scale) as f32,
+            map_scale: correction::MAP_SCALE_M as f32,
+            map_limit: correction::MAP_LIMIT as f32,
         };
     }
     let s = cfg.stuck_motor;
@@ -118,6 +135,8 @@ pub fn period_config(
         plant_stale_ns: 20 * period_ns,
         stuck,
         swap_slice_bytes: tendril_firmware::SWAP_SLICE_BYTES,
+        jump_m: correction::JUMP_M as f32,
+        settle_after_jump_ns: (correction::SETTLE_AFTER_JUMP_S * 1e9) as u64,
     })
 }
 
@@ -233,7 +252,10 @@ impl Controller {
             setpoint: inbox.setpoint.as_ref().map(setpoint_in),
             setpoints: inbox.setpoints as u32,
             superseded_nonfinite: inbox.superseded_nonfinite as u32,
-            feedback: inbox.state.as_ref().map(feedback_in),
+            feedback: inbox
+                .state
+                .as_ref()
+                .map(|f| feedback_in(f, tick.deadline_ns)),
             feedbacks: inbox.states as u32,
         };
         if let Some(f) = &inbox.state {

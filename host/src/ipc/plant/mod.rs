@@ -237,7 +237,8 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
         if secs(t1) - secs(last_cmd_time) > cfg.command_timeout_s {
             status |= plant_status::COMMAND_STALE;
         }
-        let measured = model.measure();
+        model.sense(t1);
+        let frame = model.frame().copied();
         seq += 1;
         let mut msg = PlantState {
             header: Header {
@@ -247,13 +248,17 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
             command_seq: last_cmd.map_or(0, |c| c.header.seq),
             count: n as u32,
             status,
+            tip_seq: frame.map_or(0, |f| f.seq),
+            tip_stamp_ns: frame.map_or(0, |f| f.stamp_ns),
             ..PlantState::default()
         };
         for (dst, src) in msg.tensions.iter_mut().zip(model.tensions()) {
             *dst = *src as f32;
         }
-        for (dst, src) in msg.tip_pose.iter_mut().zip(measured) {
-            *dst = src as f32;
+        if let Some(f) = &frame {
+            for (dst, src) in msg.tip_pose.iter_mut().zip(f.pose) {
+                *dst = src as f32;
+            }
         }
         transport::send(&state_pub, msg)?;
 
@@ -264,7 +269,8 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
         row.extend(model.targets().iter().copied());
         row.extend(model.tensions().iter().copied());
         let p = model.pose();
-        row.extend([p[0], p[1], p[2], measured[0], measured[1], measured[2]]);
+        let m = frame.map_or([f64::NAN; 7], |f| f.pose);
+        row.extend([p[0], p[1], p[2], m[0], m[1], m[2]]);
         row.push(status as f64);
         row.push((t1 - t0) as f64);
         log.row(&row)?;

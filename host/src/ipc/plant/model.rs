@@ -1,10 +1,13 @@
-//! The plant model: one first-order motor per tendon with saturation,
-//! optional series tendon compliance, the robot's tip from warm-started
-//! Cosserat statics or from the dynamic rod (docs/design.md §4.2), a noisy
-//! tip sensor, and the injectable motor and message faults (docs/design.md §6).
+//! The plant model: one first-order motor per tendon with saturation, dead
+//! band and backlash, optional series tendon compliance, the robot's tip
+//! from warm-started Cosserat statics or from the dynamic rod
+//! (docs/design.md §4.2), the tip tracker, and the injectable motor and
+//! message faults (docs/design.md §6). With a [`Reality`] the robot it moves
+//! is not the robot file's (docs/design.md §6.2).
 
 use super::*;
 use crate::dynamics::{Damping, Dynamics, DynamicsSettings};
+use crate::reality::{first_bending_mode_rad_s, Frame, Reality, Tracker, TrackerSpec};
 use crate::statics::pose::{orthonormalise, quaternion_wxyz};
 
 /// How the plant moves the robot.
@@ -88,6 +91,9 @@ pub struct PlantParams {
     /// Time step of the dynamic robot, s (the plant takes as many as the
     /// elapsed time holds).
     pub dynamics_dt_s: f64,
+    /// How the real robot and its tracker differ from the robot file
+    /// (None: the robot file, an ideal tracker with `noise_m`).
+    pub reality: Option<Reality>,
 }
 
 impl Default for PlantParams {
@@ -102,6 +108,7 @@ impl Default for PlantParams {
             faults: PlantFaults::default(),
             model: RobotModel::QuasiStatic,
             dynamics_dt_s: 1e-3,
+            reality: None,
         }
     }
 }
@@ -129,13 +136,49 @@ pub struct PlantModel {
     dynamics: Option<Box<Dynamics>>,
     /// Elapsed time not yet simulated by the dynamic robot, s.
     lag_s: f64,
+    /// The tip tracker.
+    tracker: Tracker,
+    /// Per motor: the play operator's output (backlash) and the tension the
+    /// drive holds (dead band), N.
+    drive: Vec<(f64, f64)>,
+    dead_band_n: f64,
+    backlash_n: f64,
     /// Statics (or dynamics) failures (the last good pose was kept).
     pub solve_failures: u64,
 }
 
 impl PlantModel {
-    /// A plant at rest with all tensions zero.
-    pub fn new(robot: &Robot, params: PlantParams) -> Result<PlantModel, IpcError> {
+    /// A plant at rest with all tensions zero, moving the robot `robot`
+    /// changed by `params.reality` if there is one.
+    pub fn new(robot: &Robot, mut params: PlantParams) -> Result<PlantModel, IpcError> {
+        let reality = params.reality.clone().unwrap_or_default();
+        let real = reality
+            .real_robot(robot)
+            .map_err(|e| IpcError::Config(format!("plant: reality {}: {e}", reality.name)))?;
+        let robot = &real;
+        if let Some(tau) = reality.motors.and_then(|m| m.time_constant_ms) {
+            params.motor_tau_s = tau * 1e-3;
+        }
+        let mut damping = Damping::of_robot(robot);
+        if let Some(d) = reality.dynamics {
+            params.model = d.model;
+            if let Some(zeta) = d.damping_ratio {
+                // Stiffness-proportional damping gives mode k the ratio
+                // ζ_k = ω_k t_r / 2: t_r from the first mode's.
+                damping =
+                    Damping::proportional(robot, 2.0 * zeta / first_bending_mode_rad_s(robot));
+            }
+        }
+        let tracker = reality.tracker.unwrap_or(TrackerSpec {
+            position_jitter_mm: params.noise_m * 1e3,
+            // A rotation by a small angle a moves the quaternion's vector
+            // part by a/2: the ideal sensor's per-component noise doubled.
+            orientation_jitter_deg: (2.0 * params.noise_quat).to_degrees(),
+            ..TrackerSpec::IDEAL
+        });
+        tracker
+            .validate()
+            .map_err(|(f, p)| IpcError::Config(format!("plant: tracker {f}: {p}")))?;
         if !(params.motor_tau_s > 0.0 && params.compliance_tau_s >= 0.0 && params.noise_m >= 0.0) {
             return Err(IpcError::Config(
                 "plant: motor time constant must be > 0, compliance and noise ≥ 0".into(),
@@ -164,7 +207,7 @@ impl PlantModel {
             RobotModel::Dynamic => Some(Box::new(
                 Dynamics::at_rest(
                     robot,
-                    Damping::of_robot(robot),
+                    damping,
                     DynamicsSettings {
                         dt_s: params.dynamics_dt_s,
                         steps: settings.steps,
@@ -189,6 +232,10 @@ impl PlantModel {
             stuck: false,
             dynamics,
             lag_s: 0.0,
+            tracker: Tracker::new(tracker),
+            drive: vec![(0.0, 0.0); n],
+            dead_band_n: reality.motors.map_or(0.0, |m| m.dead_band_n),
+            backlash_n: reality.motors.map_or(0.0, |m| m.backlash_n),
             solve_failures: 0,
             statics,
             params,
@@ -213,7 +260,12 @@ impl PlantModel {
             if t < 0.0 || t > self.max_tension[i] {
                 bad = true;
             }
-            *target = t.clamp(0.0, self.max_tension[i]);
+            *target = drive(
+                &mut self.drive[i],
+                t.clamp(0.0, self.max_tension[i]),
+                self.backlash_n,
+                self.dead_band_n,
+            );
         }
         bad
     }
@@ -321,30 +373,21 @@ impl PlantModel {
         &self.target
     }
 
-    /// The tip as the sensor reports it: position and quaternion with
-    /// Gaussian noise (quaternion renormalised).
-    pub fn measure(&mut self) -> [f64; 7] {
-        let mut m = self.pose;
-        for (k, v) in m.iter_mut().enumerate() {
-            let sd = if k < 3 {
-                self.params.noise_m
-            } else {
-                self.params.noise_quat
-            };
-            if sd > 0.0 {
-                *v += sd * gaussian(&mut self.rng);
-            }
-        }
-        let qn = m[3..].iter().map(|v| v * v).sum::<f64>().sqrt();
-        for v in &mut m[3..] {
-            *v /= qn;
-        }
-        if m[3] < 0.0 {
-            for v in &mut m[3..] {
-                *v = -*v;
-            }
-        }
-        m
+    /// The tracker at plant time `now_ns` (after [`PlantModel::step`]):
+    /// it samples the true tip when a frame is due and delivers the frames
+    /// whose latency has passed. Returns whether a new frame arrived.
+    pub fn sense(&mut self, now_ns: u64) -> bool {
+        self.tracker.step(now_ns, &self.pose, &mut self.rng)
+    }
+
+    /// The tracker's newest delivered frame (None before the first).
+    pub fn frame(&self) -> Option<&Frame> {
+        self.tracker.latest()
+    }
+
+    /// The tracker (its counts of frames taken, delivered and lost).
+    pub fn tracker(&self) -> &Tracker {
+        &self.tracker
     }
 
     /// A uniform draw in [0, 1) from the plant's generator (drop decisions).
@@ -353,11 +396,18 @@ impl PlantModel {
     }
 }
 
-/// Standard normal draw (Box–Muller).
-fn gaussian(rng: &mut ChaCha8Rng) -> f64 {
-    let u1: f64 = rng.random::<f64>().max(1e-300);
-    let u2: f64 = rng.random::<f64>();
-    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+/// What a drive does with the command `cmd` (N): backlash first — the play
+/// operator, whose output `state.0` moves only once the command has pushed
+/// it `backlash / 2` either way — then the dead band: the tension held
+/// (`state.1`) follows only when the play's output is more than `dead_band`
+/// away from it. Returns the tension the motor now tracks.
+fn drive(state: &mut (f64, f64), cmd: f64, backlash: f64, dead_band: f64) -> f64 {
+    let half = 0.5 * backlash;
+    state.0 = state.0.clamp(cmd - half, cmd + half);
+    if (state.0 - state.1).abs() > dead_band {
+        state.1 = state.0;
+    }
+    state.1
 }
 
 #[cfg(test)]
@@ -472,8 +522,10 @@ mod tests {
         let truth = m.pose();
         let k = 4000;
         let mut sum2 = 0.0;
-        for _ in 0..k {
-            let d = m.measure()[0] - truth[0];
+        for step in 0..k {
+            // The ideal tracker: a frame every millisecond, on time.
+            assert!(m.sense(step * 1_000_000));
+            let d = m.frame().unwrap().pose[0] - truth[0];
             sum2 += d * d;
         }
         let sd = (sum2 / k as f64).sqrt();

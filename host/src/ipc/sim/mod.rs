@@ -46,7 +46,7 @@ use crate::statics::Statics;
 pub const BUILT_IN_NET: &[u8] = include_bytes!("../../../../firmware/vectors/default.tnet");
 
 /// Integral gain of the correction when it is on, 1/s.
-pub const DEFAULT_KI_PER_S: f64 = 10.0;
+pub const DEFAULT_KI_PER_S: f64 = crate::ipc::controller::correction::KI_PER_S;
 
 /// Default bound on the RMS tracking error of a clean run, mm: twice the
 /// millimetre the nominal circle is held to (tests/tests/hil_loop.rs), far

@@ -1,0 +1,88 @@
+//! `tendril robustness`: the robot's closed-loop runs against every reality,
+//! net alone and corrected, with one set of default gains (docs/design.md §6.3).
+
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::Args;
+
+use crate::ipc::sim::ModelSource;
+use crate::reality::{Reality, BUILTIN};
+use crate::robustness::{self, RobustnessConfig};
+
+/// Run the circle, the steps (and the helix on a robot that reaches a
+/// volume) against every built-in reality and write a table and a figure.
+#[derive(Args, Debug)]
+pub struct RobustnessArgs {
+    /// Robot description file (the model the planner, IK and net use).
+    #[arg(long, default_value = "robots/seed-4t.toml")]
+    pub robot: PathBuf,
+    /// Trained IK net [default: out/model.tnet if it exists, else the
+    /// firmware's built-in net for the default robot].
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Realities, by name or file, comma-separated [default: every built-in].
+    #[arg(long, value_delimiter = ',')]
+    pub realities: Vec<PathBuf>,
+    /// Output directory (robustness.md, robustness.json, robustness.png, one
+    /// directory per reality with each run's report).
+    #[arg(long, default_value = "out/robustness")]
+    pub out: PathBuf,
+    /// Cap on each run's seconds of trajectory (a quicker, rougher table).
+    #[arg(long)]
+    pub quick: Option<f64>,
+    /// Only the corrected runs (half the time).
+    #[arg(long)]
+    pub corrected_only: bool,
+}
+
+/// Run `tendril robustness`.
+pub fn run(args: RobustnessArgs) -> anyhow::Result<()> {
+    super::common::refuse_stdout("--out", &args.out, "names a directory")?;
+    if let Some(q) = args.quick {
+        super::controller::check("--quick", q, q > 0.0, "a number of seconds > 0")?;
+    }
+    let realities = if args.realities.is_empty() {
+        BUILTIN
+            .iter()
+            .map(|(name, _)| Reality::load(Path::new(name)))
+            .collect::<Result<Vec<_>, _>>()?
+    } else {
+        args.realities
+            .iter()
+            .map(|p| Reality::load(p))
+            .collect::<Result<Vec<_>, _>>()?
+    };
+    let cfg = RobustnessConfig {
+        exe: std::env::current_exe().context("locating the tendril executable")?,
+        robot: args.robot.clone(),
+        model: ModelSource::resolve(args.model, Path::new("out/model.tnet")),
+        out: args.out.clone(),
+        realities,
+        quick_s: args.quick,
+        net_alone: !args.corrected_only,
+    };
+    let rows = robustness::run(&cfg)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let md = robustness::markdown(&rows, &args.robot);
+    crate::fsutil::write_atomic(&args.out.join("robustness.md"), md.as_bytes())?;
+    let json = serde_json::to_vec_pretty(&rows)?;
+    crate::fsutil::write_atomic(&args.out.join("robustness.json"), &json)?;
+    let title = format!(
+        "{}: tracking error against each reality, default gains",
+        args.robot.display()
+    );
+    robustness::figure::draw(&rows, &title, &args.out.join("robustness.png"))
+        .map_err(|e| anyhow::anyhow!("robustness figure: {e}"))?;
+    let failed = rows.iter().filter(|r| r.correction && !r.clean).count();
+    let _ = writeln!(
+        std::io::stdout(),
+        "{} runs; {} corrected runs not clean; table in {}",
+        rows.len(),
+        failed,
+        args.out.join("robustness.md").display()
+    );
+    Ok(())
+}
