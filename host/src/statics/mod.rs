@@ -27,6 +27,8 @@ pub use rod::SingularSystem;
 pub use shoot::{Solution, SolveError, SolverSettings, Statics, WarmStart, MAX_STEPS};
 
 #[cfg(test)]
+mod friction_tests;
+#[cfg(test)]
 mod tests;
 #[cfg(test)]
 mod tests_general;
