@@ -194,6 +194,7 @@ fn the_base_reaction_is_the_weight_and_the_motor_pulls_whatever_the_friction() {
             let lost: f64 = (0..4)
                 .map(|i| tau[i] - state.tension_at(i, robot.length, tau[i]))
                 .sum();
+            eprintln!("μ = {mu}: friction takes {lost:.3} N off the tendons");
             assert!(lost > 1e4 * 1e-6, "friction takes only {lost} N");
         }
     }
