@@ -303,6 +303,23 @@ impl DynamicRod {
         c0: f64,
         running: TendonSet,
     ) -> Result<(DynRates, TimeVars), SingularSystem> {
+        // One branch per call, not per tendon (as in the statics, §2.3).
+        match &self.profile {
+            None => self.rates_with::<false>(s, y, hist, c0, running),
+            Some(_) => self.rates_with::<true>(s, y, hist, c0, running),
+        }
+    }
+
+    /// [`DynamicRod::rates`] with (`FRICTION`) or without the tension profile.
+    #[inline(always)]
+    fn rates_with<const FRICTION: bool>(
+        &self,
+        s: f64,
+        y: &DynState,
+        hist: &TimeVars,
+        c0: f64,
+        running: TendonSet,
+    ) -> Result<(DynRates, TimeVars), SingularSystem> {
         let (kse, kbt) = (self.rod.kse, self.rod.kbt);
         let (bse, bbt) = (self.damping.bse, self.damping.bbt);
         let v = y.v();
@@ -325,11 +342,15 @@ impl DynamicRod {
             if self.tension[i] == 0.0 || running & (1 << i) == 0 {
                 continue;
             }
-            let (tau, dtau) = self.tension_at(i, s);
+            let (tau, dtau) = if FRICTION {
+                self.tension_at(i, s)
+            } else {
+                (self.tension[i], 0.0)
+            };
             let g = self.offset(i, s);
             let t = y.u.cross(&g.r) + g.dr + v;
             let t2 = t.norm_squared();
-            if dtau != 0.0 {
+            if FRICTION && dtau != 0.0 {
                 let f_i = t * (dtau / t2.sqrt());
                 friction_f += f_i;
                 friction_m += g.r.cross(&f_i);
@@ -358,12 +379,14 @@ impl DynamicRod {
         let inertia_f = (y.omega.cross(&y.q) + q_t) * self.rho_a;
         let j_omega = self.rho_j.component_mul(&y.omega);
         let inertia_m = y.omega.cross(&j_omega) + self.rho_j.component_mul(&omega_t);
-        let top = -y.u.cross(&n) - y.rot.tr_mul(&self.rod.f_e) - a_vec + inertia_f
-            - bse.component_mul(&hist.ws)
-            - friction_f;
-        let bottom = -y.u.cross(&m) - v.cross(&n) - b_vec + inertia_m
-            - bbt.component_mul(&hist.us)
-            - friction_m;
+        let mut top = -y.u.cross(&n) - y.rot.tr_mul(&self.rod.f_e) - a_vec + inertia_f
+            - bse.component_mul(&hist.ws);
+        let mut bottom =
+            -y.u.cross(&m) - v.cross(&n) - b_vec + inertia_m - bbt.component_mul(&hist.us);
+        if FRICTION {
+            top -= friction_f;
+            bottom -= friction_m;
+        }
         let rhs = Vector6::new(top.x, top.y, top.z, bottom.x, bottom.y, bottom.z);
         let mut x = rhs;
         if !Factor6::cholesky_or_lu(k).solve_vector(&mut x) || !x.iter().all(|v| v.is_finite()) {
