@@ -254,3 +254,59 @@ fn a_tension_sweep_up_and_down_makes_a_hysteresis_loop() {
     }
     assert!(widths[1] > 2.0 * widths[0], "widths {widths:?}");
 }
+
+#[test]
+fn with_a_fixed_profile_the_shooting_jacobian_is_exact() {
+    // The tangent pass linearises τ_i(s) and the friction force at a fixed
+    // profile (docs/design.md §2.3): against central differences of the
+    // residual, on the two-segment robot (anchors inside) under gravity-free
+    // load with a tip wrench, and a non-trivial profile from a real solve.
+    use super::integrate::integrate;
+    use super::rod::{Rod, RodState};
+    use super::tangent::{integrate_with_sensitivity, ShootingSensitivity};
+    use nalgebra::{Matrix6, Vector6};
+    let statics = repo_statics("tdcr-2seg.toml");
+    let robot = statics.robot().clone();
+    let tau = [4.0, 0.0, 1.0, 0.0, 2.0, 0.5];
+    let mut state = FrictionState::new(Friction::new(0.3), 6);
+    state.update_direction(&tau);
+    let sol = state.solve(&statics, &tau, None).unwrap();
+    let profile = sol.profile().cloned().expect("a friction profile");
+    let mut rod = Rod::new(&robot);
+    rod.set_tensions(&tau);
+    rod.set_profile(Some(profile));
+    let (f_ext, m_ext) = (
+        Vector3::new(0.05, -0.1, 0.02),
+        Vector3::new(0.004, 0.0, -0.002),
+    );
+    let base = |x: &Vector6<f64>| {
+        RodState::at_base(
+            &Vector3::new(x[0], x[1], x[2]),
+            &Vector3::new(x[3], x[4], x[5]),
+            &rod.kse,
+        )
+    };
+    let x = sol.warm.x + Vector6::new(0.1, 0.05, -0.3, -0.4, 0.3, 0.1);
+    let steps = 16;
+    let start = ShootingSensitivity::at_base(&rod.kse, 0, true, false);
+    let (tip, t) = integrate_with_sensitivity(&rod, base(&x), steps, start).unwrap();
+    assert_eq!(tip, integrate(&rod, base(&x), steps).unwrap());
+    let exact = rod.tip_residual_jacobian(&tip, &t, &f_ext, &m_ext);
+    let residual = |x: &Vector6<f64>| {
+        let tip = integrate(&rod, base(x), steps).unwrap();
+        rod.tip_residual(&tip, &f_ext, &m_ext)
+    };
+    let mut fd = Matrix6::zeros();
+    for j in 0..6 {
+        let h = 1e-6 * x[j].abs().max(if j < 3 { 1.0 } else { 0.1 });
+        let (mut xp, mut xm) = (x, x);
+        xp[j] += h;
+        xm[j] -= h;
+        fd.set_column(j, &((residual(&xp) - residual(&xm)) / (2.0 * h)));
+    }
+    for j in 0..6 {
+        let scale = fd.column(j).norm().max(1e-3);
+        let err = (exact.column(j) - fd.column(j)).norm() / scale;
+        assert!(err < 1e-5, "column {j}: relative error {err:e}");
+    }
+}
