@@ -18,6 +18,7 @@
 //! Kbt + c₀ Bbt in place of Kse and Kbt.
 
 use std::ops::{Add, Mul};
+use std::sync::Arc;
 
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
@@ -25,7 +26,7 @@ use crate::numerics::dense::Factor6;
 use crate::numerics::rk4::Rk4State;
 use crate::robot::{hat, Robot, MAX_TENDONS};
 use crate::statics::rod::{Rod, TendonSet};
-use crate::statics::SingularSystem;
+use crate::statics::{SingularSystem, TensionProfile};
 
 use super::params::Damping;
 
@@ -183,8 +184,10 @@ pub struct DynamicRod {
     tendons: Vec<crate::robot::Tendon>,
     /// Per tendon: constant offset when straight (the common, cheap case).
     straight: [Option<Vector3<f64>>; MAX_TENDONS],
-    /// Tensions τ_i, N.
+    /// Tensions τ_i, N (with a friction profile, the motors' at s = 0).
     tension: [f64; MAX_TENDONS],
+    /// Capstan friction (`docs/design.md` §2.3): τ_i(s) = τ_i,m e_i(s).
+    profile: Option<Arc<TensionProfile>>,
     /// External tip force and moment, base frame, N and N·m.
     tip_load: (Vector3<f64>, Vector3<f64>),
 }
@@ -215,7 +218,28 @@ impl DynamicRod {
             tendons: robot.tendons.clone(),
             straight,
             tension: [0.0; MAX_TENDONS],
+            profile: None,
             tip_load: (Vector3::zeros(), Vector3::zeros()),
+        }
+    }
+
+    /// Set (or with `None` remove) the capstan friction profile
+    /// (`docs/design.md` §2.3): the tensions become the motors' and tendon
+    /// i carries τ_i,m e_i(s), with the friction force τ_i' t_i on the rod.
+    pub fn set_profile(&mut self, profile: Option<Arc<TensionProfile>>) {
+        self.rod.set_profile(profile.clone());
+        self.profile = profile;
+    }
+
+    /// Tendon `i`'s tension τ_i(s) (N) and gradient τ_i'(s) (N/m).
+    fn tension_at(&self, i: usize, s: f64) -> (f64, f64) {
+        let tau = self.tension[i];
+        match &self.profile {
+            None => (tau, 0.0),
+            Some(p) => {
+                let (e, dlog) = p.factor(i, s);
+                (tau * e, tau * e * dlog)
+            }
         }
     }
 
@@ -279,6 +303,23 @@ impl DynamicRod {
         c0: f64,
         running: TendonSet,
     ) -> Result<(DynRates, TimeVars), SingularSystem> {
+        // One branch per call, not per tendon (as in the statics, §2.3).
+        match &self.profile {
+            None => self.rates_with::<false>(s, y, hist, c0, running),
+            Some(_) => self.rates_with::<true>(s, y, hist, c0, running),
+        }
+    }
+
+    /// [`DynamicRod::rates`] with (`FRICTION`) or without the tension profile.
+    #[inline(always)]
+    fn rates_with<const FRICTION: bool>(
+        &self,
+        s: f64,
+        y: &DynState,
+        hist: &TimeVars,
+        c0: f64,
+        running: TendonSet,
+    ) -> Result<(DynRates, TimeVars), SingularSystem> {
         let (kse, kbt) = (self.rod.kse, self.rod.kbt);
         let (bse, bbt) = (self.damping.bse, self.damping.bbt);
         let v = y.v();
@@ -294,14 +335,26 @@ impl DynamicRod {
         let mut h_mat = Matrix3::zeros();
         let mut a_vec = Vector3::zeros();
         let mut b_vec = Vector3::zeros();
+        // Capstan friction forces τ_i' t_i and their moments (§2.3).
+        let mut friction_f = Vector3::zeros();
+        let mut friction_m = Vector3::zeros();
         for i in 0..self.tendons.len() {
-            let tau = self.tension[i];
-            if tau == 0.0 || running & (1 << i) == 0 {
+            if self.tension[i] == 0.0 || running & (1 << i) == 0 {
                 continue;
             }
+            let (tau, dtau) = if FRICTION {
+                self.tension_at(i, s)
+            } else {
+                (self.tension[i], 0.0)
+            };
             let g = self.offset(i, s);
             let t = y.u.cross(&g.r) + g.dr + v;
             let t2 = t.norm_squared();
+            if FRICTION && dtau != 0.0 {
+                let f_i = t * (dtau / t2.sqrt());
+                friction_f += f_i;
+                friction_m += g.r.cross(&f_i);
+            }
             let c = tau / (t2 * t2.sqrt());
             let a_i = (Matrix3::from_diagonal_element(t2) - t * t.transpose()) * c;
             let r_hat = hat(&g.r);
@@ -326,9 +379,14 @@ impl DynamicRod {
         let inertia_f = (y.omega.cross(&y.q) + q_t) * self.rho_a;
         let j_omega = self.rho_j.component_mul(&y.omega);
         let inertia_m = y.omega.cross(&j_omega) + self.rho_j.component_mul(&omega_t);
-        let top = -y.u.cross(&n) - y.rot.tr_mul(&self.rod.f_e) - a_vec + inertia_f
+        let mut top = -y.u.cross(&n) - y.rot.tr_mul(&self.rod.f_e) - a_vec + inertia_f
             - bse.component_mul(&hist.ws);
-        let bottom = -y.u.cross(&m) - v.cross(&n) - b_vec + inertia_m - bbt.component_mul(&hist.us);
+        let mut bottom =
+            -y.u.cross(&m) - v.cross(&n) - b_vec + inertia_m - bbt.component_mul(&hist.us);
+        if FRICTION {
+            top -= friction_f;
+            bottom -= friction_m;
+        }
         let rhs = Vector6::new(top.x, top.y, top.z, bottom.x, bottom.y, bottom.z);
         let mut x = rhs;
         if !Factor6::cholesky_or_lu(k).solve_vector(&mut x) || !x.iter().all(|v| v.is_finite()) {
@@ -362,7 +420,7 @@ impl DynamicRod {
                 continue;
             }
             let (t, r) = self.tendon_direction(i, s, y);
-            let f = t * self.tension[i];
+            let f = t * self.tension_at(i, s).0;
             let mo = r.cross(&f);
             out += Vector6::new(f.x, f.y, f.z, mo.x, mo.y, mo.z);
         }
@@ -446,7 +504,8 @@ impl DynamicRod {
             let t = y.u.cross(&g.r) + g.dr + y.v();
             let norm = t.norm();
             let dir = t / norm;
-            let a = (Matrix3::identity() - dir * dir.transpose()) * (self.tension[i] / norm);
+            let a =
+                (Matrix3::identity() - dir * dir.transpose()) * (self.tension_at(i, s).0 / norm);
             let r_hat = hat(&g.r);
             let a_r = a * r_hat;
             let mut block = k.fixed_view_mut::<3, 3>(0, 0);

@@ -14,7 +14,9 @@ use nalgebra::{Matrix3, Matrix6, Vector3, Vector6, LU, U6};
 use crate::numerics::rk4::rk4_step;
 use crate::robot::{Robot, TensionError};
 use crate::statics::integrate::{pieces, Piece};
-use crate::statics::{SingularSystem, SolveError, SolverSettings, Statics, MAX_STEPS};
+use crate::statics::{
+    SingularSystem, SolveError, SolverSettings, Statics, TensionProfile, MAX_STEPS,
+};
 
 use super::params::{Damping, DynamicsSettings};
 use super::section::{DynState, DynamicRod, TimeVars};
@@ -168,6 +170,17 @@ impl Dynamics {
         }
         dynamics.jacobian = None;
         Ok(dynamics)
+    }
+
+    /// Capstan tendon friction from the next step on (`docs/design.md`
+    /// §2.3): the tensions given to [`Dynamics::step`] become the motors'
+    /// and each tendon carries τ_i,m e_i(s) along its path. The profile is
+    /// the caller's, e.g. [`crate::statics::Solution::profile`] of a
+    /// [`crate::statics::FrictionState::solve`] at the same motor tensions
+    /// (quasi-static angles); `None` removes friction.
+    pub fn set_friction_profile(&mut self, profile: Option<std::sync::Arc<TensionProfile>>) {
+        self.model.set_profile(profile);
+        self.jacobian = None;
     }
 
     /// Change the external tip load (N, N·m, base frame) from the next step on.

@@ -349,3 +349,50 @@ fn bad_settings_and_tensions_are_errors() {
     // A rejected step leaves the state where it was.
     assert_eq!(dynamics.tip().time_s, 0.0);
 }
+
+#[test]
+fn with_a_friction_profile_the_step_response_settles_to_the_friction_statics() {
+    // The dynamic rod takes the statics' capstan profile (docs/design.md
+    // §2.3): held at the converged profile of the friction statics, the
+    // damped step response must come to that equilibrium, not to the
+    // frictionless one (2.4 mm away at μ = 0.3).
+    use crate::statics::{Friction, FrictionState};
+    let robot = robot("seed-4t.toml");
+    let settings = DynamicsSettings {
+        dt_s: 2e-3,
+        ..DynamicsSettings::default()
+    };
+    let tensions = [4.0, 0.0, 0.0, 0.0];
+    let statics = Statics::new(
+        &robot,
+        SolverSettings {
+            steps: settings.steps,
+            ..SolverSettings::default()
+        },
+    );
+    let mut friction = FrictionState::new(Friction::new(0.3), 4);
+    friction.update_direction(&tensions);
+    let sol = friction.solve(&statics, &tensions, None).unwrap();
+    let frictionless = statics.solve(&tensions, None).unwrap().position;
+    let mut dynamics = Dynamics::at_rest(
+        &robot,
+        Damping::proportional(&robot, 0.06),
+        settings,
+        &[0.0; 4],
+        Vector3::zeros(),
+        Vector3::zeros(),
+    )
+    .unwrap();
+    dynamics.set_friction_profile(sol.profile().cloned());
+    for _ in 0..(1.5 / settings.dt_s).round() as usize {
+        dynamics.step(&tensions).unwrap();
+    }
+    let gap = (dynamics.tip().position - sol.position).norm();
+    let apart = (frictionless - sol.position).norm();
+    eprintln!("friction: settled {gap:.2e} m from the friction statics, {apart:.2e} m from the frictionless");
+    assert!(apart > 1e-4, "friction moves the tip only {apart:e} m");
+    assert!(
+        gap < 1e-6,
+        "{gap:.3e} m from the friction statics equilibrium"
+    );
+}

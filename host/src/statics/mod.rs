@@ -14,6 +14,7 @@
 
 pub mod batch;
 pub mod continuation;
+pub mod friction;
 pub mod integrate;
 pub mod pose;
 pub mod rod;
@@ -21,9 +22,12 @@ pub mod shoot;
 pub mod stability;
 pub mod tangent;
 
+pub use friction::{Friction, FrictionError, FrictionState, TensionProfile};
 pub use rod::SingularSystem;
 pub use shoot::{Solution, SolveError, SolverSettings, Statics, WarmStart, MAX_STEPS};
 
+#[cfg(test)]
+mod friction_tests;
 #[cfg(test)]
 mod tests;
 #[cfg(test)]

@@ -8,7 +8,11 @@
 //! storing `w` keeps the internal force exact to roundoff, which is what lets
 //! the shooting residual reach 1e-10 N.
 
+use std::sync::Arc;
+
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
+
+use super::friction::TensionProfile;
 
 use crate::numerics::dense::Factor6;
 use crate::numerics::rk4::Rk4State;
@@ -120,8 +124,11 @@ pub(super) struct TendonTerms {
     pub q: Vector3<f64>,
     /// |q_i|².
     pub q2: f64,
-    /// τ_i / |q_i|³, N.
+    /// τ_i(s) / |q_i|³, N.
     pub c: f64,
+    /// τ_i'(s), N/m: the capstan friction's tension gradient (zero without
+    /// a [`TensionProfile`]); the friction force is τ_i' q_i/|q_i|.
+    pub dtau: f64,
     /// û q_i + û r_i' + r_i'' (a_i = A_i alpha).
     pub alpha: Vector3<f64>,
 }
@@ -178,8 +185,13 @@ pub struct Rod {
     /// Per tendon: r(0) when the routing is straight (constant r, r' = r'' = 0),
     /// so the hot loop needs no trigonometry for the common case.
     straight: [Option<Vector3<f64>>; MAX_TENDONS],
-    /// Tendon tensions τ_i, N.
+    /// Tendon tensions τ_i, N: with a `profile`, the motors' tensions
+    /// τ_i,m at the base (s = 0).
     pub(super) tension: [f64; MAX_TENDONS],
+    /// Capstan friction (`docs/design.md` §2.3): how each tendon's tension
+    /// changes along its path, τ_i(s) = τ_i,m e_i(s). `None` is the
+    /// frictionless model, τ_i(s) = τ_i, and costs nothing on the hot path.
+    profile: Option<Arc<TensionProfile>>,
     /// The tendons with a non-zero tension.
     pulled: TendonSet,
     /// Per tendon: arc length of its anchor, m.
@@ -230,6 +242,7 @@ impl Rod {
             geometry,
             straight,
             tension: [0.0; MAX_TENDONS],
+            profile: None,
             pulled: 0,
             end,
             knots,
@@ -270,9 +283,47 @@ impl Rod {
         }
     }
 
-    /// Tension of tendon `i`, N.
+    /// Tension of tendon `i`, N (with a friction profile, the motor's
+    /// tension at the base).
     pub fn tension(&self, i: usize) -> f64 {
         self.tension[i]
+    }
+
+    /// Set (or with `None` remove) the capstan friction profile: the
+    /// tensions set by [`Rod::set_tensions`] become the motors' tensions at
+    /// s = 0, and tendon i's tension at s is τ_i,m e_i(s).
+    pub fn set_profile(&mut self, profile: Option<Arc<TensionProfile>>) {
+        self.profile = profile;
+    }
+
+    /// The friction profile in use, if any.
+    pub fn profile(&self) -> Option<&Arc<TensionProfile>> {
+        self.profile.as_ref()
+    }
+
+    /// Tendon `i`'s tension factor at `s` and its logarithmic derivative:
+    /// (e_i(s), e_i'(s)/e_i(s)); (1, 0) without friction. Since τ_i(s) =
+    /// τ_i,m e_i(s), this is also ∂τ_i(s)/∂τ_i,m.
+    #[inline(always)]
+    pub(super) fn tension_factor(&self, i: usize, s: f64) -> (f64, f64) {
+        match &self.profile {
+            None => (1.0, 0.0),
+            Some(p) => p.factor(i, s),
+        }
+    }
+
+    /// Tendon `i`'s tension τ_i(s) (N) and its gradient τ_i'(s) (N/m) at
+    /// arc length `s`: (τ_i, 0) without friction.
+    #[inline(always)]
+    pub(super) fn tension_at(&self, i: usize, s: f64) -> (f64, f64) {
+        let tau = self.tension[i];
+        match &self.profile {
+            None => (tau, 0.0),
+            Some(p) => {
+                let (e, dlog) = p.factor(i, s);
+                (tau * e, tau * e * dlog)
+            }
+        }
     }
 
     /// Tendon `i`'s offset r_i(s) with r_i'(s), r_i''(s).
@@ -316,7 +367,25 @@ impl Rod {
     /// a_i = A_i (û q_i + û r_i' + r_i''), b_i = r̂_i a_i, H_i = r̂_i G_i.
     /// The matrix is symmetric positive definite; solved by Cholesky. Only
     /// the tendons in `running` load the rod here (`docs/design.md` §2.1).
+    /// With a friction profile, τ_i is τ_i(s) and the friction force
+    /// f_i = τ_i' q_i/|q_i| at r_i is one more explicit load (§2.3):
+    /// top −= Σ f_i, bottom −= Σ r_i × f_i.
     pub fn strain_rates(
+        &self,
+        s: f64,
+        state: &RodState,
+        running: TendonSet,
+    ) -> Result<(Vector3<f64>, Vector3<f64>), SingularSystem> {
+        match &self.profile {
+            None => self.strain_rates_with::<false>(s, state, running),
+            Some(_) => self.strain_rates_with::<true>(s, state, running),
+        }
+    }
+
+    /// [`Rod::strain_rates`] with (`FRICTION`) or without the tension
+    /// profile, chosen by the caller once per step rather than per stage.
+    #[inline(always)]
+    fn strain_rates_with<const FRICTION: bool>(
         &self,
         s: f64,
         state: &RodState,
@@ -324,7 +393,7 @@ impl Rod {
     ) -> Result<(Vector3<f64>, Vector3<f64>), SingularSystem> {
         // The same assembly and factor as [`Rod::system`] (so the plain and
         // the tangent pass stay bit-identical), without keeping the parts.
-        let (k, rhs) = self.assemble(s, state, running, |_| {});
+        let (k, rhs) = self.assemble_with::<FRICTION>(s, state, running, |_| {});
         let (_, x) = Factor6::ldlt_solve(&k, rhs).ok_or(SingularSystem { s })?;
         Ok((
             Vector3::new(x[0], x[1], x[2]),
@@ -368,8 +437,23 @@ impl Rod {
     /// Bᵢᵀ Aᵢ Bᵢ = c (|q|² BᵢᵀBᵢ − [q; k][q; k]ᵀ) — a rank-one update of a
     /// fixed pattern, so no 3×3 products are formed.
     #[inline(always)]
-    #[allow(clippy::needless_range_loop)] // block indices of K, as in the formula
     fn assemble(
+        &self,
+        s: f64,
+        state: &RodState,
+        running: TendonSet,
+        keep: impl FnMut(TendonTerms),
+    ) -> ([[f64; 6]; 6], [f64; 6]) {
+        match &self.profile {
+            None => self.assemble_with::<false>(s, state, running, keep),
+            Some(_) => self.assemble_with::<true>(s, state, running, keep),
+        }
+    }
+
+    /// [`Rod::assemble`], with (`FRICTION`) or without the tension profile.
+    #[inline(always)]
+    #[allow(clippy::needless_range_loop)] // block indices of K, as in the formula
+    fn assemble_with<const FRICTION: bool>(
         &self,
         s: f64,
         state: &RodState,
@@ -384,17 +468,32 @@ impl Rod {
         }
         let mut a_sum = Vector3::zeros();
         let mut b_sum = Vector3::zeros();
+        // Capstan friction forces Σ f_i and moments Σ r_i × f_i (body frame).
+        let mut friction_f = Vector3::zeros();
+        let mut friction_m = Vector3::zeros();
         // Only the pulled tendons that run here load the rod: visit their bits.
         let mut active = running & self.pulled;
         while active != 0 {
             let i = active.trailing_zeros() as usize;
             active &= active - 1;
-            let tau = self.tension[i];
+            let (tau, dtau) = if FRICTION {
+                self.tension_at(i, s)
+            } else {
+                (self.tension[i], 0.0)
+            };
             let g = self.routing(i, s);
             let q = Self::tendon_tangent(state, &g);
             let q2 = q.norm_squared();
-            let c = tau / (q2 * q2.sqrt());
+            let q_norm = q2.sqrt();
+            let c = tau / (q2 * q_norm);
             let r = g.r;
+            if FRICTION && dtau != 0.0 {
+                // f_i = τ_i' t_i: the tension the guides take off the tendon
+                // (d(τ_i t_i)/ds = τ_i t_i' + τ_i' t_i; the first part is A/a).
+                let f_i = q * (dtau / q_norm);
+                friction_f += f_i;
+                friction_m += r.cross(&f_i);
+            }
             let kq = r.cross(&q);
             let z = [q.x, q.y, q.z, kq.x, kq.y, kq.z];
             // The whole square (constant bounds vectorise; the upper
@@ -438,12 +537,17 @@ impl Rod {
                 q,
                 q2,
                 c,
+                dtau,
                 alpha,
             });
         }
         let v = state.v();
-        let top = -state.u.cross(&n) - state.rot.tr_mul(&self.f_e) - a_sum;
-        let bottom = -state.u.cross(&m) - v.cross(&n) - b_sum;
+        let mut top = -state.u.cross(&n) - state.rot.tr_mul(&self.f_e) - a_sum;
+        let mut bottom = -state.u.cross(&m) - v.cross(&n) - b_sum;
+        if FRICTION {
+            top -= friction_f;
+            bottom -= friction_m;
+        }
         (k, [top.x, top.y, top.z, bottom.x, bottom.y, bottom.z])
     }
 
@@ -455,7 +559,24 @@ impl Rod {
         state: &RodState,
         running: TendonSet,
     ) -> Result<RodRates, SingularSystem> {
-        let (dw, du) = self.strain_rates(s, state, running)?;
+        match &self.profile {
+            None => self.rates_with::<false>(s, state, running),
+            Some(_) => self.rates_with::<true>(s, state, running),
+        }
+    }
+
+    /// [`Rod::rates`] with (`FRICTION`) or without the tension profile:
+    /// the RK4 step ([`super::integrate::rk4_step`]) picks once per step, so
+    /// that the frictionless stages carry no branch (measured: one per stage
+    /// cost ≈ 1–3 % of a solve's instructions).
+    #[inline(always)]
+    pub(super) fn rates_with<const FRICTION: bool>(
+        &self,
+        s: f64,
+        state: &RodState,
+        running: TendonSet,
+    ) -> Result<RodRates, SingularSystem> {
+        let (dw, du) = self.strain_rates_with::<FRICTION>(s, state, running)?;
         Ok(RodRates {
             dp: state.rot * state.v(),
             dr: rot_times_hat(&state.rot, &state.u),
@@ -465,16 +586,16 @@ impl Rod {
     }
 
     /// Point force of tendon `i` on the rod where it is anchored (body frame):
-    /// it pulls back along its own tangent, F_i = −τ_i q_i/|q_i|.
+    /// it pulls back along its own tangent, F_i = −τ_i(s) q_i/|q_i|.
     fn anchor_force(&self, i: usize, s: f64, state: &RodState) -> (Vector3<f64>, Vector3<f64>) {
         let g = self.routing(i, s);
         let q = Self::tendon_tangent(state, &g);
-        let f_i = q * (-self.tension[i] / q.norm());
+        let f_i = q * (-self.tension_at(i, s).0 / q.norm());
         (f_i, g.r)
     }
 
     /// The pull of the tendons in `set` on the section at `s` (body frame):
-    /// force Σ τ_i t_i and its moment Σ r_i × τ_i t_i, with t_i = q_i/|q_i|.
+    /// force Σ τ_i(s) t_i and its moment Σ r_i × τ_i(s) t_i, with t_i = q_i/|q_i|.
     fn tendon_pull(
         &self,
         s: f64,
@@ -539,7 +660,7 @@ impl Rod {
     }
 
     /// K = diag(Kse, Kbt) + Σ Bᵢᵀ Aᵢ Bᵢ over the tendons in `set` at `state`,
-    /// with Aᵢ = (τᵢ/|qᵢ|)(I − tᵢ tᵢᵀ) and Bᵢ = [I, −r̂ᵢ]: the strain-rate
+    /// with Aᵢ = (τᵢ(s)/|qᵢ|)(I − tᵢ tᵢᵀ) and Bᵢ = [I, −r̂ᵢ]: the strain-rate
     /// matrix, and also the derivative of the combined wrench [N; M] (body
     /// frame) with respect to the strains (w, u).
     pub(super) fn stiffness(&self, s: f64, state: &RodState, set: TendonSet) -> Matrix6<f64> {
@@ -554,7 +675,7 @@ impl Rod {
             let q = Self::tendon_tangent(state, &g);
             let norm = q.norm();
             let t = q / norm;
-            let a = (Matrix3::identity() - t * t.transpose()) * (self.tension[i] / norm);
+            let a = (Matrix3::identity() - t * t.transpose()) * (self.tension_at(i, s).0 / norm);
             let r_hat = hat(&g.r);
             let a_r = a * r_hat;
             let mut block = Matrix6::zeros();
@@ -571,8 +692,8 @@ impl Rod {
 
     /// Tip boundary residual (body frame):
     /// [−n(L) + Σ F_i + Rᵀ F_ext ; −m(L) + Σ r̂_i F_i + Rᵀ M_ext] with
-    /// F_i = −τ_i q_i(L)/|q_i(L)|, each tendon anchored at the tip pulling back
-    /// along its own tangent. External loads are given in the base frame (N, N·m).
+    /// F_i = −τ_i(L) q_i(L)/|q_i(L)|, each tendon anchored at the tip pulling back
+    /// along its own tangent (with friction, at the tension that reaches it). External loads are given in the base frame (N, N·m).
     pub fn tip_residual(
         &self,
         tip: &RodState,

@@ -11,7 +11,11 @@
 //! (The `levenberg-marquardt` crate was not used: it recomputes a full
 //! finite-difference Jacobian every iteration, the cost this avoids.)
 
+use std::sync::Arc;
+
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
+
+use super::friction::{FrictionError, TensionProfile};
 
 use super::integrate::{integrate, integrate_sampled};
 use super::pose::{orthonormalise, quaternion_wxyz};
@@ -80,6 +84,8 @@ pub struct Solution {
     /// Warm start for a neighbouring solve.
     pub warm: WarmStart,
     tensions: Vec<f64>,
+    /// The capstan friction profile solved with (`docs/design.md` §2.3), if any.
+    profile: Option<Arc<TensionProfile>>,
 }
 
 impl Solution {
@@ -90,9 +96,15 @@ impl Solution {
         [p.x, p.y, p.z, q[0], q[1], q[2], q[3]]
     }
 
-    /// The tendon tensions solved for, N.
+    /// The tendon tensions solved for, N (with friction: the motors').
     pub fn tensions(&self) -> &[f64] {
         &self.tensions
+    }
+
+    /// The capstan friction profile this was solved with; `None` for the
+    /// frictionless model.
+    pub fn profile(&self) -> Option<&Arc<TensionProfile>> {
+        self.profile.as_ref()
     }
 
     /// Base internal force n(0), N.
@@ -159,6 +171,9 @@ pub enum SolveError {
     /// physical robot, so this means non-physical numbers).
     #[error(transparent)]
     Singular(#[from] SingularSystem),
+    /// The friction numbers or state do not fit (`docs/design.md` §2.3).
+    #[error(transparent)]
+    BadFriction(#[from] FrictionError),
 }
 
 /// Forward statics of one robot: tensions (and optional tip load) → tip pose.
@@ -208,12 +223,39 @@ impl Statics {
         tip_moment: Vector3<f64>,
         warm: Option<&WarmStart>,
     ) -> Result<Solution, SolveError> {
+        self.solve_rod(tensions, None, tip_force, tip_moment, warm)
+    }
+
+    /// As [`Statics::solve`], with capstan friction: `tensions` are the
+    /// motors' (at s = 0) and `profile` says how each tendon's tension
+    /// changes along its path (`docs/design.md` §2.3; built by
+    /// [`super::friction::FrictionState`]). `None` is [`Statics::solve`].
+    pub(crate) fn solve_with_profile(
+        &self,
+        tensions: &[f64],
+        profile: Option<Arc<TensionProfile>>,
+        warm: Option<&WarmStart>,
+    ) -> Result<Solution, SolveError> {
+        self.solve_rod(tensions, profile, Vector3::zeros(), Vector3::zeros(), warm)
+    }
+
+    /// The shooting solve of this robot's rod under `tensions`, friction
+    /// `profile` and tip load.
+    fn solve_rod(
+        &self,
+        tensions: &[f64],
+        profile: Option<Arc<TensionProfile>>,
+        tip_force: Vector3<f64>,
+        tip_moment: Vector3<f64>,
+        warm: Option<&WarmStart>,
+    ) -> Result<Solution, SolveError> {
         self.robot.check_tensions(tensions)?;
         if !(tip_force.iter().all(|x| x.is_finite()) && tip_moment.iter().all(|x| x.is_finite())) {
             return Err(SolveError::BadLoad);
         }
         let mut rod = self.rod.clone();
         rod.set_tensions(tensions);
+        rod.set_profile(profile);
         let problem = Shooting {
             rod: &rod,
             steps: self.settings.steps,
@@ -251,11 +293,21 @@ impl Statics {
                 }
             }
         };
-        Ok(self.solution(
+        let mut solution = self.solution(
             (x, tip, jac, res, iterations, integrations),
             guess,
             tensions,
-        ))
+        );
+        solution.profile = rod.profile().cloned();
+        Ok(solution)
+    }
+
+    /// The rod of a solution of this robot: its tensions and friction profile.
+    pub(super) fn solution_rod(&self, sol: &Solution) -> Rod {
+        let mut rod = self.rod.clone();
+        rod.set_tensions(&sol.tensions);
+        rod.set_profile(sol.profile.clone());
+        rod
     }
 
     /// The rod of this robot under `tensions` (checked by the caller).
@@ -279,6 +331,7 @@ impl Statics {
             integrations,
             warm: WarmStart { x, jacobian, guess },
             tensions: tensions.to_vec(),
+            profile: None,
         }
     }
 
@@ -286,8 +339,7 @@ impl Statics {
     /// lengths, for a converged `sol` of this robot. Integrated on a grid at
     /// least as fine as the solver's.
     pub fn shape(&self, sol: &Solution, points: usize) -> Vec<Vector3<f64>> {
-        let mut rod = self.rod.clone();
-        rod.set_tensions(&sol.tensions);
+        let rod = self.solution_rod(sol);
         let base = base_state(&rod, &sol.warm.x);
         // The solve integrated this rod from this base without a singular
         // system; the finer grid can only differ by roundoff near one.

@@ -219,7 +219,7 @@ fn spatial_wrench_jacobian(
     let pulled = |i: usize| running & (1 << i) != 0 && rod.tension(i) != 0.0;
     for i in (0..rod.n_tendons).filter(|&i| pulled(i)) {
         let g = rod.routing(i, s);
-        let f = Rod::tendon_tangent(y, &g).normalize() * rod.tension(i);
+        let f = Rod::tendon_tangent(y, &g).normalize() * rod.tension_at(i, s).0;
         n_c += f;
         m_c += g.r.cross(&f);
     }
@@ -231,7 +231,7 @@ fn spatial_wrench_jacobian(
             let g = rod.routing(i, s);
             let q = Rod::tendon_tangent(y, &g);
             // τ δq̂ = −δF, F = −τ q̂ the tendon's pull on the rod.
-            let df = -rod.force_change(i, &q, &(t.u[j].cross(&g.r) + t.w[j]));
+            let df = -rod.force_change(i, s, &q, &(t.u[j].cross(&g.r) + t.w[j]));
             dn += df;
             dm += g.r.cross(&df);
         }

@@ -18,6 +18,14 @@
 //! δ(A ψ) = c [ −(q·δq) ψ + 3 (q·δq)(q·ψ) q/|q|² − (q·ψ) δq − (δq·ψ) q ] + A δψ,
 //! δq = δu × r + δw,   δψ = δu × q + u × δq + δu × r'.
 //! ```
+//!
+//! With capstan friction (`docs/design.md` §2.3) the tension profile e_i(s)
+//! is held fixed (it is the outer fixed point's, not a function of x): τ_i
+//! becomes τ_i(s), the friction force f = τ_i' q/|q| adds
+//! δf = (τ_i'/|q|)(δq − t (t·δq)) to δg, and a tension column is ∂/∂τ_i,m,
+//! scaled by e_i(s). The Jacobian is then exact for the fixed profile; how
+//! the profile itself moves with x is left out (Newton's Jacobian only
+//! picks steps; the outer fixed point accounts for it).
 
 use nalgebra::{Matrix3, SMatrix, Vector3, Vector6};
 
@@ -165,25 +173,32 @@ fn stack(top: &Vector3<f64>, bottom: &Vector3<f64>) -> Vector6<f64> {
 }
 
 impl Rod {
-    /// Tendon `i`'s pull on a section per newton of tension (body frame):
-    /// [t_i; r_i × t_i], t_i = q_i/|q_i| — the derivative of the combined
-    /// wrench and of the tip condition with respect to τ_i.
+    /// Tendon `i`'s pull on a section at `s` per newton of motor tension
+    /// (body frame): e_i(s) [t_i; r_i × t_i], t_i = q_i/|q_i| — the
+    /// derivative of the combined wrench and of the tip condition with
+    /// respect to τ_i (e_i = 1 without friction).
     fn unit_pull(&self, i: usize, s: f64, state: &RodState) -> Vector6<f64> {
         let g = self.routing(i, s);
         let t = Self::tendon_tangent(state, &g).normalize();
-        stack(&t, &g.r.cross(&t))
+        let pull = stack(&t, &g.r.cross(&t));
+        match self.profile() {
+            None => pull,
+            Some(_) => pull * self.tension_factor(i, s).0,
+        }
     }
 
-    /// δF of tendon `i`'s pull F = −τ q/|q| for a change δq of its tangent.
+    /// δF of tendon `i`'s pull F = −τ_i(s) q/|q| at `s` for a change δq of
+    /// its tangent.
     pub(super) fn force_change(
         &self,
         i: usize,
+        s: f64,
         q: &Vector3<f64>,
         dq: &Vector3<f64>,
     ) -> Vector3<f64> {
         let norm = q.norm();
         let t = q / norm;
-        (dq - t * t.dot(dq)) * (-self.tension[i] / norm)
+        (dq - t * t.dot(dq)) * (-self.tension_at(i, s).0 / norm)
     }
 
     /// State rates and their linearisation in every column of `t`: the
@@ -222,7 +237,13 @@ impl Rod {
             let q = Self::tendon_tangent(y, &g);
             let q2 = q.norm_squared();
             let psi = sys.dw + sys.du.cross(&g.r) + y.u.cross(&q) + y.u.cross(&g.dr) + g.ddr;
-            let a_psi = (psi * q2 - q * q.dot(&psi)) / (q2 * q2.sqrt());
+            let mut a_psi = (psi * q2 - q * q.dot(&psi)) / (q2 * q2.sqrt());
+            if self.profile().is_some() {
+                // τ_i(s) = τ_i,m e_i(s) and the friction force τ_i,m e_i' t_i
+                // are both linear in the motor's tension.
+                let (e, dlog) = self.tension_factor(i, s);
+                a_psi = (a_psi + q * (dlog / q2.sqrt())) * e;
+            }
             *dg = stack(&a_psi, &g.r.cross(&a_psi));
         }
         let mut out = *t;
@@ -252,6 +273,12 @@ impl Rod {
                     * term.c;
                 top += d_apsi;
                 bottom += term.r.cross(&d_apsi);
+                if term.dtau != 0.0 {
+                    // δ of the friction force τ' q/|q| at a fixed profile.
+                    let df = (dq - term.q * (q_dq / term.q2)) * (term.dtau / term.q2.sqrt());
+                    top += df;
+                    bottom += term.r.cross(&df);
+                }
             }
             dz[j] = -stack(&top, &bottom);
             if j >= 6 {
@@ -339,7 +366,7 @@ impl Rod {
                 let g = self.routing(i, self.length);
                 if self.tension[i] != 0.0 {
                     let q = Self::tendon_tangent(tip, &g);
-                    let df = self.force_change(i, &q, &(du.cross(&g.r) + dw));
+                    let df = self.force_change(i, self.length, &q, &(du.cross(&g.r) + dw));
                     force += df;
                     moment += g.r.cross(&df);
                 }
