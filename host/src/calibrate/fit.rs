@@ -392,9 +392,7 @@ pub fn calibrate(
     let mut iterations = 0;
     let mut weights;
     let mut sigma;
-    let mut round = 0;
     let (a, r) = loop {
-        round += 1;
         let (it, s) = levenberg_marquardt(&problem, &mut v, &free, &rows, &mut sols, opts)?;
         iterations += it;
         solves += s;
@@ -414,7 +412,8 @@ pub fn calibrate(
             var.sqrt().max(opts.noise_floor_m),
             opts.identifiable_fraction,
         );
-        if more.is_empty() || round >= 3 {
+        // Each round fixes at least one parameter, so this ends.
+        if more.is_empty() {
             break (a, (r, var));
         }
         // Fixed after the fit: back to the nominal value, and fit again.

@@ -22,6 +22,9 @@ pub use report::Report;
 
 use crate::statics::SolveError;
 
+/// The parameters `tendril calibrate` fits when `--fit` is not given.
+pub const DEFAULT_FIT: &str = "E,density,length,offsets,angles,base";
+
 /// Why a calibration could not be done.
 #[derive(Debug, thiserror::Error)]
 pub enum CalibError {

@@ -127,6 +127,12 @@ pub struct Report {
 }
 
 impl Report {
+    /// The report as pretty JSON (what `tendril calibrate` writes).
+    pub fn json(&self) -> String {
+        // Plain data of numbers and strings: serialising cannot fail.
+        serde_json::to_string_pretty(self).expect("a report serialises")
+    }
+
     /// The report as markdown.
     pub fn markdown(&self) -> String {
         use std::fmt::Write;

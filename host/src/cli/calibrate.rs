@@ -8,8 +8,7 @@ use anyhow::Context;
 use super::common::RobotArg;
 use crate::calibrate::{self, FitOptions};
 
-/// The parameters fitted when `--fit` is not given.
-pub const DEFAULT_FIT: &str = "E,density,length,offsets,angles,base";
+use crate::calibrate::DEFAULT_FIT;
 
 /// Fit a robot file's parameters to measured tip poses; or, with --plan N,
 /// propose N tension sets to measure.
@@ -104,7 +103,7 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
         .context("the calibrated robot does not pass the robot-file checks")?;
     crate::fsutil::write_atomic(&args.out, text.as_bytes())
         .with_context(|| format!("{}", args.out.display()))?;
-    crate::fsutil::write_atomic(&json, serde_json::to_string_pretty(&c.report)?.as_bytes())
+    crate::fsutil::write_atomic(&json, c.report.json().as_bytes())
         .with_context(|| format!("{}", json.display()))?;
     crate::fsutil::write_atomic(&md, c.report.markdown().as_bytes())
         .with_context(|| format!("{}", md.display()))?;
