@@ -4,6 +4,7 @@
 //! firmware core → control loop ↔ plant. The `tendril` binary (`main.rs`) is a
 //! thin shell over this library.
 
+pub mod calibrate;
 pub mod cli;
 pub mod command_stage;
 pub mod compare;

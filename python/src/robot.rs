@@ -214,6 +214,65 @@ impl Robot {
         )
     }
 
+    /// Fit this robot's parameters to measured tip poses: the library call
+    /// of ``tendril calibrate`` (docs/design.md §11).
+    ///
+    /// data: a measured CSV (t0..t{k-1} [N], px, py, pz [m], optional
+    /// qw..qz, fx,fy,fz, mx,my,mz). fit: the parameter list of ``--fit``.
+    /// holdout: fraction of rows held out; seed: its split;
+    /// positions_only: ignore orientations; mm_per_deg: orientation weight.
+    ///
+    /// Returns ``(robot, report)``: the calibrated ``Robot`` (its ``toml`` is
+    /// the file the CLI writes) and the report as a dict (the CLI's
+    /// ``.report.json``). ``ValueError`` for bad data or options,
+    /// ``OSError`` when the file cannot be read, ``RuntimeError`` when a
+    /// statics solve fails. Ctrl-C raises once the fit returns.
+    #[pyo3(signature = (data, fit=tendril::calibrate::DEFAULT_FIT, holdout=0.2, seed=1, positions_only=false, mm_per_deg=0.1 * 1e3 * std::f64::consts::PI / 180.0))]
+    #[allow(clippy::too_many_arguments)]
+    fn calibrate<'py>(
+        &self,
+        py: Python<'py>,
+        data: PathBuf,
+        fit: &str,
+        holdout: f64,
+        seed: u64,
+        positions_only: bool,
+        mm_per_deg: f64,
+    ) -> PyResult<(Robot, Bound<'py, PyAny>)> {
+        use tendril::calibrate::{self as cal, CalibError};
+        let params = cal::parse_fit_list(fit, self.model.n_tendons()).map_err(value_error)?;
+        if !(mm_per_deg.is_finite() && mm_per_deg > 0.0) {
+            return Err(value_error(format!(
+                "mm_per_deg must be a positive number, got {mm_per_deg}"
+            )));
+        }
+        if std::fs::metadata(&data).is_err() {
+            return Err(os_error(&std::io::Error::new(
+                std::io::ErrorKind::NotFound,
+                format!("{}: cannot read", data.display()),
+            )));
+        }
+        let measured = cal::read_measurements(&data, &self.model).map_err(|e| invalid(&e))?;
+        let mut opts = cal::FitOptions::new(params);
+        opts.holdout_fraction = holdout;
+        opts.seed = seed;
+        opts.use_orientation = !positions_only;
+        opts.orientation_m_per_rad = mm_per_deg * 1e-3 * 180.0 / std::f64::consts::PI;
+        let model = &self.model;
+        let result = detached(py, |_| cal::calibrate(model, &measured, &opts))?;
+        let c = match result {
+            Ok(c) => c,
+            Err(e @ CalibError::Solve { .. }) => return Err(runtime_error(&e)),
+            Err(e) => return Err(invalid(&e)),
+        };
+        let text = c.robot_file();
+        let robot = Robot::from_toml(&text)?;
+        let report = py
+            .import("json")?
+            .call_method1("loads", (c.report.json(),))?;
+        Ok((robot, report))
+    }
+
     /// Forward statics: tip poses for tendon tensions.
     ///
     /// tensions: ``(n, k)`` (or ``(k,)`` for one row), N, each in

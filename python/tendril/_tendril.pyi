@@ -2,7 +2,7 @@
 
 import os
 import pathlib
-from typing import Optional, Sequence, Tuple, Union
+from typing import Any, Dict, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -44,6 +44,16 @@ class Robot:
         """The robot file's path, or None (made from text or built in)."""
     @property
     def toml(self) -> str: ...
+    def calibrate(
+        self,
+        data: _Path,
+        fit: str = "E,density,length,offsets,angles,base",
+        holdout: float = 0.2,
+        seed: int = 1,
+        positions_only: bool = False,
+        mm_per_deg: float = 1.7453292519943295,
+    ) -> Tuple["Robot", Dict[str, Any]]:
+        """Fit this robot to a measured CSV (tendril calibrate) -> (calibrated robot, report dict)."""
     def fk(
         self,
         tensions: _ArrayLike,

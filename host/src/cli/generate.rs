@@ -37,6 +37,18 @@ pub struct GenerateArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Synthetic measurements: Gaussian tracker jitter on each position axis, mm.
+    #[arg(long, value_name = "SIGMA", default_value_t = 0.0)]
+    pub noise_mm: f64,
+    /// Synthetic measurements: Gaussian jitter on each axis of the orientation, degrees.
+    #[arg(long, value_name = "D", default_value_t = 0.0)]
+    pub noise_deg: f64,
+    /// Synthetic measurements: the robot's base in the tracker frame, mm (x,y,z).
+    #[arg(long, value_name = "X,Y,Z")]
+    pub frame_offset_mm: Option<String>,
+    /// Seed of the measurement noise.
+    #[arg(long, default_value_t = 2)]
+    pub noise_seed: u64,
 }
 
 impl GenerateArgs {
@@ -62,7 +74,21 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
         &args.out,
         "a dataset is a CSV with its sidecar (.json) beside it",
     )?;
+    let noise = tracker_noise(&args)?;
     let sidecar = job::generate(&args.request(), !args.quiet, stop_flag())?;
+    if let Some(noise) = noise {
+        // The rows as a tracker would record them (docs/design.md §11); the
+        // sidecar keeps describing the noiseless solves.
+        let mut data = crate::dataset::Dataset::read_csv(&args.out)?;
+        crate::calibrate::noise::add_tracker_noise(&mut data, &noise);
+        data.write_csv(&args.out)?;
+        log::info!(
+            "added tracker noise: {} mm per axis, {}° per axis, base at {:?} mm",
+            args.noise_mm,
+            args.noise_deg,
+            noise.frame_offset_m.map(|x| x * 1e3)
+        );
+    }
     log::info!(
         "wrote {} to {} in {:.2} s ({} re-solved cold, {} dropped)",
         rows(sidecar.count),
@@ -80,4 +106,37 @@ fn rows(n: usize) -> String {
     } else {
         format!("{n} rows")
     }
+}
+
+/// The tracker noise the flags ask for, or `None` for a noiseless dataset.
+fn tracker_noise(
+    args: &GenerateArgs,
+) -> anyhow::Result<Option<crate::calibrate::noise::TrackerNoise>> {
+    for (flag, x) in [
+        ("--noise-mm", args.noise_mm),
+        ("--noise-deg", args.noise_deg),
+    ] {
+        if !(x.is_finite() && x >= 0.0) {
+            anyhow::bail!("{flag} must be a finite number >= 0, got {x}");
+        }
+    }
+    let offset = match &args.frame_offset_mm {
+        None => [0.0; 3],
+        Some(text) => {
+            let v = super::common::parse_list(text, "--frame-offset-mm")?;
+            if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
+                anyhow::bail!("--frame-offset-mm takes three finite numbers x,y,z, got {text:?}");
+            }
+            [v[0] * 1e-3, v[1] * 1e-3, v[2] * 1e-3]
+        }
+    };
+    if args.noise_mm == 0.0 && args.noise_deg == 0.0 && offset == [0.0; 3] {
+        return Ok(None);
+    }
+    Ok(Some(crate::calibrate::noise::TrackerNoise {
+        position_sigma_m: args.noise_mm * 1e-3,
+        angle_sigma_rad: args.noise_deg.to_radians(),
+        frame_offset_m: offset,
+        seed: args.noise_seed,
+    }))
 }

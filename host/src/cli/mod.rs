@@ -3,6 +3,7 @@
 
 use clap::{Parser, Subcommand};
 
+mod calibrate;
 pub mod common;
 mod compare;
 pub mod console;
@@ -56,6 +57,8 @@ enum Command {
     Run(run::RunArgs),
     /// Forward statics: tip pose for tendon tensions (one, or a CSV batch).
     Fk(fk::FkArgs),
+    /// Fit a robot file to measured tip poses (or plan the measurements).
+    Calibrate(calibrate::CalibrateArgs),
     /// Generate the tension <-> pose dataset (CSV + JSON sidecar).
     Generate(generate::GenerateArgs),
     /// Train every learner on one split and compare them (Table II, Figure 3).
@@ -88,6 +91,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         None => crate::pipeline::run_default(),
         Some(Command::Run(a)) => run::run(a),
         Some(Command::Fk(a)) => fk::run(a),
+        Some(Command::Calibrate(a)) => calibrate::run(a),
         Some(Command::Generate(a)) => generate::run(a),
         Some(Command::Compare(a)) => compare::run(a),
         Some(Command::Workspace(a)) => workspace::run(a),

@@ -2,6 +2,7 @@
 //! Figures are PNG (plotters' bitmap backend) with the bundled DejaVu Sans
 //! font, so drawing needs no system font library.
 
+pub mod calibration;
 pub mod compare;
 pub mod learning_curve;
 pub mod sim;

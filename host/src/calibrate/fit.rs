@@ -1,0 +1,611 @@
+//! The estimator (`docs/design.md` §11): Levenberg–Marquardt on the chosen
+//! parameters, a Huber loss by iteratively reweighted rows, central
+//! finite-difference sensitivities through warm-started statics, 95 %
+//! intervals from the covariance and the identifiability rule.
+
+use std::time::Instant;
+
+use nalgebra::{DMatrix, DVector, UnitQuaternion, Vector3};
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+
+use super::data::Measurements;
+use super::params::{bounds, scale, Param, Values};
+use super::report::{DownWeighted, FittedParam, Report, ResidualStats, Unidentified};
+use super::CalibError;
+use crate::robot::Robot;
+use crate::statics::{Solution, SolverSettings, Statics};
+
+/// Relative central-difference step: the parameter moves by ±1e-4 of its
+/// scale ([`super::params::scale`]). The truncation error is O(h²) ≈ 1e-8
+/// of the sensitivity; the solve's own error (residual ≤ 5e-10 N) divided
+/// by h stays far below the tracker's noise.
+pub const FD_STEP: f64 = 1e-4;
+/// 95 % two-sided normal quantile.
+const Z95: f64 = 1.959963984540054;
+/// A row whose Huber weight falls below this is named as down-weighted.
+const NAMED_WEIGHT: f64 = 0.5;
+
+/// How to fit.
+#[derive(Clone, Debug)]
+pub struct FitOptions {
+    /// Parameters to fit (the rest keep the nominal file's values).
+    pub fit: Vec<Param>,
+    /// Fraction of the rows held out of the fit to judge it, in [0, 0.5].
+    pub holdout_fraction: f64,
+    /// Seed of the held-out split.
+    pub seed: u64,
+    /// Use the `qw..qz` columns when present.
+    pub use_orientation: bool,
+    /// How an orientation error weighs against a position error, m/rad.
+    pub orientation_m_per_rad: f64,
+    /// Huber threshold on a row's residual norm, in units of the robust
+    /// per-axis noise scale.
+    pub huber_k: f64,
+    /// The smallest noise the identifiability rule assumes, m: noiseless
+    /// synthetic data is judged as if a very good tracker measured it.
+    pub noise_floor_m: f64,
+    /// A direction of the parameters is unidentifiable when the data pins
+    /// it no better than this fraction of the parameters' scales.
+    pub identifiable_fraction: f64,
+    /// Levenberg–Marquardt iterations at most (per fit round).
+    pub max_iterations: usize,
+    /// Statics settings of every solve.
+    pub settings: SolverSettings,
+}
+
+impl FitOptions {
+    /// The defaults for fitting `fit`.
+    pub fn new(fit: Vec<Param>) -> FitOptions {
+        FitOptions {
+            fit,
+            holdout_fraction: 0.2,
+            seed: 1,
+            use_orientation: true,
+            orientation_m_per_rad: 0.1,
+            huber_k: 2.8,
+            noise_floor_m: 1e-5,
+            identifiable_fraction: 0.05,
+            max_iterations: 40,
+            settings: SolverSettings::default(),
+        }
+    }
+}
+
+/// A finished calibration: the robot, the values (including what the
+/// robot file cannot hold: tension scales, the tracker frame), the report
+/// and the tips for the figure.
+#[derive(Clone, Debug)]
+pub struct Calibration {
+    /// The calibrated robot (tension limits as in the nominal file).
+    pub robot: Robot,
+    /// Every value after the fit.
+    pub values: Values,
+    /// What the fit found, for JSON and markdown.
+    pub report: Report,
+    /// Measured positions (tracker frame), m, every row.
+    pub measured: Vec<[f64; 3]>,
+    /// The nominal model's tips (tracker frame = base frame), m.
+    pub before: Vec<[f64; 3]>,
+    /// The calibrated model's tips in the tracker frame, m.
+    pub after: Vec<[f64; 3]>,
+    /// Whether each row was held out of the fit.
+    pub held_out: Vec<bool>,
+}
+
+/// The fit's view of the data: what is observed per row and how.
+struct Problem<'a> {
+    nominal: &'a Robot,
+    nominal_values: Values,
+    data: &'a Measurements,
+    use_orientation: bool,
+    orientation_m_per_rad: f64,
+    settings: SolverSettings,
+}
+
+impl Problem<'_> {
+    /// Residual entries per row: 3 position, plus 3 orientation.
+    fn dims(&self) -> usize {
+        if self.use_orientation {
+            6
+        } else {
+            3
+        }
+    }
+
+    /// Statics of every row at `v`, warm-started from `warm` when given.
+    fn solve(
+        &self,
+        v: &Values,
+        rows: &[usize],
+        warm: Option<&[Solution]>,
+    ) -> Result<Vec<Solution>, CalibError> {
+        let statics = Statics::new(&v.solving_robot(self.nominal), self.settings);
+        rows.par_iter()
+            .enumerate()
+            .map(|(k, &i)| {
+                let tau = v.scaled_tensions(&self.data.tensions[i]);
+                let f = Vector3::from(self.data.tip_forces[i]);
+                let m = Vector3::from(self.data.tip_moments[i]);
+                let w = warm.map(|s| &s[k].warm);
+                statics
+                    .solve_loaded(&tau, f, m, w)
+                    .map_err(|error| CalibError::Solve {
+                        line: self.data.lines[i],
+                        error,
+                    })
+            })
+            .collect()
+    }
+
+    /// The model's tip position in the tracker frame: p_tracker = R_b p + t_b.
+    fn tip_in_tracker(v: &Values, sol: &Solution) -> Vector3<f64> {
+        v.base_rotation_matrix() * sol.position + Vector3::from(v.base_translation)
+    }
+
+    /// Residuals (measured − model) of `rows`, row-major.
+    fn residuals(&self, v: &Values, rows: &[usize], sols: &[Solution]) -> DVector<f64> {
+        let d = self.dims();
+        let mut r = DVector::zeros(rows.len() * d);
+        let rb = v.base_rotation_matrix();
+        for (k, &i) in rows.iter().enumerate() {
+            let p = Self::tip_in_tracker(v, &sols[k]);
+            let e = Vector3::from(self.data.positions[i]) - p;
+            r.fixed_rows_mut::<3>(k * d).copy_from(&e);
+            if let (true, Some(q)) = (self.use_orientation, &self.data.quaternions) {
+                let [w, x, y, z] = q[i];
+                let measured =
+                    UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
+                let [w, x, y, z] = sols[k].quaternion;
+                let tip = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
+                let model = UnitQuaternion::from_rotation_matrix(&rb) * tip;
+                // The rotation taking the model's tip frame to the measured
+                // one, as a rotation vector (rad), weighed as a length.
+                let err = (measured * model.inverse()).scaled_axis();
+                r.fixed_rows_mut::<3>(k * d + 3)
+                    .copy_from(&(err * self.orientation_m_per_rad));
+            }
+        }
+        r
+    }
+
+    /// d(residuals)/dθ for the fitted parameters at `v` (θ_j = p_j / scale_j),
+    /// by central differences; `sols` are the solves at `v`, whose warm
+    /// starts seed every perturbed solve. Returns the Jacobian and the
+    /// number of solves spent.
+    fn jacobian(
+        &self,
+        v: &Values,
+        params: &[Param],
+        rows: &[usize],
+        sols: &[Solution],
+    ) -> Result<(DMatrix<f64>, usize), CalibError> {
+        let m = rows.len() * self.dims();
+        let mut jac = DMatrix::zeros(m, params.len());
+        let mut solves = 0;
+        for (j, &p) in params.iter().enumerate() {
+            let h = FD_STEP * scale(p, &self.nominal_values);
+            let mut side = |sign: f64| -> Result<DVector<f64>, CalibError> {
+                let mut vp = v.clone();
+                vp.set(p, v.get(p) + sign * h);
+                if p.moves_rod() {
+                    let s = self.solve(&vp, rows, Some(sols))?;
+                    solves += rows.len();
+                    Ok(self.residuals(&vp, rows, &s))
+                } else {
+                    Ok(self.residuals(&vp, rows, sols))
+                }
+            };
+            let plus = side(1.0)?;
+            let minus = side(-1.0)?;
+            // d r / d θ = scale × d r / d p.
+            jac.set_column(j, &((plus - minus) / (2.0 * FD_STEP)));
+        }
+        Ok((jac, solves))
+    }
+}
+
+/// Per-row norms of a row-major residual vector with `d` entries a row.
+fn row_norms(r: &DVector<f64>, d: usize) -> Vec<f64> {
+    r.as_slice()
+        .chunks(d)
+        .map(|c| c.iter().map(|x| x * x).sum::<f64>().sqrt())
+        .collect()
+}
+
+/// Robust per-axis noise scale from row norms: the median norm over the
+/// median of the χ distribution with `d` degrees of freedom (Wilson–Hilferty).
+fn robust_sigma(norms: &[f64], d: usize) -> f64 {
+    let mut s = norms.to_vec();
+    s.sort_by(f64::total_cmp);
+    let median = if s.is_empty() { 0.0 } else { s[s.len() / 2] };
+    let k = d as f64;
+    let chi_median = (k * (1.0 - 2.0 / (9.0 * k)).powi(3)).sqrt();
+    (median / chi_median).max(1e-15)
+}
+
+/// Huber weights of rows: 1 within k σ, k σ / ‖r_i‖ beyond (IRLS).
+fn huber_weights(norms: &[f64], sigma: f64, k: f64) -> Vec<f64> {
+    norms
+        .iter()
+        .map(|&n| if n <= k * sigma { 1.0 } else { k * sigma / n })
+        .collect()
+}
+
+/// Jᵀ W J and Jᵀ W r with one weight per row of `d` entries.
+fn normal_equations(
+    jac: &DMatrix<f64>,
+    r: &DVector<f64>,
+    w: &[f64],
+    d: usize,
+) -> (DMatrix<f64>, DVector<f64>) {
+    let mut wj = jac.clone();
+    let mut wr = r.clone();
+    for (i, &wi) in w.iter().enumerate() {
+        for k in 0..d {
+            wj.row_mut(i * d + k).scale_mut(wi);
+            wr[i * d + k] *= wi;
+        }
+    }
+    (jac.transpose() * &wj, jac.transpose() * &wr)
+}
+
+/// Weighted cost Σ w_i ‖r_i‖².
+fn cost(norms: &[f64], w: &[f64]) -> f64 {
+    norms.iter().zip(w).map(|(n, w)| w * n * n).sum()
+}
+
+/// The identifiability rule (`docs/design.md` §11): while the least
+/// determined direction v of the scaled parameters has a standard deviation
+/// σ / √λ_min above `fraction`, fix the parameter that weighs most in it
+/// (ties within 30 % by [`Param::fix_priority`]) and look again. Returns
+/// the parameters left free and what was fixed, with its partners.
+fn identify(
+    a: &DMatrix<f64>,
+    params: &[Param],
+    sigma: f64,
+    fraction: f64,
+) -> (Vec<Param>, Vec<Unidentified>) {
+    let mut free: Vec<usize> = (0..params.len()).collect();
+    let mut fixed = Vec::new();
+    while !free.is_empty() {
+        let sub = DMatrix::from_fn(free.len(), free.len(), |i, j| a[(free[i], free[j])]);
+        let eig = sub.symmetric_eigen();
+        let (k, &lmin) = eig
+            .eigenvalues
+            .iter()
+            .enumerate()
+            .min_by(|x, y| x.1.total_cmp(y.1))
+            .expect("non-empty");
+        let std = sigma / lmin.max(0.0).sqrt();
+        if std <= fraction {
+            break;
+        }
+        let v = eig.eigenvectors.column(k);
+        let vmax = v.amax();
+        let pick = (0..free.len())
+            .filter(|&i| v[i].abs() >= 0.7 * vmax)
+            .min_by_key(|&i| (params[free[i]].fix_priority(), free[i]))
+            .expect("the largest component qualifies");
+        let partners: Vec<String> = (0..free.len())
+            .filter(|&i| i != pick && v[i].abs() >= 0.2 * vmax)
+            .map(|i| params[free[i]].to_string())
+            .collect();
+        let p = params[free[pick]];
+        fixed.push(Unidentified {
+            fixed: p.to_string(),
+            confounded_with: partners.clone(),
+            std_fraction: std,
+            separate_with: separating_data(p, &partners),
+        });
+        free.remove(pick);
+    }
+    (free.iter().map(|&i| params[i]).collect(), fixed)
+}
+
+/// What measurement would separate `p` from its partners, in words.
+fn separating_data(p: Param, partners: &[String]) -> String {
+    let with = |s: &str| partners.iter().any(|x| x.starts_with(s));
+    match p {
+        Param::YoungsModulus | Param::TensionScale(_) | Param::Offset(_)
+            if with("offset") || with("tension_scale") || with("E") || with("density") =>
+        {
+            "tendons and weight bend the rod by τ·s·d/(E·I) and ρ·A·g/(E·I): only the ratios \
+             are seen in tip positions. A known tip load (fx,fy,fz columns: a hung weight), \
+             a measured tendon offset or a load-cell-calibrated tension separates them"
+                .into()
+        }
+        Param::ShearModulus => "G shows only in torsion and shear: tip orientations under \
+            helical routing or a known tip moment (mx,my,mz columns) separate it"
+            .into(),
+        Param::Density => "the rod's weight is seen only against its stiffness: a known tip \
+            load, or weighing the rod, separates it"
+            .into(),
+        Param::Angle(_) | Param::BaseRotation(_) => "a common turn of the tendons looks like \
+            a turn of the base about its axis: tip orientations (qw..qz) or rows at zero \
+            tension under gravity along another axis separate them"
+            .into(),
+        _ => "more rows spread over the tension limits (tendril calibrate --plan N) or \
+            orientation columns"
+            .into(),
+    }
+}
+
+/// Fit `opts.fit` of `nominal` to `data` (checked against `nominal` by
+/// [`super::data::parse_measurements`]).
+pub fn calibrate(
+    nominal: &Robot,
+    data: &Measurements,
+    opts: &FitOptions,
+) -> Result<Calibration, CalibError> {
+    let started = Instant::now();
+    if !(0.0..=0.5).contains(&opts.holdout_fraction) {
+        return Err(CalibError::Options(format!(
+            "the held-out fraction must be in [0, 0.5], got {}",
+            opts.holdout_fraction
+        )));
+    }
+    let mut order: Vec<usize> = (0..data.len()).collect();
+    order.shuffle(&mut ChaCha8Rng::seed_from_u64(opts.seed));
+    let n_held = (data.len() as f64 * opts.holdout_fraction).round() as usize;
+    let mut held: Vec<usize> = order[..n_held].to_vec();
+    let mut rows: Vec<usize> = order[n_held..].to_vec();
+    held.sort_unstable();
+    rows.sort_unstable();
+    if rows.len() < opts.fit.len() {
+        return Err(CalibError::TooFewRows {
+            rows: rows.len(),
+            params: opts.fit.len(),
+        });
+    }
+    let problem = Problem {
+        nominal,
+        nominal_values: Values::of(nominal),
+        data,
+        use_orientation: opts.use_orientation && data.quaternions.is_some(),
+        orientation_m_per_rad: opts.orientation_m_per_rad,
+        settings: opts.settings,
+    };
+    let d = problem.dims();
+    let nv = &problem.nominal_values;
+    let mut solves = 0;
+
+    // Identifiability before the fit, at the nominal values, with the
+    // noise floor: what the rows cannot separate is fixed now.
+    let mut v = nv.clone();
+    let mut sols = problem.solve(&v, &rows, None)?;
+    solves += rows.len();
+    let (jac0, s0) = problem.jacobian(&v, &opts.fit, &rows, &sols)?;
+    solves += s0;
+    let ones = vec![1.0; rows.len()];
+    let r0 = problem.residuals(&v, &rows, &sols);
+    let (a0, _) = normal_equations(&jac0, &r0, &ones, d);
+    let (mut free, mut unidentified) = identify(
+        &a0,
+        &opts.fit,
+        opts.noise_floor_m,
+        opts.identifiable_fraction,
+    );
+
+    let mut iterations = 0;
+    let mut weights;
+    let mut sigma;
+    let (a, r) = loop {
+        let (it, s) = levenberg_marquardt(&problem, &mut v, &free, &rows, &mut sols, opts)?;
+        iterations += it;
+        solves += s;
+        // The covariance at the solution, with its final weights.
+        let r = problem.residuals(&v, &rows, &sols);
+        let norms = row_norms(&r, d);
+        sigma = robust_sigma(&norms, d);
+        weights = huber_weights(&norms, sigma, opts.huber_k);
+        let (jac, s) = problem.jacobian(&v, &free, &rows, &sols)?;
+        solves += s;
+        let (a, _) = normal_equations(&jac, &r, &weights, d);
+        let dof = (rows.len() * d).saturating_sub(free.len()).max(1);
+        let var = cost(&norms, &weights) / dof as f64;
+        let (still_free, more) = identify(
+            &a,
+            &free,
+            var.sqrt().max(opts.noise_floor_m),
+            opts.identifiable_fraction,
+        );
+        // Each round fixes at least one parameter, so this ends.
+        if more.is_empty() {
+            break (a, (r, var));
+        }
+        // Fixed after the fit: back to the nominal value, and fit again.
+        for u in &more {
+            if let Some(p) = free.iter().find(|p| p.to_string() == u.fixed) {
+                v.set(*p, nv.get(*p));
+            }
+        }
+        unidentified.extend(more);
+        free = still_free;
+        sols = problem.solve(&v, &rows, Some(&sols))?;
+        solves += rows.len();
+    };
+    let (r_fit, var) = r;
+    let cov = a
+        .clone()
+        .try_inverse()
+        .map(|inv| inv * var)
+        .unwrap_or_else(|| DMatrix::from_element(free.len(), free.len(), f64::NAN));
+
+    let mut parameters = Vec::new();
+    for &p in &opts.fit {
+        let sc = scale(p, nv);
+        let (std, fixed) = match free.iter().position(|&q| q == p) {
+            Some(j) => (cov[(j, j)].max(0.0).sqrt() * sc, false),
+            None => (f64::NAN, true),
+        };
+        parameters.push(FittedParam {
+            name: p.to_string(),
+            unit: p.unit().into(),
+            nominal: nv.get(p),
+            fitted: v.get(p),
+            std,
+            half_width_95: Z95 * std,
+            fixed,
+        });
+    }
+    let mut correlated = Vec::new();
+    for i in 0..free.len() {
+        for j in i + 1..free.len() {
+            let c = cov[(i, j)] / (cov[(i, i)] * cov[(j, j)]).sqrt();
+            if c.abs() > 0.95 {
+                correlated.push((free[i].to_string(), free[j].to_string(), c));
+            }
+        }
+    }
+
+    // Before/after on every row, fit and held out.
+    let all: Vec<usize> = (0..data.len()).collect();
+    let before_sols = problem.solve(nv, &all, None)?;
+    let after_sols = problem.solve(&v, &all, None)?;
+    solves += 2 * all.len();
+    let before: Vec<[f64; 3]> = before_sols
+        .iter()
+        .map(|s| Problem::tip_in_tracker(nv, s).into())
+        .collect();
+    let after: Vec<[f64; 3]> = after_sols
+        .iter()
+        .map(|s| Problem::tip_in_tracker(&v, s).into())
+        .collect();
+    let stats = |tips: &[[f64; 3]], idx: &[usize]| {
+        ResidualStats::of(
+            idx.iter()
+                .map(|&i| (Vector3::from(data.positions[i]) - Vector3::from(tips[i])).norm()),
+        )
+    };
+    let norms = row_norms(&r_fit, d);
+    let mut downweighted: Vec<DownWeighted> = rows
+        .iter()
+        .zip(norms.iter().zip(&weights))
+        .filter(|(_, (_, &w))| w < NAMED_WEIGHT)
+        .map(|(&i, (&n, &w))| DownWeighted {
+            line: data.lines[i],
+            residual_m: n,
+            weight: w,
+        })
+        .collect();
+    downweighted.sort_by_key(|x| x.line);
+    let robot = v.robot(nominal);
+    let report = Report {
+        robot: nominal.name.clone(),
+        rows_fit: rows.len(),
+        rows_held_out: held.len(),
+        used_orientation: problem.use_orientation,
+        fd_step_relative: FD_STEP,
+        parameters,
+        unidentifiable: unidentified,
+        correlated,
+        residual_sigma_m: var.sqrt(),
+        robust_sigma_m: sigma,
+        rows_with_weight_below_1: weights.iter().filter(|&&w| w < 1.0).count(),
+        downweighted,
+        fit_before: stats(&before, &rows),
+        fit_after: stats(&after, &rows),
+        held_out_before: stats(&before, &held),
+        held_out_after: stats(&after, &held),
+        iterations,
+        solves,
+        seconds: started.elapsed().as_secs_f64(),
+    };
+    let mut held_out = vec![false; data.len()];
+    for &i in &held {
+        held_out[i] = true;
+    }
+    Ok(Calibration {
+        robot,
+        values: v,
+        report,
+        measured: data.positions.clone(),
+        before,
+        after,
+        held_out,
+    })
+}
+
+/// Levenberg–Marquardt with Marquardt's diagonal scaling on θ = p / scale,
+/// the Huber weights recomputed from the residuals at each iterate (IRLS),
+/// every step projected into the bounds. Updates `v` and `sols`; returns
+/// iterations and solves spent.
+fn levenberg_marquardt(
+    problem: &Problem<'_>,
+    v: &mut Values,
+    free: &[Param],
+    rows: &[usize],
+    sols: &mut Vec<Solution>,
+    opts: &FitOptions,
+) -> Result<(usize, usize), CalibError> {
+    let d = problem.dims();
+    let nv = &problem.nominal_values;
+    let mut lambda = 1e-3;
+    let mut solves = 0;
+    let mut iterations = 0;
+    if free.is_empty() {
+        return Ok((0, 0));
+    }
+    for _ in 0..opts.max_iterations {
+        iterations += 1;
+        let r = problem.residuals(v, rows, sols);
+        let norms = row_norms(&r, d);
+        let w = huber_weights(&norms, robust_sigma(&norms, d), opts.huber_k);
+        let c0 = cost(&norms, &w);
+        let (jac, s) = problem.jacobian(v, free, rows, sols)?;
+        solves += s;
+        // J = ∂r/∂θ, so a step δ leaves the residual r + J δ: the damped
+        // normal equations (JᵀWJ + λ diag) δ = −JᵀW r.
+        let (a, g) = normal_equations(&jac, &r, &w, d);
+        let mut accepted = None;
+        for _ in 0..12 {
+            let mut damped = a.clone();
+            for j in 0..free.len() {
+                damped[(j, j)] += lambda * a[(j, j)].max(1e-30);
+            }
+            let Some(delta) = damped.cholesky().map(|c| -c.solve(&g)) else {
+                lambda *= 4.0;
+                continue;
+            };
+            let mut trial = v.clone();
+            let mut step = 0.0f64;
+            for (j, &p) in free.iter().enumerate() {
+                let sc = scale(p, nv);
+                let (lo, hi) = bounds(p, nv);
+                let x = (v.get(p) + delta[j] * sc).clamp(lo, hi);
+                step = step.max(((x - v.get(p)) / sc).abs());
+                trial.set(p, x);
+            }
+            let trial_sols = match problem.solve(&trial, rows, Some(sols)) {
+                Ok(s) => s,
+                Err(_) => {
+                    lambda *= 4.0;
+                    continue;
+                }
+            };
+            solves += rows.len();
+            let c1 = cost(
+                &row_norms(&problem.residuals(&trial, rows, &trial_sols), d),
+                &w,
+            );
+            if c1 < c0 {
+                accepted = Some((trial, trial_sols, step, c1));
+                lambda = (lambda / 3.0).max(1e-12);
+                break;
+            }
+            lambda *= 4.0;
+        }
+        let Some((trial, trial_sols, step, c1)) = accepted else {
+            break;
+        };
+        *v = trial;
+        *sols = trial_sols;
+        if step < 1e-10 || c0 - c1 <= 1e-14 * c0 {
+            break;
+        }
+    }
+    Ok((iterations, solves))
+}

@@ -1,0 +1,86 @@
+//! The experiment planner (`tendril calibrate --plan N`, `docs/design.md`
+//! §11): a greedy D-optimal choice of tension sets among random candidates
+//! within the limits.
+
+use nalgebra::{DMatrix, Matrix3};
+
+use super::params::{scale, Param, Values};
+use super::CalibError;
+use crate::dataset::Sampler;
+use crate::robot::Robot;
+use crate::statics::{SolverSettings, Statics};
+
+/// Candidates drawn per planned row.
+pub const CANDIDATES_PER_ROW: usize = 8;
+
+/// `n` tension sets for `robot` that make a fit of `params` (from tip
+/// positions) well conditioned: from `n × 8` (at least 200) candidates
+/// uniform within [min_tension, max_tension] plus the zero-tension row, each
+/// step adds the candidate whose 3 × p sensitivity block S maximises
+/// det(M + SᵀS), M the information so far (det(I + S M⁻¹ Sᵀ), a 3 × 3
+/// determinant); M starts at 1e-9 I. Only the rod's parameters matter: a
+/// frame offset is seen equally in every row.
+pub fn plan(
+    robot: &Robot,
+    params: &[Param],
+    n: usize,
+    seed: u64,
+) -> Result<Vec<Vec<f64>>, CalibError> {
+    if n == 0 {
+        return Err(CalibError::Options("--plan needs at least one row".into()));
+    }
+    let nv = Values::of(robot);
+    let rod: Vec<Param> = params.iter().copied().filter(Param::moves_rod).collect();
+    let count = (n * CANDIDATES_PER_ROW).max(200);
+    let mut candidates =
+        Sampler::Uniform.draw_between(count, &robot.min_tensions(), &robot.max_tensions(), seed);
+    candidates.push(robot.min_tensions());
+    // Sensitivity of each candidate's tip to each parameter (scaled).
+    let tip = |v: &Values, tau: &[f64]| -> Result<nalgebra::Vector3<f64>, CalibError> {
+        let s = Statics::new(&v.solving_robot(robot), SolverSettings::default());
+        s.solve(&v.scaled_tensions(tau), None)
+            .map(|sol| sol.position)
+            .map_err(|error| CalibError::Solve { line: 0, error })
+    };
+    use rayon::prelude::*;
+    let blocks: Vec<DMatrix<f64>> = candidates
+        .par_iter()
+        .map(|tau| {
+            let mut b = DMatrix::zeros(3, rod.len());
+            for (j, &p) in rod.iter().enumerate() {
+                let h = super::FD_STEP * scale(p, &nv);
+                let mut plus = nv.clone();
+                plus.set(p, nv.get(p) + h);
+                let mut minus = nv.clone();
+                minus.set(p, nv.get(p) - h);
+                let d = (tip(&plus, tau)? - tip(&minus, tau)?) / (2.0 * super::FD_STEP);
+                b.set_column(j, &d);
+            }
+            Ok(b)
+        })
+        .collect::<Result<_, CalibError>>()?;
+    let mut info = DMatrix::<f64>::identity(rod.len(), rod.len()) * 1e-9;
+    let mut taken = vec![false; candidates.len()];
+    let mut chosen = Vec::new();
+    for _ in 0..n.min(candidates.len()) {
+        let inv = info
+            .clone()
+            .try_inverse()
+            .ok_or_else(|| CalibError::Options("planner: information matrix singular".into()))?;
+        let best = (0..candidates.len())
+            .filter(|&c| !taken[c])
+            .map(|c| {
+                let s = &blocks[c];
+                let g: DMatrix<f64> = s * &inv * s.transpose();
+                let m = Matrix3::from_fn(|i, j| g[(i, j)]) + Matrix3::identity();
+                (c, m.determinant())
+            })
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(c, _)| c)
+            .expect("a candidate is left");
+        taken[best] = true;
+        info += blocks[best].transpose() * &blocks[best];
+        chosen.push(candidates[best].clone());
+    }
+    Ok(chosen)
+}

@@ -1,0 +1,238 @@
+//! What a calibration tells the user: fitted values with 95 % intervals,
+//! what the data cannot separate, residuals before and after, the rows the
+//! robust loss down-weighted. Serialised as JSON and rendered as markdown.
+
+use serde::Serialize;
+
+/// One parameter of `--fit`.
+#[derive(Clone, Debug, Serialize)]
+pub struct FittedParam {
+    /// Name (`E`, `offset[2]`, `base_tx`).
+    pub name: String,
+    /// Unit of the values.
+    pub unit: String,
+    /// The nominal file's value.
+    pub nominal: f64,
+    /// The fitted value (the nominal one when `fixed`).
+    pub fitted: f64,
+    /// Standard deviation from the covariance σ² (JᵀWJ)⁻¹ (NaN when fixed).
+    pub std: f64,
+    /// Half-width of the 95 % interval, 1.96 σ (NaN when fixed).
+    pub half_width_95: f64,
+    /// Fixed at the nominal value because the data cannot determine it.
+    pub fixed: bool,
+}
+
+/// A parameter the data cannot separate from others, hence fixed.
+#[derive(Clone, Debug, Serialize)]
+pub struct Unidentified {
+    /// The parameter fixed at its nominal value.
+    pub fixed: String,
+    /// The parameters it moves with in the undetermined direction.
+    pub confounded_with: Vec<String>,
+    /// Standard deviation of that direction, as a fraction of the scales.
+    pub std_fraction: f64,
+    /// What data would separate them.
+    pub separate_with: String,
+}
+
+/// A row the Huber loss down-weighted below one half.
+#[derive(Clone, Debug, Serialize)]
+pub struct DownWeighted {
+    /// Line of the measured CSV (header = line 1).
+    pub line: usize,
+    /// The row's residual norm at the fit, m (orientation weighed in).
+    pub residual_m: f64,
+    /// Its weight.
+    pub weight: f64,
+}
+
+/// Tip position errors ‖p_measured − p_model‖ over a set of rows.
+#[derive(Clone, Debug, Serialize)]
+pub struct ResidualStats {
+    /// Rows.
+    pub rows: usize,
+    /// Root mean square, m.
+    pub rms_m: f64,
+    /// Median, m.
+    pub median_m: f64,
+    /// Largest, m.
+    pub max_m: f64,
+}
+
+impl ResidualStats {
+    /// The statistics of `errors` (m); zeros for no rows.
+    pub fn of(errors: impl Iterator<Item = f64>) -> ResidualStats {
+        let mut e: Vec<f64> = errors.collect();
+        e.sort_by(f64::total_cmp);
+        let n = e.len();
+        if n == 0 {
+            return ResidualStats {
+                rows: 0,
+                rms_m: 0.0,
+                median_m: 0.0,
+                max_m: 0.0,
+            };
+        }
+        ResidualStats {
+            rows: n,
+            rms_m: (e.iter().map(|x| x * x).sum::<f64>() / n as f64).sqrt(),
+            median_m: e[n / 2],
+            max_m: e[n - 1],
+        }
+    }
+}
+
+/// The calibration report.
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    /// Name of the nominal robot.
+    pub robot: String,
+    /// Rows the fit used.
+    pub rows_fit: usize,
+    /// Rows held out to judge it.
+    pub rows_held_out: usize,
+    /// Whether orientations entered the fit.
+    pub used_orientation: bool,
+    /// Relative central-difference step of the sensitivities.
+    pub fd_step_relative: f64,
+    /// Every parameter of `--fit`.
+    pub parameters: Vec<FittedParam>,
+    /// What was fixed because the data cannot separate it.
+    pub unidentifiable: Vec<Unidentified>,
+    /// Fitted pairs with |correlation| > 0.95.
+    pub correlated: Vec<(String, String, f64)>,
+    /// Residual standard deviation per axis, √(Σ w‖r‖² / (m − p)), m.
+    pub residual_sigma_m: f64,
+    /// Robust (median-based) per-axis noise scale, m.
+    pub robust_sigma_m: f64,
+    /// Rows with any down-weighting.
+    pub rows_with_weight_below_1: usize,
+    /// Rows weighted below one half, named.
+    pub downweighted: Vec<DownWeighted>,
+    /// Tip errors of the nominal model on the fit rows.
+    pub fit_before: ResidualStats,
+    /// ... of the calibrated model.
+    pub fit_after: ResidualStats,
+    /// Tip errors of the nominal model on the held-out rows.
+    pub held_out_before: ResidualStats,
+    /// ... of the calibrated model.
+    pub held_out_after: ResidualStats,
+    /// Levenberg–Marquardt iterations.
+    pub iterations: usize,
+    /// Statics solves.
+    pub solves: usize,
+    /// Wall time, s.
+    pub seconds: f64,
+}
+
+impl Report {
+    /// The report as pretty JSON (what `tendril calibrate` writes).
+    pub fn json(&self) -> String {
+        // Plain data of numbers and strings: serialising cannot fail.
+        serde_json::to_string_pretty(self).expect("a report serialises")
+    }
+
+    /// The report as markdown.
+    pub fn markdown(&self) -> String {
+        use std::fmt::Write;
+        let mut s = String::new();
+        let mm = |x: f64| format!("{:.3}", x * 1e3);
+        let _ = writeln!(s, "# Calibration of {}\n", self.robot);
+        let _ = writeln!(
+            s,
+            "{} fit rows, {} held out; orientation {}; {} LM iterations, {} solves, {:.2} s; \
+             sensitivities by central differences, relative step {:e}.\n",
+            self.rows_fit,
+            self.rows_held_out,
+            if self.used_orientation {
+                "used"
+            } else {
+                "not used"
+            },
+            self.iterations,
+            self.solves,
+            self.seconds,
+            self.fd_step_relative
+        );
+        let _ = writeln!(s, "## Parameters (95 % intervals)\n");
+        let _ = writeln!(s, "| parameter | nominal | fitted | ± 95 % | unit |");
+        let _ = writeln!(s, "|---|---|---|---|---|");
+        for p in &self.parameters {
+            let pm = if p.fixed {
+                "fixed (not identifiable)".to_string()
+            } else {
+                format!("{:.4e}", p.half_width_95)
+            };
+            let _ = writeln!(
+                s,
+                "| {} | {:.6e} | {:.6e} | {} | {} |",
+                p.name, p.nominal, p.fitted, pm, p.unit
+            );
+        }
+        if !self.unidentifiable.is_empty() {
+            let _ = writeln!(s, "\n## Not identifiable from these data\n");
+            for u in &self.unidentifiable {
+                let _ = writeln!(
+                    s,
+                    "- **{}** moves with {} (σ of that direction {:.2} of the scales): fixed at \
+                     the nominal value; those parameters are effective values relative to it. \
+                     To separate them: {}.",
+                    u.fixed,
+                    if u.confounded_with.is_empty() {
+                        "nothing the tip sees".to_string()
+                    } else {
+                        u.confounded_with.join(", ")
+                    },
+                    u.std_fraction,
+                    u.separate_with
+                );
+            }
+        }
+        if !self.correlated.is_empty() {
+            let _ = writeln!(s, "\n## Strongly correlated fitted pairs\n");
+            for (a, b, c) in &self.correlated {
+                let _ = writeln!(s, "- {a} and {b}: {c:.3}");
+            }
+        }
+        let _ = writeln!(s, "\n## Tip position error (mm)\n");
+        let _ = writeln!(s, "| rows | model | rms | median | max |");
+        let _ = writeln!(s, "|---|---|---|---|---|");
+        for (rows, model, st) in [
+            ("fit", "nominal", &self.fit_before),
+            ("fit", "calibrated", &self.fit_after),
+            ("held out", "nominal", &self.held_out_before),
+            ("held out", "calibrated", &self.held_out_after),
+        ] {
+            let _ = writeln!(
+                s,
+                "| {rows} ({}) | {model} | {} | {} | {} |",
+                st.rows,
+                mm(st.rms_m),
+                mm(st.median_m),
+                mm(st.max_m)
+            );
+        }
+        let _ = writeln!(
+            s,
+            "\nResidual σ per axis {} mm (robust {} mm).",
+            mm(self.residual_sigma_m),
+            mm(self.robust_sigma_m)
+        );
+        let _ = writeln!(
+            s,
+            "\n## Down-weighted rows\n\n{} rows have a Huber weight below 1; below 0.5 (outliers): {}.",
+            self.rows_with_weight_below_1,
+            if self.downweighted.is_empty() {
+                "none".to_string()
+            } else {
+                self.downweighted
+                    .iter()
+                    .map(|d| format!("line {} ({} mm, weight {:.2})", d.line, mm(d.residual_m), d.weight))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            }
+        );
+        s
+    }
+}

@@ -1,0 +1,286 @@
+//! Calibration tests (`docs/design.md` §11). The synthetic "real robot" is
+//! made here from the statics directly, so the fit is checked against
+//! parameters it never saw.
+
+use std::path::Path;
+
+use nalgebra::Vector3;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::*;
+use crate::robot::{repo_robot, Robot};
+use crate::statics::{SolverSettings, Statics};
+
+/// Measurements of `truth` seen from a tracker whose frame has the base at
+/// `offset`, with per-axis jitter `sigma` (m), at `rows` random tensions.
+fn measure(truth: &Robot, rows: usize, offset: [f64; 3], sigma: f64, seed: u64) -> Measurements {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let statics = Statics::new(truth, SolverSettings::default());
+    let mut m = Measurements {
+        tensions: vec![],
+        positions: vec![],
+        quaternions: None,
+        tip_forces: vec![],
+        tip_moments: vec![],
+        lines: vec![],
+    };
+    let tensions = crate::dataset::Sampler::Adjacent.draw(rows, &truth.max_tensions(), seed);
+    for (i, tau) in tensions.into_iter().enumerate() {
+        let p = statics.solve(&tau, None).unwrap().position;
+        let noise = Vector3::from_fn(|_, _| {
+            let u1: f64 = rng.random::<f64>().max(1e-300);
+            let u2: f64 = rng.random();
+            sigma * (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+        });
+        m.positions.push((p + Vector3::from(offset) + noise).into());
+        m.tensions.push(tau);
+        m.tip_forces.push([0.0; 3]);
+        m.tip_moments.push([0.0; 3]);
+        m.lines.push(i + 2);
+    }
+    m
+}
+
+/// The seed robot with `f(values)` applied.
+fn altered(f: impl Fn(&mut Values)) -> Robot {
+    let nominal = repo_robot("seed-4t.toml");
+    let mut v = Values::of(&nominal);
+    f(&mut v);
+    v.robot(&nominal)
+}
+
+fn param<'a>(c: &'a Calibration, name: &str) -> &'a report::FittedParam {
+    c.report
+        .parameters
+        .iter()
+        .find(|p| p.name == name)
+        .unwrap_or_else(|| panic!("{name} not in the report"))
+}
+
+#[test]
+fn noiseless_recovery_to_1e_6_relative() {
+    // Identifiable parameters only (E fixed): density, length, offsets,
+    // angles, base translation; the truth differs from the nominal file.
+    let nominal = repo_robot("seed-4t.toml");
+    let truth = altered(|v| {
+        v.density *= 1.15;
+        v.length *= 1.02;
+        v.offsets = vec![0.0195, 0.0186, 0.0192, 0.0189];
+        v.angles[1] += 0.02;
+    });
+    let data = measure(&truth, 60, [0.002, -0.001, 0.0005], 0.0, 3);
+    let fit = parse_fit_list("density,length,offsets,angles,base_t", 4).unwrap();
+    let mut opts = FitOptions::new(fit);
+    opts.holdout_fraction = 0.0;
+    let c = calibrate(&nominal, &data, &opts).unwrap();
+    assert!(
+        c.report.unidentifiable.is_empty(),
+        "{:?}",
+        c.report.unidentifiable
+    );
+    let tv = Values::of(&truth);
+    for p in parse_fit_list("density,length,offsets,angles", 4).unwrap() {
+        let rel = (c.values.get(p) - tv.get(p)).abs() / tv.get(p).abs().max(1.0e-3);
+        assert!(
+            rel < 1e-6,
+            "{p}: fitted {} truth {} ({rel:e})",
+            c.values.get(p),
+            tv.get(p)
+        );
+    }
+    for k in 0..3 {
+        let t = [0.002, -0.001, 0.0005][k];
+        assert!(
+            (c.values.base_translation[k] - t).abs() < 1e-9 * 1e3,
+            "base {k}"
+        );
+    }
+}
+
+#[test]
+fn modulus_against_offsets_is_reported_unidentifiable_and_fixed() {
+    // From tip positions, tendons bend the rod by τ d/(E I) and weight by
+    // ρ A g/(E I): E, the offsets and the density move together. (The
+    // tendon's path curvature and the axial strain τ/(EA) separate them
+    // weakly: to ≈ 0.5 % at 10 µm noise, far worse than 5 % at 0.14 mm.)
+    let nominal = repo_robot("seed-4t.toml");
+    let truth = altered(|v| v.youngs_modulus *= 1.1);
+    let data = measure(&truth, 60, [0.0; 3], 1.4e-4, 5);
+    let mut opts = FitOptions::new(parse_fit_list("E,density,offsets", 4).unwrap());
+    opts.holdout_fraction = 0.0;
+    let c = calibrate(&nominal, &data, &opts).unwrap();
+    let u = &c.report.unidentifiable;
+    assert_eq!(u.len(), 1, "{u:?}");
+    assert_eq!(u[0].fixed, "E");
+    assert!(u[0].confounded_with.contains(&"offset[0]".to_string()));
+    assert!(u[0].confounded_with.contains(&"density".to_string()));
+    assert!(u[0].separate_with.contains("tip load"));
+    assert!(param(&c, "E").fixed && param(&c, "E").half_width_95.is_nan());
+    assert_eq!(param(&c, "E").fitted, nominal.youngs_modulus);
+    // With E fixed at the nominal value, the fitted offsets and density are
+    // the effective d E_nom / E and ρ E_nom / E, within their intervals.
+    for (name, eff) in (0..4)
+        .map(|i| (format!("offset[{i}]"), 0.019 / 1.1))
+        .chain([("density".to_string(), nominal.density / 1.1)])
+    {
+        let p = param(&c, &name);
+        assert!(
+            (p.fitted - eff).abs() < 2.0 * p.half_width_95,
+            "{p:?} vs {eff}"
+        );
+        assert!(p.half_width_95 < 0.01 * eff, "{p:?}");
+    }
+}
+
+#[test]
+fn outlier_rows_are_down_weighted_and_named() {
+    let nominal = repo_robot("seed-4t.toml");
+    let truth = altered(|v| v.density *= 1.15);
+    let mut data = measure(&truth, 60, [0.0; 3], 1.4e-4, 7);
+    // Two rows knocked by 20 mm (a tracker glitch): lines 12 and 30.
+    data.positions[10][0] += 0.02;
+    data.positions[28][1] -= 0.02;
+    let mut opts = FitOptions::new(parse_fit_list("density,base_t", 4).unwrap());
+    opts.holdout_fraction = 0.0;
+    let c = calibrate(&nominal, &data, &opts).unwrap();
+    let lines: Vec<usize> = c.report.downweighted.iter().map(|d| d.line).collect();
+    assert_eq!(lines, vec![12, 30], "{:?}", c.report.downweighted);
+    // The outliers barely move the estimate: density within its interval.
+    let d = param(&c, "density");
+    assert!(
+        (d.fitted - truth.density).abs() < 2.0 * d.half_width_95,
+        "{d:?}"
+    );
+}
+
+/// Coverage of the 95 % intervals over `reps` seeded repetitions: the
+/// fraction of (parameter, repetition) pairs whose interval holds the truth.
+fn coverage(reps: u64, rows: usize) -> f64 {
+    let nominal = repo_robot("seed-4t.toml");
+    let truth = altered(|v| {
+        v.density *= 1.15;
+        v.offsets = vec![0.0195, 0.0186, 0.0192, 0.0189];
+    });
+    let tv = Values::of(&truth);
+    let fit = parse_fit_list("density,offsets,base_t", 4).unwrap();
+    let (mut hit, mut total) = (0, 0);
+    for seed in 0..reps {
+        let data = measure(&truth, rows, [0.002, 0.0, -0.001], 1.4e-4, 100 + seed);
+        let mut opts = FitOptions::new(fit.clone());
+        opts.holdout_fraction = 0.0;
+        let c = calibrate(&nominal, &data, &opts).unwrap();
+        for p in &fit {
+            let t = if p.moves_rod() {
+                tv.get(*p)
+            } else {
+                [0.002, 0.0, -0.001][match p {
+                    Param::BaseTranslation(k) => *k,
+                    _ => unreachable!(),
+                }]
+            };
+            let f = param(&c, &p.to_string());
+            total += 1;
+            hit += usize::from((f.fitted - t).abs() <= f.half_width_95);
+        }
+    }
+    hit as f64 / total as f64
+}
+
+#[test]
+fn intervals_cover_the_truth_over_seeded_repetitions() {
+    // 6 repetitions × 8 parameters = 48 intervals: a 95 % interval misses
+    // 2.4 on average; ≥ 85 % is 7 misses, which a correct interval exceeds
+    // with probability < 0.5 % (binomial).
+    let c = coverage(6, 60);
+    assert!(c >= 0.85, "coverage {c}");
+}
+
+#[test]
+#[ignore = "the 20-repetition, 200-row coverage test (minutes in the dev profile); scripts/calibration-benchmark measures the issue's case in release"]
+fn intervals_cover_the_truth_over_20_repetitions() {
+    let c = coverage(20, 200);
+    eprintln!("coverage over 20 repetitions: {c}");
+    assert!(c >= 0.9, "coverage {c}");
+}
+
+#[test]
+fn bad_inputs_are_clear_errors() {
+    let robot = repo_robot("seed-4t.toml");
+    let parse = |text: &str| {
+        parse_measurements(text.as_bytes(), Path::new("m.csv"), &robot)
+            .unwrap_err()
+            .to_string()
+    };
+    let e = parse("t0,t1,t2,t3,px,py\n1,0,0,0,0,0\n");
+    assert!(
+        e.contains("m.csv") && e.contains("missing column pz"),
+        "{e}"
+    );
+    let e = parse("t0,t1,t2,t3,px,py,pz\n1,0,0,0,0,NaN,0.4\n");
+    assert!(
+        e.contains("line 2") && e.contains("py") && e.contains("finite"),
+        "{e}"
+    );
+    let e = parse("t0,t1,t2,t3,px,py,pz\n1,0,12,0,0,0,0.4\n");
+    assert!(
+        e.contains("line 2") && e.contains("tendon 2") && e.contains("max_tension"),
+        "{e}"
+    );
+    let e = parse("t0,t1,t2,t3,t4,px,py,pz\n1,0,0,0,0,0,0,0.4\n");
+    assert!(e.contains("unknown column t4"), "{e}");
+    let e = parse("t0,t1,t2,t3,px,py,pz,fx\n1,0,0,0,0,0,0.4,1\n");
+    assert!(e.contains("tip force columns must come together"), "{e}");
+    let e = parse("t0,t1,t2,t3,px,py,pz\n");
+    assert!(e.contains("no data rows"), "{e}");
+    // Fewer rows than parameters.
+    let data = parse_measurements(
+        "t0,t1,t2,t3,px,py,pz\n1,0,0,0,0,0,0.4\n2,0,0,0,0,0,0.4\n".as_bytes(),
+        Path::new("m.csv"),
+        &robot,
+    )
+    .unwrap();
+    let mut opts = FitOptions::new(parse_fit_list("density,offsets", 4).unwrap());
+    opts.holdout_fraction = 0.0;
+    let e = calibrate(&robot, &data, &opts).unwrap_err().to_string();
+    assert!(e.contains("2 fit rows for 5 parameters"), "{e}");
+    assert!(parse_fit_list("E,stiffness", 4)
+        .unwrap_err()
+        .contains("stiffness"));
+    assert!(parse_fit_list("offset7", 4)
+        .unwrap_err()
+        .contains("4 tendons"));
+}
+
+#[test]
+fn robot_file_reads_back_to_the_same_robot() {
+    for file in ["seed-4t.toml", "tdcr-2seg.toml", "seed-paper.toml"] {
+        let r = repo_robot(file);
+        let text = robot_toml(&r, &["a comment".into()]);
+        let back = Robot::from_toml(&text, Path::new("x.toml")).unwrap();
+        assert_eq!(back.tendons.len(), r.tendons.len());
+        for (a, b) in back.tendons.iter().zip(&r.tendons) {
+            assert!((a.angle - b.angle).abs() < 1e-15 && a.offset == b.offset && a.end == b.end);
+        }
+        assert_eq!(back.youngs_modulus, r.youngs_modulus);
+        assert_eq!(back.length, r.length);
+    }
+}
+
+#[test]
+fn planner_picks_distinct_rows_within_the_limits() {
+    let robot = repo_robot("seed-4t.toml");
+    let rows = plan::plan(&robot, &parse_fit_list("density,offsets", 4).unwrap(), 6, 1).unwrap();
+    assert_eq!(rows.len(), 6);
+    for r in &rows {
+        robot.check_tensions(r).unwrap();
+    }
+    // D-optimal for four offsets: every tendon must pull in some row, or its
+    // offset would be invisible.
+    for i in 0..4 {
+        assert!(
+            rows.iter().any(|r| r[i] > 1.0),
+            "tendon {i} never pulls: {rows:?}"
+        );
+    }
+}

@@ -1,0 +1,126 @@
+//! `tendril calibrate`: fit a robot file to measurements, or plan the
+//! measurements (`docs/design.md` §11).
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+
+use super::common::RobotArg;
+use crate::calibrate::{self, FitOptions};
+
+use crate::calibrate::DEFAULT_FIT;
+
+/// Fit a robot file's parameters to measured tip poses; or, with --plan N,
+/// propose N tension sets to measure.
+#[derive(clap::Args, Debug, Clone)]
+pub struct CalibrateArgs {
+    /// The nominal robot file the fit starts from.
+    #[command(flatten)]
+    pub robot: RobotArg,
+    /// Measured CSV: t0..t{n-1} [N], px,py,pz [m], optional qw..qz, fx,fy,fz, mx,my,mz.
+    #[arg(long, value_name = "CSV", required_unless_present = "plan")]
+    pub data: Option<PathBuf>,
+    /// Parameters to fit: E, G, density, length, offsets, angles, tension_scale, base
+    /// (base_t, base_r; offset2 etc. for one tendon).
+    #[arg(long, value_name = "LIST", default_value = DEFAULT_FIT)]
+    pub fit: String,
+    /// Output: the calibrated robot file; with --plan, the tension CSV. The
+    /// report goes beside it as <stem>.report.json, .report.md and .png.
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
+    /// Propose N tension sets (greedy D-optimal) instead of fitting.
+    #[arg(long, value_name = "N")]
+    pub plan: Option<usize>,
+    /// Fraction of rows held out of the fit to judge it, in [0, 0.5].
+    #[arg(long, default_value_t = 0.2)]
+    pub holdout: f64,
+    /// Seed of the held-out split (and of the planner's candidates).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Ignore the orientation columns even when present.
+    #[arg(long)]
+    pub positions_only: bool,
+    /// Weight of an orientation error against a position error, mm per degree.
+    #[arg(long, default_value_t = 0.1 * 1e3 * std::f64::consts::PI / 180.0)]
+    pub mm_per_deg: f64,
+}
+
+/// Run `tendril calibrate`.
+pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
+    let (robot, _) = args.robot.load()?;
+    let fit =
+        calibrate::parse_fit_list(&args.fit, robot.n_tendons()).map_err(anyhow::Error::msg)?;
+    if let Some(n) = args.plan {
+        crate::fsutil::check_distinct(&[("--robot", &args.robot.robot)], &[("--out", &args.out)])?;
+        let rows = calibrate::plan::plan(&robot, &fit, n, args.seed)?;
+        let header: Vec<String> = (0..robot.n_tendons()).map(|i| format!("t{i}")).collect();
+        let mut text = header.join(",") + "\n";
+        for r in &rows {
+            let cells: Vec<String> = r.iter().map(|x| format!("{x}")).collect();
+            text += &(cells.join(",") + "\n");
+        }
+        crate::fsutil::write_atomic(&args.out, text.as_bytes())
+            .with_context(|| format!("{}", args.out.display()))?;
+        log::info!(
+            "wrote {} tension sets to {}",
+            rows.len(),
+            args.out.display()
+        );
+        return Ok(());
+    }
+    let data_path = args
+        .data
+        .clone()
+        .expect("clap requires --data without --plan");
+    let stem = args.out.with_extension("");
+    let side = |ext: &str| PathBuf::from(format!("{}.{ext}", stem.display()));
+    let (json, md, png) = (side("report.json"), side("report.md"), side("png"));
+    crate::fsutil::check_distinct(
+        &[("--robot", &args.robot.robot), ("--data", &data_path)],
+        &[
+            ("--out", &args.out),
+            ("report", &json),
+            ("report", &md),
+            ("figure", &png),
+        ],
+    )?;
+    let data = calibrate::read_measurements(&data_path, &robot)?;
+    let mut opts = FitOptions::new(fit);
+    opts.holdout_fraction = args.holdout;
+    opts.seed = args.seed;
+    opts.use_orientation = !args.positions_only;
+    if !(args.mm_per_deg.is_finite() && args.mm_per_deg > 0.0) {
+        anyhow::bail!(
+            "--mm-per-deg must be a positive number, got {}",
+            args.mm_per_deg
+        );
+    }
+    opts.orientation_m_per_rad = args.mm_per_deg * 1e-3 * 180.0 / std::f64::consts::PI;
+    let c = calibrate::calibrate(&robot, &data, &opts)?;
+    // The robot file must read back as a valid robot before it is written.
+    let text = c.robot_file();
+    crate::robot::Robot::from_toml(&text, &args.out)
+        .context("the calibrated robot does not pass the robot-file checks")?;
+    crate::fsutil::write_atomic(&args.out, text.as_bytes())
+        .with_context(|| format!("{}", args.out.display()))?;
+    crate::fsutil::write_atomic(&json, c.report.json().as_bytes())
+        .with_context(|| format!("{}", json.display()))?;
+    crate::fsutil::write_atomic(&md, c.report.markdown().as_bytes())
+        .with_context(|| format!("{}", md.display()))?;
+    crate::plot::calibration::draw_calibration(&c, &png)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", png.display()))?;
+    let r = &c.report;
+    log::info!(
+        "calibrated {} in {:.2} s: held-out tip error rms {:.3} mm -> {:.3} mm (fit rows {:.3} -> {:.3} mm); {} fixed as unidentifiable; {} rows down-weighted; wrote {}",
+        r.robot,
+        r.seconds,
+        r.held_out_before.rms_m * 1e3,
+        r.held_out_after.rms_m * 1e3,
+        r.fit_before.rms_m * 1e3,
+        r.fit_after.rms_m * 1e3,
+        r.unidentifiable.len(),
+        r.downweighted.len(),
+        args.out.display()
+    );
+    Ok(())
+}
