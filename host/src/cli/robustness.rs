@@ -35,6 +35,11 @@ pub struct RobustnessArgs {
     /// Only the corrected runs (half the time).
     #[arg(long)]
     pub corrected_only: bool,
+    /// Run nothing: redraw the table and figure from these robustness.json
+    /// files (a later file's rows replace an earlier one's of the same
+    /// reality), e.g. to join a full table with a re-run of some realities.
+    #[arg(long, value_delimiter = ',')]
+    pub redraw: Vec<PathBuf>,
 }
 
 /// Run `tendril robustness`.
@@ -63,7 +68,26 @@ pub fn run(args: RobustnessArgs) -> anyhow::Result<()> {
         quick_s: args.quick,
         net_alone: !args.corrected_only,
     };
-    let rows = robustness::run(&cfg)?;
+    let rows = if args.redraw.is_empty() {
+        robustness::run(&cfg)?
+    } else {
+        let mut rows: Vec<robustness::Row> = Vec::new();
+        for path in &args.redraw {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            let more: Vec<robustness::Row> = serde_json::from_str(&text)
+                .with_context(|| format!("{}: not a robustness.json", path.display()))?;
+            for r in more {
+                match rows.iter_mut().find(|x| {
+                    x.reality == r.reality && x.run == r.run && x.correction == r.correction
+                }) {
+                    Some(x) => *x = r,
+                    None => rows.push(r),
+                }
+            }
+        }
+        rows
+    };
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let md = robustness::markdown(&rows, &args.robot);

@@ -9,6 +9,7 @@ use super::*;
 use crate::dynamics::{Damping, Dynamics, DynamicsSettings};
 use crate::reality::{first_bending_mode_rad_s, Frame, Reality, Tracker, TrackerSpec};
 use crate::statics::pose::{orthonormalise, quaternion_wxyz};
+use crate::statics::{Friction, FrictionState};
 
 /// How the plant moves the robot.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -117,6 +118,9 @@ impl Default for PlantParams {
 /// this many steps, the rest of the elapsed time is skipped, not simulated.
 const MAX_SUBSTEPS: usize = 100;
 
+/// Plant steps between refreshes of the dynamic rod's friction profile.
+const PROFILE_REFRESH_STEPS: u32 = 20;
+
 /// The plant's physics, free of any IPC (testable, benchmarkable).
 pub struct PlantModel {
     statics: Statics,
@@ -143,6 +147,11 @@ pub struct PlantModel {
     drive: Vec<(f64, f64)>,
     dead_band_n: f64,
     backlash_n: f64,
+    /// Tendon friction (docs/design.md §2.3): the sliding directions and
+    /// the tension profiles, one fixed-point pass per plant step.
+    friction: Option<FrictionState>,
+    /// Dynamic plant with friction: steps until its profile is refreshed.
+    profile_countdown: u32,
     /// Statics (or dynamics) failures (the last good pose was kept).
     pub solve_failures: u64,
 }
@@ -236,6 +245,20 @@ impl PlantModel {
             drive: vec![(0.0, 0.0); n],
             dead_band_n: reality.motors.map_or(0.0, |m| m.dead_band_n),
             backlash_n: reality.motors.map_or(0.0, |m| m.backlash_n),
+            friction: reality.friction.map(|f| {
+                let mut state = FrictionState::new(
+                    Friction {
+                        mu: f.mu,
+                        reversal_n: f.reversal_n,
+                    },
+                    n,
+                );
+                // Stepping at 1 kHz the last profile is nearly right: one
+                // pass per step, the profile one step behind (≈ 1 µm per mN).
+                state.set_max_passes(1);
+                state
+            }),
+            profile_countdown: 0,
             solve_failures: 0,
             statics,
             params,
@@ -296,7 +319,11 @@ impl PlantModel {
                 self.motor[i]
             };
         }
+        if let Some(friction) = self.friction.as_mut() {
+            friction.update_direction(&self.tendon);
+        }
         if self.dynamics.is_some() {
+            self.refresh_dynamic_friction();
             return self.step_dynamics(dt);
         }
         let moved = self
@@ -307,10 +334,15 @@ impl PlantModel {
         if !moved {
             return true;
         }
-        let sol = self
-            .statics
-            .solve(&self.tendon, self.warm.as_ref())
-            .or_else(|_| self.statics.solve(&self.tendon, None));
+        let sol = match self.friction.as_mut() {
+            Some(f) => f
+                .solve(&self.statics, &self.tendon, self.warm.as_ref())
+                .or_else(|_| f.solve(&self.statics, &self.tendon, None)),
+            None => self
+                .statics
+                .solve(&self.tendon, self.warm.as_ref())
+                .or_else(|_| self.statics.solve(&self.tendon, None)),
+        };
         match sol {
             Ok(sol) => {
                 self.pose = sol.pose();
@@ -322,6 +354,29 @@ impl PlantModel {
                 self.solve_failures += 1;
                 false
             }
+        }
+    }
+
+    /// With friction on the dynamic rod: every [`PROFILE_REFRESH_STEPS`]
+    /// plant steps, the tension profile of a friction statics solve at the
+    /// tendons' tensions (the profile follows the tensions and the sliding
+    /// directions, not each swing of the rod).
+    fn refresh_dynamic_friction(&mut self) {
+        let (Some(friction), Some(dynamics)) = (self.friction.as_mut(), self.dynamics.as_mut())
+        else {
+            return;
+        };
+        if self.profile_countdown > 0 {
+            self.profile_countdown -= 1;
+            return;
+        }
+        self.profile_countdown = PROFILE_REFRESH_STEPS;
+        match friction.solve(&self.statics, &self.tendon, self.warm.as_ref()) {
+            Ok(sol) => {
+                dynamics.set_friction_profile(sol.profile().cloned());
+                self.warm = Some(sol.warm);
+            }
+            Err(e) => log::debug!("plant: friction profile: {e}"),
         }
     }
 
@@ -530,5 +585,53 @@ mod tests {
         }
         let sd = (sum2 / k as f64).sqrt();
         assert!((sd - 1e-4).abs() < 0.1e-4, "sd = {sd}");
+    }
+
+    #[test]
+    fn a_plant_with_friction_reaches_less_far_pulling_than_releasing() {
+        // The same 3 N on tendon 0, once pulled up from 0 N and once let
+        // down from 6 N: friction in the guides keeps tension from the tip
+        // while pulling and holds it there while releasing (hysteresis).
+        let reality: Reality = toml::from_str("name = \"f\"\n[friction]\nmu = 0.2\n").unwrap();
+        let plant = || {
+            let params = PlantParams {
+                noise_m: 0.0,
+                noise_quat: 0.0,
+                reality: Some(reality.clone()),
+                ..PlantParams::default()
+            };
+            PlantModel::new(&robot(), params).unwrap()
+        };
+        let settle = |m: &mut PlantModel, t: f64| {
+            m.command(&[t, 0.0, 0.0, 0.0]);
+            for _ in 0..300 {
+                assert!(m.step(1e-3));
+            }
+        };
+        let mut up = plant();
+        settle(&mut up, 3.0);
+        let mut down = plant();
+        settle(&mut down, 6.0);
+        settle(&mut down, 3.0);
+        let mut none = PlantModel::new(
+            &robot(),
+            PlantParams {
+                noise_m: 0.0,
+                noise_quat: 0.0,
+                ..PlantParams::default()
+            },
+        )
+        .unwrap();
+        settle(&mut none, 3.0);
+        // How far tendon 0 moved the tip along x from the rest pose.
+        let rest = plant().pose()[0];
+        let reach = |m: &PlantModel| (m.pose()[0] - rest).abs();
+        assert!(
+            reach(&up) < reach(&none) && reach(&none) < reach(&down),
+            "pulling {:.3} mm, frictionless {:.3} mm, releasing {:.3} mm",
+            reach(&up) * 1e3,
+            reach(&none) * 1e3,
+            reach(&down) * 1e3
+        );
     }
 }
