@@ -41,6 +41,10 @@ fuzz_target!(|data: &[u8]| {
             limit: 0.01,
             feedback_timeout_ns: 4_000_000,
             window: 0.002,
+            filter_tau_s: 0.05,
+            map_gain: 2.0,
+            map_scale: 0.01,
+            map_limit: 0.5,
         };
     }
     let mut now: u64 = 1 << 40;
@@ -79,6 +83,7 @@ fuzz_target!(|data: &[u8]| {
             feedback: (flags & 2 != 0).then_some(Feedback {
                 seq: now,
                 tip_position: tip,
+                interval_s: 1e-3,
             }),
         };
         let prev = st.command;
