@@ -280,7 +280,10 @@ mod tests {
             size_of::<PlantState>(),
             16 + 8 + MAX_TENDONS * 4 + 7 * 4 + 4 * 3 + 8
         );
-        assert_eq!(offset_of!(PlantState, tip_stamp_ns), 24 + MAX_TENDONS * 4 + 7 * 4 + 12);
+        assert_eq!(
+            offset_of!(PlantState, tip_stamp_ns),
+            24 + MAX_TENDONS * 4 + 7 * 4 + 12
+        );
         assert_eq!(size_of::<WeightUpdate>(), 16 + 8 + WEIGHT_UPDATE_CAPACITY);
         assert_eq!(size_of::<Control>(), 16 + 8);
         assert_eq!(offset_of!(Setpoint, pose), 16);
