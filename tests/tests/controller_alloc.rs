@@ -178,6 +178,9 @@ fn two_hundred_seconds_of_controller_periods_allocate_nothing() {
                 tensions,
                 tip_pose: tip,
                 count: 4,
+                // A tracker frame with every state, 0.3 ms old.
+                tip_seq: st_seq as u32,
+                tip_stamp_ns: now - 300_000,
                 ..PlantState::default()
             }
         });
