@@ -59,16 +59,16 @@ pub fn run(args: RobustnessArgs) -> anyhow::Result<()> {
             .map(|p| Reality::load(p))
             .collect::<Result<Vec<_>, _>>()?
     };
-    let cfg = RobustnessConfig {
-        exe: std::env::current_exe().context("locating the tendril executable")?,
-        robot: args.robot.clone(),
-        model: ModelSource::resolve(args.model, Path::new("out/model.tnet")),
-        out: args.out.clone(),
-        realities,
-        quick_s: args.quick,
-        net_alone: !args.corrected_only,
-    };
     let rows = if args.redraw.is_empty() {
+        let cfg = RobustnessConfig {
+            exe: std::env::current_exe().context("locating the tendril executable")?,
+            robot: args.robot.clone(),
+            model: ModelSource::resolve(args.model, Path::new("out/model.tnet")),
+            out: args.out.clone(),
+            realities,
+            quick_s: args.quick,
+            net_alone: !args.corrected_only,
+        };
         robustness::run(&cfg)?
     } else {
         let mut rows: Vec<robustness::Row> = Vec::new();
