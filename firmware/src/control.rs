@@ -550,43 +550,11 @@ pub fn control_step<const H: usize, const OUT: usize, const W: usize>(
     let tracking = st.has_setpoint && !st.watchdog && net_ok;
 
     // 4. Integral outer loop.
-    let mut pose = st.pose;
-    let ic = cfg.integral;
-    if ic.ki > 0.0 && tracking {
-        let mut fresh = false;
-        if let Some(fb) = input.feedback {
-            if fb.tip_position.iter().any(|v| !v.is_finite()) {
-                status |= Status::BAD_FEEDBACK;
-            } else if fb.seq > st.last_feedback_seq {
-                st.last_feedback_seq = fb.seq;
-                st.last_feedback_ns = now;
-                fresh = true;
-                let before = (st.correction, st.error_map);
-                let interval = fb.interval_s.is_finite().then_some(fb.interval_s);
-                let interval = clamp(
-                    interval.unwrap_or(0.0),
-                    0.0,
-                    ic.feedback_timeout_ns as f32 * 1e-9,
-                );
-                integrate(&mut st, &fb.tip_position, ic, interval);
-                if !in_box(net, &corrected_pose(&st), cfg.box_margin) {
-                    (st.correction, st.error_map) = before;
-                }
-            }
-        }
-        if !fresh && now.saturating_sub(st.last_feedback_ns) > ic.feedback_timeout_ns {
-            status |= Status::PLANT_STALE;
-        }
-        let corrected = corrected_pose(&st);
-        if in_box(net, &corrected, cfg.box_margin) {
-            pose = corrected;
-            if st.correction.iter().any(|&c| c != 0.0) {
-                status |= Status::CORRECTION;
-            }
-        } else {
-            status |= Status::CORRECTION_LIMITED;
-        }
-    }
+    let pose = if cfg.integral.ki > 0.0 && tracking {
+        outer_loop(cfg, net, &mut st, input, &mut status)
+    } else {
+        st.pose
+    };
 
     // 5. Target.
     if st.watchdog || (!net_ok && st.has_setpoint) {
@@ -659,6 +627,57 @@ pub fn control_step<const H: usize, const OUT: usize, const W: usize>(
             status,
         },
     )
+}
+
+/// Step 4 of [`control_step`]: integrate a fresh frame and return the
+/// pose to infer (the corrected setpoint, or the setpoint when the
+/// correction would leave the net's box). Out of line so its locals are
+/// not on the stack while the net runs (the chip's RAM budget).
+#[inline(never)]
+fn outer_loop<const H: usize, const OUT: usize, const W: usize>(
+    cfg: &ControlConfig,
+    net: &CascadeNet<POSE_DIM, H, OUT, W>,
+    st: &mut ControlState,
+    input: &StepInput,
+    status: &mut Status,
+) -> [f32; POSE_DIM] {
+    let now = input.now_ns;
+    let ic = cfg.integral;
+    let mut pose = st.pose;
+    let mut fresh = false;
+    if let Some(fb) = input.feedback {
+        if fb.tip_position.iter().any(|v| !v.is_finite()) {
+            *status |= Status::BAD_FEEDBACK;
+        } else if fb.seq > st.last_feedback_seq {
+            st.last_feedback_seq = fb.seq;
+            st.last_feedback_ns = now;
+            fresh = true;
+            let before = (st.correction, st.error_map);
+            let interval = fb.interval_s.is_finite().then_some(fb.interval_s);
+            let interval = clamp(
+                interval.unwrap_or(0.0),
+                0.0,
+                ic.feedback_timeout_ns as f32 * 1e-9,
+            );
+            integrate(st, &fb.tip_position, ic, interval);
+            if !in_box(net, &corrected_pose(st), cfg.box_margin) {
+                (st.correction, st.error_map) = before;
+            }
+        }
+    }
+    if !fresh && now.saturating_sub(st.last_feedback_ns) > ic.feedback_timeout_ns {
+        *status |= Status::PLANT_STALE;
+    }
+    let corrected = corrected_pose(st);
+    if in_box(net, &corrected, cfg.box_margin) {
+        pose = corrected;
+        if st.correction.iter().any(|&c| c != 0.0) {
+            *status |= Status::CORRECTION;
+        }
+    } else {
+        *status |= Status::CORRECTION_LIMITED;
+    }
+    pose
 }
 
 /// One sample into the correction on the measured tip `tip` (module docs

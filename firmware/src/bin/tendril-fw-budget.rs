@@ -243,10 +243,18 @@ mod mcu {
             max_dt_ns: 5 * period,
             quaternion_tolerance: 1e-2,
             box_margin: 0.05,
-            ki: 10.0,
-            correction_limit: 0.003,
-            feedback_timeout_ns: 20 * period,
-            correction_window: 0.002,
+            // The host's default correction (design §6.3): the filter and
+            // the error map run in every period, so their cost is counted.
+            ki: 4.0,
+            correction_limit: 0.02,
+            feedback_timeout_ns: 25 * period,
+            correction_window: 0.02,
+            correction_filter_tau_s: 0.08,
+            correction_map_gain: 2.0,
+            correction_map_scale: 0.01,
+            correction_map_limit: 0.5,
+            jump_m: 1e-3,
+            settle_after_jump_ns: 300_000_000,
             lead_s: 0.021,
             plant_stale_ns: 20 * period,
             stuck_enabled: true,
@@ -492,6 +500,10 @@ mod mcu {
                 command_seq: host.last_seq,
                 tensions,
                 tip,
+                // A new frame every period, 5 ms old: the integration and
+                // the map update run in every period (the worst case).
+                tip_seq: k + 1,
+                tip_age_us: 5_000,
             });
             let chunk = chunk_of(blob_8, UPDATE_8_AT, k)
                 .map(|c| (c, blob_8.len()))
