@@ -26,5 +26,6 @@ pub mod plot;
 pub mod reality;
 pub mod robot;
 pub mod robustness;
+pub mod runlog;
 pub mod statics;
 pub mod units;

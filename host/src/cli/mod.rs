@@ -15,6 +15,7 @@ pub mod generate;
 pub mod ik;
 mod planner;
 mod plant;
+mod plot;
 mod robustness;
 mod run;
 mod sim;
@@ -83,6 +84,8 @@ enum Command {
     Dynamics(dynamics::DynamicsArgs),
     /// The closed loop against every reality (a plant unlike its model): table and figure.
     Robustness(robustness::RobustnessArgs),
+    /// Redraw a run's figure from its run.mcap (the Foxglove run log) alone.
+    Plot(plot::PlotArgs),
 }
 
 /// Run the subcommand `cli` names (the whole pipeline without one).
@@ -104,5 +107,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Some(Command::Evaluate(a)) => evaluate::run(a),
         Some(Command::Dynamics(a)) => dynamics::run(a),
         Some(Command::Robustness(a)) => robustness::run(a),
+        Some(Command::Plot(a)) => plot::run(a),
     }
 }

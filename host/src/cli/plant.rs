@@ -184,6 +184,12 @@ pub struct PlantArgs {
     /// Statistics JSON written at exit.
     #[arg(long)]
     pub stats: Option<PathBuf>,
+    /// The run's MCAP file (Foxglove's 3-D scene, tensions, errors, status;
+    /// docs/design.md §12).
+    #[arg(long)]
+    pub mcap: Option<PathBuf>,
+    #[command(flatten)]
+    pub runlog: RunLogOpts,
     /// Run under SCHED_FIFO once the model is set up.
     #[arg(long)]
     pub realtime: bool,
@@ -215,11 +221,45 @@ impl PlantArgs {
             peer_start_grace_s,
             supervised: self.supervised,
             log: self.log,
+            runlog: self.runlog.config(self.mcap)?,
             stats: self.stats,
             realtime: self.realtime,
             cpu: self.cpu,
             ..PlantConfig::default()
         })
+    }
+}
+
+/// Run-log options shared by `tendril plant` and `tendril sim`.
+#[derive(Args, Clone, Debug)]
+pub struct RunLogOpts {
+    /// Serve the run live to Foxglove (WebSocket) at this address; without
+    /// a value 127.0.0.1:8765. Open it in Foxglove with "Open connection".
+    #[arg(long, num_args = 0..=1, default_missing_value = DEFAULT_LIVE, value_name = "HOST:PORT")]
+    pub live: Option<String>,
+    /// 3-D scenes per second in the run log.
+    #[arg(long, default_value_t = 30.0)]
+    pub scene_hz: f64,
+    /// Points along the backbone (and each tendon) in a scene.
+    #[arg(long, default_value_t = 41)]
+    pub backbone_points: usize,
+}
+
+/// Where `--live` serves without an address.
+pub const DEFAULT_LIVE: &str = "127.0.0.1:8765";
+
+impl RunLogOpts {
+    /// The run-log configuration, writing `mcap` if given.
+    pub fn config(&self, mcap: Option<PathBuf>) -> anyhow::Result<crate::runlog::RunLogConfig> {
+        let cfg = crate::runlog::RunLogConfig {
+            mcap,
+            live: self.live.clone(),
+            scene_hz: self.scene_hz,
+            backbone_points: self.backbone_points,
+            ..crate::runlog::RunLogConfig::default()
+        };
+        cfg.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
+        Ok(cfg)
     }
 }
 

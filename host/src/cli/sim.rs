@@ -107,6 +107,11 @@ pub struct SimArgs {
     /// Start a new bridge this long after the cut (s).
     #[arg(long, allow_hyphen_values = true)]
     pub restore_link_after: Option<f64>,
+    /// Do not write `run.mcap` (the Foxglove run log).
+    #[arg(long)]
+    pub no_mcap: bool,
+    #[command(flatten)]
+    pub runlog: super::plant::RunLogOpts,
 }
 
 /// Who runs the control period in a sim.
@@ -161,6 +166,9 @@ impl SimArgs {
                 .map_err(|e| anyhow::anyhow!("--reality {}: {e}", reality.name))?;
         }
         cfg.plant.spin = self.plant.spin;
+        // The launcher puts the file in the run's directory (`run.mcap`).
+        let mcap = (!self.no_mcap).then(|| PathBuf::from(crate::ipc::sim::RUN_MCAP));
+        cfg.plant.runlog = self.runlog.config(mcap)?;
         cfg.pin = self.pin == OnOff::On;
         cfg.faults = SimFaults {
             kill_planner_at: self.kill_planner_at,

@@ -134,6 +134,20 @@ pub fn integrate_sampled(
     steps: usize,
     points: usize,
 ) -> Result<Vec<Vector3<f64>>, SingularSystem> {
+    Ok(integrate_sampled_states(rod, base, steps, points)?
+        .into_iter()
+        .map(|(_, y)| y.p)
+        .collect())
+}
+
+/// As [`integrate_sampled`], with the whole state and its arc length at
+/// each sample (after an anchor's jump when the sample is on one).
+pub fn integrate_sampled_states(
+    rod: &Rod,
+    base: RodState,
+    steps: usize,
+    points: usize,
+) -> Result<Vec<(f64, RodState)>, SingularSystem> {
     let points = points.max(2);
     let intervals = points - 1;
     let sample = |k: usize| {
@@ -145,7 +159,7 @@ pub fn integrate_sampled(
     };
     let mut out = Vec::with_capacity(points);
     let mut y = base;
-    out.push(y.p);
+    out.push((0.0, y));
     let mut a = 0.0;
     let mut knots = rod.knots().iter().copied().peekable();
     for k in 1..=intervals {
@@ -171,7 +185,7 @@ pub fn integrate_sampled(
                 break;
             }
         }
-        out.push(y.p);
+        out.push((next_sample, y));
     }
     Ok(out)
 }

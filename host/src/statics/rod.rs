@@ -326,6 +326,12 @@ impl Rod {
         }
     }
 
+    /// Where tendon `i` runs at arc length `s` of the rod in `state` (base
+    /// frame, m): p + R r_i(s); None past its anchor.
+    pub fn tendon_point(&self, i: usize, s: f64, state: &RodState) -> Option<Vector3<f64>> {
+        (i < self.n_tendons && s <= self.end[i]).then(|| state.p + state.rot * self.routing(i, s).r)
+    }
+
     /// Tendon `i`'s offset r_i(s) with r_i'(s), r_i''(s).
     pub(super) fn routing(&self, i: usize, s: f64) -> Routing {
         if let Some(r) = self.straight[i] {

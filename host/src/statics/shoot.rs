@@ -17,7 +17,7 @@ use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
 use super::friction::{FrictionError, TensionProfile};
 
-use super::integrate::{integrate, integrate_sampled};
+use super::integrate::{integrate, integrate_sampled, integrate_sampled_states};
 use super::pose::{orthonormalise, quaternion_wxyz};
 use super::rod::{Rod, RodState, SingularSystem};
 use super::tangent::{integrate_with_sensitivity, ShootingSensitivity};
@@ -346,6 +346,26 @@ impl Statics {
         integrate_sampled(&rod, base, self.settings.steps, points).unwrap_or_default()
     }
 
+    /// The backbone as [`Statics::shape`], and each tendon's path beside it
+    /// (base frame, m; a tendon's path stops at its anchor): what a run log
+    /// draws.
+    pub fn shape_with_tendons(&self, sol: &Solution, points: usize) -> RodShape {
+        let rod = self.solution_rod(sol);
+        let base = base_state(&rod, &sol.warm.x);
+        let states =
+            integrate_sampled_states(&rod, base, self.settings.steps, points).unwrap_or_default();
+        let backbone = states.iter().map(|(_, y)| y.p).collect();
+        let tendons = (0..rod.n_tendons)
+            .map(|i| {
+                states
+                    .iter()
+                    .filter_map(|(s, y)| rod.tendon_point(i, *s, y))
+                    .collect()
+            })
+            .collect();
+        RodShape { backbone, tendons }
+    }
+
     /// Tip state for `tensions` integrated from the base unknowns `x`
     /// ([n(0); u(0)]) with `steps` RK4 steps — for convergence studies and
     /// independent checks of a solution.
@@ -367,6 +387,15 @@ pub(super) fn base_state(rod: &Rod, x: &Vector6<f64>) -> RodState {
         &Vector3::new(x[3], x[4], x[5]),
         &rod.kse,
     )
+}
+
+/// A solved rod's shape: what [`Statics::shape_with_tendons`] returns.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RodShape {
+    /// Backbone points, base to tip (base frame, m).
+    pub backbone: Vec<Vector3<f64>>,
+    /// Each tendon's path, base to its anchor (base frame, m).
+    pub tendons: Vec<Vec<Vector3<f64>>>,
 }
 
 /// One shooting problem: the rod with its tensions and tip load.

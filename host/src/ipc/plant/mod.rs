@@ -23,6 +23,7 @@ use super::stats::{CsvLog, Histogram, Summary};
 use super::transport::{self, Services};
 use super::{IpcError, StopWatch};
 use crate::robot::Robot;
+use crate::runlog::{RunLog, RunLogConfig, RunLogStats, SceneRecord, StepRecord};
 use crate::statics::{SolverSettings, Statics, WarmStart};
 
 mod model;
@@ -60,6 +61,8 @@ pub struct PlantConfig {
     pub supervised: bool,
     /// Per-step CSV log.
     pub log: Option<PathBuf>,
+    /// The run's MCAP file and live view (docs/design.md §12).
+    pub runlog: RunLogConfig,
     /// Statistics JSON written at exit.
     pub stats: Option<PathBuf>,
     /// Switch to SCHED_FIFO after set-up.
@@ -82,6 +85,7 @@ impl Default for PlantConfig {
             peer_start_grace_s: None,
             supervised: false,
             log: None,
+            runlog: RunLogConfig::default(),
             stats: None,
             realtime: false,
             cpu: None,
@@ -110,6 +114,8 @@ pub struct PlantStats {
     pub latency_us: Summary,
     /// Time of one step: motor update + statics (µs).
     pub step_us: Summary,
+    /// What the run log wrote (None without one).
+    pub runlog: Option<RunLogStats>,
 }
 
 /// Column names of the plant log (for `n` tendons).
@@ -135,6 +141,29 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
     let state_pub = transport::publisher(&services.plant_state)?;
     let stop = StopWatch::new(&services)?;
     let mut log = CsvLog::create(cfg.log.as_deref(), &log_header(n))?;
+    // The run log sees the setpoints too (the desired tip): one more
+    // subscriber, drained without waiting, so the planner never notices.
+    let mut runlog = match cfg.runlog.enabled() {
+        true => Some(Recorder {
+            log: RunLog::start(&cfg.runlog).map_err(|e| IpcError::Other(e.to_string()))?,
+            setpoints: transport::subscriber(&services.setpoint)?,
+            received: Vec::with_capacity(16),
+            desired: None,
+            controller_status: 0,
+            plant_status: 0,
+        }),
+        false => None,
+    };
+    if let Some(r) = &runlog {
+        r.log.line(
+            now_ns(),
+            foxglove::messages::log::Level::Info,
+            format!("plant: {} tendons, robot {}", n, cfg.robot.display()),
+        );
+        if let Some(port) = r.log.live_port() {
+            log::info!("plant: live view on ws://{}", live_host(&cfg.runlog, port));
+        }
+    }
     super::clock::tighten_timer_slack();
     super::clock::apply_scheduling("plant", cfg.cpu, cfg.realtime, super::clock::PLANT_PRIORITY);
 
@@ -261,6 +290,9 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
             }
         }
         transport::send(&state_pub, msg)?;
+        if let Some(r) = runlog.as_mut() {
+            r.record(&model, t1, last_cmd.as_ref(), status, frame.as_ref())?;
+        }
 
         let mut row = Vec::with_capacity(3 + 2 * n + 8);
         row.push(t0 as f64);
@@ -293,6 +325,14 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
         }
     }
     log.flush()?;
+    if let Some(r) = runlog.take() {
+        r.log.line(
+            now_ns(),
+            foxglove::messages::log::Level::Info,
+            format!("plant: stopped after {} steps", stats.steps),
+        );
+        stats.runlog = Some(r.log.finish().map_err(|e| IpcError::Other(e.to_string()))?);
+    }
     stats.solve_failures = model.solve_failures;
     stats.latency_us = latencies.summary();
     stats.step_us = step_times.summary();
@@ -301,4 +341,90 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
         super::write_file(path, &json)?;
     }
     Ok(stats)
+}
+
+/// The plant's side of the run log: the desired tip from the setpoints,
+/// the status bits last seen (a rising bit is a log line).
+struct Recorder {
+    log: RunLog,
+    setpoints: transport::Sub<tendril_shared::messages::Setpoint>,
+    received: Vec<tendril_shared::messages::Setpoint>,
+    desired: Option<[f64; 7]>,
+    controller_status: u32,
+    plant_status: u32,
+}
+
+impl Recorder {
+    fn record(
+        &mut self,
+        model: &PlantModel,
+        t_ns: u64,
+        cmd: Option<&TensionCommand>,
+        plant_status: u32,
+        frame: Option<&crate::reality::Frame>,
+    ) -> Result<(), IpcError> {
+        use foxglove::messages::log::Level;
+        self.received.clear();
+        transport::drain(&self.setpoints, &mut self.received)?;
+        // A non-finite setpoint (an injected fault) is not a desired tip.
+        if let Some(sp) = self
+            .received
+            .iter()
+            .rev()
+            .find(|s| s.pose.iter().all(|v| v.is_finite()))
+        {
+            self.desired = Some(sp.pose.map(f64::from));
+        }
+        let controller_status = cmd.map_or(0, |c| c.status);
+        let rising = controller_status & !self.controller_status;
+        for name in crate::runlog::channels::controller_flags(rising) {
+            self.log
+                .line(t_ns, Level::Warning, format!("controller: {name}"));
+        }
+        let rising = plant_status & !self.plant_status;
+        for name in crate::runlog::channels::plant_flags(rising) {
+            self.log.line(t_ns, Level::Error, format!("plant: {name}"));
+        }
+        self.controller_status = controller_status;
+        self.plant_status = plant_status;
+        let frame = frame.map(|f| f.pose);
+        self.log.step(StepRecord {
+            t_ns,
+            command_seq: cmd.map_or(0, |c| c.header.seq),
+            controller_status,
+            plant_status,
+            commanded: model.targets().to_vec(),
+            measured: model.tensions().to_vec(),
+            tip: model.pose(),
+            frame,
+            desired: self.desired,
+        });
+        if self.log.scene_due(t_ns) {
+            let shape = model.shape(self.log.backbone_points()).unwrap_or_default();
+            let xyz = |v: &nalgebra::Vector3<f64>| [v.x, v.y, v.z];
+            self.log.scene(SceneRecord {
+                t_ns,
+                backbone: shape.backbone.iter().map(xyz).collect(),
+                tendons: shape
+                    .tendons
+                    .iter()
+                    .map(|t| t.iter().map(xyz).collect())
+                    .collect(),
+                tip: model.pose(),
+                frame,
+                desired: self.desired,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// The address a user types into Foxglove for the live view.
+fn live_host(cfg: &RunLogConfig, port: u16) -> String {
+    let host = cfg
+        .live
+        .as_deref()
+        .and_then(|a| crate::runlog::writer::parse_addr(a).ok())
+        .map_or_else(|| "127.0.0.1".to_string(), |(h, _)| h);
+    format!("{host}:{port}")
 }

@@ -132,6 +132,8 @@ pub struct PlantModel {
     tendon: Vec<f64>,
     target: Vec<f64>,
     warm: Option<WarmStart>,
+    /// The last converged quasi-static solution (the shape a run log draws).
+    solution: Option<crate::statics::Solution>,
     solved_for: Vec<f64>,
     pose: [f64; 7],
     rng: ChaCha8Rng,
@@ -235,6 +237,7 @@ impl PlantModel {
             tendon: zero.clone(),
             target: zero.clone(),
             warm: Some(sol.warm.clone()),
+            solution: Some(sol.clone()),
             solved_for: zero,
             pose: sol.pose(),
             rng: ChaCha8Rng::seed_from_u64(params.seed),
@@ -346,7 +349,8 @@ impl PlantModel {
         match sol {
             Ok(sol) => {
                 self.pose = sol.pose();
-                self.warm = Some(sol.warm);
+                self.warm = Some(sol.warm.clone());
+                self.solution = Some(sol);
                 self.solved_for.clone_from(&self.tendon);
                 true
             }
@@ -411,6 +415,17 @@ impl PlantModel {
             }
         }
         true
+    }
+
+    /// The rod's backbone and tendon paths at `points` arc lengths (base
+    /// frame, m), for a run log. The quasi-static plant has them from its
+    /// last solve; the dynamic rod does not keep its positions (None).
+    pub fn shape(&self, points: usize) -> Option<crate::statics::RodShape> {
+        if self.dynamics.is_some() {
+            return None;
+        }
+        let sol = self.solution.as_ref()?;
+        Some(self.statics.shape_with_tendons(sol, points))
     }
 
     /// True tip pose (no noise).

@@ -53,6 +53,9 @@ pub const DEFAULT_KI_PER_S: f64 = crate::ipc::controller::correction::KI_PER_S;
 /// below what a wrong net or an unstable loop gives (51 mm, issue 31).
 pub const DEFAULT_MAX_RMS_MM: f64 = 2.0;
 
+/// The run log's file name in the output directory (docs/design.md §12).
+pub const RUN_MCAP: &str = "run.mcap";
+
 /// Name of the working directory inside the output directory.
 pub const RUN_DIR: &str = ".sim-run";
 
@@ -642,5 +645,62 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
     };
     crate::plot::sim::draw(&dir.file("sim.png"), &figure)
         .map_err(|e| SimError::Config(format!("sim figure: {e}")))?;
+    if cfg.plant.runlog.mcap.is_some() {
+        finish_run_log(dir, &report)?;
+    }
     Ok(report)
+}
+
+/// Give `run.mcap` the report's summary as metadata. A plant killed
+/// mid-run left its file under `run.mcap.partial`, readable up to its last
+/// chunk: it becomes `run.mcap` too.
+fn finish_run_log(dir: &RunDir, report: &SimReport) -> Result<(), SimError> {
+    let path = dir.file(RUN_MCAP);
+    let partial = crate::runlog::writer::partial_path(&path);
+    let source = if path.exists() {
+        path.clone()
+    } else if partial.exists() {
+        partial.clone()
+    } else {
+        log::warn!("sim: the plant wrote no {RUN_MCAP}");
+        return Ok(());
+    };
+    let summary = report_metadata(report);
+    crate::runlog::finalize::add_metadata(&source, &path, "report", summary)
+        .map_err(|e| SimError::Config(format!("run log: {e}")))?;
+    if source == partial {
+        // add_metadata wrote through the same partial name and renamed it.
+        let _ = std::fs::remove_file(&partial);
+    }
+    Ok(())
+}
+
+/// The report's scalar fields (and its verdict's) as metadata strings.
+fn report_metadata(report: &SimReport) -> std::collections::BTreeMap<String, String> {
+    let mut out = std::collections::BTreeMap::new();
+    let Ok(serde_json::Value::Object(top)) = serde_json::to_value(report) else {
+        return out;
+    };
+    let scalar = |v: &serde_json::Value| match v {
+        serde_json::Value::String(s) => Some(s.clone()),
+        serde_json::Value::Number(_) | serde_json::Value::Bool(_) => Some(v.to_string()),
+        _ => None,
+    };
+    for (key, value) in &top {
+        match value {
+            serde_json::Value::Object(inner) if key == "verdict" || key == "model" => {
+                for (k, v) in inner {
+                    if let Some(s) = scalar(v) {
+                        out.insert(format!("{key}.{k}"), s);
+                    }
+                }
+            }
+            v => {
+                if let Some(s) = scalar(v) {
+                    out.insert(key.clone(), s);
+                }
+            }
+        }
+    }
+    out
 }

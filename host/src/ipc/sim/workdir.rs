@@ -61,7 +61,9 @@ impl RunDir {
             let process_file = ["planner-", "plant-", "controller.", "controller-"]
                 .iter()
                 .any(|p| name.starts_with(p))
-                && (name.ends_with(".csv") || name.ends_with(".json"));
+                && [".csv", ".json", ".mcap"].iter().any(|e| name.ends_with(e));
+            // A run without a log must not leave the previous run's.
+            let process_file = process_file || name == super::RUN_MCAP;
             if process_file && entry.path().is_file() {
                 std::fs::remove_file(entry.path()).map_err(io(entry.path()))?;
             }
@@ -139,6 +141,18 @@ impl Configs<'_> {
                 c.realtime = self.cfg.realtime;
                 c.supervised = true;
                 c.duration_s = None;
+                if c.runlog.mcap.is_some() {
+                    // A restarted plant logs beside the first one's file.
+                    let name = match generation {
+                        0 => super::RUN_MCAP.to_string(),
+                        g => format!("plant-{g}.mcap"),
+                    };
+                    c.runlog.mcap = Some(self.dir.file(&name));
+                }
+                if generation > 0 {
+                    // One live server: the first plant's port is taken.
+                    c.runlog.live = None;
+                }
                 write_json(&path, &c)?;
             }
             Role::Controller => {
