@@ -101,3 +101,77 @@ fn a_stiffer_robot_than_its_model_is_corrected_along_the_circle() {
         "the net alone was already within {rms_alone:.3} mm"
     );
 }
+
+/// `sim --plant-robot`: the plant moves another robot file than the one the
+/// planner, controller and net use (a net trained on a calibrated file, run
+/// on the robot it was calibrated to). The calibration benchmark's real
+/// robot as a file (the text edits of scripts/calibration-benchmark) and as
+/// the nominal file under the `calibration-truth` reality are one plant:
+/// the net alone is as far off on either, and far off (scripts/calibration-loop
+/// relies on both).
+#[test]
+fn a_plant_robot_file_moves_the_plant_like_the_calibration_truth_reality() {
+    let root = tendril_tests::workspace_root();
+    let text = std::fs::read_to_string(root.join("robots/seed-4t.toml")).unwrap();
+    let real = text
+        .replace("youngs_modulus = 207e9", "youngs_modulus = 227.7e9")
+        .replace("density = 39317.0 ", "density = 45214.55 ");
+    let mut parts = real.split("offset = 0.019\n");
+    let mut file = parts.next().unwrap().to_string();
+    for (o, p) in ["0.0195", "0.0185", "0.0194", "0.0187"].iter().zip(parts) {
+        file.push_str(&format!("offset = {o}\n{p}"));
+    }
+    assert!(file.contains("227.7e9") && file.contains("45214.55") && !file.contains("= 0.019\n"));
+    let dir = tempfile::tempdir().unwrap();
+    let real_toml = dir.path().join("real.toml");
+    std::fs::write(&real_toml, file).unwrap();
+    let real_toml = real_toml.to_str().unwrap();
+    let alone = [
+        "--model",
+        DEFAULT_NET,
+        "--trajectory",
+        "circle",
+        "--correction",
+        "off",
+        "--duration",
+        "4",
+        "--max-rms-mm",
+        "100",
+    ];
+    let rms = |extra: &[&str]| {
+        let mut args = alone.to_vec();
+        args.extend_from_slice(extra);
+        let (d, _) = run_sim(&args);
+        mm(&sim_report(d.path()), "rms_tracking_error_mm")
+    };
+    let by_file = rms(&["--plant-robot", real_toml]);
+    let by_reality = rms(&["--reality", "robots/realities/calibration-truth.toml"]);
+    eprintln!("net alone: plant robot file {by_file:.3} mm, reality {by_reality:.3} mm");
+    assert!(
+        by_file > 2.0,
+        "the plant robot was not moved: {by_file:.3} mm"
+    );
+    assert!(
+        (by_file - by_reality).abs() < 0.05 * by_reality,
+        "{by_file:.3} mm against {by_reality:.3} mm"
+    );
+    // A plant robot with other tendons than the model is refused at once.
+    let o = std::process::Command::new(tendril_tests::tendril_bin())
+        .args([
+            "sim",
+            "--plant-robot",
+            "robots/seed-1t.toml",
+            "--model",
+            DEFAULT_NET,
+        ])
+        .arg("--out")
+        .arg(dir.path().join("refused"))
+        .current_dir(&root)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("--plant-robot has 1 tendons"),
+        "{err}"
+    );
+}

@@ -133,6 +133,49 @@ impl Report {
         serde_json::to_string_pretty(self).expect("a report serialises")
     }
 
+    /// A warning when the fitted tracker frame is turned by more than the
+    /// tip noise at the rod's length: the robot file has no base pose, so a
+    /// model or a net that uses the file alone leaves that rotation out.
+    /// With E fixed the rotation is not only the tracker's: the base tilt
+    /// absorbs the weak signal that would separate E (docs/design.md §11),
+    /// and the file alone was 1.7 mm off the benchmark's real robot. None
+    /// without `length` among the parameters (no length to scale by).
+    pub fn frame_rotation_note(&self) -> Option<String> {
+        let value = |name: &str| {
+            self.parameters
+                .iter()
+                .find(|p| p.name == name && !p.fixed)
+                .map(|p| p.fitted)
+        };
+        let w: Vec<f64> = ["base_rx", "base_ry", "base_rz"]
+            .iter()
+            .map(|n| value(n).unwrap_or(0.0))
+            .collect();
+        let angle = w.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let length = value("length").or_else(|| {
+            self.parameters
+                .iter()
+                .find(|p| p.name == "length")
+                .map(|p| p.nominal)
+        })?;
+        let at_tip = angle * length;
+        if at_tip <= self.residual_sigma_m.max(10e-6) {
+            return None;
+        }
+        Some(format!(
+            "The fitted frame is turned by ({:.2}, {:.2}, {:.2}) mrad, up to {:.2} mm at the \
+             tip. The robot file has no base pose: a model or net that uses the file alone \
+             leaves this rotation out, and with E fixed it carries part of the robot (the base \
+             tilt absorbs the signal that separates E). If the tracker's orientation relative \
+             to the base is known, fit `base_t` instead of `base` (BENCHMARKS.md, Calibration, \
+             Closed loop).",
+            w[0] * 1e3,
+            w[1] * 1e3,
+            w[2] * 1e3,
+            at_tip * 1e3
+        ))
+    }
+
     /// The report as markdown.
     pub fn markdown(&self) -> String {
         use std::fmt::Write;
@@ -188,6 +231,9 @@ impl Report {
                     u.separate_with
                 );
             }
+        }
+        if let Some(note) = self.frame_rotation_note() {
+            let _ = writeln!(s, "\n## The tracker frame's rotation\n\n{note}");
         }
         if !self.correlated.is_empty() {
             let _ = writeln!(s, "\n## Strongly correlated fitted pairs\n");

@@ -284,3 +284,37 @@ fn planner_picks_distinct_rows_within_the_limits() {
         );
     }
 }
+
+#[test]
+fn a_turned_tracker_frame_is_flagged_as_missing_from_the_robot_file() {
+    // Noiseless rows from a translated tracker: the fitted rotation is ≈ 0
+    // and nothing is said.
+    let nominal = repo_robot("seed-4t.toml");
+    let truth = altered(|v| v.density *= 1.15);
+    let data = measure(&truth, 40, [0.002, -0.001, 0.0005], 0.0, 5);
+    let fit = parse_fit_list("density,length,offsets,base", 4).unwrap();
+    let mut opts = FitOptions::new(fit);
+    opts.holdout_fraction = 0.0;
+    let mut c = calibrate(&nominal, &data, &opts).unwrap();
+    assert!(
+        c.report.frame_rotation_note().is_none(),
+        "{:?}",
+        c.report.frame_rotation_note()
+    );
+    assert!(!c.report.markdown().contains("frame's rotation"));
+    // The benchmark's fitted tilt (−2.7 mrad about y): 1.1 mm at the tip.
+    for p in c.report.parameters.iter_mut() {
+        if p.name == "base_ry" {
+            p.fitted = -2.7e-3;
+        }
+    }
+    let note = c.report.frame_rotation_note().expect("a note");
+    assert!(
+        note.contains("1.08 mm") && note.contains("base_t"),
+        "{note}"
+    );
+    assert!(c
+        .report
+        .markdown()
+        .contains("## The tracker frame's rotation"));
+}

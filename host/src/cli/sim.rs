@@ -23,6 +23,12 @@ pub struct SimArgs {
     /// Robot description file.
     #[arg(long, default_value = "robots/seed-4t.toml")]
     pub robot: PathBuf,
+    /// The robot the plant moves, before --reality [default: --robot]. For
+    /// a model that is not the robot's file: a net trained on a calibrated
+    /// file (--robot) against the robot it was calibrated to (this file and
+    /// a reality that makes it the real one).
+    #[arg(long)]
+    pub plant_robot: Option<PathBuf>,
     /// Trained IK net [default: out/model.tnet if it exists, else the
     /// firmware's built-in net firmware/vectors/default.tnet].
     #[arg(long)]
@@ -133,6 +139,7 @@ impl SimArgs {
             ModelSource::resolve(self.model, Path::new(TRAINED_MODEL))
         };
         let mut cfg = SimConfig::new(exe, self.robot, model, self.out);
+        cfg.plant_robot = self.plant_robot;
         cfg.prefix = self.prefix;
         cfg.duration_s = self.duration;
         cfg.max_rms_mm = self.max_rms_mm;
@@ -158,12 +165,23 @@ impl SimArgs {
         cfg.realtime = self.tuning.realtime != Some(OnOff::Off);
         cfg.plant.params = self.plant.params()?;
         cfg.plant.params.model = self.plant_model;
+        let plant_robot = cfg.plant_robot.as_ref().unwrap_or(&cfg.robot);
+        // Refused here, before any process starts, if it does not fit.
+        let robot = crate::robot::Robot::load(plant_robot)?;
         if let Some(reality) = &cfg.plant.params.reality {
-            // Refused here, before any process starts, if it does not fit.
-            let robot = crate::robot::Robot::load(&cfg.robot)?;
             reality
                 .real_robot(&robot)
                 .map_err(|e| anyhow::anyhow!("--reality {}: {e}", reality.name))?;
+        }
+        if cfg.plant_robot.is_some() {
+            let model = crate::robot::Robot::load(&cfg.robot)?;
+            if model.n_tendons() != robot.n_tendons() {
+                anyhow::bail!(
+                    "--plant-robot has {} tendons but --robot has {}",
+                    robot.n_tendons(),
+                    model.n_tendons()
+                );
+            }
         }
         cfg.plant.spin = self.plant.spin;
         // The launcher puts the file in the run's directory (`run.mcap`).
@@ -211,6 +229,10 @@ impl SimArgs {
             },
             |r| format!("reality {} ({})", r.name, r.summary()),
         );
+        let reality = match &cfg.plant_robot {
+            Some(p) => format!("plant robot {}, {reality}", p.display()),
+            None => reality,
+        };
         cfg.label = format!(
             "controller {:?}, trajectory {:?}, correction {:?} (ki {}/s), lead {} ms, {reality}, \
              {} s, real-time {}, pinned {:?}",

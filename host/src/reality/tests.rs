@@ -197,3 +197,75 @@ fn jittered_latency_keeps_frames_in_order() {
     // Mean ≥ the nominal 10 ms (order is kept by holding early frames back).
     assert!((10.0..14.0).contains(&mean_delay), "{mean_delay} ms");
 }
+
+/// The calibration benchmark's "real" robot file, made from seed-4t.toml by
+/// the text edits of scripts/calibration-benchmark and scripts/calibration-loop
+/// (E 227.7e9, ρ 45214.55, offsets 19.5, 18.5, 19.4, 18.7 mm).
+fn calibration_real_robot() -> Robot {
+    let text = crate::robot::BUILTIN_DEFAULT_TOML;
+    let real = text
+        .replace("youngs_modulus = 207e9", "youngs_modulus = 227.7e9")
+        .replace("density = 39317.0 ", "density = 45214.55 ");
+    let mut parts = real.split("offset = 0.019\n");
+    let mut out = parts.next().unwrap().to_string();
+    for (o, p) in ["0.0195", "0.0185", "0.0194", "0.0187"].iter().zip(parts) {
+        out.push_str(&format!("offset = {o}\n{p}"));
+    }
+    // The edits must all have applied: a changed seed-4t.toml would make
+    // the scripts' real robot silently the nominal one.
+    assert!(out.contains("227.7e9") && out.contains("45214.55") && !out.contains("= 0.019\n"));
+    Robot::from_toml(&out, Path::new("real.toml")).unwrap()
+}
+
+#[test]
+fn calibration_truth_is_the_calibration_benchmarks_real_robot() {
+    use crate::ipc::plant::{PlantModel, PlantParams};
+    use crate::statics::{SolverSettings, Statics};
+    // The reality file (a file, not a built-in: the robustness table runs
+    // every built-in) applied to the nominal robot by the plant itself.
+    let path =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/realities/calibration-truth.toml");
+    let reality = Reality::load(&path).unwrap_or_else(|e| panic!("{e}"));
+    let nominal = default_robot();
+    let params = PlantParams {
+        noise_m: 0.0,
+        noise_quat: 0.0,
+        reality: Some(reality),
+        ..PlantParams::default()
+    };
+    let steps = params.statics_steps;
+    let mut plant = PlantModel::new(&nominal, params).unwrap();
+    let file = Statics::new(
+        &calibration_real_robot(),
+        SolverSettings {
+            steps,
+            ..SolverSettings::default()
+        },
+    );
+    let nominal_statics = Statics::new(&nominal, SolverSettings::default());
+    let tensions = crate::dataset::Sampler::Adjacent.draw(8, &nominal.max_tensions(), 3);
+    for tau in tensions {
+        plant.command(&tau);
+        // Past the motors' lag: five time constants a step.
+        for _ in 0..10 {
+            assert!(plant.step(0.1));
+        }
+        let p = nalgebra::Vector3::from_row_slice(&plant.pose()[..3]);
+        let want = file.solve(plant.tensions(), None).unwrap().position;
+        // Same robot up to the last bits of E, ρ and the offsets; the rest
+        // is the solver's convergence (warm in the plant, cold here).
+        assert!(
+            (p - want).norm() < 1e-8,
+            "{tau:?}: {} m off",
+            (p - want).norm()
+        );
+        // And it is not the nominal robot (so the check can tell them apart).
+        let off = (nominal_statics
+            .solve(plant.tensions(), None)
+            .unwrap()
+            .position
+            - p)
+            .norm();
+        assert!(off > 1e-3, "{tau:?}: only {off} m from the nominal robot");
+    }
+}

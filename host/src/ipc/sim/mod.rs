@@ -140,8 +140,13 @@ impl ModelSource {
 pub struct SimConfig {
     /// The `tendril` executable to start the children from.
     pub exe: PathBuf,
-    /// Robot file.
+    /// Robot file: the model the planner, the controller and the net use,
+    /// and the plant's robot unless `plant_robot` says otherwise.
     pub robot: PathBuf,
+    /// The robot the plant moves (before its reality), when it is not the
+    /// model's: e.g. the nominal file under a net trained on a calibrated
+    /// one, with the calibrated robot's truth as the reality.
+    pub plant_robot: Option<PathBuf>,
     /// The net.
     pub model: ModelSource,
     /// Output directory.
@@ -203,6 +208,7 @@ impl SimConfig {
         SimConfig {
             exe,
             robot: robot.clone(),
+            plant_robot: None,
             model,
             out,
             prefix: None,

@@ -133,7 +133,12 @@ impl Configs<'_> {
         match role {
             Role::Plant => {
                 let mut c = self.cfg.plant.clone();
-                c.robot = self.cfg.robot.clone();
+                c.robot = self
+                    .cfg
+                    .plant_robot
+                    .as_ref()
+                    .unwrap_or(&self.cfg.robot)
+                    .clone();
                 c.prefix = self.prefix.clone();
                 c.log = log;
                 c.stats = stats;
