@@ -349,3 +349,63 @@ fn a_live_client_through_a_60_s_run_costs_the_controller_no_period() {
         "skipped {with} periods with a live client, {without} without"
     );
 }
+
+#[test]
+fn a_dynamics_run_logs_the_swinging_rod() {
+    // `tendril dynamics` (faster than real time: nothing is dropped) logs
+    // every time step and a scene at 30 Hz of simulated time whose
+    // backbone ends at the tip the same step's transform reports.
+    let dir = tempfile::tempdir().unwrap();
+    let out = tendril(&[
+        "dynamics",
+        "--tensions-step",
+        "0,0,0,0:2,0,0,0@0.05",
+        "--duration",
+        "0.3",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let log = read(&dir.path().join("run.mcap"));
+    let rows = std::fs::read_to_string(dir.path().join("tip.csv"))
+        .unwrap()
+        .lines()
+        .count()
+        - 1;
+    assert_eq!(
+        log.topics["/tensions"].1 as usize, rows,
+        "one per time step"
+    );
+    assert!(
+        log.scenes.len() >= 9,
+        "{} scenes in 0.3 s",
+        log.scenes.len()
+    );
+    let tips: BTreeMap<u64, foxglove::messages::Vector3> = log
+        .tf
+        .iter()
+        .map(|(t, b)| {
+            let tf = foxglove::messages::FrameTransforms::decode(b.as_slice()).unwrap();
+            (*t, tf.transforms[0].translation.unwrap())
+        })
+        .collect();
+    let mut moved = 0.0f64;
+    for (t, bytes) in &log.scenes {
+        let scene = foxglove::messages::SceneUpdate::decode(bytes.as_slice()).unwrap();
+        let backbone = &scene.entities[0].lines[0].points;
+        assert_eq!(backbone.len(), 41);
+        let (last, tip) = (backbone.last().unwrap(), tips[t]);
+        let d =
+            ((last.x - tip.x).powi(2) + (last.y - tip.y).powi(2) + (last.z - tip.z).powi(2)).sqrt();
+        assert!(
+            d < 1e-9,
+            "at {t} ns the backbone ends {d:.2e} m from the tip"
+        );
+        moved = moved.max(tip.x.abs());
+    }
+    assert!(moved > 1e-3, "the rod never swung: {moved:.2e} m");
+}

@@ -27,9 +27,13 @@ pub struct DynamicsArgs {
     /// RK4 steps over the backbone (spatial grid).
     #[arg(long, default_value_t = DynamicsSettings::default().steps)]
     steps: usize,
-    /// Output directory: tip.csv (t,px,py,pz,vx,vy,vz; s, m, m/s) and tip.png.
+    /// Output directory: tip.csv (t,px,py,pz,vx,vy,vz; s, m, m/s), tip.png
+    /// and run.mcap (the swinging rod for Foxglove).
     #[arg(long, value_name = "DIR", default_value = "out/dynamics")]
     out: PathBuf,
+    /// Do not write run.mcap.
+    #[arg(long)]
+    no_mcap: bool,
 }
 
 /// Run `tendril dynamics`.
@@ -49,6 +53,7 @@ pub fn run(args: DynamicsArgs) -> anyhow::Result<()> {
         },
         out: args.out,
         progress: log::log_enabled!(log::Level::Info),
+        mcap: !args.no_mcap,
     };
     let csv = run_offline(&job, stop_flag())?;
     println!("{}", csv.display());

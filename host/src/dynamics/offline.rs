@@ -215,7 +215,7 @@ pub fn step_response(
     step: &TensionStep,
     duration_s: f64,
     stop: &AtomicBool,
-    mut on_step: impl FnMut(&Sample) -> std::io::Result<()>,
+    mut on_step: impl FnMut(&Sample, &Dynamics) -> std::io::Result<()>,
 ) -> Result<(), OfflineError> {
     let steps = plan_steps(duration_s, settings.dt_s, step)?;
     let write_err = |e: std::io::Error| OfflineError::Write {
@@ -234,11 +234,14 @@ pub fn step_response(
         Vector3::zeros(),
     )?;
     let first = dynamics.tip();
-    on_step(&Sample {
-        t_s: 0.0,
-        position: first.position,
-        velocity: first.velocity,
-    })
+    on_step(
+        &Sample {
+            t_s: 0.0,
+            position: first.position,
+            velocity: first.velocity,
+        },
+        &dynamics,
+    )
     .map_err(write_err)?;
     for k in 1..=steps {
         if stop.load(Ordering::SeqCst) {
@@ -251,7 +254,7 @@ pub fn step_response(
             position: tip.position,
             velocity: tip.velocity,
         };
-        on_step(&sample).map_err(write_err)?;
+        on_step(&sample, &dynamics).map_err(write_err)?;
     }
     Ok(())
 }
@@ -286,6 +289,9 @@ pub struct OfflineRun {
     pub out: PathBuf,
     /// Show a progress bar on stderr.
     pub progress: bool,
+    /// Also write `run.mcap` (the rod's shape and tip over time, for
+    /// Foxglove; docs/design.md §12).
+    pub mcap: bool,
 }
 
 /// Run an offline step response with a progress bar and Ctrl-C checks;
@@ -326,6 +332,20 @@ pub fn run(job: &OfflineRun, stop: &AtomicBool) -> Result<PathBuf, OfflineError>
     let every = steps.div_ceil(FIGURE_POINTS).max(1);
     let mut figure = Vec::with_capacity((steps / every + 2) as usize);
     let mut failed = None;
+    let mut runlog = match job.mcap {
+        false => None,
+        true => Some(
+            crate::runlog::RunLog::start(&crate::runlog::RunLogConfig {
+                mcap: Some(job.out.join("run.mcap")),
+                lossless: true,
+                ..crate::runlog::RunLogConfig::default()
+            })
+            .map_err(|e| OfflineError::Write {
+                path: job.out.join("run.mcap"),
+                message: e.to_string(),
+            })?,
+        ),
+    };
     let written = write_atomic_with(&csv, |w| {
         writeln!(w, "{CSV_HEADER}")?;
         let mut k = 0u64;
@@ -336,7 +356,10 @@ pub fn run(job: &OfflineRun, stop: &AtomicBool) -> Result<PathBuf, OfflineError>
             &job.step,
             job.duration_s,
             stop,
-            |s| {
+            |s, dynamics| {
+                if let Some(log) = runlog.as_mut() {
+                    log_step(log, &job.step, s, dynamics);
+                }
                 if k.is_multiple_of(every) || k == steps {
                     figure.push(*s);
                 }
@@ -354,6 +377,16 @@ pub fn run(job: &OfflineRun, stop: &AtomicBool) -> Result<PathBuf, OfflineError>
         })
     });
     bar.finish_and_clear();
+    if let Some(log) = runlog.take() {
+        if failed.is_some() || written.is_err() {
+            log.discard();
+        } else {
+            log.finish().map_err(|e| OfflineError::Write {
+                path: job.out.join("run.mcap"),
+                message: e.to_string(),
+            })?;
+        }
+    }
     match (failed, written) {
         (Some(OfflineError::Write { message, .. }), _) => {
             return Err(OfflineError::Write { path: csv, message })
@@ -387,6 +420,40 @@ pub fn run(job: &OfflineRun, stop: &AtomicBool) -> Result<PathBuf, OfflineError>
     })?;
     log::info!("wrote {} and {}", csv.display(), png.display());
     Ok(csv)
+}
+
+/// One sample into the run log: the applied tensions, the tip, and at the
+/// scene rate the rod's backbone (simulated time as the clock).
+fn log_step(log: &mut crate::runlog::RunLog, step: &TensionStep, s: &Sample, dynamics: &Dynamics) {
+    let t_ns = (s.t_s * 1e9).round() as u64;
+    let tip = dynamics.tip();
+    let q =
+        crate::statics::pose::quaternion_wxyz(&crate::statics::pose::orthonormalise(&tip.rotation));
+    let p = s.position;
+    let pose = [p.x, p.y, p.z, q[0], q[1], q[2], q[3]];
+    let tensions = step.at(s.t_s - 1e-12).to_vec();
+    log.step(crate::runlog::StepRecord {
+        t_ns,
+        command_seq: 0,
+        controller_status: 0,
+        plant_status: 0,
+        commanded: tensions.clone(),
+        measured: tensions,
+        tip: pose,
+        frame: None,
+        desired: None,
+    });
+    if log.scene_due(t_ns) {
+        let backbone = crate::runlog::resample(dynamics.backbone(), log.backbone_points());
+        log.scene(crate::runlog::SceneRecord {
+            t_ns,
+            backbone: backbone.iter().map(|v| [v.x, v.y, v.z]).collect(),
+            tendons: vec![],
+            tip: pose,
+            frame: None,
+            desired: None,
+        });
+    }
 }
 
 #[cfg(test)]

@@ -91,6 +91,9 @@ pub struct Dynamics {
     history: Vec<History>,
     current: Vec<TimeVars>,
     scratch: Vec<TimeVars>,
+    /// Backbone points of the pass that recorded `current` (base frame, m):
+    /// the base and each RK4 step's end, base to tip.
+    backbone: Vec<Vector3<f64>>,
     x: Vector6<f64>,
     x_prev: Vector6<f64>,
     jacobian: Option<LU<f64, U6, U6>>,
@@ -144,6 +147,7 @@ impl Dynamics {
             history: vec![History::default(); slots],
             current: vec![TimeVars::default(); slots],
             scratch: vec![TimeVars::default(); slots],
+            backbone: Vec::with_capacity(slots / 4 + 2),
             x: guess,
             x_prev: guess,
             jacobian: None,
@@ -231,6 +235,13 @@ impl Dynamics {
         }
         self.tip.time_s += self.settings.dt_s;
         Ok(self.tip)
+    }
+
+    /// The backbone now, base to tip (base frame, m): the base and the end
+    /// of every RK4 step of the last converged pass (the tip is the last
+    /// point). Its spacing is the solver's grid, not uniform across pieces.
+    pub fn backbone(&self) -> &[Vector3<f64>] {
+        &self.backbone
     }
 
     /// The tip now.
@@ -364,18 +375,27 @@ impl Dynamics {
     ) -> Result<(DynState, Vector6<f64>), DynamicsError> {
         self.passes += 1;
         let history = dynamic.then_some(self.history.as_slice());
-        let record = if into_scratch {
-            &mut self.scratch
+        let (record, backbone) = if into_scratch {
+            (&mut self.scratch, None)
         } else {
-            &mut self.current
+            (&mut self.current, Some(&mut self.backbone))
         };
-        Ok(pass(&self.model, &self.pieces, x, c0, history, record)?)
+        Ok(pass(
+            &self.model,
+            &self.pieces,
+            x,
+            c0,
+            history,
+            record,
+            backbone,
+        )?)
     }
 }
 
 /// Integrate base to tip with RK4 on the schedule `pieces`, each stage and
 /// each piece end a grid point with its history term; returns the tip state
-/// and the tip residual.
+/// and the tip residual. With `backbone`, the base and every step's end
+/// position are recorded into it.
 fn pass(
     model: &DynamicRod,
     pieces: &[Piece],
@@ -383,6 +403,7 @@ fn pass(
     c0: f64,
     history: Option<&[History]>,
     record: &mut [TimeVars],
+    mut backbone: Option<&mut Vec<Vector3<f64>>>,
 ) -> Result<(DynState, Vector6<f64>), SingularSystem> {
     let term = |k: usize| history.map_or(TimeVars::default(), |h| h[k].term);
     let length = model.rod.length;
@@ -390,6 +411,10 @@ fn pass(
         Vector3::new(x[0], x[1], x[2]),
         Vector3::new(x[3], x[4], x[5]),
     );
+    if let Some(b) = backbone.as_deref_mut() {
+        b.clear();
+        b.push(y.p);
+    }
     let mut k = 0;
     for piece in pieces {
         let hh = piece.h;
@@ -402,6 +427,9 @@ fn pass(
                 record[k + stage] = z;
                 Ok(r)
             })?;
+            if let Some(b) = backbone.as_deref_mut() {
+                b.push(y.p);
+            }
             k += 4;
         }
         record[k] = y.time_vars(Vector3::zeros(), Vector3::zeros());

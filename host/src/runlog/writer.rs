@@ -55,6 +55,9 @@ pub struct RunLogConfig {
     pub backbone_points: usize,
     /// Key–value pairs written as the MCAP's `run` metadata.
     pub metadata: BTreeMap<String, String>,
+    /// Wait for the writer instead of dropping when it is behind: for runs
+    /// faster than real time (`tendril dynamics`), never for a loop.
+    pub lossless: bool,
 }
 
 impl Default for RunLogConfig {
@@ -65,6 +68,7 @@ impl Default for RunLogConfig {
             scene_hz: 30.0,
             backbone_points: 41,
             metadata: BTreeMap::new(),
+            lossless: false,
         }
     }
 }
@@ -208,6 +212,8 @@ pub struct RunLog {
     next_scene_ns: u64,
     backbone_points: usize,
     live_port: Option<u16>,
+    lossless: bool,
+    discard: Arc<std::sync::atomic::AtomicBool>,
 }
 
 impl RunLog {
@@ -220,9 +226,11 @@ impl RunLog {
         let live_port = sinks.server.as_ref().map(|s| s.port());
         let (tx, rx) = sync_channel(QUEUE);
         let dropped = Arc::new(AtomicU64::new(0));
+        let discard = Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let discard_in_thread = Arc::clone(&discard);
         let thread = std::thread::Builder::new()
             .name("tendril-runlog".into())
-            .spawn(move || sinks.run(rx))
+            .spawn(move || sinks.run(rx, &discard_in_thread))
             .map_err(|e| RunLogError::Config(format!("run log: thread: {e}")))?;
         Ok(RunLog {
             tx: Some(tx),
@@ -232,6 +240,8 @@ impl RunLog {
             next_scene_ns: 0,
             backbone_points: cfg.backbone_points,
             live_port,
+            lossless: cfg.lossless,
+            discard,
         })
     }
 
@@ -275,12 +285,25 @@ impl RunLog {
 
     fn send(&self, rec: Record) {
         let Some(tx) = &self.tx else { return };
+        if self.lossless {
+            if tx.send(rec).is_err() {
+                self.dropped.fetch_add(1, Ordering::Relaxed);
+            }
+            return;
+        }
         match tx.try_send(rec) {
             Ok(()) => {}
             Err(TrySendError::Full(_)) | Err(TrySendError::Disconnected(_)) => {
                 self.dropped.fetch_add(1, Ordering::Relaxed);
             }
         }
+    }
+
+    /// Stop without keeping the file (a failed or interrupted run that
+    /// publishes nothing): the `.partial` file is removed.
+    pub fn discard(self) {
+        self.discard.store(true, Ordering::SeqCst);
+        drop(self);
     }
 
     /// Drain the queue, close the file (renamed into place) and stop the
@@ -423,7 +446,11 @@ impl Sinks {
         *self.counts.entry(topic.to_string()).or_default() += 1;
     }
 
-    fn run(mut self, rx: Receiver<Record>) -> Result<RunLogStats, RunLogError> {
+    fn run(
+        mut self,
+        rx: Receiver<Record>,
+        discard: &std::sync::atomic::AtomicBool,
+    ) -> Result<RunLogStats, RunLogError> {
         while let Ok(rec) = rx.recv() {
             match rec {
                 Record::Step(s) => self.step(&s),
@@ -446,6 +473,11 @@ impl Sinks {
                 message,
             };
             let writer = handle.close().map_err(|e| file_err(e.to_string()))?;
+            if discard.load(Ordering::SeqCst) {
+                drop(writer);
+                let _ = std::fs::remove_file(&partial);
+                return Ok(stats);
+            }
             let file = writer
                 .into_inner()
                 .map_err(|e| file_err(e.error().to_string()))?;

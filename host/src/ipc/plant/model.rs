@@ -419,10 +419,14 @@ impl PlantModel {
 
     /// The rod's backbone and tendon paths at `points` arc lengths (base
     /// frame, m), for a run log. The quasi-static plant has them from its
-    /// last solve; the dynamic rod does not keep its positions (None).
+    /// last solve; the dynamic rod gives its backbone on its own grid,
+    /// resampled here, and no tendon paths.
     pub fn shape(&self, points: usize) -> Option<crate::statics::RodShape> {
-        if self.dynamics.is_some() {
-            return None;
+        if let Some(d) = &self.dynamics {
+            return Some(crate::statics::RodShape {
+                backbone: crate::runlog::resample(d.backbone(), points),
+                tendons: vec![],
+            });
         }
         let sol = self.solution.as_ref()?;
         Some(self.statics.shape_with_tendons(sol, points))
@@ -547,6 +551,62 @@ mod tests {
             gap < 0.2 * largest_gap,
             "after 3 s still {gap:.2e} m from the quasi-static pose (largest {largest_gap:.2e} m)"
         );
+    }
+
+    #[test]
+    fn both_plants_shape_ends_at_their_tip_and_starts_at_the_base() {
+        // What a run log draws (docs/design.md §12): the backbone's last
+        // point is the tip the plant reports, for the quasi-static rod
+        // (integrated from its solve) and the swinging dynamic one (its own
+        // grid, resampled).
+        for model in [RobotModel::QuasiStatic, RobotModel::Dynamic] {
+            let params = PlantParams {
+                noise_m: 0.0,
+                model,
+                ..PlantParams::default()
+            };
+            let mut m = PlantModel::new(&robot(), params).unwrap();
+            for _ in 0..40 {
+                m.command(&[3.0, 0.0, 1.0, 0.0]);
+                assert!(m.step(1e-3));
+            }
+            let shape = m.shape(21).expect("a shape");
+            assert_eq!(shape.backbone.len(), 21, "{model:?}");
+            assert!(shape.backbone[0].norm() < 1e-12, "{model:?}");
+            let p = m.pose();
+            let tip = nalgebra::Vector3::new(p[0], p[1], p[2]);
+            let d = (shape.backbone[20] - tip).norm();
+            assert!(d < 1e-6, "{model:?}: backbone ends {d:.2e} m from the tip");
+            // Evenly spaced along a rod of length L: 20 chords, each ≈ L/20.
+            let chords: Vec<f64> = shape
+                .backbone
+                .windows(2)
+                .map(|w| (w[1] - w[0]).norm())
+                .collect();
+            let (lo, hi) = chords
+                .iter()
+                .fold((f64::MAX, 0.0f64), |(a, b), &c| (a.min(c), b.max(c)));
+            assert!(hi < 1.05 * lo, "{model:?}: chords {lo:.2e}..{hi:.2e} m");
+            let tendons = if model == RobotModel::QuasiStatic {
+                4
+            } else {
+                0
+            };
+            assert_eq!(shape.tendons.len(), tendons, "{model:?}");
+        }
+    }
+
+    #[test]
+    fn resampling_keeps_the_ends_and_spaces_by_length() {
+        let v = |x: f64| nalgebra::Vector3::new(x, 0.0, 0.0);
+        let line = [v(0.0), v(0.1), v(0.4), v(1.0)];
+        let r = crate::runlog::resample(&line, 5);
+        let xs: Vec<f64> = r.iter().map(|p| p.x).collect();
+        for (got, want) in xs.iter().zip([0.0, 0.25, 0.5, 0.75, 1.0]) {
+            assert!((got - want).abs() < 1e-12, "{xs:?}");
+        }
+        assert_eq!(crate::runlog::resample(&[v(2.0)], 3), vec![v(2.0); 3]);
+        assert!(crate::runlog::resample(&[], 3).is_empty());
     }
 
     #[test]
