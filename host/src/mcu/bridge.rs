@@ -64,6 +64,10 @@ pub const CHUNK_MAX_BACKLOG: usize = 256;
 /// the link carries: said once.
 pub const BACKLOG_WARN_BYTES: usize = 2048;
 
+/// Bytes the link may still hold unread for a new setpoint or plant state
+/// to be sent (about two periods of the loop's traffic at 100 Hz).
+pub const SEND_MAX_BACKLOG: usize = 192;
+
 /// How often the bridge looks for messages, µs.
 pub const POLL_US: u64 = 100;
 
@@ -412,6 +416,12 @@ pub fn run(
     let mut last_chunk = 0u64;
     let mut backlog_warned = false;
     let mut last_flush = start;
+    let mut pending_state: Option<PlantState> = None;
+    // The newest setpoint not yet sent, with the count of setpoints it
+    // stands for and the non-finite ones among those it superseded.
+    let mut pending_setpoint: Option<(Setpoint, usize, usize)> = None;
+    let mut pending_count = 0usize;
+    let mut last_feedback = 0u64;
     let mut row = vec![0.0f64; 6 + n];
     let outcome: Result<(), IpcError> = loop {
         let now = now_ns();
@@ -422,19 +432,52 @@ pub fn run(
             }
         })?;
         if let Some(s) = &sp {
+            // A setpoint that cannot go now is superseded by a newer one:
+            // what it superseded is counted with it.
+            let mut count = n_sp;
+            if let Some((old, old_count, old_nonfinite)) = pending_setpoint.take() {
+                if old.pose.iter().any(|v| !v.is_finite()) {
+                    nonfinite += 1;
+                }
+                nonfinite += old_nonfinite;
+                count += old_count;
+            }
+            pending_setpoint = Some((*s, count, nonfinite));
+        }
+        // Nothing new goes while the link still holds a backlog (the chip
+        // uses only the newest setpoint and state; queueing old ones behind
+        // a slow link only delays the new ones — at start-up the chip reads
+        // nothing until it is configured). The newest goes once it drained.
+        let link_free = chip.backlog() <= SEND_MAX_BACKLOG;
+        if let (Some((s, count, superseded)), true) = (pending_setpoint, link_free) {
             // The newest is forwarded (its own NaN is the chip's to find);
-            // `nonfinite` counted only the ones it superseded.
-            let msg = link_setpoint(s, n_sp, nonfinite, &mut last_tangent);
+            // `superseded` counted only the ones it superseded.
+            let msg = link_setpoint(&s, count, superseded, &mut last_tangent);
             chip.send(&Down::Setpoint(msg)).map_err(other)?;
             in_flight.push_back((msg.seq, now));
             if in_flight.len() > 64 {
                 in_flight.pop_front();
             }
+            pending_setpoint = None;
         }
+        // The newest plant state, at most once per chip period: the chip
+        // uses one frame per period, and the plant publishes on every
+        // command and idle tick (about twice a period), which with protocol
+        // 3's longer feedback took the loop past what the emulated link
+        // carries (~104 of ~100 bytes a period at 100 Hz).
         let (st, n_st): (Option<PlantState>, usize) = transport::latest(&states)?;
         if let Some(f) = &st {
-            chip.send(&Down::Feedback(link_feedback(f, n_st, n, now_ns())))
+            pending_state = Some(*f);
+            pending_count += n_st;
+        }
+        let feedback_due = link_free && now.saturating_sub(last_feedback) >= period_ns * 3 / 4;
+        if let (Some(f), true) = (&pending_state, feedback_due) {
+            let t = now_ns();
+            chip.send(&Down::Feedback(link_feedback(f, pending_count, n, t)))
                 .map_err(other)?;
+            last_feedback = t;
+            pending_state = None;
+            pending_count = 0;
         }
         let (w, _): (Option<WeightUpdate>, usize) = transport::latest(&weights)?;
         if let Some(w) = w {
