@@ -133,10 +133,19 @@ impl HostNet {
                 }
             }
         }
-        // The last partial block: padded with copies of its first pose
-        // (their results are dropped), so the tail runs the same kernel.
+        // The last partial block. One pose alone (a single query through
+        // this API) runs the one-lane kernel: the 8-lane one would do 8
+        // queries' work for it. More: padded with copies of the first pose
+        // (results dropped), the 8-lane kernel.
         let rest = blocks.remainder();
-        if let Some(&first) = rest.first() {
+        if let [pose] = rest {
+            let y = self.block::<1>(std::slice::from_ref(pose));
+            for (row, _) in rows.zip(rest) {
+                for (d, s) in row.iter_mut().zip(&y) {
+                    *d = s[0];
+                }
+            }
+        } else if let Some(&first) = rest.first() {
             let mut b = [first; LANES];
             b[..rest.len()].copy_from_slice(rest);
             let y = self.block::<LANES>(&b);
