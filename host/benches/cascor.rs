@@ -1,15 +1,17 @@
 //! Cascade-correlation speed: f32 inference per query (the firmware's code
-//! path, via the host's decoded net) and a small training run. The full
+//! path, via the host's decoded net), the host layout ([`HostNet`]: one
+//! query, and batches per row, against the per-row firmware loop it
+//! replaced) and a small training run. The full
 //! training figure (default dataset, 20,000 rows) is a `tendril train` wall
 //! time; BENCHMARKS.md gives the command.
 
-use criterion::{criterion_group, criterion_main, Criterion};
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use nalgebra::DMatrix;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tendril::learn::cascor::export::{to_bytes, Ranges};
 use tendril::learn::cascor::{train, CascorOptions, GrowingNet, OutputKind};
-use tendril::net::{decode, infer};
+use tendril::net::{decode, infer, pose_rows, HostNet};
 
 fn random_net(hidden: usize) -> GrowingNet {
     let mut rng = ChaCha8Rng::seed_from_u64(1);
@@ -44,6 +46,44 @@ fn inference(c: &mut Criterion) {
             b.iter(|| infer(&net, std::hint::black_box(&pose)))
         });
     }
+    host_inference(c, &ranges);
+}
+
+/// Issue 29 item 2, the 7-64-4 net: single queries and 600-row batches
+/// (a test split's size) through [`HostNet`], and the same through the
+/// firmware's `infer` row by row (what `net::infer_batch` did before).
+fn host_inference(c: &mut Criterion, ranges: &Ranges) {
+    let net = decode(&to_bytes(&random_net(64), ranges).unwrap()).unwrap();
+    let fast = HostNet::new(&net);
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let rows = 600;
+    let poses = DMatrix::from_fn(rows, 7, |_, c| {
+        let (lo, hi) = (ranges.input_lo[c], ranges.input_hi[c]);
+        lo + (hi - lo) * rng.random_range(0.0..1.0)
+    });
+    let x = pose_rows(&poses);
+    let pose = x[0];
+    let mut one = [0.0f32; 8];
+    c.bench_function("host_infer_64_single/firmware_infer", |b| {
+        b.iter(|| tendril_firmware::infer(&net, std::hint::black_box(&pose)))
+    });
+    c.bench_function("host_infer_64_single/host_net", |b| {
+        b.iter(|| fast.infer_one(std::hint::black_box(&pose), &mut one))
+    });
+    let mut g = c.benchmark_group("host_infer_64_batch_600");
+    g.throughput(Throughput::Elements(rows as u64));
+    let mut y = vec![0.0f32; rows * 4];
+    g.bench_function("firmware_infer_per_row", |b| {
+        b.iter(|| {
+            for (p, out) in std::hint::black_box(&x).iter().zip(y.chunks_exact_mut(4)) {
+                out.copy_from_slice(&tendril_firmware::infer(&net, p)[..4]);
+            }
+        })
+    });
+    g.bench_function("host_net_infer_rows", |b| {
+        b.iter(|| fast.infer_rows(std::hint::black_box(&x), &mut y))
+    });
+    g.finish();
 }
 
 fn training(c: &mut Criterion) {

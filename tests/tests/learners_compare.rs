@@ -124,6 +124,7 @@ fn comparison_has_a_row_for_every_learner_and_writes_its_files() {
             e.name
         );
         assert!(e.parameters > 0 && e.train_seconds >= 0.0 && e.infer_us > 0.0);
+        assert!(e.infer_batched_us > 0.0 && e.test.inference_ns_per_query > 0.0);
         assert!(!e.hyper.is_empty());
     }
     // A tree of depth ≤ 4 has at most 16 leaves: it cannot fit 96 rows exactly.

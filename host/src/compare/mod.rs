@@ -24,7 +24,7 @@ pub mod report;
 pub mod runner;
 
 pub use registry::{all_learners, all_learners_for, baselines, REFERENCE};
-pub use runner::{compare, dump_splits};
+pub use runner::{compare, dump_splits, time_inference, InferenceTime};
 
 /// Why the comparison failed.
 #[derive(Debug, thiserror::Error)]
@@ -74,7 +74,8 @@ pub struct CompareOptions {
     /// error (a seeded subsample: the full split would cost one Cosserat solve
     /// per row per learner; 0 = all).
     pub train_task_rows: usize,
-    /// Single queries timed for the inference time.
+    /// Test rows timed for the inference times (single and batched,
+    /// [`runner::time_inference`]).
     pub timing_queries: usize,
     /// Show a progress bar over learners on stderr.
     pub progress: bool,
@@ -113,6 +114,8 @@ pub struct Entry {
     pub train_seconds: f64,
     /// Mean wall time of one single-row prediction, microseconds.
     pub infer_us: f64,
+    /// Mean wall time per row of a batched prediction, microseconds.
+    pub infer_batched_us: f64,
     /// Metrics on the training split (validation rows excluded); the
     /// task-space part on a seeded subsample of `train_task_rows` rows.
     pub train: SplitMetrics,

@@ -15,7 +15,8 @@ use crate::fsutil::{check_distinct, write_atomic, PathCollision};
 use crate::inverse::{ExactIk, IkSettings, InverseError, Target};
 use crate::learn::cascor::job::MAX_HELD_OUT_FRACTION;
 use crate::net::{
-    check_model_robot, infer, infer_batch, read_model, ReadError, RobotMismatch, CLI_OVERRIDE,
+    check_model_robot, infer, infer_batch, pose_rows, read_model, HostNet, ReadError,
+    RobotMismatch, CLI_OVERRIDE,
 };
 use crate::robot::{Robot, RobotError};
 use crate::statics::{SolverSettings, Statics};
@@ -333,17 +334,24 @@ fn distance(a: &[f64; 7], b: &[f64; 7]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
-/// Mean wall time of one f32 inference (ns), timing batches on one thread
-/// for ≥ 50 ms; `None` without a pose to time.
+/// Mean wall time of one f32 inference (ns) per row, batched: the rows go
+/// through one [`HostNet`] (built, and the poses converted to f32, before
+/// the clock starts) into one reused buffer, repeated on one thread for
+/// ≥ 50 ms. The same method as the comparison's batched column
+/// (`compare::runner`); `None` without a pose to time.
 pub fn inference_ns(net: &McuNet, poses: &nalgebra::DMatrix<f64>) -> Option<f64> {
     if poses.nrows() == 0 {
         return None;
     }
+    let fast = HostNet::new(net);
+    let x = pose_rows(poses);
+    let mut y = vec![0.0f32; x.len() * fast.outputs()];
     let mut n = 0usize;
     let t = Instant::now();
     while t.elapsed().as_millis() < 50 {
-        std::hint::black_box(infer_batch(net, std::hint::black_box(poses)));
-        n += poses.nrows();
+        fast.infer_rows(std::hint::black_box(&x), &mut y);
+        std::hint::black_box(&mut y);
+        n += x.len();
     }
     Some(t.elapsed().as_nanos() as f64 / n as f64)
 }

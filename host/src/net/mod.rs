@@ -9,6 +9,9 @@
 //! - [`read`]: file → the firmware's fixed-capacity [`McuNet`], through the
 //!   decoder the MCU uses.
 //! - [`mod@infer`]: the firmware's f32 inference, bit-identical to the MCU's.
+//! - [`fast`]: [`HostNet`], the same arithmetic laid out for the host CPU
+//!   (several queries through each unit at once, no allocation per query),
+//!   bit-identical to [`mod@infer`].
 //! - [`robot_check`]: the one check of a net's recorded robot against the
 //!   robot a consumer is given (`--allow-robot-mismatch` to override).
 //! - [`guarded`]: [`GuardedNet`], a net with its robot's limits that never
@@ -17,13 +20,15 @@
 //!
 //! [`McuNet`]: tendril_shared::McuNet
 
+pub mod fast;
 pub mod guarded;
 pub mod infer;
 pub mod read;
 pub mod robot_check;
 
+pub use fast::HostNet;
 pub use guarded::{read_poses, solve_csv, BatchSummary, GuardedNet, IkAnswer, IkError};
-pub use infer::{infer, infer_batch};
+pub use infer::{infer, infer_batch, pose_rows};
 pub use read::{decode, read_tnet, read_tnet_bytes, ReadError, MAX_TNET_BYTES};
 pub use robot_check::{
     check_model_robot, decode_with_provenance, load_for_robot, read_model, ModelError, RobotCheck,

@@ -32,15 +32,38 @@ pub use options::{CascorOptions, ObjectiveChoice, OutputSolver};
 pub use quickprop::QuickpropParams;
 pub use train::{train, train_with_stop, TrainReport, UnitLog};
 
+use tendril_shared::POSE_DIM;
+
 use crate::learn::{LearnError, Learner, Split};
+use crate::net::{pose_rows, HostNet};
 
 /// Cascade correlation as a [`Learner`]: `Cascor::new(CascorOptions::default())`.
+///
+/// `predict` runs the trained net the way it is deployed: exported to f32
+/// (unit ranges, so normalised in → normalised out) and run by
+/// [`HostNet`], the firmware's arithmetic laid out for the host. So the
+/// comparison times and scores what `tendril ik` and the MCU run, not the
+/// f64 training net (which it falls back to only if the export fails).
 #[derive(Clone, Debug)]
 pub struct Cascor {
     /// Hyper-parameters used by `fit`.
     pub options: CascorOptions,
     net: Option<GrowingNet>,
     report: Option<TrainReport>,
+    fast: Option<HostNet>,
+}
+
+/// `net` as f32 with unit ranges (`(x − 0)/(1 − 0)` and `0 + y·(1 − 0)` are
+/// exact), ready for [`HostNet`]; `None` if the format cannot hold it.
+fn host_net(net: &GrowingNet) -> Option<HostNet> {
+    let ranges = export::Ranges {
+        input_lo: vec![0.0; net.n_inputs],
+        input_hi: vec![1.0; net.n_inputs],
+        output_lo: vec![0.0; net.n_outputs],
+        output_hi: vec![1.0; net.n_outputs],
+    };
+    let bytes = export::to_bytes(net, &ranges).ok()?;
+    crate::net::decode(&bytes).ok().map(|m| HostNet::new(&m))
 }
 
 impl Cascor {
@@ -50,6 +73,7 @@ impl Cascor {
             options,
             net: None,
             report: None,
+            fast: None,
         }
     }
 
@@ -58,6 +82,7 @@ impl Cascor {
     pub fn from_trained(options: CascorOptions, net: GrowingNet, report: TrainReport) -> Cascor {
         Cascor {
             options,
+            fast: host_net(&net),
             net: Some(net),
             report: Some(report),
         }
@@ -81,16 +106,25 @@ impl Learner for Cascor {
 
     fn fit(&mut self, train: Split<'_>, valid: Split<'_>, seed: u64) -> Result<(), LearnError> {
         let (net, report) = train::train(train.x, train.y, valid.x, valid.y, &self.options, seed)?;
+        self.fast = host_net(&net);
         self.net = Some(net);
         self.report = Some(report);
         Ok(())
     }
 
-    /// Predictions of the trained net; an untrained learner predicts an `n × 0` matrix.
+    /// Predictions of the trained net through [`HostNet`] (f32, the
+    /// firmware's arithmetic); an untrained learner predicts an `n × 0` matrix.
     fn predict(&self, x: &DMatrix<f64>) -> DMatrix<f64> {
-        match &self.net {
-            Some(net) => net.predict(x),
-            None => DMatrix::zeros(x.nrows(), 0),
+        match (&self.fast, &self.net) {
+            (Some(fast), _) if x.ncols() <= POSE_DIM => {
+                let rows = pose_rows(x);
+                let no = fast.outputs();
+                let mut y = vec![0.0f32; rows.len() * no];
+                fast.infer_rows(&rows, &mut y);
+                DMatrix::from_fn(rows.len(), no, |r, c| f64::from(y[r * no + c]))
+            }
+            (_, Some(net)) => net.predict(x),
+            (_, None) => DMatrix::zeros(x.nrows(), 0),
         }
     }
 

@@ -1,0 +1,357 @@
+//! Host inference laid out for the CPU (issue 29, item 2): [`HostNet`], built
+//! once from a decoded [`McuNet`], runs poses through the net several at a
+//! time and allocates nothing per query.
+//!
+//! # Parity
+//! The results are **bit-identical** to the firmware's
+//! [`tendril_firmware::infer`] (`docs/design.md` §5), so every caller that
+//! claims parity may use this path. Batching changes which queries share a
+//! loop, never the operations one query sees:
+//!
+//! - each unit's dot product keeps the firmware's order: four partial sums,
+//!   `s[i mod 4] += w_i a_i` in index order, reduced as `(s0 + s1) + (s2 +
+//!   s3)`; the batch puts *queries* side by side in the SIMD lanes
+//!   (`LANES` of them share one broadcast weight), so no query's sum is
+//!   reassociated;
+//! - Rust never contracts `a * b + c` into an FMA, so the product is rounded
+//!   before the add, as in the firmware (and the M4's `vmla.f32`);
+//! - the activations are `Activation::apply`, the firmware's own `f32` code;
+//!   normalisation and de-normalisation are the same expressions (the range
+//!   widths `hi − lo` are computed once here, the same rounded value);
+//! - the firmware pads every row to a multiple of 8 products whose features
+//!   are 0. This path skips them, which is exact: a partial sum starts at
+//!   +0 and, in round-to-nearest, a sum is −0 only if both addends are −0,
+//!   so no partial sum is ever −0, and `s + (±0) = s` for every other `s`
+//!   (NaN and ±∞ included).
+//!
+//! The test below checks the bits against the firmware over thousands of
+//! random poses on the shipped nets and on a random 64-unit net.
+
+use tendril_shared::{Activation, McuNet, MAX_HIDDEN, MAX_TENDONS, POSE_DIM};
+
+/// Queries pushed through each unit together. Eight `f32` lanes are two SSE
+/// registers per partial sum (four sums: eight of the sixteen registers),
+/// enough independent add chains to hide the add latency.
+pub const LANES: usize = 8;
+
+/// Most features a unit reads: the bias, the inputs, the hidden units.
+const MAX_FEATURES: usize = 1 + POSE_DIM + MAX_HIDDEN;
+
+/// A decoded net ready for fast host inference: its rows packed without the
+/// firmware's padding, its ranges as `lo` and width. Built once per net.
+#[derive(Clone, Debug)]
+pub struct HostNet {
+    inputs: usize,
+    hidden: usize,
+    outputs: usize,
+    hidden_act: Activation,
+    output_act: Activation,
+    in_lo: [f32; POSE_DIM],
+    in_width: [f32; POSE_DIM],
+    out_lo: [f32; MAX_TENDONS],
+    out_width: [f32; MAX_TENDONS],
+    /// Hidden row `k` (`1 + POSE_DIM + k` weights), then the output rows
+    /// (`1 + POSE_DIM + hidden` each): the firmware's packed order.
+    weights: Box<[f32]>,
+}
+
+impl HostNet {
+    /// The net of `net`, laid out for the host.
+    pub fn new(net: &McuNet) -> HostNet {
+        let s = net.shape();
+        let mut in_lo = [0.0; POSE_DIM];
+        let mut in_width = [1.0; POSE_DIM];
+        for (i, (&lo, &hi)) in net.input_lo().iter().zip(net.input_hi()).enumerate() {
+            in_lo[i] = lo;
+            in_width[i] = hi - lo;
+        }
+        let mut out_lo = [0.0; MAX_TENDONS];
+        let mut out_width = [0.0; MAX_TENDONS];
+        for (o, (&lo, &hi)) in net.output_lo().iter().zip(net.output_hi()).enumerate() {
+            out_lo[o] = lo;
+            out_width[o] = hi - lo;
+        }
+        let weights: Vec<f32> = (0..s.hidden)
+            .filter_map(|k| net.hidden_row(k))
+            .chain((0..s.outputs).filter_map(|o| net.output_row(o)))
+            .flatten()
+            .copied()
+            .collect();
+        HostNet {
+            inputs: s.inputs,
+            hidden: s.hidden,
+            outputs: s.outputs,
+            hidden_act: net.hidden_activation(),
+            output_act: net.output_activation(),
+            in_lo,
+            in_width,
+            out_lo,
+            out_width,
+            weights: weights.into_boxed_slice(),
+        }
+    }
+
+    /// Number of outputs (tensions per query).
+    pub fn outputs(&self) -> usize {
+        self.outputs
+    }
+
+    /// Tensions (N) for one pose into `out[..outputs()]` (shorter `out`:
+    /// the first `out.len()`), bit-identical to the firmware's `infer`.
+    pub fn infer_one(&self, pose: &[f32; POSE_DIM], out: &mut [f32]) {
+        let y = self.block::<1>(std::slice::from_ref(pose));
+        for (d, s) in out.iter_mut().zip(&y[..self.outputs]) {
+            *d = s[0];
+        }
+    }
+
+    /// Tensions for every pose in `poses` into `out`, row-major
+    /// (`out[r·outputs() + o]`), [`LANES`] poses at a time; bit-identical
+    /// to the firmware's `infer` row by row. Rows of `out` past the poses
+    /// are left alone.
+    ///
+    /// # Panics
+    /// If `out` holds fewer than `poses.len() · outputs()` values.
+    pub fn infer_rows(&self, poses: &[[f32; POSE_DIM]], out: &mut [f32]) {
+        let no = self.outputs;
+        assert!(
+            out.len() >= poses.len() * no,
+            "output buffer of {} for {} rows of {no}",
+            out.len(),
+            poses.len()
+        );
+        if no == 0 {
+            return;
+        }
+        let mut rows = out.chunks_exact_mut(no);
+        let mut blocks = poses.chunks_exact(LANES);
+        for b in blocks.by_ref() {
+            let y = self.block::<LANES>(b);
+            for (q, row) in rows.by_ref().take(LANES).enumerate() {
+                for (d, s) in row.iter_mut().zip(&y) {
+                    *d = s[q];
+                }
+            }
+        }
+        // The last partial block. One pose alone (a single query through
+        // this API) runs the one-lane kernel: the 8-lane one would do 8
+        // queries' work for it. More: padded with copies of the first pose
+        // (results dropped), the 8-lane kernel.
+        let rest = blocks.remainder();
+        if let [pose] = rest {
+            let y = self.block::<1>(std::slice::from_ref(pose));
+            for (row, _) in rows.zip(rest) {
+                for (d, s) in row.iter_mut().zip(&y) {
+                    *d = s[0];
+                }
+            }
+        } else if let Some(&first) = rest.first() {
+            let mut b = [first; LANES];
+            b[..rest.len()].copy_from_slice(rest);
+            let y = self.block::<LANES>(&b);
+            for (q, row) in rows.take(rest.len()).enumerate() {
+                for (d, s) in row.iter_mut().zip(&y) {
+                    *d = s[q];
+                }
+            }
+        }
+    }
+
+    /// The net on `L` poses at once (`poses.len() == L`): features stored
+    /// feature-major (`f[i][q]`, query `q` in lane `q`) so each weight is
+    /// loaded once and multiplies `L` queries. Everything lives on the
+    /// stack: 72 × `L` features.
+    #[inline(always)]
+    fn block<const L: usize>(&self, poses: &[[f32; POSE_DIM]]) -> [[f32; L]; MAX_TENDONS] {
+        let mut f = [[0.0f32; L]; MAX_FEATURES];
+        f[0] = [1.0; L];
+        let ranges = self.in_lo.iter().zip(&self.in_width);
+        for (i, (fi, (&lo, &width))) in f[1..].iter_mut().zip(ranges).enumerate() {
+            if i >= self.inputs {
+                break; // inputs the net does not have stay 0, as in the firmware
+            }
+            for (v, p) in fi.iter_mut().zip(poses) {
+                *v = (p[i] - lo) / width;
+            }
+        }
+        let nh = self.hidden.min(MAX_HIDDEN);
+        // One loop per activation, as in the firmware: no dispatch per unit.
+        let start = match self.hidden_act {
+            Activation::Linear => self.hidden_layer(&mut f, nh, |s| s),
+            Activation::Sigmoid => self.hidden_layer(&mut f, nh, |s| Activation::Sigmoid.apply(s)),
+            Activation::SymmetricSigmoid => {
+                self.hidden_layer(&mut f, nh, |s| Activation::SymmetricSigmoid.apply(s))
+            }
+        };
+        let len = 1 + POSE_DIM + nh;
+        let mut y = [[0.0f32; L]; MAX_TENDONS];
+        let rows = self.weights.get(start..).unwrap_or(&[]).chunks_exact(len);
+        for (o, (yo, w)) in y.iter_mut().zip(rows).take(self.outputs).enumerate() {
+            let s = dot(w, &f[..len]);
+            let (lo, width) = (self.out_lo[o], self.out_width[o]);
+            for (d, s) in yo.iter_mut().zip(s) {
+                *d = lo + self.output_act.apply(s) * width;
+            }
+        }
+        y
+    }
+
+    /// Hidden units `0..nh` into `f[1 + POSE_DIM + k]`; returns the offset
+    /// of the first output row.
+    #[inline(always)]
+    fn hidden_layer<const L: usize>(
+        &self,
+        f: &mut [[f32; L]; MAX_FEATURES],
+        nh: usize,
+        act: impl Fn(f32) -> f32,
+    ) -> usize {
+        let mut start = 0;
+        for k in 0..nh {
+            let len = 1 + POSE_DIM + k;
+            let Some(w) = self.weights.get(start..start + len) else {
+                break;
+            };
+            start += len;
+            let s = dot(w, &f[..len]);
+            for (h, s) in f[len].iter_mut().zip(s) {
+                *h = act(s);
+            }
+        }
+        start
+    }
+}
+
+/// `w · f` for `L` queries at once, in the firmware's order for each query
+/// (`s[i mod 4] += w_i f_i[q]`, then `(s0 + s1) + (s2 + s3)`); `f` as long
+/// as `w`. The inner loops over the lanes are what LLVM vectorises.
+#[inline(always)]
+fn dot<const L: usize>(w: &[f32], f: &[[f32; L]]) -> [f32; L] {
+    let mut s = [[0.0f32; L]; 4];
+    let (w4, f4) = (w.chunks_exact(4), f.chunks_exact(4));
+    let (wr, fr) = (w4.remainder(), f4.remainder());
+    for (wc, fc) in w4.zip(f4) {
+        for ((sj, &wj), fj) in s.iter_mut().zip(wc).zip(fc) {
+            for (a, &x) in sj.iter_mut().zip(fj) {
+                *a += wj * x;
+            }
+        }
+    }
+    for ((sj, &wj), fj) in s.iter_mut().zip(wr).zip(fr) {
+        for (a, &x) in sj.iter_mut().zip(fj) {
+            *a += wj * x;
+        }
+    }
+    let [s0, s1, s2, s3] = s;
+    let mut out = [0.0f32; L];
+    for (q, o) in out.iter_mut().enumerate() {
+        *o = (s0[q] + s1[q]) + (s2[q] + s3[q]);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    //! The fast path against the firmware's `infer`, bit for bit: a wrong
+    //! weight index, a dropped or reordered product changes the bits of
+    //! nearly every query.
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    use super::*;
+
+    fn tnet(name: &str) -> Box<McuNet> {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../firmware/vectors")
+            .join(name);
+        crate::net::read_tnet(&path).unwrap()
+    }
+
+    /// A random 7-64-4 net (the benchmark's size), symmetric-sigmoid hidden units.
+    fn random_64() -> Box<McuNet> {
+        use crate::learn::cascor::export::{to_bytes, Ranges};
+        use crate::learn::cascor::{GrowingNet, OutputKind};
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let mut row =
+            |n: usize| -> Vec<f64> { (0..n).map(|_| rng.random_range(-1.0..1.0)).collect() };
+        let net = GrowingNet {
+            n_inputs: 7,
+            n_outputs: 4,
+            hidden: (0..64).map(|k| row(8 + k)).collect(),
+            outputs: (0..4).map(|_| row(8 + 64)).collect(),
+            output_kind: OutputKind::Sigmoid,
+        };
+        let ranges = Ranges {
+            input_lo: vec![-0.1, -0.1, 0.2, 0.8, -0.3, -0.3, -0.01],
+            input_hi: vec![0.1, 0.1, 0.4, 1.0, 0.3, 0.3, 0.01],
+            output_lo: vec![0.0; 4],
+            output_hi: vec![10.0; 4],
+        };
+        crate::net::decode(&to_bytes(&net, &ranges).unwrap()).unwrap()
+    }
+
+    /// Poses spread a little past the net's input box (extrapolation too).
+    fn poses(net: &McuNet, n: usize, seed: u64) -> Vec<[f32; POSE_DIM]> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let (lo, hi) = (net.input_lo(), net.input_hi());
+        (0..n)
+            .map(|_| {
+                std::array::from_fn(|i| match (lo.get(i), hi.get(i)) {
+                    (Some(&l), Some(&h)) => l + (h - l) * rng.random_range(-0.2f32..1.2),
+                    _ => rng.random_range(-1.0..1.0),
+                })
+            })
+            .collect()
+    }
+
+    fn check_bits(net: &McuNet, seed: u64) {
+        let fast = HostNet::new(net);
+        let no = net.shape().outputs;
+        assert!(no > 0 && net.shape().hidden > 0);
+        // Lengths around the block size exercise the partial last block.
+        for n in [1, 7, 8, 9, 17, 3001] {
+            let x = poses(net, n, seed + n as u64);
+            let mut out = vec![f32::NAN; n * no];
+            fast.infer_rows(&x, &mut out);
+            let mut one = [f32::NAN; MAX_TENDONS];
+            for (r, p) in x.iter().enumerate() {
+                let want = tendril_firmware::infer(net, p);
+                fast.infer_one(p, &mut one);
+                let got = &out[r * no..(r + 1) * no];
+                for (o, ((g, s), w)) in got.iter().zip(&one).zip(&want).enumerate() {
+                    assert_eq!(
+                        g.to_bits(),
+                        w.to_bits(),
+                        "batch of {n}, row {r}, output {o}: {g} vs firmware {w}"
+                    );
+                    assert_eq!(s.to_bits(), w.to_bits(), "single, row {r}, output {o}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bit_identical_to_the_firmware_on_the_default_net() {
+        check_bits(&tnet("default.tnet"), 1);
+    }
+
+    #[test]
+    fn bit_identical_to_the_firmware_on_the_two_segment_net() {
+        check_bits(&tnet("tdcr-2seg.tnet"), 2);
+    }
+
+    #[test]
+    fn bit_identical_to_the_firmware_on_a_random_64_unit_net() {
+        check_bits(&random_64(), 3);
+    }
+
+    #[test]
+    fn short_output_buffer_panics() {
+        let net = HostNet::new(&tnet("default.tnet"));
+        let x = [[0.0f32; POSE_DIM]; 2];
+        let mut out = vec![0.0; 2 * net.outputs() - 1];
+        let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            net.infer_rows(&x, &mut out)
+        }));
+        assert!(r.is_err());
+    }
+}
