@@ -199,33 +199,34 @@ pub fn normalise<const IN: usize, const H: usize, const OUT: usize, const W: usi
 /// zeros, as it has no output to compute.
 ///
 /// There is no bad-shape case to report: a `CascadeNet` exists only with a
-/// shape that fits its capacity (every constructor checks), and the storage
-/// bound of the largest such net is checked at compile time here, so every
-/// padded read below is in bounds for every value of the type.
+/// shape whose weights fit its store (every constructor checks), and the
+/// inference checks that bound once more before its unchecked reads (a net
+/// that failed it would give all zeros), so every padded read is in bounds
+/// for every value of the type.
 pub fn infer<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
     net: &CascadeNet<IN, H, OUT, W>,
     x: &[f32; IN],
 ) -> [f32; OUT] {
-    const {
-        assert!(
-            W >= weight_capacity(IN, H, OUT),
-            "inference needs the weight storage of the largest net of its capacity"
-        );
-    }
     let shape = net.shape();
     // `min` is a no-op for every net a constructor made (hidden ≤ H); it
-    // makes the bound below hold for the type itself. The outputs are the
-    // `no ≤ OUT` output ranges the last loop zips with.
+    // keeps the feature reads below inside `f` for the type itself.
     let nh = shape.hidden.min(H);
+    let no = net.output_lo().len().min(OUT);
     let w: &[f32] = net.weights();
+    // The store bounds a net by its weights, not by `H` and `OUT` at once
+    // (a 7-63-9 net fits the store of a 7-64-8 one), so the bound of the
+    // padded reads is this net's own: every constructor checks it, and this
+    // one comparison makes the unchecked reads below safe whatever the value.
+    if weight_capacity(IN, nh, no) > w.len() {
+        return [0.0; OUT];
+    }
     let out_start = CascadeNet::<IN, H, OUT, W>::hidden_row_offset(nh);
     let row_len = 1 + IN + nh;
     // Row `r` (hidden or output) starts at `start_r` and its padded dot
     // product reads `[start_r, start_r + 8⌈len_r/8⌉) ⊂ [start_r, start_r +
     // len_r + 7)` of the weights, all inside `[0, out_start + no·row_len +
-    // ROW_PAD) ⊂ [0, weight_capacity(IN, H, OUT)) ⊂ [0, W)` (nh ≤ H, no ≤
-    // OUT, and the compile-time check above), and `[0, 8⌈len_r/8⌉) ⊂ [0, 1
-    // + IN + nh + 7)` of the features.
+    // ROW_PAD) = [0, weight_capacity(IN, nh, no)) ⊂ [0, w.len())` (checked
+    // above), and `[0, 8⌈len_r/8⌉) ⊂ [0, 1 + IN + nh + 7)` of the features.
     let mut f = Features {
         one: 1.0,
         x: normalise(net, x),
@@ -244,7 +245,7 @@ pub fn infer<const IN: usize, const H: usize, const OUT: usize, const W: usize>(
     let feats = f.as_slice();
     let out_act = net.output_activation();
     let mut y = [0.0f32; OUT];
-    let ranges = net.output_lo().iter().zip(net.output_hi());
+    let ranges = net.output_lo().iter().zip(net.output_hi()).take(no);
     let mut start = out_start;
     for (yo, (&lo, &hi)) in y.iter_mut().zip(ranges) {
         // SAFETY: output row `o` starts at `out_start + o·row_len` with

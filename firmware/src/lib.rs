@@ -74,7 +74,8 @@ pub use control::{
 pub use infer::infer;
 pub use swap::{FlashSlot, IncrementalSwap, NetSlots, NetStore, SwapError, SwapEvent};
 /// The MCU binary's net type: 7 pose inputs, up to
-/// [`tendril_shared::MAX_HIDDEN`] hidden units and 8 tendons, defined once
+/// [`tendril_shared::MAX_HIDDEN`] hidden units and up to 9 tendons (as many
+/// units and tendons as its weight store holds), defined once
 /// in `tendril_shared` so the host's controllers and parity runs use it too.
 pub use tendril_shared::McuNet;
 use tendril_shared::{MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS};

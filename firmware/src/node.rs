@@ -53,15 +53,11 @@ pub mod setup_error {
     pub const TIMING: u8 = 4;
 }
 
-/// The chip's weight-update buffer: the largest net a controller accepts
-/// (7 inputs, [`MAX_HIDDEN`] hidden units, [`MAX_TENDONS`] outputs, with
-/// its provenance), no more: RAM is the chip's scarcest resource.
-pub const MCU_UPDATE_CAPACITY: usize = tendril_shared::NetShape {
-    inputs: POSE_DIM,
-    hidden: MAX_HIDDEN,
-    outputs: MAX_TENDONS,
-}
-.encoded_len_v2();
+/// The chip's weight-update buffer: the largest net file a controller
+/// accepts ([`tendril_shared::MAX_NET_FILE`]: 7 inputs and as many hidden
+/// units and outputs as fit the weight store, with its provenance), no
+/// more: RAM is the chip's scarcest resource.
+pub const MCU_UPDATE_CAPACITY: usize = tendril_shared::MAX_NET_FILE;
 
 /// Bytes of a weight update's check per period on the chip.
 pub const SWAP_SLICE_BYTES: usize = crate::SWAP_SLICE_BYTES;

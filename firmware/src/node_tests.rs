@@ -12,6 +12,7 @@ use tendril_shared::link::messages::{
     MAX_UP_PAYLOAD, PROTOCOL_VERSION, TELEMETRY_EVERY,
 };
 use tendril_shared::link::{encode, encode_raw, max_frame_len, FrameDecoder};
+use tendril_shared::MAX_TENDONS;
 
 use crate::board::Board;
 use crate::node::{setup_error, Node, MCU_UPDATE_CAPACITY};
@@ -122,11 +123,11 @@ fn telemetry(ups: &[Up]) -> Option<Telemetry> {
 fn setup() -> Setup {
     Setup {
         n_tendons: 4,
-        max_tension: [10.0; 8],
-        min_tension: [0.0; 8],
-        slew_rate: [200.0; 8],
-        cocontraction_sets: [0; 8],
-        cocontraction_weights: [0.0; 8],
+        max_tension: [10.0; MAX_TENDONS],
+        min_tension: [0.0; MAX_TENDONS],
+        slew_rate: [200.0; MAX_TENDONS],
+        cocontraction_sets: [0; MAX_TENDONS],
+        cocontraction_weights: [0.0; MAX_TENDONS],
         period_ns: TICK,
         watchdog_ns: 5 * TICK / 2 * 10,
         max_dt_ns: 5 * TICK,
@@ -306,7 +307,7 @@ fn setups_refused_kept_and_replaced() {
     assert_eq!(r.node.period().unwrap().counters().periods, 12);
     // A different one: a new period, back on the timer until a Step.
     let mut other = setup();
-    other.slew_rate = [150.0; 8];
+    other.slew_rate = [150.0; MAX_TENDONS];
     r.send(&Down::Setup(other));
     let ups = r.tick();
     assert_eq!(hello(&ups).unwrap().setup_hash, other.hash());

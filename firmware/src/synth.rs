@@ -45,8 +45,8 @@ pub fn synthetic_blob(
     max_tension: f32,
     buf: &mut [u8],
 ) -> Result<usize, TnetError> {
-    let lo = [0.0f32; 8];
-    let hi = [max_tension; 8];
+    let lo = [0.0f32; tendril_shared::MAX_TENDONS];
+    let hi = [max_tension; tendril_shared::MAX_TENDONS];
     let ranges = Ranges {
         input_lo: &INPUT_LO,
         input_hi: &INPUT_HI,

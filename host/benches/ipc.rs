@@ -146,6 +146,7 @@ fn child(prefix: &str, mode: Mode) {
             },
             setpoint_seq: sp.header.seq,
             tensions: out.command,
+            pad: Default::default(),
             count: 4,
             status: out.status.bits(),
         };

@@ -360,7 +360,7 @@ pub fn write_vectors(_net: &Path, _dir: &Path) -> Result<PathBuf, ParityError> {
 }
 
 /// Build, run and compare for `net` (see the module doc): the vectors are
-/// made for `net`, so a net for any robot (1–8 tendons) is checked.
+/// made for `net`, so a net for any robot (1–9 tendons) is checked.
 pub fn check(root: &Path, net: &Path, target_dir: &Path) -> Result<ParityReport, ParityError> {
     prerequisites()?;
     let net = std::fs::canonicalize(net)

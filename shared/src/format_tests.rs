@@ -148,13 +148,24 @@ fn shape_encoded_len_is_the_encoders_length() {
     let max = NetShape {
         inputs: crate::POSE_DIM,
         hidden: crate::MAX_HIDDEN,
-        outputs: crate::MAX_TENDONS,
+        outputs: 8,
     };
     // 3,134 floats (ranges 2·7 + 2·8, hidden 64·8 + 64·63/2 = 2,528,
     // outputs 8·72 = 576) = 12,536 B; magic 4, version 1, dims 3,
     // activations 2, six lengths 1+1+1+1+2+2 = 8, CRC 4.
     assert_eq!(max.encoded_len(), 12_558);
     assert!(max.encoded_len() <= crate::messages::WEIGHT_UPDATE_CAPACITY);
+    // Nine tendons trade a unit for the ninth output: 7-63-9 is 3,128
+    // floats (ranges 2·7 + 2·9, hidden 63·8 + 63·62/2 = 2,457, outputs
+    // 9·71 = 639), six fewer than 7-64-8, so 7-64-8 stays the largest file.
+    let nine = NetShape {
+        inputs: crate::POSE_DIM,
+        hidden: crate::max_hidden_for(9),
+        outputs: 9,
+    };
+    assert_eq!(nine.hidden, 63);
+    assert_eq!(nine.encoded_len(), 12_558 - 6 * 4);
+    assert_eq!(crate::MAX_NET_FILE, max.encoded_len_v2());
 }
 
 #[test]

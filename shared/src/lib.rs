@@ -34,7 +34,9 @@ pub mod tnet;
 mod format_tests;
 
 pub use activation::Activation;
-pub use capacity::{McuNet, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS, POSE_DIM};
+pub use capacity::{
+    max_hidden_for, McuNet, MAX_HIDDEN, MAX_NET_FILE, MAX_TENDONS, MAX_WEIGHTS, POSE_DIM,
+};
 pub use limits::{CoContraction, LimitsError, TendonLimits};
 pub use net::{weight_capacity, CascadeNet, CheckJob, Checked, Row};
 pub use tnet::{

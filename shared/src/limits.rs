@@ -10,7 +10,7 @@ pub use crate::capacity::MAX_TENDONS;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
 pub enum LimitsError {
     /// Zero tendons, or more than [`MAX_TENDONS`].
-    #[error("robot has {0} tendons, tendril supports 1 to 8")]
+    #[error("robot has {0} tendons, tendril supports 1 to {max}", max = crate::capacity::MAX_TENDONS)]
     TendonCount(usize),
     /// The two per-tendon arrays have different lengths.
     #[error("{max_tension} max tensions but {slew_rate} slew rates")]
@@ -278,8 +278,8 @@ mod tests {
             Err(LimitsError::TendonCount(0))
         );
         assert_eq!(
-            TendonLimits::uniform(9, 1.0, 1.0),
-            Err(LimitsError::TendonCount(9))
+            TendonLimits::uniform(10, 1.0, 1.0),
+            Err(LimitsError::TendonCount(10))
         );
         assert!(matches!(
             TendonLimits::new(&[1.0], &[1.0, 2.0]),

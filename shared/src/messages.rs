@@ -12,21 +12,13 @@
 //! latency).
 
 pub use crate::capacity::MAX_TENDONS;
-use crate::capacity::{MAX_HIDDEN, POSE_DIM};
-use crate::tnet::NetShape;
 
 /// Bytes a [`WeightUpdate`] can carry: more than twice the largest net a
-/// controller accepts (12.5 KiB for 7-64-8; checked at compile time).
+/// controller accepts (12.5 KiB; checked at compile time).
 pub const WEIGHT_UPDATE_CAPACITY: usize = 32 * 1024;
 
 const _: () = assert!(
-    NetShape {
-        inputs: POSE_DIM,
-        hidden: MAX_HIDDEN,
-        outputs: MAX_TENDONS,
-    }
-    .encoded_len_v2()
-        <= WEIGHT_UPDATE_CAPACITY,
+    crate::capacity::MAX_NET_FILE <= WEIGHT_UPDATE_CAPACITY,
     "the largest net must fit a WeightUpdate"
 );
 
@@ -122,6 +114,12 @@ pub mod command_status {
     const _: () = assert!(ALL & !WIRE_MASK == 0, "wire bits stay in WIRE_MASK");
 }
 
+/// Bytes after a `[f32; MAX_TENDONS]` that bring the next field to an
+/// 8-byte boundary: 4 with an odd [`MAX_TENDONS`], else 0. The messages
+/// carry them as an explicit zero field, so no byte in shared memory is
+/// compiler padding with an undefined value.
+pub const TENSION_PAD: usize = (8 - MAX_TENDONS * 4 % 8) % 8;
+
 /// Tendon tensions to apply, controller → plant.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -132,6 +130,8 @@ pub struct TensionCommand {
     pub setpoint_seq: u64,
     /// Desired tendon tensions (N); entries past `count` are zero.
     pub tensions: [f32; MAX_TENDONS],
+    /// Zero: the explicit padding after `tensions` ([`TENSION_PAD`]).
+    pub pad: [u8; TENSION_PAD],
     /// Number of valid entries in `tensions`.
     pub count: u32,
     /// [`command_status`] bits.
@@ -164,6 +164,8 @@ pub struct PlantState {
     pub command_seq: u64,
     /// Measured tendon tensions (N); entries past `count` are zero.
     pub tensions: [f32; MAX_TENDONS],
+    /// Zero: the explicit padding after `tensions` ([`TENSION_PAD`]).
+    pub pad: [u8; TENSION_PAD],
     /// The tracker's newest tip pose: `px, py, pz` (m), `qw..qz`, with its
     /// noise, sampled at `tip_stamp_ns` (docs/design.md §6.2: a tracker
     /// samples at its own rate and delivers late; this is its last delivered
@@ -274,15 +276,15 @@ mod tests {
         );
         assert_eq!(
             size_of::<TensionCommand>(),
-            16 + 8 + MAX_TENDONS * 4 + 4 + 4
+            16 + 8 + MAX_TENDONS * 4 + TENSION_PAD + 4 + 4
         );
         assert_eq!(
             size_of::<PlantState>(),
-            16 + 8 + MAX_TENDONS * 4 + 7 * 4 + 4 * 3 + 8
+            16 + 8 + MAX_TENDONS * 4 + TENSION_PAD + 7 * 4 + 4 * 3 + 8
         );
         assert_eq!(
             offset_of!(PlantState, tip_stamp_ns),
-            24 + MAX_TENDONS * 4 + 7 * 4 + 12
+            24 + MAX_TENDONS * 4 + TENSION_PAD + 7 * 4 + 12
         );
         assert_eq!(size_of::<WeightUpdate>(), 16 + 8 + WEIGHT_UPDATE_CAPACITY);
         assert_eq!(size_of::<Control>(), 16 + 8);
@@ -292,7 +294,10 @@ mod tests {
         assert_eq!(offset_of!(Setpoint, tangent_dim), 16 + 7 * 4 * 5 + 36);
         assert_eq!(offset_of!(Setpoint, flags), 16 + 7 * 4 * 5 + 40);
         assert_eq!(offset_of!(TensionCommand, tensions), 24);
-        assert_eq!(offset_of!(PlantState, tip_pose), 24 + MAX_TENDONS * 4);
+        assert_eq!(
+            offset_of!(PlantState, tip_pose),
+            24 + MAX_TENDONS * 4 + TENSION_PAD
+        );
         assert_eq!(align_of::<Setpoint>(), 8);
     }
 

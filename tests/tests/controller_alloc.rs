@@ -119,7 +119,7 @@ fn two_hundred_seconds_of_controller_periods_allocate_nothing() {
     let periods = 200_000u64;
     let stuck_from = 190_000u64;
     let (mut sp_seq, mut st_seq) = (0u64, 0u64);
-    let mut motor = [0.0f32; 8];
+    let mut motor = [0.0f32; tendril_shared::MAX_TENDONS];
     let mut stuck_value = None;
     let mut total = 0u64;
     let mut last_cmd_seq = 0u64;
@@ -176,6 +176,7 @@ fn two_hundred_seconds_of_controller_periods_allocate_nothing() {
                 },
                 command_seq: last_cmd_seq,
                 tensions,
+                pad: Default::default(),
                 tip_pose: tip,
                 count: 4,
                 // A tracker frame with every state, 0.3 ms old.

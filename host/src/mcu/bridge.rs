@@ -693,6 +693,7 @@ fn publish(
         count: n as u32,
         status: c.status,
         tensions,
+        pad: Default::default(),
     };
     transport::send(commands, cmd)
 }

@@ -474,7 +474,7 @@ pub fn synthetic(setup: &Setup, update: &[u8], periods: usize, seed: u64) -> Res
         cc_pose(length, mid[0] + radius * a.cos(), mid[1] + radius * a.sin())
     };
     let gain = setup.stuck_model_gain;
-    let mut plant = [0.0f32; 8];
+    let mut plant = [0.0f32; tendril_shared::MAX_TENDONS];
     let (mut sp_seq, mut fb_seq) = (0u32, 0u32);
     // Scenario periods, as fractions of the trace so any length ≥ 2000
     // covers them all.

@@ -2,7 +2,7 @@
 //! compare → export → firmware parity → closed-loop simulation — with a
 //! report and figures. `cargo run --release` (no subcommand) runs it on the
 //! default robot into `out/`; `tendril run --robot FILE` on any robot file
-//! (1–8 tendons, one or more segments) into `out/<file stem>/`. Every stage
+//! (1–9 tendons, one or more segments) into `out/<file stem>/`. Every stage
 //! adapts to the robot and the report says what a stage skipped and why.
 //!
 //! Every stage writes into a staging directory ([`staging`]), published

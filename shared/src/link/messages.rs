@@ -454,12 +454,12 @@ mod tests {
         assert!(n <= MAX_DOWN_PAYLOAD, "chunk {n} B");
         std::println!("chunk {n} B");
         let setup = Setup {
-            n_tendons: 8,
-            max_tension: [f32::MAX; 8],
-            min_tension: [f32::MAX; 8],
-            slew_rate: [f32::MAX; 8],
-            cocontraction_sets: [u8::MAX; 8],
-            cocontraction_weights: [f32::MAX; 8],
+            n_tendons: MAX_TENDONS as u8,
+            max_tension: [f32::MAX; MAX_TENDONS],
+            min_tension: [f32::MAX; MAX_TENDONS],
+            slew_rate: [f32::MAX; MAX_TENDONS],
+            cocontraction_sets: [u8::MAX; MAX_TENDONS],
+            cocontraction_weights: [f32::MAX; MAX_TENDONS],
             period_ns: u32::MAX,
             watchdog_ns: u32::MAX,
             max_dt_ns: u32::MAX,
@@ -523,7 +523,7 @@ mod tests {
                 stuck: Some((u8::MAX, f32::MAX)),
                 hold_silence_us: u32::MAX,
             },
-            tensions: heapless::Vec::from_slice(&[f32::MAX; 8]).unwrap(),
+            tensions: heapless::Vec::from_slice(&[f32::MAX; MAX_TENDONS]).unwrap(),
         });
         assert!(postcard::to_slice(&c, &mut buf).unwrap().len() <= MAX_UP_PAYLOAD);
     }
@@ -605,11 +605,11 @@ mod tests {
     fn different_setups_hash_differently() {
         let a = Setup {
             n_tendons: 4,
-            max_tension: [10.0; 8],
-            min_tension: [0.0; 8],
-            slew_rate: [200.0; 8],
-            cocontraction_sets: [0; 8],
-            cocontraction_weights: [0.0; 8],
+            max_tension: [10.0; MAX_TENDONS],
+            min_tension: [0.0; MAX_TENDONS],
+            slew_rate: [200.0; MAX_TENDONS],
+            cocontraction_sets: [0; MAX_TENDONS],
+            cocontraction_weights: [0.0; MAX_TENDONS],
             period_ns: 1_000_000,
             watchdog_ns: 2_500_000,
             max_dt_ns: 5_000_000,

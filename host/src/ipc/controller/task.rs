@@ -292,6 +292,7 @@ impl Controller {
             count: c.count as u32,
             status,
             tensions: c.tensions,
+            pad: Default::default(),
         };
         self.row[0] = tick.deadline_ns as f64;
         self.row[1] = tick.lateness_ns as f64;

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use serde::Serialize;
-use tendril_shared::MAX_HIDDEN;
+use tendril_shared::{max_hidden_for, MAX_HIDDEN};
 
 pub use super::data_robot::{robot_for_data, DataRobot};
 use super::export::{write_tnet_with, ExportError, Ranges};
@@ -305,14 +305,20 @@ fn train_and_write(job: &TrainJob<'_>, stop: &AtomicBool) -> Result<TrainResult,
         sizes.test,
         data.n_tendons
     );
+    // The controllers' weight store bounds the net by its weights: with
+    // nine tendons it holds one unit fewer than the dimension cap.
+    let cap = max_hidden_for(data.n_tendons);
+    let mut options = job.options.clone();
+    if options.max_hidden > cap {
+        log::info!(
+            "{} tendons: the controllers' weight store holds {cap} hidden units, not {}",
+            data.n_tendons,
+            options.max_hidden
+        );
+        options.max_hidden = cap;
+    }
     let (net, report) = train_with_stop(
-        &p.train_x,
-        &p.train_y,
-        &p.valid_x,
-        &p.valid_y,
-        &job.options,
-        s.seed,
-        stop,
+        &p.train_x, &p.train_y, &p.valid_x, &p.valid_y, &options, s.seed, stop,
     )?;
     // The last unit may have finished after Ctrl-C: still write nothing.
     if stop.load(Ordering::SeqCst) {
