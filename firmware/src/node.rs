@@ -302,30 +302,50 @@ impl<const U: usize> Node<U> {
             core.send(board, &hello);
         }
         // 2. The period, every `per` ticks (none in lock-step mode).
-        let Some(period) = core.period.as_ref() else {
-            core.pending.inputs = Inputs::default();
-            return;
-        };
-        if core.lockstep {
-            return;
-        }
-        let per =
-            (period.config().period_ns / u64::from(core.tick_ns.max(1))).clamp(1, 1 << 16) as u32;
-        core.since_period = core.since_period.saturating_add(1).saturating_add(missed);
-        if core.since_period < per {
-            return;
-        }
-        let missed_periods = core.since_period / per - 1;
-        core.since_period %= per;
-        let mut input = core.pending.inputs;
-        input.now_ns = t0;
-        input.missed_ticks = missed_periods;
-        core.pending.inputs = Inputs::default();
-        core.run_period(board, store, &input, self.rx.counters(), t0);
+        core.timed_period(board, store, missed, self.rx.counters(), t0);
     }
 }
 
 impl<const U: usize> Core<U> {
+    /// The timer's period, when `per` ticks have passed since the last (none
+    /// in lock-step mode or before a configuration).
+    // Not inlined, like `step`: its copy of the inputs then takes stack only
+    // while it runs, not in `tick`'s frame under a lock-step period (tests/
+    // tests/mcu_budget.rs measures the stack).
+    #[inline(never)]
+    fn timed_period<B, S>(
+        &mut self,
+        board: &mut B,
+        store: &mut S,
+        missed: u32,
+        frames: FrameCounters,
+        t0: u64,
+    ) where
+        B: Board,
+        S: NetStore<POSE_DIM, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS> + ?Sized,
+    {
+        let Some(period) = self.period.as_ref() else {
+            self.pending.inputs = Inputs::default();
+            return;
+        };
+        if self.lockstep {
+            return;
+        }
+        let per =
+            (period.config().period_ns / u64::from(self.tick_ns.max(1))).clamp(1, 1 << 16) as u32;
+        self.since_period = self.since_period.saturating_add(1).saturating_add(missed);
+        if self.since_period < per {
+            return;
+        }
+        let missed_periods = self.since_period / per - 1;
+        self.since_period %= per;
+        let mut input = self.pending.inputs;
+        input.now_ns = t0;
+        input.missed_ticks = missed_periods;
+        self.pending.inputs = Inputs::default();
+        self.run_period(board, store, &input, frames, t0);
+    }
+
     /// A [`Down::Step`]: one period now, at `now_ns`.
     // Not inlined: its locals (a decoded Setup, a new period's
     // configuration, a frame buffer) then take stack only while it runs,

@@ -74,8 +74,8 @@ mod mcu {
     /// The STM32F405 board's receive and transmit queue sizes
     /// (`board::stm32f405::{RX_QUEUE, TX_QUEUE}`, which exist only in that
     /// board's build).
-    const RX_QUEUE: usize = 384;
-    const TX_QUEUE: usize = 384;
+    const RX_QUEUE: usize = 512;
+    const TX_QUEUE: usize = 512;
     /// The board's tick: 1 kHz, as on the STM32F405.
     const TICK_NS: u32 = 1_000_000;
     /// The control period: 100 Hz.

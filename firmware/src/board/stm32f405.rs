@@ -51,14 +51,17 @@ use tendril_shared::MAX_TENDONS;
 use super::Board;
 
 /// Receive queue, bytes (the spsc queue holds one byte less). At 2 Mbaud
-/// it takes 1.9 ms of line time to fill; the node drains it every 1 ms
-/// tick (the emulated link brings at most ~75 B per ms). 384 rather than
-/// 512 since nine tendons: with the transmit queue, the 256 B they give
-/// back pay for the ninth tendon's arrays inside the 32 KB RAM budget.
-pub const RX_QUEUE: usize = 384;
-/// Transmit queue, bytes: a largest up frame (≤ 264 B framed) and a
-/// command behind it; at 2 Mbaud the line empties it in 1.9 ms.
-pub const TX_QUEUE: usize = 384;
+/// it takes 2.5 ms of line time to fill; the node drains it every 1 ms
+/// tick (the emulated link brings at most ~75 B per ms). A period may bring
+/// a largest setpoint and a chunk together (≈ 420 B framed), so 512.
+pub const RX_QUEUE: usize = 512;
+/// Transmit queue, bytes: a period's command and telemetry (at most 84 and
+/// 78 B before framing, kept under `MAX_UP_PAYLOAD` by a test) with
+/// room to spare; at 2 Mbaud the line empties it in 1.3 ms. 256 rather than
+/// 512 since nine tendons: the 256 B pay for the ninth tendon's arrays
+/// inside the 32 KB RAM budget (a power of two: heapless's index
+/// arithmetic stays masks, which 384 made divisions with a larger frame).
+pub const TX_QUEUE: usize = 512;
 /// Period tick rate, Hz.
 pub const PERIOD_HZ: u32 = 1000;
 /// Link baud rate on USART1 (PA9 TX, PA10 RX, AF7). The controller needs
