@@ -109,7 +109,7 @@ fn default_net_source(path: &Path) -> Result<String, String> {
         src,
         "}}) {{\n    Ok(net) => net,\n    Err(_) => panic!({:?}),\n}};",
         format!(
-            "the embedded net {display} ({}-{}-{}) does not fit McuNet (7 inputs, MAX_HIDDEN hidden units, 8 outputs)",
+            "the embedded net {display} ({}-{}-{}) does not fit McuNet (7 inputs, at most MAX_TENDONS outputs, and as many hidden units as the weight store holds: 64 up to 8 outputs, 63 for 9)",
             s.inputs, s.hidden, s.outputs
         )
     );

@@ -11,8 +11,22 @@ use crate::synth::synthetic_blob;
 
 /// Hidden units of every net of the run: the MCU's capacity.
 pub const HIDDEN: usize = tendril_shared::MAX_HIDDEN;
-/// Outputs (tendons) of every net of the run: the most a robot has.
-pub const OUTPUTS: usize = tendril_shared::MAX_TENDONS;
+/// Outputs (tendons) of every net of the run: 8, which with [`HIDDEN`]
+/// units makes the largest net file the MCU accepts
+/// ([`tendril_shared::MAX_NET_FILE`]; nine tendons trade a unit for the
+/// ninth output and make a shorter file).
+pub const OUTPUTS: usize = 8;
+
+const _: () = assert!(
+    NetShape {
+        inputs: POSE_DIM,
+        hidden: HIDDEN,
+        outputs: OUTPUTS,
+    }
+    .encoded_len_v2()
+        == tendril_shared::MAX_NET_FILE,
+    "the run's nets are the largest the MCU accepts"
+);
 /// Upper end of every output range and of the tension limits, N.
 pub const MAX_TENSION: f32 = 20.0;
 /// Slew limit of the run's robot, N/s.

@@ -314,7 +314,7 @@ fn hot_swap_of_the_largest_net_misses_no_period() {
         );
         let pose = swap_demo::pose(p.k);
         let want = infer(running, &pose);
-        assert_eq!(p.infer.len(), 8);
+        assert_eq!(p.infer.len(), tendril_shared::MAX_TENDONS);
         for (o, (g, w)) in p.infer.iter().zip(&want).enumerate() {
             assert!(
                 close(*g, *w),
