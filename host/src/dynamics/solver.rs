@@ -541,7 +541,7 @@ fn pass(
 fn coarse_factor(n: usize, coarsen: usize) -> usize {
     (1..=coarsen.min(n / 2))
         .rev()
-        .find(|f| n % f == 0)
+        .find(|f| n.is_multiple_of(*f))
         .unwrap_or(1)
 }
 
@@ -555,7 +555,7 @@ fn coarse_slot(j: usize, f: usize, stage: usize) -> usize {
     match stage {
         0 => 4 * j,
         3 => 4 * (j + f - 1) + 3,
-        _ if f % 2 == 0 => 4 * (j + f / 2),
+        _ if f.is_multiple_of(2) => 4 * (j + f / 2),
         _ => 4 * (j + (f - 1) / 2) + stage,
     }
 }
