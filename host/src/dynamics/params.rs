@@ -103,6 +103,15 @@ impl Damping {
     }
 }
 
+/// Default [`DynamicsSettings::jacobian_coarsening`]: 1, the solve's own
+/// grid. Unlike the statics', the time step's shooting problem is stiff
+/// (solutions grow like e^{λs}, λL ≈ 5 for the seed robot at 1 ms), so a
+/// coarse grid's Jacobian is poor: on the 30 mm circle at 1 kHz a 4× coarser
+/// one took 4.2 fine passes per step against 2.3, and an 8× coarser one
+/// (2 RK4 steps) did not converge in the first step (issue 29 item 3b,
+/// `docs/design.md` §4.2).
+pub const JACOBIAN_COARSENING: usize = 1;
+
 /// Discretisation and convergence settings of the dynamic solve.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DynamicsSettings {
@@ -121,6 +130,11 @@ pub struct DynamicsSettings {
     pub floor_tol: f64,
     /// Newton iterations per time step before giving up.
     pub max_iter: usize,
+    /// The finite-difference Jacobian is taken on a grid this many times
+    /// coarser than `steps` (per piece, the largest divisor of its steps up
+    /// to this that leaves two steps; 1: the solve's own grid). The answer
+    /// is the fine grid's whatever this is.
+    pub jacobian_coarsening: usize,
 }
 
 impl Default for DynamicsSettings {
@@ -134,6 +148,7 @@ impl Default for DynamicsSettings {
             tol: 1e-9,
             floor_tol: 1e-7,
             max_iter: 12,
+            jacobian_coarsening: JACOBIAN_COARSENING,
         }
     }
 }

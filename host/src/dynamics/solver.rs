@@ -7,9 +7,12 @@
 //! wrench enters a boundary condition. The unknowns are the base strains
 //! x = [w(0); u(0)]; the residual is the tip's force and moment balance.
 //! The Jacobian is taken by finite differences and kept across iterations
-//! and time steps (a chord method) until Newton stops contracting.
+//! and time steps (a chord method), kept consistent with every step taken by
+//! Broyden's rank-one update, and refreshed only when a step contracts the
+//! residual too little. Each step starts from the base strains extrapolated
+//! quadratically from the last three steps.
 
-use nalgebra::{Matrix3, Matrix6, Vector3, Vector6, LU, U6};
+use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
 use crate::numerics::rk4::rk4_step;
 use crate::robot::{Robot, TensionError};
@@ -80,6 +83,9 @@ const FD_STEP_W: f64 = 1e-9;
 const FD_STEP_U: f64 = 1e-7;
 /// Largest residual change (N, N·m) a finite-difference step may cause.
 const FD_TARGET: f64 = 1e-3;
+/// A step with the carried Jacobian that leaves more than this fraction of
+/// the residual gets the next iteration a fresh (finite-difference) one.
+const REFRESH_CONTRACTION: f64 = 0.25;
 
 /// A dynamic robot: state, history and solver.
 #[derive(Clone, Debug)]
@@ -94,11 +100,17 @@ pub struct Dynamics {
     /// Backbone points of the pass that recorded `current` (base frame, m):
     /// the base and each RK4 step's end, base to tip.
     backbone: Vec<Vector3<f64>>,
-    x: Vector6<f64>,
-    x_prev: Vector6<f64>,
-    jacobian: Option<LU<f64, U6, U6>>,
+    /// The backbone of the pass that recorded `scratch`.
+    scratch_backbone: Vec<Vector3<f64>>,
+    /// Base strains of the last three steps, newest first.
+    x_past: [Vector6<f64>; 3],
+    /// Steps taken since the start (how many of `x_past` are the dynamics').
+    steps_taken: u64,
+    /// The residual's Jacobian in use: finite differences, then Broyden.
+    jacobian: Option<Matrix6<f64>>,
     tip: TipState,
     passes: u64,
+    coarse_passes: u64,
 }
 
 impl Dynamics {
@@ -148,8 +160,9 @@ impl Dynamics {
             current: vec![TimeVars::default(); slots],
             scratch: vec![TimeVars::default(); slots],
             backbone: Vec::with_capacity(slots / 4 + 2),
-            x: guess,
-            x_prev: guess,
+            scratch_backbone: Vec::with_capacity(slots / 4 + 2),
+            x_past: [guess; 3],
+            steps_taken: 0,
             jacobian: None,
             tip: TipState {
                 time_s: 0.0,
@@ -158,10 +171,10 @@ impl Dynamics {
                 velocity: Vector3::zeros(),
             },
             passes: 0,
+            coarse_passes: 0,
         };
         // The statics are the dynamics with c₀ = 0 and no history.
         dynamics.solve(guess, 0.0, false)?;
-        dynamics.x_prev = dynamics.x;
         // At rest: y(−1) = y(−2) = y(0), y_t = 0, so y_h = (c₁ + c₂) y = −c₀ y.
         let scheme = settings.scheme();
         for (h, z) in dynamics.history.iter_mut().zip(&dynamics.current) {
@@ -220,11 +233,11 @@ impl Dynamics {
         self.robot.check_tensions(tensions)?;
         self.model.set_tensions(tensions);
         let scheme = self.settings.scheme();
-        // Linear extrapolation of the base strains from the last two steps.
-        let guess = self.x * 2.0 - self.x_prev;
-        let x_before = self.x;
+        let guess = self.prediction();
+        let x_before = self.x_past;
         self.solve(guess, scheme.c0(), true)?;
-        self.x_prev = x_before;
+        self.x_past = [self.x_past[0], x_before[0], x_before[1]];
+        self.steps_taken += 1;
         let (c0, c1, c2, d1) = (scheme.c0(), scheme.c1(), scheme.c2(), scheme.d1());
         for (h, z) in self.history.iter_mut().zip(&self.current) {
             let rate = *z * c0 + h.term;
@@ -235,6 +248,19 @@ impl Dynamics {
         }
         self.tip.time_s += self.settings.dt_s;
         Ok(self.tip)
+    }
+
+    /// The base strains this step is predicted to end at: the quadratic
+    /// through the last three steps' (x(i) ≈ 3 x(i−1) − 3 x(i−2) + x(i−3),
+    /// error O(δt³ x_ttt)), linear after the first step, the last one at
+    /// the start (the rod is at rest then).
+    fn prediction(&self) -> Vector6<f64> {
+        let [x1, x2, x3] = self.x_past;
+        match self.steps_taken {
+            0 => x1,
+            1 => x1 * 2.0 - x2,
+            _ => (x1 - x2) * 3.0 + x3,
+        }
     }
 
     /// The backbone now, base to tip (base frame, m): the base and the end
@@ -254,80 +280,101 @@ impl Dynamics {
         &self.settings
     }
 
-    /// Rod passes (integrations base to tip) spent so far.
+    /// Rod passes (integrations base to tip) on the solve's grid spent so
+    /// far.
     pub fn passes(&self) -> u64 {
         self.passes
     }
 
+    /// Passes on the Jacobian's grid (finite differences) spent so far,
+    /// each about 1 / [`DynamicsSettings::jacobian_coarsening`] of a pass
+    /// on the solve's grid; not counted in [`Dynamics::passes`].
+    pub fn coarse_passes(&self) -> u64 {
+        self.coarse_passes
+    }
+
     /// Newton on the base strains from `guess`; on success `current` holds
-    /// the grid at the solution and `x`, `tip` are updated. A stale Jacobian
-    /// that stops contracting is refreshed; with a fresh one the step is
+    /// the grid at the solution and `x_past[0]`, `tip` are updated. The
+    /// Jacobian carried from the last step (or iteration) is corrected by
+    /// Broyden's update after every accepted step, so it follows the slowly
+    /// changing step-to-step problem for the price of the passes Newton
+    /// takes anyway; it is refreshed by finite differences only when a step
+    /// with it contracts the residual by less than [`REFRESH_CONTRACTION`]
+    /// or does not reduce it at all. With a fresh Jacobian the step is
     /// backtracked. When no step improves the residual any more (the
     /// roundoff floor of a stiff step), a residual within
-    /// [`DynamicsSettings::floor_tol`] is accepted.
+    /// [`DynamicsSettings::floor_tol`] is accepted. Trials are integrated
+    /// into `scratch` and swapped into `current` when accepted, so a
+    /// rejected trial costs no pass to re-record the grid.
     fn solve(&mut self, guess: Vector6<f64>, c0: f64, dynamic: bool) -> Result<(), DynamicsError> {
         let mut x = guess;
         let (mut tip, mut r) = self.residual(&x, c0, dynamic, false)?;
+        let mut norm = r.norm();
         for _ in 0..self.settings.max_iter {
-            if r.norm() <= self.settings.tol {
+            if norm <= self.settings.tol {
                 break;
             }
             let fresh = self.jacobian.is_none();
-            if fresh {
-                self.jacobian = Some(self.fd_jacobian(&x, &r, c0, dynamic)?);
-            }
-            let Some(dx) = self.jacobian.as_ref().and_then(|j| j.solve(&(-r))) else {
+            let jac = match self.jacobian {
+                Some(j) => j,
+                None => self.fd_jacobian(&x, c0, dynamic)?,
+            };
+            self.jacobian = Some(jac);
+            let Some(dx) = jac.lu().solve(&(-r)) else {
                 break;
             };
-            let mut accepted = None;
+            let mut accepted = false;
             let mut scale = 1.0;
-            for _ in 0..4 {
-                let trial = x + dx * scale;
-                if let Ok((trial_tip, trial_r)) = self.residual(&trial, c0, dynamic, false) {
-                    if trial_r.norm() < r.norm() {
-                        accepted = Some((trial, trial_tip, trial_r));
+            // A carried Jacobian gets one try; a fresh one backtracks.
+            for _ in 0..if fresh { 4 } else { 1 } {
+                let step = dx * scale;
+                if let Ok((trial_tip, trial_r)) = self.residual(&(x + step), c0, dynamic, true) {
+                    let trial_norm = trial_r.norm();
+                    if trial_norm < norm {
+                        // Broyden: the secant condition J s = Δr along the
+                        // step just taken, the rest of J unchanged.
+                        let update =
+                            (trial_r - r - jac * step) * step.transpose() / step.norm_squared();
+                        let weak = trial_norm > REFRESH_CONTRACTION * norm
+                            && trial_norm > self.settings.tol;
+                        self.jacobian = (fresh || !weak).then_some(jac + update);
+                        std::mem::swap(&mut self.current, &mut self.scratch);
+                        std::mem::swap(&mut self.backbone, &mut self.scratch_backbone);
+                        (x, tip, r, norm) = (x + step, trial_tip, trial_r, trial_norm);
+                        accepted = true;
                         break;
                     }
                 }
-                if !fresh {
-                    break;
-                }
                 scale *= 0.25;
             }
-            match accepted {
-                Some((trial, trial_tip, trial_r)) => {
-                    if !fresh && trial_r.norm() > 0.25 * r.norm() {
-                        self.jacobian = None;
-                    }
-                    (x, tip, r) = (trial, trial_tip, trial_r);
-                }
-                None if fresh => {
-                    // Re-record the grid at x, which the trials overwrote.
-                    (tip, r) = self.residual(&x, c0, dynamic, false)?;
+            if !accepted {
+                if fresh {
                     break;
                 }
-                None => {
-                    self.jacobian = None;
-                    (tip, r) = self.residual(&x, c0, dynamic, false)?;
-                }
+                self.jacobian = None;
             }
         }
-        let residual = r.norm();
-        if residual > self.settings.floor_tol {
+        if norm > self.settings.floor_tol {
             return Err(DynamicsError::NotConverged {
                 time_s: 0.0,
-                residual,
+                residual: norm,
                 iterations: self.settings.max_iter,
             });
         }
-        self.x = x;
+        self.x_past[0] = x;
         self.tip.position = tip.p;
         self.tip.rotation = tip.rot;
         self.tip.velocity = tip.rot * tip.q;
         Ok(())
     }
 
-    /// ∂residual/∂x by forward differences. Small time steps make the
+    /// ∂residual/∂x by forward differences on the grid
+    /// [`DynamicsSettings::jacobian_coarsening`] times coarser than the
+    /// solve's: Newton needs the Jacobian only to choose its steps (the
+    /// residual, and so the answer, is always the fine grid's), and the
+    /// Broyden updates then correct it along the steps taken. Seven passes
+    /// on that grid (the default is the solve's own grid: see
+    /// [`super::params::JACOBIAN_COARSENING`]). Small time steps make the
     /// shooting problem stiff (the beam's implicit step is a beam on an
     /// elastic foundation ρA c₀², whose solutions grow like e^{λs} with
     /// λ⁴ ~ ρA c₀²/EI): a step that changes the residual by more than
@@ -335,10 +382,10 @@ impl Dynamics {
     fn fd_jacobian(
         &mut self,
         x: &Vector6<f64>,
-        r: &Vector6<f64>,
         c0: f64,
         dynamic: bool,
-    ) -> Result<LU<f64, U6, U6>, DynamicsError> {
+    ) -> Result<Matrix6<f64>, DynamicsError> {
+        let r = self.coarse_residual(x, c0, dynamic)?;
         let mut jac = Matrix6::zeros();
         for j in 0..6 {
             let mut step = if j < 3 { FD_STEP_W } else { FD_STEP_U };
@@ -346,7 +393,7 @@ impl Dynamics {
             for _ in 0..4 {
                 let mut xj = *x;
                 xj[j] += step;
-                let (_, rj) = self.residual(&xj, c0, dynamic, true)?;
+                let rj = self.coarse_residual(&xj, c0, dynamic)?;
                 let change = (rj - r).norm();
                 column = (rj - r) / step;
                 if change <= FD_TARGET || !change.is_finite() && step < 1e-30 {
@@ -360,12 +407,13 @@ impl Dynamics {
             }
             jac.set_column(j, &column);
         }
-        Ok(jac.lu())
+        Ok(jac)
     }
 
     /// One pass base to tip from the base strains `x`: the tip state and
-    /// residual. Records the grid into `current` (or `scratch` for a
-    /// finite-difference pass). `dynamic` false: no history (statics).
+    /// residual. Records the grid and backbone into `current` or, for a
+    /// trial or finite-difference pass, `scratch`. `dynamic` false: no
+    /// history (statics).
     fn residual(
         &mut self,
         x: &Vector6<f64>,
@@ -376,9 +424,9 @@ impl Dynamics {
         self.passes += 1;
         let history = dynamic.then_some(self.history.as_slice());
         let (record, backbone) = if into_scratch {
-            (&mut self.scratch, None)
+            (&mut self.scratch, &mut self.scratch_backbone)
         } else {
-            (&mut self.current, Some(&mut self.backbone))
+            (&mut self.current, &mut self.backbone)
         };
         Ok(pass(
             &self.model,
@@ -386,23 +434,59 @@ impl Dynamics {
             x,
             c0,
             history,
-            record,
-            backbone,
+            1,
+            Some(record),
+            Some(backbone),
         )?)
+    }
+
+    /// The residual at `x` from a pass on the grid
+    /// [`DynamicsSettings::jacobian_coarsening`] times coarser, for the
+    /// finite-difference Jacobian; records nothing.
+    fn coarse_residual(
+        &mut self,
+        x: &Vector6<f64>,
+        c0: f64,
+        dynamic: bool,
+    ) -> Result<Vector6<f64>, DynamicsError> {
+        self.coarse_passes += 1;
+        let history = dynamic.then_some(self.history.as_slice());
+        let coarsen = self.settings.jacobian_coarsening.max(1);
+        Ok(pass(
+            &self.model,
+            &self.pieces,
+            x,
+            c0,
+            history,
+            coarsen,
+            None,
+            None,
+        )?
+        .1)
     }
 }
 
 /// Integrate base to tip with RK4 on the schedule `pieces`, each stage and
 /// each piece end a grid point with its history term; returns the tip state
-/// and the tip residual. With `backbone`, the base and every step's end
-/// position are recorded into it.
+/// and the tip residual. With `record`, every grid point's time variables
+/// are written into it, and with `backbone`, the base and every step's end
+/// position.
+///
+/// `coarsen` > 1 integrates each piece with steps that many times longer
+/// ([`coarse_factor`]), for the Jacobian only: a coarse step spans `f` fine
+/// steps and takes its stages' history terms from the fine grid points at
+/// the same arc length ([`coarse_slot`]), so the coarse pass solves the same
+/// time step on a coarser grid. It records nothing (`record` must be
+/// `None`). With `coarsen` = 1 it is the fine pass, operation for operation.
+#[allow(clippy::too_many_arguments)]
 fn pass(
     model: &DynamicRod,
     pieces: &[Piece],
     x: &Vector6<f64>,
     c0: f64,
     history: Option<&[History]>,
-    record: &mut [TimeVars],
+    coarsen: usize,
+    mut record: Option<&mut [TimeVars]>,
     mut backbone: Option<&mut Vec<Vector3<f64>>>,
 ) -> Result<(DynState, Vector6<f64>), SingularSystem> {
     let term = |k: usize| history.map_or(TimeVars::default(), |h| h[k].term);
@@ -415,33 +499,65 @@ fn pass(
         b.clear();
         b.push(y.p);
     }
-    let mut k = 0;
+    // Slot of the piece's first grid point.
+    let mut base = 0;
     for piece in pieces {
-        let hh = piece.h;
-        for j in 0..piece.n {
-            let s = piece.a + j as f64 * hh;
+        let f = coarse_factor(piece.n, coarsen);
+        let hh = piece.h * f as f64;
+        for j in (0..piece.n).step_by(f) {
+            let s = piece.a + j as f64 * piece.h;
             // Each stage is a grid point with its own history term; its
             // time variables are recorded for the next time step.
             y = rk4_step(s, &y, hh, |stage, s, y| {
-                let (r, z) = model.rates(s, y, &term(k + stage), c0, piece.running)?;
-                record[k + stage] = z;
+                let k = base + coarse_slot(j, f, stage);
+                let (r, z) = model.rates(s, y, &term(k), c0, piece.running)?;
+                if let Some(rec) = record.as_deref_mut() {
+                    rec[k] = z;
+                }
                 Ok(r)
             })?;
             if let Some(b) = backbone.as_deref_mut() {
                 b.push(y.p);
             }
-            k += 4;
         }
-        record[k] = y.time_vars(Vector3::zeros(), Vector3::zeros());
+        let k = base + 4 * piece.n;
+        if let Some(rec) = record.as_deref_mut() {
+            rec[k] = y.time_vars(Vector3::zeros(), Vector3::zeros());
+        }
         let end_term = term(k);
-        k += 1;
+        base = k + 1;
         if piece.ends_at_anchor(length) {
-            y = model.across_anchor(piece.b, &y, &end_term, &term(k), c0);
+            y = model.across_anchor(piece.b, &y, &end_term, &term(base), c0);
         } else {
             return Ok((y, model.tip_residual(&y, &end_term, c0)));
         }
     }
     Ok((y, model.tip_residual(&y, &TimeVars::default(), c0)))
+}
+
+/// The coarsening of a piece of `n` fine steps: the largest factor f ≤
+/// `coarsen` that divides n and leaves at least two coarse steps (1 when
+/// none does), so coarse steps end on fine grid points.
+fn coarse_factor(n: usize, coarsen: usize) -> usize {
+    (1..=coarsen.min(n / 2))
+        .rev()
+        .find(|f| n.is_multiple_of(*f))
+        .unwrap_or(1)
+}
+
+/// Slot (from the piece's first) of the fine grid point whose history a
+/// stage of the coarse step spanning fine steps j..j+f takes: the start is
+/// fine step j's first stage, the end fine step j+f−1's last (both at the
+/// same arc length as the coarse stage), the midpoint fine step j+f/2's
+/// first stage (f even) or fine step j+(f−1)/2's own midpoint stages (f odd).
+/// f = 1 gives the fine grid's own slots.
+fn coarse_slot(j: usize, f: usize, stage: usize) -> usize {
+    match stage {
+        0 => 4 * j,
+        3 => 4 * (j + f - 1) + 3,
+        _ if f.is_multiple_of(2) => 4 * (j + f / 2),
+        _ => 4 * (j + (f - 1) / 2) + stage,
+    }
 }
 
 fn check_settings(s: &DynamicsSettings) -> Result<(), DynamicsError> {
