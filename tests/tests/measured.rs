@@ -166,16 +166,18 @@ fn a_measured_csv_without_a_sidecar_trains_and_finds_its_outliers_and_noise() {
     let sigma = f["noise_sigma_mm"].as_f64().unwrap();
     assert!((0.10..0.19).contains(&sigma), "{f}");
     assert_eq!(f["noise_source"], "local-fit", "{f}");
-    // A net cannot beat the noise floor against measured tips.
+    // Judged against measured tips, the jitter dominates: a good net sits
+    // near the floor (below it only by following the jitter it is asked
+    // for), not far above it.
     let (rms, floor) = (
         f["held_out_rms_mm"].as_f64().unwrap(),
         f["floor_rms_mm"].as_f64().unwrap(),
     );
-    assert!(rms >= 0.8 * floor && rms < 10.0, "{f}");
+    assert!(rms >= 0.5 * floor && rms < 3.0 * floor, "{f}");
 
     // A given noise is used as given.
     ok(
-        &train(dir, "g.tnet", &["--noise-mm", "0.2", "--max-hidden", "1"]),
+        &train(dir, "g.tnet", &["--noise-mm", "0.2"]),
         "train with --noise-mm",
     );
     let f = &json(&dir.join("g.train.json"))["measured"]["noise_floor"];
@@ -285,6 +287,9 @@ fn leaving_outliers_out_beats_fitting_them_on_held_out_truth() {
     );
     let keep = held_out_against_truth(dir, "keep.tnet");
     let reject = held_out_against_truth(dir, "reject.tnet");
+    eprintln!(
+        "held-out tip mean against the truth: plain fit {keep:.3} mm, robust fit {reject:.3} mm"
+    );
     assert!(
         reject < 0.8 * keep,
         "robust fit {reject} mm vs plain fit {keep} mm (held-out mean, against the truth)"

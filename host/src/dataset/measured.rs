@@ -292,9 +292,10 @@ pub fn flag_outliers(data: &Dataset) -> OutlierReport {
         // A floor of 1 nm: noiseless rows would otherwise flag the fit's
         // round-off.
         let limit = OUTLIER_SIGMAS * sigma.max(1e-9);
-        for i in 0..n {
+        for (i, f) in flagged.iter_mut().enumerate() {
+            // A NaN residual (no usable neighbour) counts as an outlier.
             let r = res.row(i).norm();
-            flagged[i] = !(r <= limit);
+            *f = r.is_nan() || r > limit;
         }
         usable = flagged.iter().map(|f| !f).collect();
     }
@@ -374,8 +375,10 @@ pub struct NoiseFloorReport {
     pub noise_sigma_mm: f64,
     /// Where it came from.
     pub noise_source: NoiseSource,
-    /// The RMS 3-D tip distance pure jitter gives, √3 σ, mm: no learner
-    /// judged against measured tips can score below it on average.
+    /// The RMS 3-D distance between a measured and the true tip, √3 σ, mm.
+    /// A learner asked for the measured pose follows the jitter along the
+    /// directions the robot can move, so its RMS against measured tips can
+    /// fall below this; well above it, the learner is the larger error.
     pub floor_rms_mm: f64,
     /// Held-out rows judged (their own measured tip not an outlier).
     pub rows: usize,
