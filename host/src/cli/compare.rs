@@ -35,6 +35,17 @@ pub struct CompareArgs {
     /// Also write the normalised splits here (input of scripts/python/baselines_reference.py).
     #[arg(long, value_name = "DIR")]
     pub dump_splits: Option<PathBuf>,
+    /// Outliers of the tip in the training rows [default: reject for a dataset without a
+    /// sidecar (measured rows, docs/design.md §3.1), else keep].
+    #[arg(long, value_enum)]
+    pub outliers: Option<super::train::OutliersArg>,
+    /// Synthetic measured rows: the noiseless rows behind --data (same tensions, same order);
+    /// the test split is judged against them on --true-robot. Needs --true-robot.
+    #[arg(long, value_name = "CSV", requires = "true_robot")]
+    pub true_data: Option<PathBuf>,
+    /// The robot that made --true-data. Needs --true-data.
+    #[arg(long, value_name = "FILE", requires = "true_data")]
+    pub true_robot: Option<PathBuf>,
 }
 
 impl CompareArgs {
@@ -52,6 +63,10 @@ impl CompareArgs {
                 dump_splits: self.dump_splits.clone(),
                 ..CompareOptions::default()
             },
+            reject_outliers: self
+                .outliers
+                .map(|o| o == super::train::OutliersArg::Reject),
+            truth: self.true_data.clone().zip(self.true_robot.clone()),
         }
     }
 }

@@ -49,6 +49,13 @@ pub struct GenerateArgs {
     /// Seed of the measurement noise.
     #[arg(long, default_value_t = 2)]
     pub noise_seed: u64,
+    /// Synthetic measurements: fraction of rows, in [0, 1], whose tip position is an outlier
+    /// (off by --outlier-mm in a random direction, on top of the jitter).
+    #[arg(long, value_name = "F", default_value_t = 0.0)]
+    pub outlier_fraction: f64,
+    /// Synthetic measurements: how far an outlier's tip position is off, mm.
+    #[arg(long, value_name = "MM", default_value_t = 5.0)]
+    pub outlier_mm: f64,
 }
 
 impl GenerateArgs {
@@ -80,13 +87,16 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
         // The rows as a tracker would record them (docs/design.md §11); the
         // sidecar keeps describing the noiseless solves.
         let mut data = crate::dataset::Dataset::read_csv(&args.out)?;
-        crate::calibrate::noise::add_tracker_noise(&mut data, &noise);
+        let outliers = crate::calibrate::noise::add_tracker_noise(&mut data, &noise);
         data.write_csv(&args.out)?;
         log::info!(
-            "added tracker noise: {} mm per axis, {}° per axis, base at {:?} mm",
+            "added tracker noise: {} mm per axis, {}° per axis, base at {:?} mm, {} outlier \
+             rows off by {} mm",
             args.noise_mm,
             args.noise_deg,
-            noise.frame_offset_m.map(|x| x * 1e3)
+            noise.frame_offset_m.map(|x| x * 1e3),
+            outliers.len(),
+            args.outlier_mm
         );
     }
     log::info!(
@@ -130,7 +140,20 @@ fn tracker_noise(
             [v[0] * 1e-3, v[1] * 1e-3, v[2] * 1e-3]
         }
     };
-    if args.noise_mm == 0.0 && args.noise_deg == 0.0 && offset == [0.0; 3] {
+    if !(0.0..=1.0).contains(&args.outlier_fraction) {
+        anyhow::bail!(
+            "--outlier-fraction must be in [0, 1], got {}",
+            args.outlier_fraction
+        );
+    }
+    if !(args.outlier_mm.is_finite() && args.outlier_mm >= 0.0) {
+        anyhow::bail!(
+            "--outlier-mm must be a finite number >= 0, got {}",
+            args.outlier_mm
+        );
+    }
+    let outliers = args.outlier_fraction > 0.0 && args.outlier_mm > 0.0;
+    if args.noise_mm == 0.0 && args.noise_deg == 0.0 && offset == [0.0; 3] && !outliers {
         return Ok(None);
     }
     Ok(Some(crate::calibrate::noise::TrackerNoise {
@@ -138,5 +161,7 @@ fn tracker_noise(
         angle_sigma_rad: args.noise_deg.to_radians(),
         frame_offset_m: offset,
         seed: args.noise_seed,
+        outlier_fraction: args.outlier_fraction,
+        outlier_m: args.outlier_mm * 1e-3,
     }))
 }

@@ -43,11 +43,24 @@ pub enum SolverArg {
     Quickprop,
 }
 
+/// Outlier handling for measured rows on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OutliersArg {
+    /// Leave training rows whose tip disagrees with its neighbours' out of the fit.
+    Reject,
+    /// Fit every row.
+    Keep,
+}
+
 /// Train a cascade-correlation IK net (pose → tensions) and export it as `.tnet`.
 /// The dataset needs at least 50 rows; every output must be a distinct file.
+/// A dataset without a sidecar is taken as measured rows (docs/design.md §3.1):
+/// it needs --robot, its outliers are left out of the fit, and the report
+/// gives the held-out error against the noise floor.
 #[derive(clap::Args, Debug)]
 pub struct TrainArgs {
-    /// Dataset CSV (`tendril generate`): t0..t{T-1},px,py,pz,qw,qx,qy,qz.
+    /// Dataset CSV (`tendril generate`, or measured rows):
+    /// t0..t{T-1},px,py,pz,qw,qx,qy,qz.
     #[arg(long, value_name = "CSV")]
     pub data: PathBuf,
     /// Weight file to write (`.tnet`, written atomically).
@@ -154,6 +167,15 @@ pub struct TrainArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Measured rows: the tracker's jitter per position axis, mm, for the
+    /// noise floor [default: estimated from repeated rows, else from the
+    /// local fit]. Makes the rows measured even with a sidecar.
+    #[arg(long, value_name = "SIGMA")]
+    pub noise_mm: Option<f64>,
+    /// Measured rows: what to do with outliers of the tip [default: reject].
+    /// Makes the rows measured even with a sidecar.
+    #[arg(long, value_enum)]
+    pub outliers: Option<OutliersArg>,
 }
 
 impl TrainArgs {
@@ -206,6 +228,14 @@ impl TrainArgs {
 }
 
 impl TrainArgs {
+    /// Whether `--data` holds measured rows: it has no sidecar, or a
+    /// measured-rows option is given.
+    pub fn measured(&self) -> bool {
+        self.noise_mm.is_some()
+            || self.outliers.is_some()
+            || !crate::dataset::Sidecar::path_for(&self.data).exists()
+    }
+
     /// The training job these arguments describe, on `data` read from `--data`.
     pub fn job<'a>(&self, data: &'a Dataset) -> anyhow::Result<TrainJob<'a>> {
         // The log, curve and report go beside the net unless named: beside a
@@ -253,6 +283,10 @@ impl TrainArgs {
                 seed: self.seed,
                 test_fraction: self.test_fraction,
                 valid_fraction: self.valid_fraction,
+                measured: self.measured().then_some(job::MeasuredSpec {
+                    reject_outliers: self.outliers != Some(OutliersArg::Keep),
+                    noise_mm: self.noise_mm,
+                }),
             },
             outputs,
             threads: self.threads,
@@ -271,7 +305,12 @@ pub fn run(a: TrainArgs) -> anyhow::Result<()> {
     if let Some(plot) = &a.plot {
         super::common::refuse_stdout("--plot", plot, "a PNG is drawn into a file")?;
     }
-    let data = Dataset::read_csv(&a.data)?;
+    let mut data = Dataset::read_csv(&a.data)?;
+    let r = job::robot_for_data(&data, &a.data, a.robot.as_deref(), a.allow_robot_mismatch)?;
+    crate::dataset::measured::check_rows(&data, &r.robot, &a.data)?;
+    if a.measured() {
+        crate::dataset::measured::canonical_quaternions(&mut data);
+    }
     let job = a.job(&data)?;
     let t = job::run(&job, stop_flag())?;
     let o = &job.outputs;
@@ -285,5 +324,35 @@ pub fn run(a: TrainArgs) -> anyhow::Result<()> {
         o.curve.display(),
         o.report.display()
     );
+    if let Some(m) = &t.measured {
+        let f = &m.noise_floor;
+        let mm = crate::units::length_mm;
+        log::info!(
+            "measured rows: {} of {} training rows are outliers ({}, tip off by > {}); \
+             held-out tip error (predicted tensions through the local fit of the training \
+             rows, {} rows, {} outliers left out) RMS {} / mean {} against a noise floor of \
+             RMS {} (σ {} per axis, {}): the net's own share ≈ {}",
+            m.outliers.count,
+            m.outliers.rows,
+            if m.outliers_rejected {
+                "left out"
+            } else {
+                "kept"
+            },
+            mm(m.outliers.threshold_mm),
+            f.rows,
+            f.outlier_rows,
+            mm(f.held_out_rms_mm),
+            mm(f.held_out_mean_mm),
+            mm(f.floor_rms_mm),
+            mm(f.noise_sigma_mm),
+            match f.noise_source {
+                crate::dataset::measured::NoiseSource::Given => "given",
+                crate::dataset::measured::NoiseSource::RepeatedRows => "from repeated rows",
+                crate::dataset::measured::NoiseSource::LocalFit => "estimated from the local fit",
+            },
+            mm(f.excess_rms_mm)
+        );
+    }
     Ok(())
 }

@@ -22,6 +22,13 @@ pub struct CompareJob {
     pub out_dir: PathBuf,
     /// Split, seed and evaluation settings.
     pub options: CompareOptions,
+    /// Leave outliers out of the fits (`Some(true)`), keep them
+    /// (`Some(false)`); `None`: leave them out when the dataset has no
+    /// sidecar (measured rows, `docs/design.md` §3.1).
+    pub reject_outliers: Option<bool>,
+    /// The noiseless rows behind synthetic measured rows, and the robot
+    /// that made them ([`super::TrueRows`]): both or neither.
+    pub truth: Option<(PathBuf, PathBuf)>,
 }
 
 /// What a comparison run produced.
@@ -48,12 +55,45 @@ pub fn run(job: &CompareJob) -> Result<CompareResult, CompareError> {
     }
     let files = output_files(&job.out_dir, o.dump_splits.as_deref());
     let outputs: Vec<(&str, &Path)> = files.iter().map(|(r, p)| (*r, p.as_path())).collect();
-    check_distinct(&[("--data", &job.data), ("--robot", &job.robot)], &outputs)?;
-    let data = Dataset::read_csv(&job.data).map_err(|e| CompareError::BadInput(e.to_string()))?;
-    let robot = Robot::load(&job.robot).map_err(|e| CompareError::BadInput(e.to_string()))?;
-    let sidecar = crate::dataset::Sidecar::read(&crate::dataset::Sidecar::path_for(&job.data)).ok();
+    let mut inputs: Vec<(&str, &Path)> = vec![("--data", &job.data), ("--robot", &job.robot)];
+    if let Some((d, r)) = &job.truth {
+        inputs.push(("--true-data", d));
+        inputs.push(("--true-robot", r));
+    }
+    check_distinct(&inputs, &outputs)?;
+    let bad = |e: &dyn std::fmt::Display| CompareError::BadInput(e.to_string());
+    let mut data = Dataset::read_csv(&job.data).map_err(|e| bad(&e))?;
+    let robot = Robot::load(&job.robot).map_err(|e| bad(&e))?;
+    crate::dataset::measured::check_rows(&data, &robot, &job.data).map_err(|e| bad(&e))?;
+    let side_path = crate::dataset::Sidecar::path_for(&job.data);
+    let measured = !side_path.exists() || job.reject_outliers.is_some();
+    if measured {
+        crate::dataset::measured::canonical_quaternions(&mut data);
+    }
+    let sidecar = crate::dataset::Sidecar::read(&side_path).ok();
+    let true_rows = match &job.truth {
+        None => None,
+        Some((d, r)) => {
+            let t = Dataset::read_csv(d).map_err(|e| bad(&e))?;
+            let robot = Robot::load(r).map_err(|e| bad(&e))?;
+            if t.len() != data.len() || t.tensions != data.tensions {
+                return Err(CompareError::BadInput(format!(
+                    "--true-data {} is not the truth of --data {}: its tensions are not the \
+                     same rows",
+                    d.display(),
+                    job.data.display()
+                )));
+            }
+            Some(super::TrueRows {
+                poses: t.poses,
+                robot,
+            })
+        }
+    };
     let options = CompareOptions {
         targets: Some(Targets::for_dataset(&robot, sidecar.as_ref())),
+        reject_outliers: job.reject_outliers.unwrap_or(measured),
+        true_rows,
         ..o.clone()
     };
     let comparison = compare(&data, &robot, all_learners_for(&robot), &options)?;

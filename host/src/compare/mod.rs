@@ -84,6 +84,25 @@ pub struct CompareOptions {
     pub dump_splits: Option<PathBuf>,
     /// What every learner learns; `None`: [`Targets::for_robot`] the robot.
     pub targets: Option<Targets>,
+    /// Leave the training rows whose tip is an outlier out of every
+    /// learner's fit and validation (measured rows, `docs/design.md` §3.1).
+    pub reject_outliers: bool,
+    /// Judge the test split against these true rows instead of the
+    /// dataset's own poses (a synthetic benchmark of measured rows).
+    pub true_rows: Option<TrueRows>,
+}
+
+/// The truth behind synthetic measured rows: the noiseless pose of every
+/// row of the dataset (same order) and the robot that produced them. With
+/// it, every learner is asked for the true pose of each test row, its
+/// tensions are solved on the true robot, and the tip is measured against
+/// the true tip.
+#[derive(Clone, Debug)]
+pub struct TrueRows {
+    /// `n × 7` true poses, row `i` the truth of the dataset's row `i`.
+    pub poses: nalgebra::DMatrix<f64>,
+    /// The robot that made them.
+    pub robot: crate::robot::Robot,
 }
 
 impl Default for CompareOptions {
@@ -97,6 +116,8 @@ impl Default for CompareOptions {
             progress: true,
             dump_splits: None,
             targets: None,
+            reject_outliers: false,
+            true_rows: None,
         }
     }
 }
@@ -136,4 +157,7 @@ pub struct Comparison {
     pub options: CompareOptions,
     /// One entry per learner, in the order they ran.
     pub entries: Vec<Entry>,
+    /// Sentences on how the rows were treated (outliers left out, the
+    /// truth judged against), printed under the table.
+    pub notes: Vec<String>,
 }

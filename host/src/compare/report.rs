@@ -208,6 +208,10 @@ impl Comparison {
             self.entries.first().map_or(0, |e| e.train_task_rows),
             o.timing_queries.min(nt),
         );
+        for n in &self.notes {
+            s.push_str(n);
+            s.push_str("\n\n");
+        }
         s.push_str("| learner |");
         for c in &cols {
             s.push_str(&format!(" {} |", c.header));
@@ -364,6 +368,7 @@ mod tests {
             sizes: (80, 10, 10),
             options: CompareOptions::default(),
             entries,
+            notes: Vec::new(),
         }
     }
 

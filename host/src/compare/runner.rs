@@ -8,7 +8,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::DMatrix;
 
 use super::{CompareError, CompareOptions, Comparison, Entry};
-use crate::dataset::{prepare, Dataset, MinMax, Prepared};
+use crate::dataset::{prepare_excluding, split_indices, Dataset, MinMax, Prepared};
 use crate::evaluate::{
     plain_clip_position_if_different, staged_tensions, task_space_errors, tension_rmse,
     tension_rmse_normalised, EvalError, SplitMetrics,
@@ -138,13 +138,73 @@ pub fn compare(
         .targets
         .clone()
         .unwrap_or_else(|| Targets::for_robot(robot));
-    let p = prepare(
+    let mut notes = Vec::new();
+    let exclude = if opts.reject_outliers {
+        let (exclude, r) =
+            crate::dataset::measured::training_outliers(data, opts.test_fraction, opts.seed);
+        notes.push(format!(
+            "Measured rows: {} of {} training rows left out of every learner's fit as outliers \
+             (tip off its neighbours' local fit by more than {}; residual σ {} per axis).",
+            r.count,
+            r.rows,
+            crate::units::length_mm(r.threshold_mm),
+            crate::units::length_mm(r.residual_sigma_mm)
+        ));
+        exclude
+    } else {
+        Vec::new()
+    };
+    let p = prepare_excluding(
         &targets.learning_data(data),
         opts.test_fraction,
         opts.valid_fraction,
         opts.seed,
+        &exclude,
     );
-    let truth = prepare(data, opts.test_fraction, opts.valid_fraction, opts.seed);
+    let truth = prepare_excluding(
+        data,
+        opts.test_fraction,
+        opts.valid_fraction,
+        opts.seed,
+        &exclude,
+    );
+    // The test split's queries and what they are judged against: the
+    // dataset's own poses on the given robot, or the true rows on the true
+    // robot.
+    let true_test = match &opts.true_rows {
+        Some(t) => {
+            if t.poses.nrows() != data.len() || t.poses.ncols() != 7 {
+                return Err(CompareError::BadInput(format!(
+                    "the true rows are {} × {}, the dataset {} × 7: they must be the same rows",
+                    t.poses.nrows(),
+                    t.poses.ncols(),
+                    data.len()
+                )));
+            }
+            if t.robot.n_tendons() != robot.n_tendons() {
+                return Err(CompareError::BadInput(format!(
+                    "the true robot {} has {} tendons, the robot {}",
+                    t.robot.name,
+                    t.robot.n_tendons(),
+                    robot.n_tendons()
+                )));
+            }
+            let (_, test_idx) = split_indices(data.len(), opts.test_fraction, opts.seed);
+            let poses = t.poses.select_rows(&test_idx);
+            notes.push(format!(
+                "Test split judged against the truth: each learner is asked for the true pose \
+                 of every test row, its tensions are solved on the true robot {} and the tip \
+                 is compared with the true tip.",
+                t.robot.name
+            ));
+            Some((
+                p.x_range.normalise(&poses),
+                poses,
+                Statics::new(&t.robot, SolverSettings::default()),
+            ))
+        }
+        None => None,
+    };
     if let Some(dir) = &opts.dump_splits {
         dump_splits(&p, dir)?;
     }
@@ -203,14 +263,25 @@ pub fn compare(
             time.batched_us,
         )
         .map_err(eval_err)?;
-        let pred_test = p.y_range.denormalise(&l.predict(&p.test_x));
+        let (test_x, test_poses, test_statics) = match &true_test {
+            Some((x, poses, st)) => (x, poses, st),
+            None => (&p.test_x, &truth.test.poses, &statics),
+        };
+        let mut pred_test = p.y_range.denormalise(&l.predict(test_x));
+        if true_test.is_some() {
+            // The MCU stages with the robot file it is given (the nominal
+            // one, whose co-contraction weights centred the targets); only
+            // the physics is the true robot's. Staging again on the true
+            // robot leaves a staged row as it is.
+            pred_test = staged_tensions(&statics, &pred_test).map_err(eval_err)?;
+        }
         let all_test: Vec<usize> = (0..p.test.len()).collect();
         let test = split_metrics(
-            &statics,
+            test_statics,
             &truth.y_range,
             &pred_test,
             &truth.test.tensions,
-            &truth.test.poses,
+            test_poses,
             &all_test,
             time.batched_us,
         )
@@ -240,6 +311,7 @@ pub fn compare(
         sizes: (p.train_x.nrows(), p.valid_x.nrows(), p.test_x.nrows()),
         options: opts.clone(),
         entries,
+        notes,
     })
 }
 

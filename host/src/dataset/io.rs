@@ -106,6 +106,8 @@ impl Dataset {
         let file = std::fs::File::open(path).map_err(io)?;
         let mut reader = csv::ReaderBuilder::new()
             .has_headers(true)
+            // Row lengths are checked below, with a message naming the line.
+            .flexible(true)
             .from_reader(crate::fsutil::LineCapped::new(file));
         let header: Vec<String> = reader
             .headers()
@@ -159,11 +161,16 @@ impl Dataset {
                 line,
                 why: e.to_string(),
             })?;
-            if record.len() < width {
+            if record.len() != header.len() {
                 return Err(DatasetError::Row {
                     path: path.to_path_buf(),
                     line,
-                    why: format!("{} fields, expected {width}", record.len()),
+                    why: format!(
+                        "{} fields, but the header has {} ({})",
+                        record.len(),
+                        header.len(),
+                        header.join(",")
+                    ),
                 });
             }
             for (c, field) in record.iter().take(width).enumerate() {

@@ -12,12 +12,13 @@ pub mod disk;
 pub mod generate;
 pub mod io;
 pub mod job;
+pub mod measured;
 pub mod sample;
 pub mod split;
 
 pub use io::{Dataset, DatasetError, Sidecar};
 pub use sample::Sampler;
-pub use split::{prepare, split_indices, MinMax, Prepared};
+pub use split::{prepare, prepare_excluding, split_indices, MinMax, Prepared};
 
 /// Names of the pose columns, in order.
 pub const POSE_COLUMNS: [&str; 7] = ["px", "py", "pz", "qw", "qx", "qy", "qz"];

@@ -173,7 +173,23 @@ impl Prepared {
 /// (`valid_fraction` of the training rows) and normalise everything with the
 /// ranges of the training rows.
 pub fn prepare(data: &Dataset, test_fraction: f64, valid_fraction: f64, seed: u64) -> Prepared {
-    let (train_idx, test_idx) = split_indices(data.len(), test_fraction, seed);
+    prepare_excluding(data, test_fraction, valid_fraction, seed, &[])
+}
+
+/// [`prepare`], with the rows `exclude[i]` marks (outliers of measured data,
+/// [`super::measured`]) left out of the training and validation rows. The
+/// test split is [`split_indices`]'s whatever is excluded, so `tendril
+/// evaluate --rows test` finds the same rows from the seed and fraction
+/// alone; an `exclude` shorter than the data excludes nothing past its end.
+pub fn prepare_excluding(
+    data: &Dataset,
+    test_fraction: f64,
+    valid_fraction: f64,
+    seed: u64,
+    exclude: &[bool],
+) -> Prepared {
+    let (mut train_idx, test_idx) = split_indices(data.len(), test_fraction, seed);
+    train_idx.retain(|&i| !exclude.get(i).copied().unwrap_or(false));
     let train = data.rows(&train_idx);
     let test = data.rows(&test_idx);
     let x_range = MinMax::fit(&train.poses);

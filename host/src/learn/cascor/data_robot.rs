@@ -22,7 +22,7 @@ pub struct DataRobot {
     /// The robot.
     pub robot: Robot,
     /// Its file: `--robot` when given, else the robot file the dataset's
-    /// sidecar records, else (no sidecar) the default robot.
+    /// sidecar records (a dataset without a sidecar needs `--robot`).
     pub path: PathBuf,
     /// [`Targets::for_dataset`] of the robot and the dataset's sidecar.
     pub targets: Targets,
@@ -163,15 +163,13 @@ pub fn robot_for_data(
         }
         (None, Some((side_path, side))) => recorded_robot(side, side_path, allow_mismatch)?,
         (None, None) => {
-            let path = PathBuf::from(DEFAULT_ROBOT);
-            log::info!(
-                "{} has no sidecar: training for the default robot {DEFAULT_ROBOT} (give --robot \
-                 otherwise)",
+            // Measured rows have no sidecar; guessing the robot would centre
+            // the targets on another robot's co-contraction sets.
+            return Err(bad(format!(
+                "{} has no sidecar (measured rows?): give the robot the rows were measured on \
+                 with --robot FILE (its tendon count and co-contraction sets)",
                 data_file.display()
-            );
-            let robot =
-                Robot::load(&path).map_err(|e| bad(format!("robot for the targets: {e}")))?;
-            (robot, path)
+            )));
         }
     };
     if robot.n_tendons() != data.n_tendons {

@@ -17,7 +17,7 @@ pub use super::data_robot::{robot_for_data, DataRobot};
 use super::export::{write_tnet_with, ExportError, Ranges};
 use super::{train_with_stop, CascorOptions, GrowingNet, TrainReport};
 use crate::dataset::split::{SPLIT_SEED, TEST_FRACTION, VALID_FRACTION};
-use crate::dataset::{prepare, Dataset};
+use crate::dataset::{prepare_excluding, Dataset};
 use crate::fsutil::{check_distinct, write_atomic, write_atomic_with, PathCollision};
 use crate::learn::targets::{Targets, TargetsSummary};
 use crate::learn::LearnError;
@@ -40,6 +40,21 @@ pub struct SplitSpec {
     pub test_fraction: f64,
     /// Validation fraction carved from the training rows, in [0, [`MAX_HELD_OUT_FRACTION`]].
     pub valid_fraction: f64,
+    /// The rows are measurements (`docs/design.md` §3.1): `None` for the
+    /// exact rows of `tendril generate`.
+    pub measured: Option<MeasuredSpec>,
+}
+
+/// How measured rows are trained on (`docs/design.md` §3.1).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct MeasuredSpec {
+    /// Leave training rows whose tip is an outlier
+    /// ([`crate::dataset::measured::flag_outliers`]) out of the fit and
+    /// the validation; the test split keeps every row.
+    pub reject_outliers: bool,
+    /// The tracker's jitter per position axis, mm, when the user knows it;
+    /// else estimated (repeated rows, else the local fit's residuals).
+    pub noise_mm: Option<f64>,
 }
 
 impl Default for SplitSpec {
@@ -48,6 +63,7 @@ impl Default for SplitSpec {
             seed: SPLIT_SEED,
             test_fraction: TEST_FRACTION,
             valid_fraction: VALID_FRACTION,
+            measured: None,
         }
     }
 }
@@ -57,6 +73,13 @@ impl SplitSpec {
     pub fn validate(&self) -> Result<(), TrainError> {
         crate::dataset::split::check_test_fraction(self.test_fraction)
             .map_err(TrainError::BadInput)?;
+        if let Some(n) = self.measured.and_then(|m| m.noise_mm) {
+            if !(n.is_finite() && n > 0.0) {
+                return Err(TrainError::BadInput(format!(
+                    "--noise-mm must be a finite number > 0, got {n}"
+                )));
+            }
+        }
         let v = self.valid_fraction;
         if !(0.0..=MAX_HELD_OUT_FRACTION).contains(&v) {
             return Err(TrainError::BadInput(format!(
@@ -148,6 +171,22 @@ pub struct TrainResult {
     pub sizes: SplitSizes,
     /// Test RMSE of the targets ([`TrainJob::targets`]), normalised ×100 (f64 net).
     pub test_rmse_norm100: f64,
+    /// For measured rows: the outliers found and the held-out error against
+    /// the noise floor.
+    pub measured: Option<MeasuredReport>,
+}
+
+/// What training on measured rows found (in the report JSON as `measured`).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MeasuredReport {
+    /// Whether the outliers were left out of the fit.
+    pub outliers_rejected: bool,
+    /// Outliers among the training rows (validation rows included).
+    pub outliers: crate::dataset::measured::OutlierReport,
+    /// Lines of the data file (header = 1) of the rows flagged.
+    pub outlier_lines: Vec<usize>,
+    /// The net's held-out error against the noise floor.
+    pub noise_floor: crate::dataset::measured::NoiseFloorReport,
 }
 
 /// Why a training run failed; nothing was written.
@@ -207,6 +246,8 @@ struct ReportFile<'a> {
     hidden_units: usize,
     parameters: usize,
     test_tension_rmse_norm100: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    measured: Option<&'a MeasuredReport>,
 }
 
 /// Check `job`, train, and write the weight file, log, learning curve and
@@ -292,7 +333,28 @@ fn train_and_write(job: &TrainJob<'_>, stop: &AtomicBool) -> Result<TrainResult,
     let data = job.data;
     let s = job.split;
     let learned = job.targets.learning_data(data);
-    let p = prepare(&learned, s.test_fraction, s.valid_fraction, s.seed);
+    let outliers = s
+        .measured
+        .map(|_| crate::dataset::measured::training_outliers(data, s.test_fraction, s.seed));
+    let exclude = match (&outliers, s.measured) {
+        (Some((exclude, r)), Some(m)) if m.reject_outliers => {
+            log::info!(
+                "left out {} of {} training rows as outliers (tip off its neighbours' fit by                  more than {:.3} mm)",
+                r.count,
+                r.rows,
+                r.threshold_mm
+            );
+            exclude.clone()
+        }
+        _ => Vec::new(),
+    };
+    let p = prepare_excluding(
+        &learned,
+        s.test_fraction,
+        s.valid_fraction,
+        s.seed,
+        &exclude,
+    );
     let sizes = SplitSizes {
         train: p.train_x.nrows(),
         valid: p.valid_x.nrows(),
@@ -327,6 +389,12 @@ fn train_and_write(job: &TrainJob<'_>, stop: &AtomicBool) -> Result<TrainResult,
     let test_pred = net.predict(&p.test_x);
     let test_rmse_norm100 =
         100.0 * ((&test_pred - &p.test_y).norm_squared() / p.test_y.len() as f64).sqrt();
+    let measured = match (s.measured, outliers) {
+        (Some(m), Some((marks, report))) => Some(measured_report(
+            job, m, &marks, report, &p.y_range, &net, &p.test_x,
+        )),
+        _ => None,
+    };
     let ranges = Ranges {
         input_lo: p.x_range.lo.clone(),
         input_hi: p.x_range.hi.clone(),
@@ -380,6 +448,7 @@ fn train_and_write(job: &TrainJob<'_>, stop: &AtomicBool) -> Result<TrainResult,
         hidden_units: net.n_hidden(),
         parameters: net.parameter_count(),
         test_tension_rmse_norm100: test_rmse_norm100,
+        measured: measured.as_ref(),
     };
     let werr = |why: String| TrainError::Write {
         path: o.report.clone(),
@@ -403,7 +472,55 @@ fn train_and_write(job: &TrainJob<'_>, stop: &AtomicBool) -> Result<TrainResult,
         ranges,
         sizes,
         test_rmse_norm100,
+        measured,
     })
+}
+
+/// The held-out error of `net` on measured rows against the noise floor
+/// (`docs/design.md` §3.1): the test rows' predicted tensions, staged as the
+/// MCU would command them, pushed through the local fit of the kept
+/// training rows, against the measured tips.
+#[allow(clippy::too_many_arguments)]
+fn measured_report(
+    job: &TrainJob<'_>,
+    m: MeasuredSpec,
+    marks: &[bool],
+    report: crate::dataset::measured::OutlierReport,
+    y_range: &crate::dataset::MinMax,
+    net: &GrowingNet,
+    test_x: &nalgebra::DMatrix<f64>,
+) -> MeasuredReport {
+    use crate::dataset::measured::{held_out_vs_noise, noise_from_repeats, NoiseSource};
+    let s = job.split;
+    let (mut train_idx, test_idx) =
+        crate::dataset::split_indices(job.data.len(), s.test_fraction, s.seed);
+    // The judge's forward fit leaves the outliers out whether or not the
+    // net was fitted without them: both are judged by the same yardstick.
+    train_idx.retain(|&i| !marks[i]);
+    let (train, test) = (job.data.rows(&train_idx), job.data.rows(&test_idx));
+    let mut pred = y_range.denormalise(&net.predict(test_x));
+    if let Some(limits) = job
+        .robot
+        .as_ref()
+        .and_then(|r| crate::command_stage::limits_for(r, 1.0).ok())
+    {
+        pred = crate::command_stage::command_rows(&limits, &pred);
+    }
+    let noise = match (m.noise_mm, noise_from_repeats(&train)) {
+        (Some(n), _) => (n, NoiseSource::Given),
+        (None, Some((sigma, _))) => (sigma * 1e3, NoiseSource::RepeatedRows),
+        (None, None) => (report.noise_sigma_mm, NoiseSource::LocalFit),
+    };
+    let noise_floor = held_out_vs_noise(&train, &report, &test, &pred, noise);
+    MeasuredReport {
+        outliers_rejected: m.reject_outliers,
+        outlier_lines: (0..marks.len())
+            .filter(|&i| marks[i])
+            .map(|i| i + 2)
+            .collect(),
+        outliers: report,
+        noise_floor,
+    }
 }
 
 /// The training log: one CSV row per installed unit.

@@ -1,0 +1,297 @@
+//! Learning from measured rows (issue 30 item 3, docs/design.md §3.1), with
+//! real CLI processes at small size: a measured CSV (no sidecar) trains and
+//! reports its outliers and noise floor; impossible rows are refused naming
+//! line and column; leaving outliers out beats fitting them, judged on
+//! held-out rows against the noiseless truth.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use tendril_tests::{robot, tendril_bin};
+
+fn run_in(dir: &Path, args: &[&str]) -> Output {
+    Command::new(tendril_bin())
+        .args(args)
+        .current_dir(dir)
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("spawn tendril")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn ok(o: &Output, what: &str) {
+    assert!(o.status.success(), "{what} failed: {}", stderr(o));
+}
+
+fn seed_robot() -> PathBuf {
+    robot("seed-4t.toml")
+}
+
+/// `n` rows of the seed robot into `dir/clean.csv`, and the same rows seen
+/// through a tracker (jitter `sigma_mm`, `outliers` of them 5 mm off) into
+/// `dir/noisy.csv` without a sidecar, as measured rows come.
+fn clean_and_noisy(dir: &Path, n: usize, sigma_mm: &str, outliers: &str) {
+    let seed = seed_robot();
+    let base = [
+        "generate",
+        "--robot",
+        seed.to_str().unwrap(),
+        "--samples",
+        &n.to_string(),
+        "--seed",
+        "5",
+        "--quiet",
+    ];
+    let o = run_in(dir, &[&base[..], &["--out", "clean.csv"]].concat());
+    ok(&o, "generate clean");
+    let o = run_in(
+        dir,
+        &[
+            &base[..],
+            &[
+                "--out",
+                "noisy.csv",
+                "--noise-mm",
+                sigma_mm,
+                "--outlier-fraction",
+                outliers,
+                "--outlier-mm",
+                "5",
+            ],
+        ]
+        .concat(),
+    );
+    ok(&o, "generate noisy");
+    std::fs::remove_file(dir.join("noisy.json")).unwrap();
+}
+
+/// Rows (0-based) whose tip in `noisy.csv` is more than 2 mm from
+/// `clean.csv`'s: the injected outliers.
+fn injected_outliers(dir: &Path) -> Vec<usize> {
+    let (h, clean) = tendril_tests::csv(&dir.join("clean.csv"));
+    let (_, noisy) = tendril_tests::csv(&dir.join("noisy.csv"));
+    let px = tendril_tests::col(&h, "px");
+    (0..clean.len())
+        .filter(|&i| {
+            let d: f64 = (0..3)
+                .map(|k| (clean[i][px + k] - noisy[i][px + k]).powi(2))
+                .sum();
+            d.sqrt() > 2e-3
+        })
+        .collect()
+}
+
+fn train(dir: &Path, out: &str, extra: &[&str]) -> Output {
+    let seed = seed_robot();
+    let args = [
+        &[
+            "train",
+            "--data",
+            "noisy.csv",
+            "--robot",
+            seed.to_str().unwrap(),
+            "--out",
+            out,
+            "--max-hidden",
+            "12",
+            "--test-fraction",
+            "0.1",
+            "--threads",
+            "2",
+        ][..],
+        extra,
+    ]
+    .concat();
+    run_in(dir, &args)
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn a_measured_csv_without_a_sidecar_trains_and_finds_its_outliers_and_noise() {
+    let dir = tempfile::tempdir().unwrap();
+    let dir = dir.path();
+    clean_and_noisy(dir, 600, "0.14", "0.02");
+    let injected = injected_outliers(dir);
+    assert_eq!(injected.len(), 12);
+
+    // No sidecar: the robot is not guessed.
+    let o = run_in(
+        dir,
+        &[
+            "train",
+            "--data",
+            "noisy.csv",
+            "--out",
+            "m.tnet",
+            "--max-hidden",
+            "1",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--robot"), "{}", stderr(&o));
+    assert!(!dir.join("m.tnet").exists());
+
+    ok(&train(dir, "m.tnet", &[]), "train on measured rows");
+    let report = json(&dir.join("m.train.json"));
+    let m = &report["measured"];
+    assert_eq!(m["outliers_rejected"], true, "{m}");
+    // Every injected outlier among the training rows is found, and few
+    // honest rows with it (test rows are never examined for the fit).
+    let (_, test) = tendril::dataset::split_indices(600, 0.1, 1);
+    let lines: Vec<usize> = m["outlier_lines"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap() as usize)
+        .collect();
+    for i in injected.iter().filter(|i| !test.contains(i)) {
+        assert!(
+            lines.contains(&(i + 2)),
+            "row {i} (line {}) not found: {lines:?}",
+            i + 2
+        );
+    }
+    assert!(
+        lines.len() <= injected.len() + 3,
+        "{lines:?} vs {injected:?}"
+    );
+    // The jitter estimated from the rows alone (0.14 mm was injected).
+    let f = &m["noise_floor"];
+    let sigma = f["noise_sigma_mm"].as_f64().unwrap();
+    assert!((0.10..0.19).contains(&sigma), "{f}");
+    assert_eq!(f["noise_source"], "local-fit", "{f}");
+    // Judged against measured tips, the jitter dominates: a good net sits
+    // near the floor (below it only by following the jitter it is asked
+    // for), not far above it.
+    let (rms, floor) = (
+        f["held_out_rms_mm"].as_f64().unwrap(),
+        f["floor_rms_mm"].as_f64().unwrap(),
+    );
+    assert!(rms >= 0.5 * floor && rms < 3.0 * floor, "{f}");
+
+    // A given noise is used as given.
+    ok(
+        &train(dir, "g.tnet", &["--noise-mm", "0.2"]),
+        "train with --noise-mm",
+    );
+    let f = &json(&dir.join("g.train.json"))["measured"]["noise_floor"];
+    assert_eq!(f["noise_source"], "given", "{f}");
+    assert_eq!(f["noise_sigma_mm"].as_f64(), Some(0.2), "{f}");
+}
+
+/// `train` and `compare` refuse `text` (a dataset with one bad row),
+/// naming `needles` (line and column).
+fn refused(text: &str, needles: &[&str]) {
+    let dir = tempfile::tempdir().unwrap();
+    let dir = dir.path();
+    std::fs::write(dir.join("bad.csv"), text).unwrap();
+    let seed = seed_robot();
+    let seed = seed.to_str().unwrap();
+    for args in [
+        &[
+            "train", "--data", "bad.csv", "--robot", seed, "--out", "m.tnet",
+        ][..],
+        &[
+            "compare", "--data", "bad.csv", "--robot", seed, "--out", "o",
+        ][..],
+    ] {
+        let o = run_in(dir, args);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {err}");
+        for n in needles {
+            assert!(err.contains(n), "{args:?}: expected {n:?} in {err}");
+        }
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(!dir.join("m.tnet").exists() && !dir.join("o").exists());
+    }
+}
+
+#[test]
+fn impossible_rows_are_refused_naming_line_and_column() {
+    let head = "t0,t1,t2,t3,px,py,pz,qw,qx,qy,qz\n";
+    let good = "1,2,0,0,0.01,0.002,0.39,1,0,0,0\n";
+    let with = |bad: &str| format!("{head}{good}{good}{bad}{good}");
+    refused(
+        &with("1,2,0,0,NaN,0.002,0.39,1,0,0,0\n"),
+        &["line 4", "px", "not finite"],
+    );
+    refused(
+        &with("1,2,0,0,0.01,0.002,0.39,1,0,0\n"),
+        &["line 4", "10 fields", "11"],
+    );
+    refused(
+        &with("1,2,0,0,0.01,0.002,0.39,1,0,0,0,7\n"),
+        &["line 4", "12 fields"],
+    );
+    refused(
+        &with("1,-0.5,0,0,0.01,0.002,0.39,1,0,0,0\n"),
+        &["line 4", "t1", "negative"],
+    );
+    refused(
+        &with("1,2,0,11,0.01,0.002,0.39,1,0,0,0\n"),
+        &["line 4", "t3", "max_tension"],
+    );
+    refused(
+        &with("1,2,0,0,0.01,0.002,0.39,0.7,0,0,0\n"),
+        &["line 4", "qw,qx,qy,qz", "norm"],
+    );
+}
+
+/// Held-out tip error (mean, mm) of `model` against the noiseless rows, on
+/// the robot that made them.
+fn held_out_against_truth(dir: &Path, model: &str) -> f64 {
+    let seed = seed_robot();
+    let out = format!("{model}.truth.json");
+    let o = run_in(
+        dir,
+        &[
+            "evaluate",
+            "--model",
+            model,
+            "--data",
+            "clean.csv",
+            "--robot",
+            seed.to_str().unwrap(),
+            "--rows",
+            "test",
+            "--json-out",
+            &out,
+        ],
+    );
+    ok(&o, "evaluate against the truth");
+    json(&dir.join(out))["metrics"]["position_mm"]["mean"]
+        .as_f64()
+        .unwrap()
+}
+
+#[test]
+fn leaving_outliers_out_beats_fitting_them_on_held_out_truth() {
+    let dir = tempfile::tempdir().unwrap();
+    let dir = dir.path();
+    // 5 % of the rows 5 mm off, little jitter: the outliers dominate what
+    // a plain fit gets wrong.
+    clean_and_noisy(dir, 1000, "0.05", "0.05");
+    ok(
+        &train(dir, "keep.tnet", &["--outliers", "keep"]),
+        "train keeping outliers",
+    );
+    ok(
+        &train(dir, "reject.tnet", &["--outliers", "reject"]),
+        "train rejecting outliers",
+    );
+    let keep = held_out_against_truth(dir, "keep.tnet");
+    let reject = held_out_against_truth(dir, "reject.tnet");
+    eprintln!(
+        "held-out tip mean against the truth: plain fit {keep:.3} mm, robust fit {reject:.3} mm"
+    );
+    assert!(
+        reject < 0.8 * keep,
+        "robust fit {reject} mm vs plain fit {keep} mm (held-out mean, against the truth)"
+    );
+}
