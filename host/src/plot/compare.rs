@@ -34,6 +34,7 @@ fn panel(
     caption: &str,
     y_desc: &str,
     series: &[Series<'_>],
+    format: fn(f64) -> String,
 ) -> DrawResult {
     let n = rows.len();
     let (lo, hi) = log_bounds(
@@ -54,6 +55,7 @@ fn panel(
         .disable_x_mesh()
         .x_labels(0)
         .y_desc(y_desc)
+        .y_label_formatter(&|v| format(*v))
         .label_style(("sans-serif", 15))
         .draw()?;
     let k = series.len() as f64;
@@ -79,7 +81,7 @@ fn panel(
                 .map(|(i, r)| {
                     let x = i as f64 - 0.4 + (si as f64 + 0.1) * width;
                     Text::new(
-                        bar_label(value(r)),
+                        format(value(r)),
                         (x, value(r) * 1.12),
                         ("sans-serif", 12),
                     )
@@ -138,16 +140,18 @@ pub fn draw_comparison(rows: &[LearnerBars], title: &str, out: &Path) -> DrawRes
                 ("train", RGBColor(120, 160, 220), |r| r.train_rmse),
                 ("test", RGBColor(20, 60, 160), |r| r.test_rmse),
             ],
+            bar_label,
         )?;
         panel(
             &bottom,
             rows,
             "task-space tip position error, test split (Cosserat model)",
-            "error [mm] (log)",
+            "error (log; nm, µm, mm as the value needs)",
             &[
                 ("mean", RGBColor(230, 140, 60), |r| r.tip_mean_mm),
                 ("95th percentile", RGBColor(170, 60, 20), |r| r.tip_p95_mm),
             ],
+            crate::units::length_mm,
         )?;
         root.present()?;
         Ok(())
