@@ -1,7 +1,7 @@
 //! A fixed workload of cold and warm statics solves, for instruction counts
 //! under `valgrind --tool=callgrind` (deterministic, unlike wall time on a
 //! shared machine): `cargo build --release -p tendril --example statics_cost`
-//! then `valgrind --tool=callgrind target/release/examples/statics_cost cold|warm|multi|batch|uniform`
+//! then `valgrind --tool=callgrind target/release/examples/statics_cost cold|warm|chain|multi|batch|uniform`
 //! (multi: cold solves of the two-segment tdcr-2seg robot; batch: 600 uniform
 //! rows through the batch fk call, one thread; uniform: the same rows solved
 //! cold one by one, without the batch machinery). Optional further arguments:
@@ -63,6 +63,37 @@ fn main() -> anyhow::Result<()> {
         return Ok(());
     }
     let max = robot.max_tensions();
+    if mode == "chain" {
+        // A chain of warm solves, each 0.1 N from the last on a tendon
+        // picked by a fixed pseudo-random walk (a plant, a path), started
+        // once with dx/dτ: what `Statics::add_tension_sensitivity` is for.
+        let mut tau = vec![4.0, 3.0, 0.0, 0.0];
+        tau.truncate(max.len());
+        tau.resize(max.len(), 0.0);
+        let mut prev = statics.solve(&tau, None)?;
+        let predict = std::env::args().nth(4).as_deref() != Some("no-predict");
+        if predict {
+            statics.add_tension_sensitivity(&mut prev);
+        }
+        let mut state = 12345u64;
+        let (mut integrations, solves) = (0.0, 200);
+        for _ in 0..solves {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let i = (state >> 33) as usize % tau.len();
+            let up = (state >> 40) & 1 == 1;
+            tau[i] = (tau[i] + if up { 0.1 } else { -0.1 }).clamp(0.0, max[i]);
+            let sol = statics.solve(&tau, Some(&prev.warm))?;
+            integrations += sol.integrations;
+            prev = sol;
+        }
+        println!(
+            "chain: {solves} solves, {:.2} integrations per solve",
+            integrations / solves as f64
+        );
+        return Ok(());
+    }
     let cases = Sampler::Adjacent.draw(100, &max, 3);
     let (mut solves, mut integrations) = (0usize, 0.0);
     for t in &cases {

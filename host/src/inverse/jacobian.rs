@@ -15,7 +15,7 @@ use nalgebra::{DMatrix, Matrix3, Vector3, Vector6};
 
 use crate::statics::rod::{Rod, RodState};
 use crate::statics::tangent::{integrate_with_sensitivity, FullSensitivity};
-use crate::statics::SingularSystem;
+use crate::statics::{SingularSystem, TensionSensitivity};
 
 /// Tip pose and its Jacobian with respect to the tensions at one solution.
 #[derive(Clone, Debug)]
@@ -26,6 +26,10 @@ pub struct TipJacobian {
     pub rotation: Matrix3<f64>,
     /// 6 × tendons: rows 0–2 ∂p/∂τ (m/N), rows 3–5 ∂θ/∂τ (rad/N, base frame).
     pub jacobian: DMatrix<f64>,
+    /// dx/dτ of the shooting unknowns, which the same pass gives: the
+    /// statics warm start's first-order prediction
+    /// ([`crate::statics::WarmStart::set_tension_sensitivity`]).
+    pub dx_dtau: TensionSensitivity,
 }
 
 /// Why the Jacobian could not be formed.
@@ -62,9 +66,11 @@ pub fn tip_jacobian(
     let lu = r_x.lu();
     let tendons = t.columns - 6;
     let mut jacobian = DMatrix::zeros(6, tendons);
+    let mut dx_dtau = TensionSensitivity::zeros();
     for i in 0..tendons {
         let r_tau: Vector6<f64> = r.column(6 + i).into();
         let dx = lu.solve(&(-r_tau)).ok_or(JacobianError::SingularShooting)?;
+        dx_dtau.set_column(i, &dx);
         let mut dp = t.p[6 + i];
         let mut d_rot = t.rot[6 + i];
         for (k, dxk) in dx.iter().enumerate() {
@@ -88,5 +94,6 @@ pub fn tip_jacobian(
         position: tip.p,
         rotation: tip.rot,
         jacobian,
+        dx_dtau,
     })
 }

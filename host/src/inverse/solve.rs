@@ -309,7 +309,18 @@ impl ExactIk {
     ) -> Result<DMatrix<f64>, InverseError> {
         let mut rod = self.rod.clone();
         rod.set_tensions(tensions);
-        Ok(tip_jacobian(&rod, &warm.x, self.settings.statics.steps)?.jacobian)
+        Ok(self.tip_jacobian_full(tensions, warm)?.jacobian)
+    }
+
+    /// [`ExactIk::tip_jacobian_at`] with the pass's dx/dτ.
+    fn tip_jacobian_full(
+        &self,
+        tensions: &[f64],
+        warm: &WarmStart,
+    ) -> Result<super::TipJacobian, InverseError> {
+        let mut rod = self.rod.clone();
+        rod.set_tensions(tensions);
+        Ok(tip_jacobian(&rod, &warm.x, self.settings.statics.steps)?)
     }
 
     /// Broyden's rank-one update of `from`'s ∂e/∂τ for `to` when the step
@@ -361,7 +372,11 @@ impl ExactIk {
         p: &'a mut Point,
     ) -> Result<&'a DMatrix<f64>, InverseError> {
         if p.jac.is_none() {
-            let full = self.tip_jacobian_at(&p.tau, &p.sol.warm)?;
+            let pass = self.tip_jacobian_full(&p.tau, &p.sol.warm)?;
+            // The pass's dx/dτ lets every statics solve started from this
+            // point predict its unknowns (`docs/design.md` §2, "Solve").
+            p.sol.warm.set_tension_sensitivity(pass.dx_dtau);
+            let full = pass.jacobian;
             p.jac = Some(match target {
                 Target::Position(_) => full.rows(0, 3).into_owned(),
                 Target::Lateral(_) => full.rows(0, 2).into_owned(),

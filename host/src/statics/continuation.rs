@@ -184,7 +184,7 @@ impl Statics {
             let predicted = slope * (target - lambda);
             let x_pred = x + predicted;
             let corrected = problem
-                .newton(x_pred, Some(pass.jacobian), &settings)
+                .newton(x_pred, Some(pass.jacobian), false, &settings)
                 .map_err(|(_, it, int)| (it, int));
             let accepted = match corrected {
                 Ok(ok) => {

@@ -24,7 +24,10 @@ pub mod tangent;
 
 pub use friction::{Friction, FrictionError, FrictionState, TensionProfile};
 pub use rod::SingularSystem;
-pub use shoot::{RodShape, Solution, SolveError, SolverSettings, Statics, WarmStart, MAX_STEPS};
+pub use shoot::{
+    RodShape, Solution, SolveError, SolverSettings, Statics, TensionSensitivity, WarmStart,
+    MAX_STEPS,
+};
 
 #[cfg(test)]
 mod friction_tests;

@@ -6,22 +6,24 @@
 //! one pass gives residual and Jacobian, and Newton converges quadratically.
 //! A Jacobian that keeps contracting the residual fast is reused (chord
 //! steps, one plain pass each), and a warm start carries the previous
-//! solution's and starts from its unknowns shifted by the change of the
-//! analytic guess, so a nearby solve costs a few plain passes.
+//! solution's together with dx/dτ, the shooting unknowns' sensitivity to the
+//! tensions: a nearby solve starts from the unknowns predicted to first
+//! order, x + (dx/dτ) Δτ, and corrects them with the carried Jacobian, so it
+//! costs about three plain passes.
 //! (The `levenberg-marquardt` crate was not used: it recomputes a full
 //! finite-difference Jacobian every iteration, the cost this avoids.)
 
 use std::sync::Arc;
 
-use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
+use nalgebra::{Matrix3, Matrix6, SMatrix, Vector3, Vector6};
 
 use super::friction::{FrictionError, TensionProfile};
 
 use super::integrate::{integrate, integrate_sampled, integrate_sampled_states};
 use super::pose::{orthonormalise, quaternion_wxyz};
 use super::rod::{Rod, RodState, SingularSystem};
-use super::tangent::{integrate_with_sensitivity, ShootingSensitivity};
-use crate::robot::{Robot, TensionError};
+use super::tangent::{integrate_with_sensitivity, FullSensitivity, ShootingSensitivity};
+use crate::robot::{Robot, TensionError, MAX_TENDONS};
 
 /// Most RK4 steps over the length a solve accepts (`tendril fk --steps`):
 /// 6000 times the default, far past where the discretisation error meets
@@ -50,6 +52,10 @@ impl Default for SolverSettings {
     }
 }
 
+/// dx/dτ: how the shooting unknowns x = [n(0); u(0)] of a solution move
+/// with the tensions, one column per tendon (the unused columns zero).
+pub type TensionSensitivity = SMatrix<f64, 6, MAX_TENDONS>;
+
 /// What a previous solve leaves for the next nearby one.
 #[derive(Clone, Debug, PartialEq)]
 pub struct WarmStart {
@@ -58,10 +64,56 @@ pub struct WarmStart {
     /// Residual Jacobian at or near `x` (the last one Newton used).
     pub jacobian: Matrix6<f64>,
     /// The analytic guess ([`Rod::initial_guess`]) for the tensions and tip
-    /// load solved: a warm solve starts from `x` moved by how much the
-    /// guess moves, which carries most of the tensions' first-order effect
-    /// at no cost.
+    /// load solved: without `dx_dtau`, or when the tip load changed, a warm
+    /// solve starts from `x` moved by how much the guess moves.
     guess: Vector6<f64>,
+    /// The tensions solved for (the first `tendons` entries), N.
+    tensions: [f64; MAX_TENDONS],
+    tendons: usize,
+    /// The tip force and moment solved for (base frame).
+    load: [Vector3<f64>; 2],
+    /// dx/dτ near `x`: the first-order prediction of the next solve's
+    /// unknowns, x + (dx/dτ) Δτ. `None` until a warm solve (or
+    /// [`WarmStart::set_tension_sensitivity`]) provides it.
+    dx_dtau: Option<TensionSensitivity>,
+}
+
+impl WarmStart {
+    /// The tensions this warm start was solved for, N.
+    pub fn tensions(&self) -> &[f64] {
+        &self.tensions[..self.tendons]
+    }
+
+    /// dx/dτ carried for the next solve's prediction, if any.
+    pub fn tension_sensitivity(&self) -> Option<&TensionSensitivity> {
+        self.dx_dtau.as_ref()
+    }
+
+    /// Carries `dx_dtau` (e.g. from the tip Jacobian's pass, which has it
+    /// for free: `inverse::jacobian`) for the next solve's prediction.
+    pub fn set_tension_sensitivity(&mut self, dx_dtau: TensionSensitivity) {
+        if dx_dtau.iter().all(|v| v.is_finite()) {
+            self.dx_dtau = Some(dx_dtau);
+        }
+    }
+
+    /// The change of tensions from this warm start to `tensions`, when the
+    /// tip load is the same (`None` otherwise: the prediction covers only
+    /// the tensions).
+    fn tension_step(
+        &self,
+        tensions: &[f64],
+        load: &[Vector3<f64>; 2],
+    ) -> Option<SMatrix<f64, MAX_TENDONS, 1>> {
+        if tensions.len() != self.tendons || *load != self.load {
+            return None;
+        }
+        let mut d = SMatrix::<f64, MAX_TENDONS, 1>::zeros();
+        for (i, t) in tensions.iter().enumerate() {
+            d[i] = t - self.tensions[i];
+        }
+        Some(d)
+    }
 }
 
 /// A converged statics solution.
@@ -270,8 +322,38 @@ impl Statics {
             w.x.iter().all(|v| v.is_finite()) && w.jacobian.iter().all(|v| v.is_finite())
         });
         let guess = rod.initial_guess(&tip_force, &tip_moment);
+        let load = [tip_force, tip_moment];
+        // dx/dτ for the next solve: this solve's prediction, Broyden-updated
+        // with the step it turned out to be.
+        let mut carried = None;
         let result = match warm_ok {
-            Some(w) => problem.newton(w.x + (guess - w.guess), Some(w.jacobian), &self.settings),
+            Some(w) => match (w.dx_dtau, w.tension_step(tensions, &load)) {
+                // First-order prediction x + (dx/dτ) Δτ, corrected by chord
+                // steps with the carried Jacobian.
+                (Some(s), Some(dtau)) => {
+                    let out =
+                        problem.newton(w.x + s * dtau, Some(w.jacobian), true, &self.settings);
+                    if let Ok(ok) = &out {
+                        // Broyden's update of dx/dτ: exact along the step
+                        // just taken, for the next solve of a chain.
+                        let n2 = dtau.norm_squared();
+                        carried = Some(if n2 > 0.0 {
+                            s + (ok.0 - w.x - s * dtau) * dtau.transpose() / n2
+                        } else {
+                            s
+                        });
+                    }
+                    out
+                }
+                // Without dx/dτ (or with another tip load): x moved by the
+                // change of the analytic guess.
+                _ => problem.newton(
+                    w.x + (guess - w.guess),
+                    Some(w.jacobian),
+                    false,
+                    &self.settings,
+                ),
+            },
             None => Err((f64::INFINITY, 0, 0.0)),
         };
         // A warm start that fails (a far neighbour) falls back to a cold start
@@ -279,7 +361,7 @@ impl Statics {
         let (x, tip, jac, res, iterations, integrations) = match result {
             Ok(ok) => ok,
             Err((_, it0, int0)) => {
-                match problem.newton(guess, None, &self.settings) {
+                match problem.newton(guess, None, false, &self.settings) {
                     Ok((x, tip, j, r, it, int)) => (x, tip, j, r, it + it0, int + int0),
                     Err((residual, it, _)) => {
                         // A singular system at the start point is the cause
@@ -299,6 +381,10 @@ impl Statics {
             tensions,
         );
         solution.profile = rod.profile().cloned();
+        solution.warm.load = load;
+        if let Some(s) = carried.filter(|s| s.iter().all(|v| v.is_finite())) {
+            solution.warm.dx_dtau = Some(s);
+        }
         Ok(solution)
     }
 
@@ -329,7 +415,19 @@ impl Statics {
             residual,
             iterations,
             integrations,
-            warm: WarmStart { x, jacobian, guess },
+            warm: WarmStart {
+                x,
+                jacobian,
+                guess,
+                tensions: {
+                    let mut t = [0.0; MAX_TENDONS];
+                    t[..tensions.len()].copy_from_slice(tensions);
+                    t
+                },
+                tendons: tensions.len(),
+                load: [Vector3::zeros(); 2],
+                dx_dtau: None,
+            },
             tensions: tensions.to_vec(),
             profile: None,
         }
@@ -378,6 +476,35 @@ impl Statics {
         let mut rod = self.rod.clone();
         rod.set_tensions(tensions);
         integrate(&rod, base_state(&rod, x), steps)
+    }
+}
+
+impl Statics {
+    /// Gives `sol`'s warm start dx/dτ, the first-order prediction of a
+    /// nearby solve's unknowns (`docs/design.md` §2, "Solve"), from one
+    /// coarse-grid pass with the tension columns (≈ 0.9 plain passes on the
+    /// default robot). A warm solve from it starts at x + (dx/dτ) Δτ and
+    /// hands dx/dτ on, Broyden-updated with the step it took, so a chain of
+    /// nearby solves (a plant, a path) pays this once. Without it a warm
+    /// solve starts from the analytic guess's shift. A pass that meets a
+    /// singular system leaves `sol` as it was.
+    pub fn add_tension_sensitivity(&self, sol: &mut Solution) {
+        let rod = self.solution_rod(sol);
+        let [f_ext, m_ext] = sol.warm.load;
+        let problem = Shooting {
+            rod: &rod,
+            steps: self.settings.steps,
+            jacobian_steps: jacobian_steps(self.settings.steps),
+            f_ext,
+            m_ext,
+            track_rotation: rod.f_e != Vector3::zeros()
+                || f_ext != Vector3::zeros()
+                || m_ext != Vector3::zeros(),
+        };
+        if let Some((s, _)) = problem.tension_sensitivity(&sol.warm.x) {
+            sol.warm.set_tension_sensitivity(s);
+            sol.integrations += problem.tension_sensitivity_cost();
+        }
     }
 }
 
@@ -439,6 +566,9 @@ const MAX_HALVINGS: usize = 8;
 /// next step gets a fresh Jacobian (a coarse pass with sensitivities, cheaper
 /// than the several chord steps a weaker contraction would need).
 const CHORD_CONTRACTION: f64 = 0.01;
+/// [`CHORD_CONTRACTION`] for a solve started from a first-order prediction
+/// with a carried Jacobian (`Shooting::newton`'s `trust`).
+const TRUSTED_CHORD_CONTRACTION: f64 = 0.1;
 /// How much a step with a warm start's Jacobian cuts the residual when the
 /// tensions moved (measured 0.01–0.07 for a 0.1 N change on the default
 /// robot). A warm start whose residual this would not bring under the
@@ -485,6 +615,46 @@ impl Shooting<'_> {
         )
     }
 
+    /// dx/dτ = −R_x⁻¹ R_τ (implicit function theorem through r(x, τ) = 0)
+    /// and R_x, both from one coarse-grid pass of the rod with the six x
+    /// columns and one column per tendon, at `x`. `None` when that pass
+    /// meets a singular system or R_x is singular.
+    pub(super) fn tension_sensitivity(
+        &self,
+        x: &Vector6<f64>,
+    ) -> Option<(TensionSensitivity, Matrix6<f64>)> {
+        let start = FullSensitivity::at_base(
+            &self.rod.kse,
+            self.rod.n_tendons,
+            self.track_rotation,
+            false,
+        );
+        let (tip, t) = integrate_with_sensitivity(
+            self.rod,
+            base_state(self.rod, x),
+            self.jacobian_steps,
+            start,
+        )
+        .ok()?;
+        let r = self
+            .rod
+            .tip_residual_jacobian(&tip, &t, &self.f_ext, &self.m_ext);
+        let r_x: Matrix6<f64> = r.fixed_columns::<6>(0).into_owned();
+        let lu = r_x.lu();
+        let mut s = TensionSensitivity::zeros();
+        for i in 0..self.rod.n_tendons {
+            let r_tau: Vector6<f64> = r.column(6 + i).into();
+            s.set_column(i, &lu.solve(&(-r_tau))?);
+        }
+        s.iter().all(|v| v.is_finite()).then_some((s, r_x))
+    }
+
+    /// What a [`Shooting::tension_sensitivity`] pass costs in plain passes:
+    /// a coarse Jacobian pass with (6 + tendons)/6 times the columns.
+    pub(super) fn tension_sensitivity_cost(&self) -> f64 {
+        self.jacobian_cost(Grid::Coarse) * (6 + self.rod.n_tendons) as f64 / 6.0
+    }
+
     /// What a [`Shooting::jacobian`] pass costs in plain passes.
     fn jacobian_cost(&self, grid: Grid) -> f64 {
         match grid {
@@ -499,21 +669,36 @@ impl Shooting<'_> {
     /// not; backtracking when a step does not reduce the residual. A fresh
     /// coarse Jacobian that gives no descent at all is replaced by the fine
     /// grid's before the solve gives up. `j0`: a Jacobian from a nearby
-    /// solution (warm start), used while it contracts.
+    /// solution (warm start), used while it contracts; `trust`: use it even
+    /// when one step would not reach the tolerance (the start is a
+    /// first-order prediction, whose residual a few chord steps remove more
+    /// cheaply than a fresh Jacobian and a step).
     pub(super) fn newton(
         &self,
         x0: Vector6<f64>,
         j0: Option<Matrix6<f64>>,
+        trust: bool,
         settings: &SolverSettings,
     ) -> Result<NewtonOk, NewtonErr> {
         let mut x = x0;
+        // From a first-order prediction the residual is small and the
+        // carried Jacobian contracts it ~100-fold per step (measured 0.005–0.02
+        // on the default robot, 0.1 N changes): keep it while it contracts
+        // at least 10-fold, cheaper than a fresh one.
+        let chord_contraction = if trust {
+            TRUSTED_CHORD_CONTRACTION
+        } else {
+            CHORD_CONTRACTION
+        };
         let (mut r, mut tip) = self.residual(&x);
         let mut integrations = 1.0;
         let mut norm = r.norm();
         // The Jacobian in use and, when it was computed at the current x and
         // not updated since, on which grid.
         let (mut jac, mut fresh) = match j0 {
-            Some(j) if norm * STALE_CONTRACTION < settings.tol || !norm.is_finite() => (j, None),
+            Some(j) if trust || norm * STALE_CONTRACTION < settings.tol || !norm.is_finite() => {
+                (j, None)
+            }
             _ => {
                 integrations += self.jacobian_cost(Grid::Coarse);
                 match self.jacobian(&x, Grid::Coarse) {
@@ -562,7 +747,7 @@ impl Shooting<'_> {
                         // A full step that cut the residual well keeps its
                         // Jacobian for the next (chord) step; otherwise the
                         // next step gets a fresh one.
-                        if (alpha < 1.0 || contraction > CHORD_CONTRACTION) && norm >= settings.tol
+                        if (alpha < 1.0 || contraction > chord_contraction) && norm >= settings.tol
                         {
                             refresh = Some(Grid::Coarse);
                         }

@@ -665,3 +665,46 @@ fn existing_robots_give_the_poses_they_gave_before_anchors() {
         assert!(worst < 1e-9, "case {k}: {pose:?} vs {before:?} ({worst:e})");
     }
 }
+
+/// A chain of warm solves predicted by dx/dτ (`Statics::add_tension_sensitivity`)
+/// keeps the fine grid's answer: the residual recomputed from the unknowns
+/// by a fresh fine pass is within the tolerance, and the tip agrees with a
+/// cold solve to the tolerance times the rod's tip compliance (≈ 0.2 m/N on
+/// this robot, so 1e-9 m is a loose bound); and the prediction saves passes.
+#[test]
+fn a_predicted_warm_chain_keeps_the_fine_grids_answer_for_fewer_passes() {
+    let st = super::repo_statics("seed-4t.toml");
+    let start = [4.0, 3.0, 0.0, 0.0];
+    let mut predicted = st.solve(&start, None).unwrap();
+    let mut plain = predicted.clone();
+    st.add_tension_sensitivity(&mut predicted);
+    assert!(predicted.warm.tension_sensitivity().is_some());
+    let (mut with, mut without) = (0.0, 0.0);
+    let mut tau = start;
+    let zero = Vector3::zeros();
+    for k in 0..8 {
+        tau[k % 3] += if k % 2 == 0 { 0.1 } else { 0.05 };
+        let warm = st.solve(&tau, Some(&predicted.warm)).unwrap();
+        let cold = st.solve(&tau, None).unwrap();
+        let tip = st
+            .tip_state(&tau, &warm.warm.x, st.settings().steps)
+            .unwrap();
+        let residual = st.rod_for(&tau).tip_residual(&tip, &zero, &zero).norm();
+        assert!(
+            residual < st.settings().tol,
+            "step {k}: residual {residual:e}"
+        );
+        let gap = (warm.position - cold.position).norm();
+        assert!(gap < 1e-9, "step {k}: tip {gap:e} m from the cold solve");
+        assert!(warm.warm.tension_sensitivity().is_some());
+        with += warm.integrations;
+        predicted = warm;
+        let p = st.solve(&tau, Some(&plain.warm)).unwrap();
+        without += p.integrations;
+        plain = p;
+    }
+    assert!(
+        with < without,
+        "{with} passes with dx/dτ, {without} without"
+    );
+}
