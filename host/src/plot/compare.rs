@@ -80,11 +80,7 @@ fn panel(
                 .filter(|(_, r)| shown(value(r)))
                 .map(|(i, r)| {
                     let x = i as f64 - 0.4 + (si as f64 + 0.1) * width;
-                    Text::new(
-                        format(value(r)),
-                        (x, value(r) * 1.12),
-                        ("sans-serif", 12),
-                    )
+                    Text::new(format(value(r)), (x, value(r) * 1.12), ("sans-serif", 12))
                 }),
         )?;
     }
