@@ -305,6 +305,15 @@ impl Lifter {
     /// their [`Lifter::height_range`]s), so a circle at that height is
     /// reachable with the most room above and below.
     pub fn mid_height(&self, center: [f64; 2], radius: f64) -> Result<f64, PlanError> {
+        let (lo, hi) = self.height_band(center, radius)?;
+        Ok(0.5 * (lo + hi))
+    }
+
+    /// The heights (m) a circle of `radius` (m) about lateral `center` (m)
+    /// can be tracked at: the intersection of the [`Lifter::height_range`]s
+    /// of [`HEIGHT_SAMPLES`] points around it. Paths that move in height
+    /// about [`Lifter::mid_height`] stay inside it.
+    pub fn height_band(&self, center: [f64; 2], radius: f64) -> Result<(f64, f64), PlanError> {
         let no_height = || PlanError::NoHeight {
             center_m: center.to_vec(),
             radius_mm: radius * 1e3,
@@ -320,7 +329,7 @@ impl Lifter {
         if lo > hi {
             return Err(no_height());
         }
-        Ok(0.5 * (lo + hi))
+        Ok((lo, hi))
     }
 }
 

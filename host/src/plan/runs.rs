@@ -27,7 +27,9 @@ pub struct LoopRun {
 /// - k = 3 (a volume): a 20 mm circle (radius 10 mm) at the robot's mid
 ///   height ([`Lifter::mid_height`]), 3-D steps of ± 8 mm sideways and
 ///   ± 2 mm in height about it, and a helix of radius 10 mm rising 4 mm
-///   about it in one turn and back;
+///   about it in one turn and back; where the reachable band of heights
+///   ([`Lifter::height_band`]) is narrower than 8 mm, the height moves
+///   shrink to a quarter of it;
 /// - k = 1 (a curve): a sweep along the axis between where 10 % and 50 %
 ///   of every tendon's maximum tension puts the tip.
 ///
@@ -67,7 +69,12 @@ pub fn default_loop_runs(statics: &Statics) -> Result<Vec<LoopRun>, PlanError> {
             },
         ],
         3 => {
-            let z = lifter.mid_height([0.0, 0.0], 0.01)?;
+            let (lo, hi) = lifter.height_band([0.0, 0.0], 0.01)?;
+            let z = 0.5 * (lo + hi);
+            // ± 2 mm in height, or a quarter of the band where it is
+            // narrower (a long robot resolved by least tension reaches only
+            // a thin band just under its straight height off the axis).
+            let dz = (0.002f64).min(0.25 * (hi - lo));
             vec![
                 LoopRun {
                     name: "circle",
@@ -83,14 +90,15 @@ pub fn default_loop_runs(statics: &Statics) -> Result<Vec<LoopRun>, PlanError> {
                 LoopRun {
                     name: "steps",
                     label: format!(
-                        "3-D steps, ± 8 mm sideways and ± 2 mm about {:.1} mm height",
+                        "3-D steps, ± 8 mm sideways and ± {:.1} mm about {:.1} mm height",
+                        mm(dz),
                         mm(z)
                     ),
                     shape: PathShape::Steps {
                         targets_m: vec![
                             vec![0.008, 0.0, z],
-                            vec![0.0, 0.008, z + 0.002],
-                            vec![-0.008, 0.0, z - 0.002],
+                            vec![0.0, 0.008, z + dz],
+                            vec![-0.008, 0.0, z - dz],
                             vec![0.0, -0.008, z],
                         ],
                         dwell_s: 2.0,
@@ -102,14 +110,14 @@ pub fn default_loop_runs(statics: &Statics) -> Result<Vec<LoopRun>, PlanError> {
                     name: "helix",
                     label: format!(
                         "helix of radius 10 mm between {:.1} and {:.1} mm height, 0.2 Hz",
-                        mm(z - 0.002),
-                        mm(z + 0.002)
+                        mm(z - dz),
+                        mm(z + dz)
                     ),
                     shape: PathShape::Helix {
                         center_m: [0.0, 0.0],
                         radius_m: 0.01,
                         freq_hz: 0.2,
-                        heights_m: [z - 0.002, z + 0.002],
+                        heights_m: [z - dz, z + dz],
                         turns: 1.0,
                     },
                     duration_s: 10.0,

@@ -347,7 +347,14 @@ impl PlantModel {
                 .or_else(|_| self.statics.solve(&self.tendon, None)),
         };
         match sol {
-            Ok(sol) => {
+            Ok(mut sol) => {
+                // The plant's solves form a chain of nearby tensions: pay
+                // dx/dτ once (after the first solve, or a cold fallback), and
+                // every warm solve after it starts from the prediction and
+                // hands dx/dτ on (docs/design.md §2, "Solve").
+                if self.friction.is_none() && sol.warm.tension_sensitivity().is_none() {
+                    self.statics.add_tension_sensitivity(&mut sol);
+                }
                 self.pose = sol.pose();
                 self.warm = Some(sol.warm.clone());
                 self.solution = Some(sol);
@@ -512,6 +519,31 @@ mod tests {
         let s = Statics::new(&robot(), SolverSettings::default());
         let sol = s.solve(m.tensions(), None).unwrap();
         assert!((sol.position - nalgebra::Vector3::from_row_slice(&m.pose()[..3])).norm() < 1e-6);
+    }
+
+    #[test]
+    fn a_chain_of_plant_steps_predicts_from_dx_dtau_and_keeps_the_statics_answer() {
+        // The plant's warm starts carry dx/dτ after its first solve; every
+        // later pose is still the statics of its tensions (to the solver's
+        // tolerance times the tip compliance, far below 1e-9 m here).
+        let params = PlantParams {
+            noise_m: 0.0,
+            noise_quat: 0.0,
+            ..PlantParams::default()
+        };
+        let mut m = PlantModel::new(&robot(), params).unwrap();
+        let s = Statics::new(&robot(), SolverSettings::default());
+        m.command(&[3.0, 1.0, 0.0, 0.0]);
+        for k in 0..200 {
+            assert!(m.step(0.001));
+            let warm = m.warm.as_ref().unwrap();
+            assert!(warm.tension_sensitivity().is_some(), "step {k}");
+            if k % 40 == 39 {
+                let sol = s.solve(m.tensions(), None).unwrap();
+                let err = (sol.position - nalgebra::Vector3::from_row_slice(&m.pose()[..3])).norm();
+                assert!(err < 1e-9, "step {k}: {err:e} m from a cold solve");
+            }
+        }
     }
 
     #[test]
