@@ -75,7 +75,10 @@ pub struct WarmStart {
     /// dx/dτ near `x`: the first-order prediction of the next solve's
     /// unknowns, x + (dx/dτ) Δτ. `None` until a warm solve (or
     /// [`WarmStart::set_tension_sensitivity`]) provides it.
-    dx_dtau: Option<TensionSensitivity>,
+    // Boxed: 432 bytes that most solutions (a dataset's, a batch's) never
+    // carry would otherwise sit in every `Solution` (`fk --input` keeps a
+    // chunk of 4,096 of them).
+    dx_dtau: Option<Box<TensionSensitivity>>,
 }
 
 impl WarmStart {
@@ -86,14 +89,14 @@ impl WarmStart {
 
     /// dx/dτ carried for the next solve's prediction, if any.
     pub fn tension_sensitivity(&self) -> Option<&TensionSensitivity> {
-        self.dx_dtau.as_ref()
+        self.dx_dtau.as_deref()
     }
 
     /// Carries `dx_dtau` (e.g. from the tip Jacobian's pass, which has it
     /// for free: `inverse::jacobian`) for the next solve's prediction.
     pub fn set_tension_sensitivity(&mut self, dx_dtau: TensionSensitivity) {
         if dx_dtau.iter().all(|v| v.is_finite()) {
-            self.dx_dtau = Some(dx_dtau);
+            self.dx_dtau = Some(Box::new(dx_dtau));
         }
     }
 
@@ -327,7 +330,7 @@ impl Statics {
         // with the step it turned out to be.
         let mut carried = None;
         let result = match warm_ok {
-            Some(w) => match (w.dx_dtau, w.tension_step(tensions, &load)) {
+            Some(w) => match (w.dx_dtau.as_deref(), w.tension_step(tensions, &load)) {
                 // First-order prediction x + (dx/dτ) Δτ, corrected by chord
                 // steps with the carried Jacobian.
                 (Some(s), Some(dtau)) => {
@@ -340,7 +343,7 @@ impl Statics {
                         carried = Some(if n2 > 0.0 {
                             s + (ok.0 - w.x - s * dtau) * dtau.transpose() / n2
                         } else {
-                            s
+                            *s
                         });
                     }
                     out
@@ -383,7 +386,7 @@ impl Statics {
         solution.profile = rod.profile().cloned();
         solution.warm.load = load;
         if let Some(s) = carried.filter(|s| s.iter().all(|v| v.is_finite())) {
-            solution.warm.dx_dtau = Some(s);
+            solution.warm.dx_dtau = Some(Box::new(s));
         }
         Ok(solution)
     }
