@@ -37,6 +37,8 @@ mod tests;
 mod tests_general;
 #[cfg(test)]
 mod tests_stability;
+#[cfg(test)]
+mod tests_three_segment;
 
 /// [`crate::robot::repo_robot`]'s statics with the default solver settings:
 /// the repository's robot files for tests, benches and examples.

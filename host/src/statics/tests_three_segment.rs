@@ -5,8 +5,9 @@
 //! evenly only shortens the rod up to its anchor.
 
 use nalgebra::Vector3;
-use tendril::robot::repo_robot;
-use tendril::statics::{SolverSettings, Statics};
+
+use super::{SolverSettings, Statics};
+use crate::robot::repo_robot;
 
 fn statics(steps: usize) -> Statics {
     Statics::new(
