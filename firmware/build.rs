@@ -68,10 +68,11 @@ fn default_net_source(path: &Path) -> Result<String, String> {
         "/// Path of the `.tnet` file [`DEFAULT_NET`] was generated from at build time\n\
          /// (`TENDRIL_FW_NET`, or `firmware/vectors/default.tnet`).\n\
          pub const DEFAULT_NET_FILE: &str = {display:?};\n\n\
-         /// CRC-32 of that file's bytes: how the chip names its built-in net\n\
-         /// to a host (the link's Hello), which sends its own net when they differ.\n\
+         /// `tendril_shared::tnet::net_hash` of that file (its CRC field): how the\n\
+         /// chip names its built-in net to a host (the link's Hello), which\n\
+         /// sends its own net when they differ.\n\
          pub const DEFAULT_NET_CRC: u32 = {:#010x};\n",
-        tendril_shared::crc32::crc32(&bytes)
+        tendril_shared::tnet::net_hash(&bytes)
     );
     let _ = writeln!(
         src,

@@ -610,3 +610,19 @@ fn a_decode_over_any_earlier_net_equals_a_fresh_decode() {
         }
     }
 }
+
+/// The link's net hash names a net: different nets differ, and it is the
+/// file's own CRC field; the CRC-32 of a whole file (its CRC appended) is
+/// the same residue for every valid file and would name none.
+#[test]
+fn net_hash_tells_nets_apart_where_a_whole_file_crc_cannot() {
+    let a = Owned::new(7, 3, 4).blob();
+    let b = Owned::new(7, 4, 4).blob();
+    assert_ne!(a, b);
+    assert_ne!(tnet::net_hash(&a), tnet::net_hash(&b));
+    let field = |f: &[u8]| u32::from_le_bytes(f[f.len() - 4..].try_into().unwrap());
+    assert_eq!(tnet::net_hash(&a), field(&a));
+    assert_eq!(tnet::net_hash(&b), field(&b));
+    assert_eq!(crc32(&a), 0x2144_DF1C);
+    assert_eq!(crc32(&b), 0x2144_DF1C);
+}

@@ -282,6 +282,15 @@ impl<'a> Reader<'a> {
     }
 }
 
+/// How a controller names a `.tnet` file to a host (the link's Hello,
+/// docs/design.md §5.6): the CRC-32 of its bytes before the trailing CRC,
+/// i.e. the file's own CRC field. Not the CRC-32 of the whole file: with
+/// the file's CRC appended, that is the CRC's residue, 0x2144DF1C, for
+/// every valid file, and would name no net at all.
+pub fn net_hash(bytes: &[u8]) -> u32 {
+    crate::crc32::crc32(bytes.get(..bytes.len().saturating_sub(4)).unwrap_or(bytes))
+}
+
 /// Parse and check the header (magic, version, shape, activations) of a
 /// `.tnet` byte string, without touching the weights: what a loader uses to
 /// report a file's shape or pick a capacity.

@@ -384,7 +384,7 @@ pub fn run(
     };
     let link = McuLink::connect(&socket, Duration::from_secs(10)).map_err(other)?;
     let mut chip = ChipLink::open(link, &setup).map_err(other)?;
-    let model_hash = tendril_shared::crc32::crc32(model);
+    let model_hash = tendril_shared::tnet::net_hash(model);
     let mut update: Option<(Vec<u8>, usize, u64)> =
         (chip.hello.net_hash != model_hash).then(|| (model.to_vec(), 0, 0));
 
