@@ -70,6 +70,9 @@ fn host_inference(c: &mut Criterion, ranges: &Ranges) {
     c.bench_function("host_infer_64_single/host_net", |b| {
         b.iter(|| fast.infer_one(std::hint::black_box(&pose), &mut one))
     });
+    c.bench_function("host_infer_64_single/host_net_relaxed", |b| {
+        b.iter(|| fast.infer_one_relaxed(std::hint::black_box(&pose), &mut one))
+    });
     let mut g = c.benchmark_group("host_infer_64_batch_600");
     g.throughput(Throughput::Elements(rows as u64));
     let mut y = vec![0.0f32; rows * 4];
