@@ -7,21 +7,18 @@
 //! `cargo bench -p tendril --bench dynamics`
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use nalgebra::{Vector2, Vector3};
+use nalgebra::Vector3;
 use tendril::dynamics::{Damping, Dynamics, DynamicsSettings};
-use tendril::plan::bend_tensions;
 use tendril::robot::repo_robot;
 use tendril::statics::{SolverSettings, Statics};
+
+#[path = "workloads/circle.rs"]
+mod workloads;
 
 fn dynamics_step(c: &mut Criterion) {
     let robot = repo_robot("seed-4t.toml");
     let statics = Statics::new(&robot, SolverSettings::default());
-    let path: Vec<Vec<f64>> = (0..5000)
-        .map(|k| {
-            let a = std::f64::consts::TAU * 0.2 * k as f64 * 1e-3;
-            bend_tensions(&statics, &Vector2::new(-3.0 + 1.5 * a.cos(), 1.5 * a.sin()))
-        })
-        .collect();
+    let path = workloads::circle_tensions(&statics, 5000);
     let mut group = c.benchmark_group("dynamics");
     for steps in [16usize, 24] {
         let settings = DynamicsSettings {

@@ -17,11 +17,13 @@
 use std::io::Write;
 use std::time::Instant;
 
-use nalgebra::{Vector2, Vector3};
+use nalgebra::Vector3;
 use tendril::dynamics::{Damping, Dynamics, DynamicsSettings};
-use tendril::plan::bend_tensions;
 use tendril::robot::repo_robot;
 use tendril::statics::{SolverSettings, Statics};
+
+#[path = "../benches/workloads/circle.rs"]
+mod workloads;
 
 fn main() -> anyhow::Result<()> {
     let n: usize = std::env::args()
@@ -37,12 +39,7 @@ fn main() -> anyhow::Result<()> {
     let robot = repo_robot("seed-4t.toml");
     let statics = Statics::new(&robot, SolverSettings::default());
     // The bench's path: the 30 mm circle at 0.2 Hz, sampled every 1 ms.
-    let path: Vec<Vec<f64>> = (0..n + 1)
-        .map(|k| {
-            let a = std::f64::consts::TAU * 0.2 * k as f64 * 1e-3;
-            bend_tensions(&statics, &Vector2::new(-3.0 + 1.5 * a.cos(), 1.5 * a.sin()))
-        })
-        .collect();
+    let path = workloads::circle_tensions(&statics, n + 1);
     let mut dynamics = Dynamics::at_rest(
         &robot,
         Damping::of_robot(&robot),

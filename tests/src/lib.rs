@@ -45,6 +45,27 @@ pub fn tendril(args: &[&str]) -> Output {
         .expect("spawn tendril")
 }
 
+/// Run `tendril` with `args` in `dir`, only warnings on stderr
+/// (`RUST_LOG=warn`), and capture its output.
+pub fn tendril_in(dir: &Path, args: &[&str]) -> Output {
+    Command::new(tendril_bin())
+        .args(args)
+        .current_dir(dir)
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("spawn tendril")
+}
+
+/// A finished process's stderr as text.
+pub fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// Panic with `what` and the process's stderr unless it succeeded.
+pub fn assert_ok(out: &Output, what: &str) {
+    assert!(out.status.success(), "{what} failed: {}", stderr(out));
+}
+
 /// Path of a robot file in `robots/`, for a command-line argument (to load
 /// one: `tendril::robot::repo_robot`).
 pub fn robot(name: &str) -> PathBuf {

@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 
-use tendril_tests::tendril_bin;
+use tendril_tests::{stderr, tendril_bin};
 
 fn robot() -> PathBuf {
     tendril_tests::robot("seed-4t.toml")
@@ -30,10 +30,6 @@ fn tendril_capped(dir: &Path, args: &[&str]) -> Output {
         .args(args)
         .current_dir(dir);
     cmd.output().expect("run tendril under ulimit")
-}
-
-fn stderr(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stderr).into_owned()
 }
 
 /// Exit 1 (a refusal, not a crash) with a message containing every `needle`.

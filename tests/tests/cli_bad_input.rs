@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use tendril_tests::tendril_bin;
+use tendril_tests::{stderr, tendril_bin};
 
 fn robot() -> PathBuf {
     tendril_tests::robot("seed-4t.toml")
@@ -17,10 +17,6 @@ fn tendril(dir: &Path, args: &[&str]) -> Output {
         .current_dir(dir)
         .output()
         .expect("run tendril")
-}
-
-fn stderr(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stderr).into_owned()
 }
 
 /// A temporary directory with `data.csv` (`rows` rows of the seed robot).

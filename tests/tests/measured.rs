@@ -5,26 +5,9 @@
 //! held-out rows against the noiseless truth.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
-use tendril_tests::{robot, tendril_bin};
-
-fn run_in(dir: &Path, args: &[&str]) -> Output {
-    Command::new(tendril_bin())
-        .args(args)
-        .current_dir(dir)
-        .env("RUST_LOG", "warn")
-        .output()
-        .expect("spawn tendril")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn ok(o: &Output, what: &str) {
-    assert!(o.status.success(), "{what} failed: {}", stderr(o));
-}
+use tendril_tests::{assert_ok, robot, stderr, tendril_in};
 
 fn seed_robot() -> PathBuf {
     robot("seed-4t.toml")
@@ -45,9 +28,9 @@ fn clean_and_noisy(dir: &Path, n: usize, sigma_mm: &str, outliers: &str) {
         "5",
         "--quiet",
     ];
-    let o = run_in(dir, &[&base[..], &["--out", "clean.csv"]].concat());
-    ok(&o, "generate clean");
-    let o = run_in(
+    let o = tendril_in(dir, &[&base[..], &["--out", "clean.csv"]].concat());
+    assert_ok(&o, "generate clean");
+    let o = tendril_in(
         dir,
         &[
             &base[..],
@@ -64,7 +47,7 @@ fn clean_and_noisy(dir: &Path, n: usize, sigma_mm: &str, outliers: &str) {
         ]
         .concat(),
     );
-    ok(&o, "generate noisy");
+    assert_ok(&o, "generate noisy");
     std::fs::remove_file(dir.join("noisy.json")).unwrap();
 }
 
@@ -105,7 +88,7 @@ fn train(dir: &Path, out: &str, extra: &[&str]) -> Output {
         extra,
     ]
     .concat();
-    run_in(dir, &args)
+    tendril_in(dir, &args)
 }
 
 fn json(path: &Path) -> serde_json::Value {
@@ -121,7 +104,7 @@ fn a_measured_csv_without_a_sidecar_trains_and_finds_its_outliers_and_noise() {
     assert_eq!(injected.len(), 12);
 
     // No sidecar: the robot is not guessed.
-    let o = run_in(
+    let o = tendril_in(
         dir,
         &[
             "train",
@@ -137,7 +120,7 @@ fn a_measured_csv_without_a_sidecar_trains_and_finds_its_outliers_and_noise() {
     assert!(stderr(&o).contains("--robot"), "{}", stderr(&o));
     assert!(!dir.join("m.tnet").exists());
 
-    ok(&train(dir, "m.tnet", &[]), "train on measured rows");
+    assert_ok(&train(dir, "m.tnet", &[]), "train on measured rows");
     let report = json(&dir.join("m.train.json"));
     let m = &report["measured"];
     assert_eq!(m["outliers_rejected"], true, "{m}");
@@ -176,7 +159,7 @@ fn a_measured_csv_without_a_sidecar_trains_and_finds_its_outliers_and_noise() {
     assert!(rms >= 0.5 * floor && rms < 3.0 * floor, "{f}");
 
     // A given noise is used as given.
-    ok(
+    assert_ok(
         &train(dir, "g.tnet", &["--noise-mm", "0.2"]),
         "train with --noise-mm",
     );
@@ -201,7 +184,7 @@ fn refused(text: &str, needles: &[&str]) {
             "compare", "--data", "bad.csv", "--robot", seed, "--out", "o",
         ][..],
     ] {
-        let o = run_in(dir, args);
+        let o = tendril_in(dir, args);
         let err = stderr(&o);
         assert_eq!(o.status.code(), Some(1), "{args:?}: {err}");
         for n in needles {
@@ -248,7 +231,7 @@ fn impossible_rows_are_refused_naming_line_and_column() {
 fn held_out_against_truth(dir: &Path, model: &str) -> f64 {
     let seed = seed_robot();
     let out = format!("{model}.truth.json");
-    let o = run_in(
+    let o = tendril_in(
         dir,
         &[
             "evaluate",
@@ -264,7 +247,7 @@ fn held_out_against_truth(dir: &Path, model: &str) -> f64 {
             &out,
         ],
     );
-    ok(&o, "evaluate against the truth");
+    assert_ok(&o, "evaluate against the truth");
     json(&dir.join(out))["metrics"]["position_mm"]["mean"]
         .as_f64()
         .unwrap()
@@ -277,11 +260,11 @@ fn leaving_outliers_out_beats_fitting_them_on_held_out_truth() {
     // 5 % of the rows 5 mm off, little jitter: the outliers dominate what
     // a plain fit gets wrong.
     clean_and_noisy(dir, 1000, "0.05", "0.05");
-    ok(
+    assert_ok(
         &train(dir, "keep.tnet", &["--outliers", "keep"]),
         "train keeping outliers",
     );
-    ok(
+    assert_ok(
         &train(dir, "reject.tnet", &["--outliers", "reject"]),
         "train rejecting outliers",
     );

@@ -6,27 +6,8 @@
 //! learn from.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-use tendril_tests::{robot, tendril_bin};
-
-/// Run `tendril` in `dir`.
-fn run_in(dir: &Path, args: &[&str]) -> Output {
-    Command::new(tendril_bin())
-        .args(args)
-        .current_dir(dir)
-        .env("RUST_LOG", "warn")
-        .output()
-        .expect("spawn tendril")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn ok(o: &Output, what: &str) {
-    assert!(o.status.success(), "{what} failed: {}", stderr(o));
-}
+use tendril_tests::{assert_ok, robot, stderr, tendril_in};
 
 /// The seed robot with `edit` applied to its text, written to `dir/name`.
 fn robot_variant(dir: &Path, name: &str, edit: impl Fn(String) -> String) -> PathBuf {
@@ -51,7 +32,7 @@ fn soft_robot(dir: &Path) -> PathBuf {
 /// (seed 1): `dir/d.csv`, `dir/m.tnet`.
 fn data_and_net(dir: &Path) -> (PathBuf, PathBuf) {
     let seed = robot("seed-4t.toml");
-    let o = run_in(
+    let o = tendril_in(
         dir,
         &[
             "generate",
@@ -63,9 +44,9 @@ fn data_and_net(dir: &Path) -> (PathBuf, PathBuf) {
             "d.csv",
         ],
     );
-    ok(&o, "generate");
-    let o = run_in(dir, &train_args(&[]));
-    ok(&o, "train");
+    assert_ok(&o, "generate");
+    let o = tendril_in(dir, &train_args(&[]));
+    assert_ok(&o, "train");
     (dir.join("d.csv"), dir.join("m.tnet"))
 }
 
@@ -129,7 +110,7 @@ fn ik_refuses_a_net_for_a_robot_half_as_stiff_unless_allowed() {
             "--allow-extrapolation",
         ];
         a.extend_from_slice(extra);
-        run_in(dir.path(), &a)
+        tendril_in(dir.path(), &a)
     };
     let refused = ik(&soft, &[]);
     let e = stderr(&refused);
@@ -144,7 +125,7 @@ fn ik_refuses_a_net_for_a_robot_half_as_stiff_unless_allowed() {
         assert!(e.contains(part), "{part:?} missing from: {e}");
     }
     let allowed = ik(&soft, &["--allow-robot-mismatch"]);
-    ok(&allowed, "ik --allow-robot-mismatch");
+    assert_ok(&allowed, "ik --allow-robot-mismatch");
     assert!(
         stderr(&allowed).contains("trained for robot seed-4t"),
         "no warning: {}",
@@ -160,7 +141,7 @@ fn ik_refuses_a_net_for_a_robot_half_as_stiff_unless_allowed() {
     });
     for r in [robot("seed-4t.toml"), restyled] {
         let o = ik(&r, &[]);
-        ok(&o, "ik with the net's robot");
+        assert_ok(&o, "ik with the net's robot");
         let e = stderr(&o);
         assert!(
             !e.contains("trained for robot") && !e.contains("does not record"),
@@ -175,7 +156,7 @@ fn sim_and_controller_refuse_a_net_for_another_robot_before_starting() {
     data_and_net(dir.path());
     let soft = soft_robot(dir.path());
     let soft = soft.to_str().unwrap();
-    let sim = run_in(
+    let sim = tendril_in(
         dir.path(),
         &[
             "sim",
@@ -199,7 +180,7 @@ fn sim_and_controller_refuse_a_net_for_another_robot_before_starting() {
         !dir.path().join("sim").exists(),
         "sim left an output directory"
     );
-    let controller = run_in(
+    let controller = tendril_in(
         dir.path(),
         &[
             "controller",
@@ -239,7 +220,7 @@ fn evaluate_takes_the_nets_split_and_refuses_another_seed() {
             "test",
         ];
         a.extend_from_slice(extra);
-        run_in(dir.path(), &a)
+        tendril_in(dir.path(), &a)
     };
     let refused = eval(&["--seed", "2"]);
     let e = stderr(&refused);
@@ -257,7 +238,7 @@ fn evaluate_takes_the_nets_split_and_refuses_another_seed() {
     // The net's own split, taken from the net or given again.
     for extra in [&[][..], &["--seed", "1", "--test-fraction", "0.03"][..]] {
         let o = eval(extra);
-        ok(&o, "evaluate --rows test");
+        assert_ok(&o, "evaluate --rows test");
         let json: serde_json::Value =
             serde_json::from_slice(&std::fs::read(dir.path().join("m.eval.json")).unwrap())
                 .unwrap();
@@ -270,7 +251,7 @@ fn train_refuses_a_robot_that_is_not_the_datas() {
     let dir = tempfile::tempdir().unwrap();
     data_and_net(dir.path());
     let soft = soft_robot(dir.path());
-    let o = run_in(
+    let o = tendril_in(
         dir.path(),
         &train_args(&["--robot", soft.to_str().unwrap()]),
     );
@@ -280,11 +261,11 @@ fn train_refuses_a_robot_that_is_not_the_datas() {
         e.contains("soft.toml") && e.contains("SHA-256") && e.contains("--allow-robot-mismatch"),
         "{e}"
     );
-    let o = run_in(
+    let o = tendril_in(
         dir.path(),
         &train_args(&["--robot", soft.to_str().unwrap(), "--allow-robot-mismatch"]),
     );
-    ok(&o, "train --allow-robot-mismatch");
+    assert_ok(&o, "train --allow-robot-mismatch");
     assert!(stderr(&o).contains("not the robot the dataset was generated with"));
 }
 
@@ -303,7 +284,7 @@ fn train_resolves_the_recorded_robot_beside_the_sidecar_and_never_falls_back() {
     // stiff), recorded by a relative path ("bot.toml").
     let soft = soft_robot(&gen);
     std::fs::rename(&soft, gen.join("bot.toml")).unwrap();
-    let o = run_in(
+    let o = tendril_in(
         &gen,
         &[
             "generate",
@@ -315,7 +296,7 @@ fn train_resolves_the_recorded_robot_beside_the_sidecar_and_never_falls_back() {
             "../data/d.csv",
         ],
     );
-    ok(&o, "generate");
+    assert_ok(&o, "generate");
     let train = |extra: &[&str]| {
         let mut a = vec![
             "train",
@@ -331,7 +312,7 @@ fn train_resolves_the_recorded_robot_beside_the_sidecar_and_never_falls_back() {
             "1",
         ];
         a.extend_from_slice(extra);
-        run_in(&elsewhere, &a)
+        tendril_in(&elsewhere, &a)
     };
     // Not in the current directory, not beside the sidecar: refused, named.
     let o = train(&[]);
@@ -344,7 +325,7 @@ fn train_resolves_the_recorded_robot_beside_the_sidecar_and_never_falls_back() {
     assert!(!elsewhere.join("m.tnet").exists());
     // Beside the sidecar: found, and the net records it.
     std::fs::copy(gen.join("bot.toml"), data.join("bot.toml")).unwrap();
-    ok(&train(&[]), "train with the robot beside the sidecar");
+    assert_ok(&train(&[]), "train with the robot beside the sidecar");
     let bytes = std::fs::read(elsewhere.join("m.tnet")).unwrap();
     let p = tendril_shared::read_provenance(&bytes).unwrap().unwrap();
     assert_eq!(p.robot_name(), "seed-4t-soft");
@@ -384,7 +365,7 @@ fn train_refuses_constant_tension_columns_naming_them() {
         })
         .collect();
     std::fs::write(dir.path().join("zero.csv"), zeroed.join("\n") + "\n").unwrap();
-    let o = run_in(
+    let o = tendril_in(
         dir.path(),
         &[
             "train",
@@ -416,7 +397,7 @@ fn train_pool_zero_says_so_once() {
     let mut args = train_args(&[]);
     let at = args.iter().position(|&a| a == "--pool").unwrap();
     args[at + 1] = "0";
-    let o = run_in(dir.path(), &args);
+    let o = tendril_in(dir.path(), &args);
     let e = stderr(&o);
     assert!(!o.status.success());
     assert_eq!(e.matches("must be at least 1").count(), 1, "{e}");

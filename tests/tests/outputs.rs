@@ -7,10 +7,10 @@
 
 use std::os::unix::fs::FileTypeExt;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use tendril_tests::{one_loop_at_a_time, robot, tendril_bin, workspace_root};
+use tendril_tests::{one_loop_at_a_time, robot, stderr, tendril_bin, workspace_root};
 
 /// Three rows of tensions for `fk --input` on seed-4t.
 fn rows_csv(dir: &Path) -> PathBuf {
@@ -30,10 +30,6 @@ fn fk_batch(input: &Path, output: &Path) -> Command {
         .arg(output)
         .current_dir(workspace_root());
     cmd
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 /// Files whose names say they are our temporaries.

@@ -14,7 +14,7 @@ use std::process::{Command, Output};
 
 use serde_json::Value;
 use tendril::robot::repo_robot;
-use tendril_tests::{one_loop_at_a_time, robot, tendril_bin, workspace_root};
+use tendril_tests::{one_loop_at_a_time, robot, stderr, tendril_bin, workspace_root};
 
 const DEFAULT_NET: &str = "firmware/vectors/default.tnet";
 
@@ -34,10 +34,6 @@ fn sim(out: &Path, args: &[&str]) -> (Output, Value) {
         .expect("spawn tendril sim");
     let text = std::fs::read_to_string(out.join("report.json")).expect("report.json");
     (o, serde_json::from_str(&text).expect("report is JSON"))
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 /// The seed robot's first bending mode, Hz (Euler–Bernoulli cantilever).

@@ -8,7 +8,7 @@ use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
-use tendril_tests::{robot, tendril_bin, workspace_root};
+use tendril_tests::{robot, stderr, tendril_bin, workspace_root};
 
 /// The default exported net, relative to the workspace root.
 const DEFAULT_NET: &str = "firmware/vectors/default.tnet";
@@ -47,10 +47,6 @@ fn run_sim(out: &Path, args: &[&str]) -> Output {
 fn report(out: &Path) -> Value {
     let text = std::fs::read_to_string(out.join("report.json")).expect("report.json");
     serde_json::from_str(&text).expect("report is JSON")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 /// Whether `pid` is a live process (a zombie counts as gone: it runs nothing).

@@ -339,10 +339,10 @@ fn train_and_write(job: &TrainJob<'_>, stop: &AtomicBool) -> Result<TrainResult,
     let exclude = match (&outliers, s.measured) {
         (Some((exclude, r)), Some(m)) if m.reject_outliers => {
             log::info!(
-                "left out {} of {} training rows as outliers (tip off its neighbours' fit by                  more than {:.3} mm)",
+                "left out {} of {} training rows as outliers (tip off its neighbours' fit by more than {})",
                 r.count,
                 r.rows,
-                r.threshold_mm
+                crate::units::length_mm(r.threshold_mm)
             );
             exclude.clone()
         }
