@@ -22,6 +22,7 @@ use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
 use super::{Dataset, DatasetError, POSE_COLUMNS};
+use crate::numerics::kdtree::KdTree;
 use crate::robot::Robot;
 
 /// Largest |‖q‖ − 1| accepted in a row: a tracker's quaternions are unit to
@@ -122,12 +123,15 @@ pub struct LocalForward {
     positions: DMatrix<f64>,
     scale: Vec<f64>,
     k: usize,
+    /// The rows in range-scaled tension space; `None` past
+    /// [`crate::numerics::kdtree::MAX_DIM`] tendons (then a full scan).
+    tree: Option<KdTree>,
 }
 
 impl LocalForward {
     /// The model over `data`'s rows (at least 8 rows).
     pub fn new(data: &Dataset) -> LocalForward {
-        let scale = (0..data.n_tendons)
+        let scale: Vec<f64> = (0..data.n_tendons)
             .map(|j| {
                 let c = data.tensions.column(j);
                 let r = c.max() - c.min();
@@ -138,11 +142,15 @@ impl LocalForward {
                 }
             })
             .collect();
+        let scaled = DMatrix::from_fn(data.len(), data.n_tendons, |i, j| {
+            data.tensions[(i, j)] * scale[j]
+        });
         LocalForward {
             tensions: data.tensions.clone(),
             positions: data.poses.columns(0, 3).into_owned(),
-            scale,
             k: NEIGHBOURS.min(data.len().saturating_sub(1)).max(1),
+            tree: KdTree::build(&scaled).ok(),
+            scale,
         }
     }
 
@@ -160,21 +168,11 @@ impl LocalForward {
     /// which `usable(row)` holds (leave a row out by refusing it).
     pub fn predict(&self, t: &[f64], usable: impl Fn(usize) -> bool) -> [f64; 3] {
         let n_t = self.tensions.ncols();
-        let mut near: Vec<(f64, usize)> = (0..self.len())
-            .filter(|&i| usable(i))
-            .map(|i| {
-                let d: f64 = (0..n_t)
-                    .map(|j| ((self.tensions[(i, j)] - t[j]) * self.scale[j]).powi(2))
-                    .sum();
-                (d, i)
-            })
-            .collect();
-        let k = self.k.min(near.len());
+        let near = self.nearest_usable(t, &usable);
+        let k = near.len();
         if k == 0 {
             return [f64::NAN; 3];
         }
-        near.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
-        near.truncate(k);
         // Tricube-free Gaussian-ish weights would need a bandwidth; equal
         // weights over the k nearest keep the fit's variance known (≈ p/k).
         let n_q = n_t * (n_t + 1) / 2;
@@ -219,6 +217,46 @@ impl LocalForward {
                 let mean = y.row_mean();
                 [mean[0], mean[1], mean[2]]
             }
+        }
+    }
+
+    /// The (up to) `k` rows nearest `t` in range-scaled tension space that
+    /// `usable` allows, as (a distance, row). From the k-d
+    /// tree, asking for a few more than `k` and more again while refused
+    /// rows leave fewer than `k` (O(k log n) for the few outliers and the
+    /// row itself a leave-one-out fit refuses); without a tree, a scan.
+    fn nearest_usable(&self, t: &[f64], usable: &impl Fn(usize) -> bool) -> Vec<(f64, usize)> {
+        let n = self.len();
+        let Some(tree) = &self.tree else {
+            let mut near: Vec<(f64, usize)> = (0..n)
+                .filter(|&i| usable(i))
+                .map(|i| {
+                    let d: f64 = (0..self.scale.len())
+                        .map(|j| ((self.tensions[(i, j)] - t[j]) * self.scale[j]).powi(2))
+                        .sum();
+                    (d, i)
+                })
+                .collect();
+            let k = self.k.min(near.len());
+            if k > 0 {
+                near.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
+            }
+            near.truncate(k);
+            return near;
+        };
+        let q: Vec<f64> = t.iter().zip(&self.scale).map(|(x, s)| x * s).collect();
+        let mut ask = self.k + 8;
+        loop {
+            let near: Vec<(f64, usize)> = tree
+                .nearest(&q, ask.min(n))
+                .into_iter()
+                .filter(|&(_, i)| usable(i))
+                .take(self.k)
+                .collect();
+            if near.len() >= self.k || ask >= n {
+                return near;
+            }
+            ask *= 4;
         }
     }
 

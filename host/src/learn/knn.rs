@@ -3,15 +3,12 @@
 //! the k training points nearest in normalised input space. k and the
 //! weighting are chosen on the validation split.
 
-use std::num::NonZero;
-
-use kiddo::immutable::float::kdtree::ImmutableKdTree;
-use kiddo::SquaredEuclidean;
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 
 use super::linalg::{argmin, check_splits, rmse};
 use super::{LearnError, Learner, Split};
+use crate::numerics::kdtree::KdTree as Tree;
 
 /// How the k neighbours' targets are averaged.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -31,75 +28,11 @@ impl Weighting {
     }
 }
 
-/// The k-d tree, one variant per input dimension (kiddo fixes it at compile time).
-enum Tree {
-    D1(ImmutableKdTree<f64, u32, 1, 32>),
-    D2(ImmutableKdTree<f64, u32, 2, 32>),
-    D3(ImmutableKdTree<f64, u32, 3, 32>),
-    D4(ImmutableKdTree<f64, u32, 4, 32>),
-    D5(ImmutableKdTree<f64, u32, 5, 32>),
-    D6(ImmutableKdTree<f64, u32, 6, 32>),
-    D7(ImmutableKdTree<f64, u32, 7, 32>),
-    D8(ImmutableKdTree<f64, u32, 8, 32>),
-}
-
 /// Largest input dimension the k-d tree is compiled for (a pose has 7).
-pub const MAX_DIM: usize = 8;
+pub const MAX_DIM: usize = crate::numerics::kdtree::MAX_DIM;
 
-fn points<const K: usize>(x: &DMatrix<f64>) -> Vec<[f64; K]> {
-    (0..x.nrows())
-        .map(|i| std::array::from_fn(|j| x[(i, j)]))
-        .collect()
-}
-
-fn query<const K: usize>(
-    t: &ImmutableKdTree<f64, u32, K, 32>,
-    q: &[f64],
-    k: NonZero<usize>,
-) -> Vec<(f64, usize)> {
-    let q: [f64; K] = std::array::from_fn(|j| q[j]);
-    t.nearest_n::<SquaredEuclidean>(&q, k)
-        .into_iter()
-        .map(|n| (n.distance.sqrt(), n.item as usize))
-        .collect()
-}
-
-impl Tree {
-    fn build(x: &DMatrix<f64>) -> Result<Tree, LearnError> {
-        Ok(match x.ncols() {
-            1 => Tree::D1(ImmutableKdTree::new_from_slice(&points::<1>(x))),
-            2 => Tree::D2(ImmutableKdTree::new_from_slice(&points::<2>(x))),
-            3 => Tree::D3(ImmutableKdTree::new_from_slice(&points::<3>(x))),
-            4 => Tree::D4(ImmutableKdTree::new_from_slice(&points::<4>(x))),
-            5 => Tree::D5(ImmutableKdTree::new_from_slice(&points::<5>(x))),
-            6 => Tree::D6(ImmutableKdTree::new_from_slice(&points::<6>(x))),
-            7 => Tree::D7(ImmutableKdTree::new_from_slice(&points::<7>(x))),
-            8 => Tree::D8(ImmutableKdTree::new_from_slice(&points::<8>(x))),
-            d => {
-                return Err(LearnError::BadData(format!(
-                    "KNN supports 1–{MAX_DIM} input columns, got {d}"
-                )))
-            }
-        })
-    }
-
-    /// The k nearest training rows of `q`: (distance, row), nearest first,
-    /// ties broken by row index so the result never depends on tree layout.
-    fn nearest(&self, q: &[f64], k: usize) -> Vec<(f64, usize)> {
-        let k = NonZero::new(k.max(1)).unwrap_or(NonZero::<usize>::MIN);
-        let mut v = match self {
-            Tree::D1(t) => query(t, q, k),
-            Tree::D2(t) => query(t, q, k),
-            Tree::D3(t) => query(t, q, k),
-            Tree::D4(t) => query(t, q, k),
-            Tree::D5(t) => query(t, q, k),
-            Tree::D6(t) => query(t, q, k),
-            Tree::D7(t) => query(t, q, k),
-            Tree::D8(t) => query(t, q, k),
-        };
-        v.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        v
-    }
+fn build_tree(x: &DMatrix<f64>) -> Result<Tree, LearnError> {
+    Tree::build(x).map_err(|e| LearnError::BadData(format!("KNN: {e}")))
 }
 
 /// k-nearest-neighbour regressor.
@@ -207,7 +140,7 @@ impl Learner for Knn {
                 why: "need at least one k ≥ 1 and one weighting".into(),
             });
         }
-        self.tree = Some(Tree::build(train.x)?);
+        self.tree = Some(build_tree(train.x)?);
         self.train_y = train.y.clone();
         self.n_inputs = train.x.ncols();
         let tree = self

@@ -1,6 +1,8 @@
 //! Numerical building blocks shared by the statics, their sensitivities and
 //! the dynamics: one classical RK4 step ([`rk4`]) and the small dense
-//! solvers ([`dense`]).
+//! solvers ([`dense`]); and the nearest-neighbour search of the KNN
+//! learner and the measured rows' local model ([`kdtree`]).
 
 pub mod dense;
+pub mod kdtree;
 pub mod rk4;
