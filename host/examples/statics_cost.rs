@@ -187,7 +187,7 @@ fn tips(robot: &Robot, statics: &Statics, first: &[f64]) -> anyhow::Result<()> {
         let n = statics.solve(&tau, Some(&plain.warm))?;
         let t = tight.solve(&tau, Some(&tight_prev.warm))?;
         let f = fine.solve(&tau, Some(&fine_prev.warm))?;
-        let mut line = format!("{what}");
+        let mut line = what.to_string();
         for v in &tau {
             line += &format!(" {v}");
         }
