@@ -153,7 +153,8 @@ fn walk(state: &mut u64, tau: &mut [f64], max: &[f64]) {
 /// without; each against the same grid solved tight (stopping error) and 1024
 /// steps solved tight (the converged answer). One line per point
 /// (`bench`/`chain`, tensions, then the tips in m, each x y z: predicted,
-/// no-predict, tight, 1024-step), then the largest errors.
+/// no-predict, tight, 1024-step, then the plain-pass equivalents of the
+/// predicted and no-predict solves), then the largest errors.
 fn tips(robot: &Robot, statics: &Statics, first: &[f64]) -> anyhow::Result<()> {
     let tight_settings = |steps| SolverSettings {
         steps,
@@ -196,6 +197,7 @@ fn tips(robot: &Robot, statics: &Statics, first: &[f64]) -> anyhow::Result<()> {
                 line += &format!(" {c:.17e}");
             }
         }
+        line += &format!(" passes {:.2} {:.2}", p.integrations, n.integrations);
         println!("{line}");
         for (i, s) in [&p, &n].into_iter().enumerate() {
             for (j, r) in [&t, &f].into_iter().enumerate() {
