@@ -6,7 +6,8 @@
 //! rows through the batch fk call, one thread; uniform: the same rows solved
 //! cold one by one, without the batch machinery; tips: the chain's tips
 //! against tight and 1024-step solves, printed, for "equal accuracy"
-//! against the C++ reference). Optional further arguments: a robot file and a
+//! against the C++ reference; point: the criterion bench's warm solve, 1000
+//! times). Optional further arguments: a robot file and a
 //! step count, e.g. `cold bench/cpp-reference/till-4t.toml 20`, and anywhere
 //! after the mode the flags `tol=<N>` (the solver's residual tolerance),
 //! `start=<t1,t2,..>` (the chain's first tensions, default 4,3,0,0) and
@@ -91,6 +92,26 @@ fn main() -> anyhow::Result<()> {
     first.resize(max.len(), 0.0);
     if mode == "tips" {
         return tips(&robot, &statics, &first);
+    }
+    if mode == "point" {
+        // The criterion bench's warm solve, repeated: 0.1 N up on the first
+        // tendon from the cold solve at `first` (with dx/dτ unless
+        // `no-predict`), for instruction counts of exactly that solve.
+        let mut prev = statics.solve(&first, None)?;
+        if predict {
+            statics.add_tension_sensitivity(&mut prev);
+        }
+        let mut next = first.clone();
+        next[0] += if first[0] + 0.1 <= max[0] { 0.1 } else { -0.1 };
+        let (solves, mut integrations) = (1000, 0.0);
+        for _ in 0..solves {
+            integrations += statics.solve(&next, Some(&prev.warm))?.integrations;
+        }
+        println!(
+            "point: {solves} solves, {:.2} integrations per solve",
+            integrations / solves as f64
+        );
+        return Ok(());
     }
     if mode == "chain" {
         // A chain of warm solves, each 0.1 N from the last on a tendon
