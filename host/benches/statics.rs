@@ -7,6 +7,11 @@
 //! batch: 600 uniformly random rows through `tendril fk --input`'s library
 //! call on one thread, per row; till-4t: the robot of the public C++
 //! reference at 20 steps (bench/cpp-reference/run times both in one run).
+//! mid and till-4t also time warm solves from a state carrying dx/dτ
+//! (`warm_predicted`, as the dataset chains and the plant solve), and both
+//! kinds at the tolerance whose tips are as accurate as the C++ reference's
+//! (`warm_equal_accuracy`, `warm_equal_accuracy_no_predict`; BENCHMARKS.md,
+//! "Warm statics at the C++ reference's accuracy").
 //! Run: `cargo bench -p tendril --bench statics`.
 
 use std::hint::black_box;
@@ -32,10 +37,48 @@ fn cold_and_warm(c: &mut Criterion, group: &str, statics: &Statics, tau: &[f64])
     });
 }
 
+/// The loosest residual tolerance (N, N·m) at which every warm-solved tip of
+/// the till-4t chain (`statics_cost tips`) is within the C++ reference's tip
+/// error of the converged answer at the same tensions (BENCHMARKS.md,
+/// "Warm statics at the C++ reference's accuracy").
+const EQUAL_ACCURACY_TOL: f64 = 1e-7;
+
+/// Warm solves 0.1 N from `tau`: from a state carrying dx/dτ
+/// (`Statics::add_tension_sensitivity`, as a chain or the plant has it) at
+/// the default tolerance, and at [`EQUAL_ACCURACY_TOL`] with and without it.
+fn predicted_warm(c: &mut Criterion, group: &str, robot: &Robot, steps: usize, tau: &[f64]) {
+    let mut next = tau.to_vec();
+    let max = robot.tendons[0].max_tension;
+    next[0] += if tau[0] + 0.1 <= max { 0.1 } else { -0.1 };
+    let cases = [
+        ("warm_predicted", SolverSettings::default().tol, true),
+        ("warm_equal_accuracy", EQUAL_ACCURACY_TOL, true),
+        ("warm_equal_accuracy_no_predict", EQUAL_ACCURACY_TOL, false),
+    ];
+    for (name, tol, predict) in cases {
+        let statics = Statics::new(
+            robot,
+            SolverSettings {
+                steps,
+                tol,
+                ..SolverSettings::default()
+            },
+        );
+        let mut prev = statics.solve(tau, None).unwrap();
+        if predict {
+            statics.add_tension_sensitivity(&mut prev);
+        }
+        c.bench_function(&format!("statics/{group}/{name}"), |b| {
+            b.iter(|| statics.solve(black_box(&next), Some(&prev.warm)).unwrap())
+        });
+    }
+}
+
 fn solves(c: &mut Criterion) {
     let seed = robot("seed-4t.toml");
     let statics = Statics::new(&seed, SolverSettings::default());
     cold_and_warm(c, "mid", &statics, &[4.0, 3.0, 0.0, 0.0]);
+    predicted_warm(c, "mid", &seed, 16, &[4.0, 3.0, 0.0, 0.0]);
     cold_and_warm(c, "max", &statics, &[10.0, 10.0, 0.0, 0.0]);
 
     // Multi-segment against the same rod with every tendon at the tip.
@@ -76,6 +119,7 @@ fn solves(c: &mut Criterion) {
         ),
         &[15.0, 0.0, 0.0, 0.0],
     );
+    predicted_warm(c, "till-4t", &till, 20, &[15.0, 0.0, 0.0, 0.0]);
 
     // One RK4 pass alone: the unit of cost of everything above.
     let sol = statics.solve(&[4.0, 3.0, 0.0, 0.0], None).unwrap();

@@ -4,8 +4,14 @@
 //! then `valgrind --tool=callgrind target/release/examples/statics_cost cold|warm|chain|multi|batch|uniform`
 //! (multi: cold solves of the two-segment tdcr-2seg robot; batch: 600 uniform
 //! rows through the batch fk call, one thread; uniform: the same rows solved
-//! cold one by one, without the batch machinery). Optional further arguments:
-//! a robot file and a step count, e.g. `cold bench/cpp-reference/till-4t.toml 20`.
+//! cold one by one, without the batch machinery; tips: the chain's tips
+//! against tight and 1024-step solves, printed, for "equal accuracy"
+//! against the C++ reference; point: the criterion bench's warm solve, 1000
+//! times). Optional further arguments: a robot file and a
+//! step count, e.g. `cold bench/cpp-reference/till-4t.toml 20`, and anywhere
+//! after the mode the flags `tol=<N>` (the solver's residual tolerance),
+//! `start=<t1,t2,..>` (the chain's first tensions, default 4,3,0,0) and
+//! `no-predict` (chain: no dx/dτ).
 
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
@@ -16,10 +22,27 @@ use tendril::statics::batch::{solve_all, Load};
 use tendril::statics::{SolverSettings, Statics};
 
 fn main() -> anyhow::Result<()> {
-    let mode = std::env::args().nth(1).unwrap_or_else(|| "cold".into());
+    let args: Vec<String> = std::env::args().collect();
+    let mode = args.get(1).cloned().unwrap_or_else(|| "cold".into());
+    // Flags anywhere after the mode; the rest are positional.
+    let flag = |name: &str| {
+        args.iter()
+            .skip(2)
+            .find_map(|a| a.strip_prefix(name).map(str::to_owned))
+    };
+    let predict = !args.iter().skip(2).any(|a| a == "no-predict");
+    let tol: Option<f64> = flag("tol=").map(|s| s.parse()).transpose()?;
+    let start: Option<Vec<f64>> = flag("start=")
+        .map(|s| s.split(',').map(str::parse).collect())
+        .transpose()?;
+    let positional: Vec<&String> = args
+        .iter()
+        .skip(2)
+        .filter(|a| !a.contains('=') && *a != "no-predict")
+        .collect();
     // Optional: another robot file and step count (cold/warm modes).
-    let file = std::env::args().nth(2);
-    let steps = std::env::args().nth(3).map(|s| s.parse()).transpose()?;
+    let file = positional.first().map(|s| s.to_string());
+    let steps = positional.get(1).map(|s| s.parse()).transpose()?;
     let robot = match (&file, mode.as_str()) {
         (Some(path), _) => Robot::load(Path::new(path))?,
         (None, "multi") => repo_robot("tdcr-2seg.toml"),
@@ -27,6 +50,7 @@ fn main() -> anyhow::Result<()> {
     };
     let settings = SolverSettings {
         steps: steps.unwrap_or(SolverSettings::default().steps),
+        tol: tol.unwrap_or(SolverSettings::default().tol),
         ..SolverSettings::default()
     };
     let statics = Statics::new(&robot, settings);
@@ -63,27 +87,45 @@ fn main() -> anyhow::Result<()> {
         return Ok(());
     }
     let max = robot.max_tensions();
+    let mut first = start.unwrap_or_else(|| vec![4.0, 3.0, 0.0, 0.0]);
+    first.truncate(max.len());
+    first.resize(max.len(), 0.0);
+    if mode == "tips" {
+        return tips(&robot, &statics, &first);
+    }
+    if mode == "point" {
+        // The criterion bench's warm solve, repeated: 0.1 N up on the first
+        // tendon from the cold solve at `first` (with dx/dτ unless
+        // `no-predict`), for instruction counts of exactly that solve.
+        let mut prev = statics.solve(&first, None)?;
+        if predict {
+            statics.add_tension_sensitivity(&mut prev);
+        }
+        let mut next = first.clone();
+        next[0] += if first[0] + 0.1 <= max[0] { 0.1 } else { -0.1 };
+        let (solves, mut integrations) = (1000, 0.0);
+        for _ in 0..solves {
+            integrations += statics.solve(&next, Some(&prev.warm))?.integrations;
+        }
+        println!(
+            "point: {solves} solves, {:.2} integrations per solve",
+            integrations / solves as f64
+        );
+        return Ok(());
+    }
     if mode == "chain" {
         // A chain of warm solves, each 0.1 N from the last on a tendon
         // picked by a fixed pseudo-random walk (a plant, a path), started
         // once with dx/dτ: what `Statics::add_tension_sensitivity` is for.
-        let mut tau = vec![4.0, 3.0, 0.0, 0.0];
-        tau.truncate(max.len());
-        tau.resize(max.len(), 0.0);
+        let mut tau = first;
         let mut prev = statics.solve(&tau, None)?;
-        let predict = std::env::args().nth(4).as_deref() != Some("no-predict");
         if predict {
             statics.add_tension_sensitivity(&mut prev);
         }
         let mut state = 12345u64;
         let (mut integrations, solves) = (0.0, 200);
         for _ in 0..solves {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            let i = (state >> 33) as usize % tau.len();
-            let up = (state >> 40) & 1 == 1;
-            tau[i] = (tau[i] + if up { 0.1 } else { -0.1 }).clamp(0.0, max[i]);
+            walk(&mut state, &mut tau, &max);
             let sol = statics.solve(&tau, Some(&prev.warm))?;
             integrations += sol.integrations;
             prev = sol;
@@ -112,6 +154,95 @@ fn main() -> anyhow::Result<()> {
     println!(
         "{mode}: {solves} solves, {:.2} integrations per solve",
         integrations / solves as f64
+    );
+    Ok(())
+}
+
+/// One step of the chain's fixed pseudo-random walk: ±0.1 N on one tendon.
+fn walk(state: &mut u64, tau: &mut [f64], max: &[f64]) {
+    *state = state
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
+    let i = (*state >> 33) as usize % tau.len();
+    let up = (*state >> 40) & 1 == 1;
+    tau[i] = (tau[i] + if up { 0.1 } else { -0.1 }).clamp(0.0, max[i]);
+}
+
+/// The tips "equal accuracy" is judged by: at the solver's settings, the
+/// warm solve 0.1 N up from `first` (from the cold solve's warm start, with
+/// and without dx/dτ), then the chain's 200 warm solves with dx/dτ carried and
+/// without; each against the same grid solved tight (stopping error) and 1024
+/// steps solved tight (the converged answer). One line per point
+/// (`bench`/`chain`, tensions, then the tips in m, each x y z: predicted,
+/// no-predict, tight, 1024-step, then the plain-pass equivalents of the
+/// predicted and no-predict solves), then the largest errors.
+fn tips(robot: &Robot, statics: &Statics, first: &[f64]) -> anyhow::Result<()> {
+    let tight_settings = |steps| SolverSettings {
+        steps,
+        tol: 1e-12,
+        ..SolverSettings::default()
+    };
+    let tight = Statics::new(robot, tight_settings(statics.settings().steps));
+    let fine = Statics::new(robot, tight_settings(1024));
+    let max = robot.max_tensions();
+    let cold = statics.solve(first, None)?;
+    let mut predicted = cold.clone();
+    statics.add_tension_sensitivity(&mut predicted);
+    let mut plain = cold;
+    let mut tight_prev = tight.solve(first, None)?;
+    let mut fine_prev = fine.solve(first, None)?;
+    // Largest |tip − reference| of (predicted, no-predict) against (tight, 1024).
+    let mut worst = [[0.0f64; 2]; 2];
+    let mut tau = first.to_vec();
+    let mut state = 12345u64;
+    for k in 0..=200 {
+        let what = if k == 0 { "bench" } else { "chain" };
+        if k == 0 {
+            tau[0] += if tau[0] + 0.1 <= max[0] { 0.1 } else { -0.1 };
+        } else {
+            if k == 1 {
+                tau = first.to_vec();
+            }
+            walk(&mut state, &mut tau, &max);
+        }
+        let p = statics.solve(&tau, Some(&predicted.warm))?;
+        let n = statics.solve(&tau, Some(&plain.warm))?;
+        let t = tight.solve(&tau, Some(&tight_prev.warm))?;
+        let f = fine.solve(&tau, Some(&fine_prev.warm))?;
+        let mut line = what.to_string();
+        for v in &tau {
+            line += &format!(" {v}");
+        }
+        for s in [&p, &n, &t, &f] {
+            for c in s.position.iter() {
+                line += &format!(" {c:.17e}");
+            }
+        }
+        line += &format!(" passes {:.2} {:.2}", p.integrations, n.integrations);
+        println!("{line}");
+        for (i, s) in [&p, &n].into_iter().enumerate() {
+            for (j, r) in [&t, &f].into_iter().enumerate() {
+                worst[i][j] = worst[i][j].max((s.position - r.position).norm());
+            }
+        }
+        if k == 0 {
+            // The chain starts again from the first point's cold solves.
+            continue;
+        }
+        predicted = p;
+        plain = n;
+        tight_prev = t;
+        fine_prev = f;
+    }
+    println!(
+        "worst tip error, tol {:e}, {} steps: predicted {:.2e} m (vs tight) {:.2e} m (vs 1024); \
+         no-predict {:.2e} m {:.2e} m",
+        statics.settings().tol,
+        statics.settings().steps,
+        worst[0][0],
+        worst[0][1],
+        worst[1][0],
+        worst[1][1]
     );
     Ok(())
 }
