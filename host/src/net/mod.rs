@@ -13,8 +13,8 @@
 //!   (several queries through each unit at once, no allocation per query),
 //!   bit-identical to [`mod@infer`] (8 or, with AVX2, 16 queries per
 //!   block); and its relaxed single-query path
-//!   ([`HostNet::infer_one_relaxed`], `relaxed`), within a few 1e-7 of it
-//!   but not bit-identical, for answers that claim no parity.
+//!   ([`HostNet::infer_one_relaxed`], `relaxed`), not bit-identical (a
+//!   rational `tanh`, FMA), for answers that claim no parity.
 //! - [`robot_check`]: the one check of a net's recorded robot against the
 //!   robot a consumer is given (`--allow-robot-mismatch` to override).
 //! - [`guarded`]: [`GuardedNet`], a net with its robot's limits that never
