@@ -101,6 +101,27 @@ fn a_nominal_quasi_static_run_is_clean_and_states_its_bound() {
     assert_eq!(r["max_rms_applied"], true);
 }
 
+/// A path with jumps has no RMS bound (its RMS is the jumps' transients),
+/// so its steady states are held to the bound: a tip that settles off its
+/// target is not clean. The seed robot settles ~0.04 mm off, far above
+/// 0.001 mm.
+#[test]
+fn steps_that_settle_beyond_the_bound_are_not_clean() {
+    let dir = tempfile::tempdir().unwrap();
+    let (o, r) = sim(
+        dir.path(),
+        &["--trajectory", "steps", "--max-rms-mm", "0.001"],
+    );
+    let err = stderr(&o);
+    assert!(!o.status.success(), "{err}");
+    assert_eq!(r["verdict"]["clean"], false);
+    assert!(
+        err.contains("steady-state error") && err.contains("exceeds the bound 0.001 mm"),
+        "{err}"
+    );
+    assert_eq!(r["max_rms_applied"], false, "{}", r["max_rms_applied"]);
+}
+
 #[test]
 fn a_run_above_its_stated_rms_bound_is_not_clean() {
     let dir = tempfile::tempdir().unwrap();

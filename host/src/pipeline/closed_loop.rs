@@ -57,6 +57,7 @@ pub fn closed_loop_section(
         family.describe()
     );
     let mut sections = Vec::new();
+    let mut tally = Tally::default();
     let letters = "abcdefghijklmnopqrstuvwxyz";
     let mut k = 0;
     for run in &runs {
@@ -88,6 +89,7 @@ pub fn closed_loop_section(
             match crate::ipc::sim::run(&sim) {
                 Ok(r) => {
                     let num = length_mm_or_dash;
+                    tally.count(&r.verdict.problems);
                     let verdict = if r.verdict.clean {
                         String::new()
                     } else {
@@ -109,6 +111,7 @@ pub fn closed_loop_section(
                 Err(e @ SimError::Interrupted) => return Err(e.into()),
                 Err(e) => {
                     log::error!("closed loop {dir}: {e}");
+                    tally.count(&[e.to_string()]);
                     let _ = writeln!(summary, "| {} ({dir}) | {on_off} | failed | | |", run.label);
                     sections.push(format!("{title}\n\nThe sim failed: {e}.\n"));
                 }
@@ -116,13 +119,37 @@ pub fn closed_loop_section(
         }
     }
     if let Some(run) = runs.first() {
-        let (row, section) = chip_run(&exe, robot_file, model, out, run, quick_s)?;
+        let (row, section) = chip_run(&exe, robot_file, model, out, run, quick_s, &mut tally)?;
         summary.push_str(&row);
         sections.push(section);
+    }
+    if tally.missed > 0 {
+        // The report has every number; the terminal gets one line, so a
+        // run that looks done is not mistaken for one that went well.
+        log::warn!(
+            "closed loop: {} of {} runs missed their bounds (report section 5)",
+            tally.missed,
+            tally.runs
+        );
     }
     summary.push('\n');
     summary.push_str(&sections.join("\n"));
     Ok(summary)
+}
+
+/// How many loop runs ran, and how many missed their bounds or failed.
+#[derive(Default)]
+struct Tally {
+    runs: usize,
+    missed: usize,
+}
+
+impl Tally {
+    /// One run with these problems (none: it passed).
+    fn count(&mut self, problems: &[String]) {
+        self.runs += 1;
+        self.missed += usize::from(!problems.is_empty());
+    }
 }
 
 /// The first run once more with the chip in the loop: the controller image
@@ -136,6 +163,7 @@ fn chip_run(
     out: &Path,
     run: &LoopRun,
     quick_s: Option<f64>,
+    tally: &mut Tally,
 ) -> anyhow::Result<(String, String)> {
     let dir = format!("{}-mcu", run_dir(run, true));
     let what = format!("{}, with the correction, the chip in the loop", run.label);
@@ -167,6 +195,7 @@ fn chip_run(
     Ok(match crate::ipc::sim::run(&sim) {
         Ok(r) => {
             let num = length_mm_or_dash;
+            tally.count(&r.verdict.problems);
             let verdict = if r.verdict.clean {
                 String::new()
             } else {
@@ -197,6 +226,7 @@ fn chip_run(
         Err(e @ SimError::Interrupted) => return Err(e.into()),
         Err(e) => {
             log::error!("closed loop {dir}: {e}");
+            tally.count(&[e.to_string()]);
             (
                 format!(
                     "| {} ({dir}), chip in the loop | on | failed | | |\n",

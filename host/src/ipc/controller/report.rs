@@ -149,6 +149,8 @@ pub struct FaultLog {
     faults: Vec<DetectedFault>,
     not_listed: u64,
     last_listed: [Option<u64>; FAULT_KINDS],
+    /// Kinds already logged as a warning (see [`FaultLog::warn_first`]).
+    warned: [bool; FAULT_KINDS],
 }
 
 impl FaultLog {
@@ -159,6 +161,26 @@ impl FaultLog {
             faults: Vec::with_capacity(FAULT_CAPACITY),
             not_listed: 0,
             last_listed: [None; FAULT_KINDS],
+            warned: [false; FAULT_KINDS],
+        }
+    }
+
+    /// Log `message` as a warning the first time `kind` happens, at debug
+    /// level after that: a setpoint stream outside the net's box repeats
+    /// the event every period it lasts (57 warnings in one `tendril run` of
+    /// the three-segment robot), and the run's report counts them all.
+    /// Returns whether it warned.
+    fn warn_first(&mut self, kind: FaultKind, message: &str) -> bool {
+        match self.warned.get_mut(kind.slot()) {
+            Some(w) if !*w => {
+                *w = true;
+                log::warn!("{message} (repeats are counted in the report, not logged)");
+                true
+            }
+            _ => {
+                log::debug!("{message}");
+                false
+            }
         }
     }
 
@@ -252,7 +274,10 @@ impl FaultLog {
             );
         }
         if ev.has(event::NONFINITE_SETPOINT) {
-            log::warn!("controller: setpoint with NaN/∞ rejected");
+            self.warn_first(
+                FaultKind::NonfiniteSetpoint,
+                "controller: setpoint with NaN/∞ rejected",
+            );
             let n = counters.rejected_nonfinite as f64;
             self.detect(
                 FaultKind::NonfiniteSetpoint,
@@ -263,13 +288,19 @@ impl FaultLog {
             );
         }
         if ev.has(event::BAD_QUATERNION) {
-            log::warn!("controller: setpoint with a non-unit quaternion rejected");
+            self.warn_first(
+                FaultKind::BadQuaternion,
+                "controller: setpoint with a non-unit quaternion rejected",
+            );
             let n = counters.rejected_quaternion as f64;
             let detail = "setpoint with a non-unit quaternion rejected";
             self.detect(FaultKind::BadQuaternion, now_ns, None, n, detail);
         }
         if ev.has(event::OUTSIDE_WORKSPACE) {
-            log::warn!("controller: setpoint outside the workspace held");
+            self.warn_first(
+                FaultKind::OutsideWorkspace,
+                "controller: setpoint outside the workspace held",
+            );
             let n = counters.rejected_workspace as f64;
             let detail = "setpoint outside the net's workspace: target held";
             self.detect(FaultKind::OutsideWorkspace, now_ns, None, n, detail);
@@ -352,5 +383,21 @@ impl ControllerStats {
         self.commands_not_applied = u(c.commands_not_applied);
         self.plant_stale_cycles = u(c.plant_stale_periods);
         self.plant_recoveries = u(c.plant_recoveries);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One warning per kind and process, however often the event repeats;
+    /// every occurrence still reaches the fault list's thinning.
+    #[test]
+    fn a_repeating_event_warns_once_per_kind() {
+        let mut log = FaultLog::new(0);
+        assert!(log.warn_first(FaultKind::OutsideWorkspace, "outside"));
+        assert!(!log.warn_first(FaultKind::OutsideWorkspace, "outside"));
+        assert!(log.warn_first(FaultKind::BadQuaternion, "quaternion"));
+        assert!(!log.warn_first(FaultKind::BadQuaternion, "quaternion"));
     }
 }
