@@ -157,6 +157,9 @@ pub fn period_config(s: &Setup) -> Result<PeriodConfig, u8> {
 struct Pending {
     inputs: Inputs,
     hello_asked: bool,
+    /// When the newest feedback arrived, ns on the board's clock: on the
+    /// timer it waits up to a period for it, and ages meanwhile.
+    feedback_received_ns: u64,
 }
 
 /// The node's state besides the frame decoder (split so a decoded payload,
@@ -231,6 +234,7 @@ impl<const U: usize> Node<U> {
                         feedbacks: 0,
                     },
                     hello_asked: false,
+                    feedback_received_ns: 0,
                 },
                 last_tangent: None,
                 refused_events: 0,
@@ -342,6 +346,15 @@ impl<const U: usize> Core<U> {
         let mut input = self.pending.inputs;
         input.now_ns = t0;
         input.missed_ticks = missed_periods;
+        if let Some(f) = input.feedback.as_mut() {
+            // The host gave the tracker frame's age when it sent it; the
+            // frame has since waited here for this period (up to a period:
+            // 10 ms at 100 Hz, 0.19 mm on the 30 mm circle). Without it the
+            // loop compares the tip with the path where the robot was
+            // later than the frame shows, and integrates the difference.
+            let waited = t0.saturating_sub(self.pending.feedback_received_ns);
+            f.tip_age_ns = f.tip_age_ns.saturating_add(waited);
+        }
         self.pending.inputs = Inputs::default();
         self.run_period(board, store, &input, frames, t0);
     }
@@ -498,7 +511,7 @@ impl<const U: usize> Core<U> {
             Down::Setpoint(s) => self.setpoint(s),
             // Taken by `Node::tick`, which has the board and the store.
             Down::Step { .. } => {}
-            Down::Feedback(f) => self.feedback(f),
+            Down::Feedback(f) => self.feedback(f, now_ns),
             Down::Chunk {
                 offset,
                 total,
@@ -539,7 +552,8 @@ impl<const U: usize> Core<U> {
         });
     }
 
-    fn feedback(&mut self, f: &Feedback) {
+    fn feedback(&mut self, f: &Feedback, now_ns: u64) {
+        self.pending.feedback_received_ns = now_ns;
         let i = &mut self.pending.inputs;
         i.feedbacks = i.feedbacks.saturating_add(u32::from(f.count.max(1)));
         i.feedback = Some(FeedbackIn {

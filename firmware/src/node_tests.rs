@@ -273,6 +273,79 @@ fn the_same_inputs_in_lock_step_give_the_same_commands_whatever_the_board_clock(
     assert_eq!(a, b);
 }
 
+/// A 100 Hz loop on the 1 kHz board with the integral loop on, a setpoint
+/// that says it moves at 50 mm/s along x, and the tip seen where the
+/// setpoint is. Each period's setpoint arrives the tick after the period
+/// before; its tracker frame arrives `waits` ticks before the next period
+/// (9: with the setpoint; 0: in the period's own tick) with the age
+/// `age_us` the host gave it when it sent it. The commands.
+fn frames_waiting(waits: u32, age_us: u32) -> Vec<Command> {
+    let mut r = Rig::new();
+    let mut s = setup();
+    s.period_ns = 10 * TICK;
+    s.watchdog_ns = 25 * s.period_ns;
+    s.max_dt_ns = 5 * s.period_ns;
+    s.feedback_timeout_ns = 20 * s.period_ns;
+    s.plant_stale_ns = 20 * s.period_ns;
+    s.ki = 10.0;
+    s.slew_rate = [1e6; MAX_TENDONS];
+    r.send(&Down::Setup(s));
+    let mut out: Vec<Command> = Vec::new();
+    let mut since_period = None;
+    for k in 0..600u32 {
+        if since_period == Some(0) {
+            let seq = out.len() as u32;
+            let Down::Setpoint(mut sp) = setpoint(seq + 1) else {
+                unreachable!()
+            };
+            sp.velocity = Some(Setpoint::wire_velocity(&[
+                0.05, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            ]));
+            r.send(&Down::Setpoint(sp));
+        }
+        if since_period == Some(9 - waits) {
+            let seq = out.len() as u32;
+            let Down::Feedback(mut f) = feedback(seq, out.last().map_or(0, |c| c.seq)) else {
+                unreachable!()
+            };
+            let p = pose();
+            f.tip = [0, 1, 2].map(|i| (p[i] * 1e6).round() as i32);
+            f.tip_age_us = age_us;
+            r.send(&Down::Feedback(f));
+        }
+        let c = commands(&r.tick());
+        since_period = if c.is_empty() {
+            since_period.map(|n| n + 1)
+        } else {
+            Some(0)
+        };
+        out.extend(c);
+        assert!(k < 30 || since_period.is_some(), "no period in 30 ticks");
+    }
+    out
+}
+
+#[test]
+fn a_frame_that_waits_for_the_period_ages_meanwhile() {
+    // Sampled one tick after a period, the frame is compared with the path
+    // where the robot was then, whether it waited nine ticks here (sent at
+    // once) or on the host (sent nine ticks old, just before the period).
+    let waited_here = frames_waiting(9, 0);
+    let waited_on_host = frames_waiting(0, 9_000);
+    let first_difference = |a: &[Command], b: &[Command]| a.iter().zip(b).position(|(x, y)| x != y);
+    assert_eq!(waited_here.len(), 60);
+    assert_eq!(first_difference(&waited_here, &waited_on_host), None);
+    // The age matters: a frame as new as the period is another sample.
+    let fresh = frames_waiting(0, 0);
+    assert!(first_difference(&waited_on_host, &fresh).is_some());
+    let corrected = |cs: &[Command]| {
+        cs.iter()
+            .filter(|c| c.status & tendril_shared::messages::command_status::CORRECTION != 0)
+            .count()
+    };
+    assert!(corrected(&waited_on_host) > 30, "the loop integrated");
+}
+
 #[test]
 fn setups_refused_kept_and_replaced() {
     let mut r = configured();

@@ -81,18 +81,25 @@ fn the_chip_tracks_the_circle_like_the_host_controller() {
         f(&host["rms_tracking_error_mm"]),
         f(&mcu["rms_tracking_error_mm"]),
     );
-    println!("circle RMS: host {rh:.4} mm, chip {rm:.4} mm");
+    let (ph, pm) = (f(&host["rms_path_error_mm"]), f(&mcu["rms_path_error_mm"]));
+    println!("circle RMS: host {rh:.4} mm, chip {rm:.4} mm; path error: host {ph:.4} mm, chip {pm:.4} mm");
     // The issue's target is "within 0.05 mm of a host-controller run made
-    // right before it". Single pairs at 100 Hz cannot hold it reliably:
-    // the host's own RMS spreads over 0.06–0.17 mm from run to run and
-    // the chip's over 0.085–0.126 mm (BENCHMARKS.md; cause of the host's
-    // spread not pinned down). What a pair can check without flaking:
-    // the chip is not worse than the host by more than 0.1 mm, and it
-    // tracks the circle to 0.2 mm (the IK net alone: ~1 mm).
+    // right before it". The tracking error on the moving circle (18.8 mm/s)
+    // is partly delay: 0.19 mm per 10 ms, and the chip's commands come
+    // through an emulated serial link whose latency follows the machine's
+    // load (setpoint → command has its own check below). So the target is
+    // held on the path error, the tip's distance from the circle (the
+    // tracking error less the delay along it): idle, the chip is
+    // 0.010–0.016 mm above the host there, and 0.006–0.032 mm in tracking
+    // (BENCHMARKS.md). Before protocol 4 the link's coarse quaternion put
+    // the chip 0.045 mm above the host's path error and a CI run 0.11 mm
+    // above its tracking error. The tracking error is bounded loosely,
+    // for a loaded machine: 0.25 mm (13 ms of delay).
     assert!(
-        rm <= rh + 0.1 && rm <= 0.2,
-        "chip in the loop {rm} mm vs host controller {rh} mm"
+        pm <= ph + 0.05,
+        "chip in the loop {pm} mm off the circle vs host controller {ph} mm"
     );
+    assert!(rm <= 0.25, "chip in the loop tracks to {rm} mm RMS");
     assert!(host["controller"]["link"].is_null());
     assert_link_kept_up(&mcu, 2.0);
     let c = chip(&mcu);

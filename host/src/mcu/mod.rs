@@ -13,6 +13,8 @@ pub mod bridge;
 mod chip;
 mod link;
 pub mod trace;
+#[cfg(test)]
+mod units_tests;
 
 pub use chip::{build_image, locate_bringup_image, locate_image, Chip, QEMU, TARGET};
 pub use link::McuLink;

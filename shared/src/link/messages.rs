@@ -32,7 +32,13 @@ use crate::MAX_TENDONS;
 /// so every older message keeps its postcard tag, but a version-1 chip
 /// would count a Step as a bad message and keep running on its timer: the
 /// host must know the chip understands it, hence the bump.
-pub const PROTOCOL_VERSION: u16 = 3;
+///
+/// 4: the quaternion of [`WirePose`] in 1e-6 (`i32`), was 1e-4 (`i16`):
+/// 1e-4 moved the default net's command by as much as 0.06 mm RMS of tip
+/// (0.11 mm max), the whole gap between the chip and the host controller on
+/// the circle. Same bytes on the wire (a unit quaternion's components in
+/// 1e-6 are 3-byte varints, as they were in 1e-4).
+pub const PROTOCOL_VERSION: u16 = 4;
 
 /// The chip sends [`Up::Telemetry`] every this many ticks of its timer
 /// (100 ms at 1 kHz), and a Hello as often while unconfigured.
@@ -129,15 +135,18 @@ pub struct Tangent {
 /// Fixed-point units of the link (docs/design.md §5.6): the emulated
 /// USART carries 10–70 kB/s (docs/design.md §5.6), so a setpoint and a feedback must fit in well
 /// under 130 bytes per 10 ms period. Every quantity is an integer of a unit
-/// far below what matters to the loop (a micron, 1e-4 of a quaternion, a
+/// far below what matters to the loop (a micron, 1e-6 of a quaternion, a
 /// millinewton), sent as a postcard varint; the chip turns it back into
 /// `f32`. NaN/∞ travel as the type's minimum (the chip must see a bad
 /// setpoint to reject it).
 pub mod units {
     /// Metres per position unit: 1 µm.
     pub const POSITION_M: f32 = 1e-6;
-    /// Quaternion component per unit.
-    pub const QUATERNION: f32 = 1e-4;
+    /// Quaternion component per unit. Not 1e-4: a trained net turns the
+    /// orientation into tensions steeply (on the default robot 1e-4 of a
+    /// component moved the tip by 0.06 mm RMS; 1e-6 by 0.0014 mm), since
+    /// for a one-segment robot the orientation says where the tip is.
+    pub const QUATERNION: f32 = 1e-6;
     /// Pose derivative per unit: 1e-4 m/s (or 1/s for the quaternion).
     pub const VELOCITY: f32 = 1e-4;
     /// Newtons per tension unit: 1 mN.
@@ -186,13 +195,13 @@ pub mod units {
     }
 }
 
-/// A pose on the link: position in µm, quaternion in 1e-4.
+/// A pose on the link: position in µm, quaternion in 1e-6.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct WirePose {
     /// `px, py, pz`, µm.
     pub position: [i32; 3],
-    /// `qw, qx, qy, qz`, 1e-4.
-    pub quaternion: [i16; 4],
+    /// `qw, qx, qy, qz`, 1e-6.
+    pub quaternion: [i32; 4],
 }
 
 impl WirePose {
@@ -201,7 +210,7 @@ impl WirePose {
         let [x, y, z, w, qx, qy, qz] = *p;
         WirePose {
             position: [x, y, z].map(|v| units::to_i32(v, units::POSITION_M)),
-            quaternion: [w, qx, qy, qz].map(|v| units::to_i16(v, units::QUATERNION)),
+            quaternion: [w, qx, qy, qz].map(|v| units::to_i32(v, units::QUATERNION)),
         }
     }
 
@@ -210,7 +219,7 @@ impl WirePose {
         let [x, y, z] = self.position.map(|q| units::from_i32(q, units::POSITION_M));
         let [w, qx, qy, qz] = self
             .quaternion
-            .map(|q| units::from_i16(q, units::QUATERNION));
+            .map(|q| units::from_i32(q, units::QUATERNION));
         [x, y, z, w, qx, qy, qz]
     }
 }
@@ -427,7 +436,7 @@ mod tests {
             superseded_nonfinite: u16::MAX,
             pose: WirePose {
                 position: [i32::MAX; 3],
-                quaternion: [i16::MAX; 4],
+                quaternion: [i32::MAX; 4],
             },
             velocity: Some([i16::MAX; 7]),
             tangent: Some(Tangent {

@@ -357,6 +357,64 @@ pub fn tracking(samples: &[Sample]) -> Tracking {
     }
 }
 
+/// How far in time, either side of a sample, the path it is measured
+/// against reaches, s: several periods of the slowest loop (100 Hz with the
+/// chip) and the longest latency a clean run has, yet a small arc of any
+/// trajectory the planner draws (0.4 s of the 0.2 Hz circle).
+pub const PATH_WINDOW_S: f64 = 0.2;
+
+/// RMS distance from the true tip to the planner's path, mm, over the
+/// samples outside holds: the contour error of machining. The path is the
+/// polyline through the setpoints issued within ±[`PATH_WINDOW_S`] of the
+/// sample. The tracking error compares the tip with the setpoint in force
+/// at the same instant, so on a moving setpoint it includes the delay from
+/// planner to tip (speed × latency: 0.19 mm per 10 ms on the 30 mm circle);
+/// this one does not, and so separates what the controller computes from
+/// how fast its commands arrive (reported on its own: setpoint → command).
+pub fn path_error_rms(samples: &[Sample]) -> Option<f64> {
+    // The path's vertices: the desired position each time it changes.
+    let mut vertices: Vec<(f64, [f64; 3])> = Vec::new();
+    for s in samples {
+        if vertices.last().is_none_or(|v| v.1 != s.desired) {
+            vertices.push((s.t, s.desired));
+        }
+    }
+    let e: Vec<f64> = samples
+        .iter()
+        .filter(|s| !s.hold)
+        .map(|s| {
+            let from = vertices.partition_point(|v| v.0 < s.t - PATH_WINDOW_S);
+            let to = vertices.partition_point(|v| v.0 <= s.t + PATH_WINDOW_S);
+            let near = &vertices[from..to.max(from + 1).min(vertices.len())];
+            let to_segments = near
+                .windows(2)
+                .map(|w| distance_to_segment(s.actual, w[0].1, w[1].1));
+            // A lone vertex (a constant setpoint) is a path of one point.
+            to_segments
+                .chain(near.iter().map(|v| distance_to_segment(s.actual, v.1, v.1)))
+                .fold(f64::INFINITY, f64::min)
+                * 1e3
+        })
+        .collect();
+    rms(&e)
+}
+
+/// Distance from `p` to the segment `a`–`b` (a point if they coincide), m.
+fn distance_to_segment(p: [f64; 3], a: [f64; 3], b: [f64; 3]) -> f64 {
+    let ab: [f64; 3] = std::array::from_fn(|k| b[k] - a[k]);
+    let ap: [f64; 3] = std::array::from_fn(|k| p[k] - a[k]);
+    let len2: f64 = ab.iter().map(|x| x * x).sum();
+    let along = if len2 > 0.0 {
+        (ap.iter().zip(&ab).map(|(x, y)| x * y).sum::<f64>() / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (0..3)
+        .map(|k| (ap[k] - along * ab[k]).powi(2))
+        .sum::<f64>()
+        .sqrt()
+}
+
 /// Every stretch of ≥ 1 s with a constant desired position: the mean true
 /// error over its last 0.5 s.
 pub fn steady_states(samples: &[Sample]) -> Vec<SteadyState> {
@@ -424,10 +482,73 @@ mod tests {
         assert!((t.max.unwrap() - 4.0).abs() < 1e-9);
     }
 
+    /// A 100 Hz setpoint along x at 20 mm/s and a tip `lag_s` behind it,
+    /// `offset_m` off the line in y; plant samples at 1 kHz.
+    fn lagging_line(lag_s: f64, offset_m: f64) -> Vec<Sample> {
+        let v = 0.02;
+        (0..2000)
+            .map(|i| {
+                let t = i as f64 * 1e-3;
+                let t_sp = (t / 0.01).floor() * 0.01;
+                Sample {
+                    t,
+                    desired: [v * t_sp, 0.0, 0.2],
+                    actual: [v * (t - lag_s).max(0.0), offset_m, 0.2],
+                    hold: t < 0.5,
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_path_error_leaves_out_the_delay_along_the_path() {
+        // 20 ms behind at 20 mm/s: the tracking error is ~0.4 mm (less
+        // the setpoint's own 0–10 ms age), the path error nothing.
+        let s = lagging_line(0.02, 0.0);
+        let track = tracking(&s).rms.unwrap();
+        assert!((0.25..0.35).contains(&track), "{track}");
+        assert!(path_error_rms(&s).unwrap() < 1e-9);
+    }
+
+    #[test]
+    fn the_path_error_keeps_the_distance_across_the_path() {
+        let s = lagging_line(0.02, 0.1e-3);
+        let p = path_error_rms(&s).unwrap();
+        assert!((p - 0.1).abs() < 1e-9, "{p}");
+        // A lone setpoint is a path of one point: a steady state's error.
+        let fixed = [sample(0.0, 0.01, 0.012, false)];
+        assert!((path_error_rms(&fixed).unwrap() - 2.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_lagging_tip_on_a_circle_is_only_a_chord_off_its_path() {
+        // The 30 mm circle at 0.2 Hz, setpoints at 100 Hz, tip 30 ms
+        // behind and on the circle: the path error is at most the sagitta
+        // of a 10 ms chord, r(1 − cos(ω·0.01/2)) = 3.0e-4 mm (the first
+        // 50 ms, with the tip behind the path's start, are a hold).
+        let (r, w) = (0.015, 2.0 * std::f64::consts::PI * 0.2);
+        let at = |t: f64| [r * (w * t).cos(), r * (w * t).sin(), 0.2];
+        let s: Vec<Sample> = (0..3000)
+            .map(|i| {
+                let t = i as f64 * 1e-3;
+                Sample {
+                    t,
+                    desired: at((t / 0.01).floor() * 0.01),
+                    actual: at(t - 0.03),
+                    hold: t < 0.05,
+                }
+            })
+            .collect();
+        assert!(tracking(&s).rms.unwrap() > 0.4);
+        let p = path_error_rms(&s).unwrap();
+        assert!((1e-4..3.1e-4).contains(&p), "{p}");
+    }
+
     #[test]
     fn no_samples_give_no_statistics_rather_than_zeros() {
         let t = tracking(&[sample(0.0, 0.0, 0.5, true)]);
         assert_eq!((t.rms, t.max, t.p95, t.samples), (None, None, None, 0));
+        assert_eq!(path_error_rms(&[sample(0.0, 0.0, 0.5, true)]), None);
     }
 
     #[test]

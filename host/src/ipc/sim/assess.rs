@@ -6,7 +6,9 @@ use std::path::Path;
 
 use tendril_shared::messages::{command_status, plant_status};
 
-use super::analysis::{self, join, rms_between, steady_states, tracking, Logs, Sample};
+use super::analysis::{
+    self, join, path_error_rms, rms_between, steady_states, tracking, Logs, Sample,
+};
 use super::faults::Action;
 use super::oscillation;
 use super::report::{
@@ -240,6 +242,7 @@ pub fn build_report(
         },
         processes,
         rms_tracking_error_mm: track.rms,
+        rms_path_error_mm: path_error_rms(&samples),
         max_tracking_error_mm: track.max,
         p95_tracking_error_mm: track.p95,
         tracking_samples: track.samples,

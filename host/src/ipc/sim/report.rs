@@ -38,6 +38,12 @@ pub struct SimReport {
     /// RMS of the true tip error against the planner's path over the
     /// tracking samples (outside holds), mm; `null` with no samples.
     pub rms_tracking_error_mm: Option<f64>,
+    /// RMS distance from the true tip to the planner's path (the polyline
+    /// through the setpoints within ±0.2 s), mm: the tracking error less
+    /// the delay along the path (`analysis::path_error_rms`). What compares
+    /// two controllers whose commands arrive with different latency.
+    #[serde(default)]
+    pub rms_path_error_mm: Option<f64>,
     /// Largest tracking error, mm.
     pub max_tracking_error_mm: Option<f64>,
     /// 95th percentile of the tracking error, mm.
@@ -302,6 +308,10 @@ impl SimReport {
             row("tracking window (s)", format!("{a:.2} – {b:.2}"));
         }
         row("RMS tracking error (mm)", mm(self.rms_tracking_error_mm));
+        row(
+            "RMS path error: tracking less the delay along the path (mm)",
+            mm(self.rms_path_error_mm),
+        );
         row("max tracking error (mm)", mm(self.max_tracking_error_mm));
         row("p95 tracking error (mm)", mm(self.p95_tracking_error_mm));
         row(
