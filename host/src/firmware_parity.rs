@@ -147,12 +147,21 @@ pub fn build_mcu_bin(
         Some(p) => cmd.env("TENDRIL_FW_VECTORS", p),
         None => cmd.env_remove("TENDRIL_FW_VECTORS"),
     };
-    let status = cmd
-        .status()
+    // Cargo's progress lines are not the user's business (the pipeline
+    // logs the stage); its error is, and goes into the message.
+    let out = cmd
+        .stdin(std::process::Stdio::null())
+        .output()
         .map_err(|e| ParityError::Run(format!("starting cargo build: {e}")))?;
-    if !status.success() {
+    if !out.status.success() {
+        let err = String::from_utf8_lossy(&out.stderr);
+        let first = err
+            .lines()
+            .find(|l| l.starts_with("error"))
+            .unwrap_or("(no error line)");
         return Err(ParityError::Run(format!(
-            "cargo build of the MCU binary failed ({status})"
+            "cargo build of the MCU binary failed ({}): {first}",
+            out.status
         )));
     }
     let elf = target_dir.join(TARGET).join("release").join(bin);

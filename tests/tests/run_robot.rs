@@ -93,6 +93,20 @@ fn the_pipeline_runs_end_to_end_on_the_one_tendon_robot() {
         !runs.is_empty(),
         "no closed-loop run for the one-tendon robot"
     );
+    // The chip's run: the run's net goes over the link before any setpoint
+    // (the chip boots with the default robot's net, whose box the
+    // one-tendon robot's poses are outside of), so no setpoint meets the
+    // wrong net, and the loop is clean.
+    let chip_dir = format!("{}-mcu", run_dir(&runs[0], true));
+    let chip = json(&dir.join(&chip_dir).join("controller.json"));
+    assert_eq!(number(&chip, &["weight_swaps"]), 1.0, "{chip_dir}: {chip}");
+    assert_eq!(number(&chip, &["rejected_workspace"]), 0.0, "{chip_dir}");
+    let sim = json(&dir.join(&chip_dir).join("report.json"));
+    assert_eq!(
+        sim["verdict"]["clean"],
+        Value::Bool(true),
+        "{chip_dir}: {sim}"
+    );
     for run in runs {
         let sub = run_dir(&run, true);
         let sim = json(&dir.join(&sub).join("report.json"));

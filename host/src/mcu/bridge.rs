@@ -17,7 +17,7 @@ use std::time::Duration;
 
 use anyhow::{anyhow, bail, Result};
 use serde::{Deserialize, Serialize};
-use tendril_firmware::period::{Counters, Events, PeriodConfig};
+use tendril_firmware::period::{event, Counters, Events, PeriodConfig};
 use tendril_shared::link::messages::{
     units, Command, Down, Feedback, Hello, Setpoint as LinkSetpoint, Setup, Tangent as LinkTangent,
     Telemetry, Up, WirePose, MAX_CHUNK, MAX_UP_PAYLOAD, PROTOCOL_VERSION,
@@ -46,6 +46,11 @@ use crate::robot::Robot;
 /// link saturates (measured: the chip missed periods and its stuck-motor
 /// rule fired on stale feedback). A real board at 2 Mbaud carries 1 kHz.
 pub const MCU_RATE_HZ: f64 = 100.0;
+
+/// How long the bridge holds the planner's setpoints back while the chip
+/// installs the run's net at the start, ns (the upload takes ~1 s idle,
+/// ~3.5 s behind a loaded loop's traffic).
+const FIRST_NET_WAIT_NS: u64 = 8_000_000_000;
 
 /// Bytes of a weight-update chunk the bridge sends. A chunk goes only
 /// when the link has no backlog ([`CHUNK_MAX_BACKLOG`]) and at most every
@@ -387,6 +392,15 @@ pub fn run(
     let model_hash = tendril_shared::tnet::net_hash(model);
     let mut update: Option<(Vec<u8>, usize, u64)> =
         (chip.hello.net_hash != model_hash).then(|| (model.to_vec(), 0, 0));
+    // Until the chip runs the run's net, no setpoint goes to it: it would
+    // be answered by the net already on the chip, made for another robot or
+    // another fit (a robot of other tendon counts is held, one of the same
+    // count driven by the wrong net). The planner's settle hold covers the
+    // upload (12 kB in about a second on an idle link); the setpoints that
+    // came meanwhile are counted with the first one forwarded. Should the
+    // chip neither swap nor refuse within `FIRST_NET_WAIT_NS`, the loop
+    // goes on with what it has, and says so.
+    let mut first_net_pending = update.is_some();
 
     let node = transport::node("tendril-controller")?;
     let _orphan = transport::ReleaseIfOrphaned(&node);
@@ -449,7 +463,17 @@ pub fn run(
         // a slow link only delays the new ones — at start-up the chip reads
         // nothing until it is configured). The newest goes once it drained.
         let link_free = chip.backlog() <= SEND_MAX_BACKLOG;
-        if let (Some((s, count, superseded)), true) = (pending_setpoint, link_free) {
+        if first_net_pending && now.saturating_sub(start) > FIRST_NET_WAIT_NS {
+            first_net_pending = false;
+            log::warn!(
+                "controller: the chip has not installed the run's net after {} s: \
+                 setpoints go to the net it runs",
+                FIRST_NET_WAIT_NS / 1_000_000_000
+            );
+        }
+        if let (Some((s, count, superseded)), true, false) =
+            (pending_setpoint, link_free, first_net_pending)
+        {
             // The newest is forwarded (its own NaN is the chip's to find);
             // `superseded` counted only the ones it superseded.
             let msg = link_setpoint(&s, count, superseded, &mut last_tangent);
@@ -543,6 +567,11 @@ pub fn run(
         for msg in chip.drain() {
             match msg {
                 Up::Command(c) => {
+                    if c.events & (event::WEIGHTS_SWAPPED | event::WEIGHTS_REJECTED) != 0 {
+                        // Swapped, or refused (the refusal is a fault the
+                        // report lists): either way the wait is over.
+                        first_net_pending = false;
+                    }
                     if last_cmd_seq > 0 && c.seq > last_cmd_seq + 1 {
                         stats.commands_lost += u64::from(c.seq - last_cmd_seq - 1);
                     }

@@ -12,7 +12,7 @@
 pub mod closed_loop;
 pub mod staging;
 
-pub use closed_loop::run_dir;
+pub use closed_loop::{run_dir, LoopTally};
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -149,11 +149,11 @@ pub fn run(
     let staging = Staging::create(out, &lock)
         .with_context(|| format!("creating {}", out.join(staging::STAGING).display()))?;
     let result = stages(robot_file, &robot, out, &staging, options, command);
-    if result.is_ok() && !crate::interrupt::stop_requested() {
+    if let (Ok(tally), false) = (&result, crate::interrupt::stop_requested()) {
         staging
             .publish()
             .with_context(|| format!("moving the finished run's files into {}", out.display()))?;
-        return Ok(());
+        return loop_status(tally, out);
     }
     drop(staging); // removes everything this run wrote
     if !existed {
@@ -169,12 +169,30 @@ pub fn run(
         ))),
         Err(e) => Err(e),
         // A signal in a stage that does not poll the flag: still nothing is published.
-        Ok(()) => Err(anyhow::anyhow!("interrupted")),
+        Ok(_) => Err(anyhow::anyhow!("interrupted")),
     }
 }
 
+/// The status of a run whose stages all ran and whose files are published
+/// in `out`: a loop run that missed its bounds still makes it a failure, so
+/// a script sees what the report says.
+fn loop_status(tally: &LoopTally, out: &Path) -> anyhow::Result<()> {
+    if tally.missed > 0 {
+        anyhow::bail!(
+            "closed loop: {} of {} runs missed their bounds or failed (section 5 of {}); \
+             every stage ran and its files are in {}",
+            tally.missed,
+            tally.runs,
+            out.join("report.md").display(),
+            out.display()
+        );
+    }
+    Ok(())
+}
+
 /// Every stage of [`run`], writing into `staging`; `out` is where the
-/// files will be once published (the report names those paths).
+/// files will be once published (the report names those paths). Returns
+/// the closed-loop stage's tally (empty when it was skipped).
 fn stages(
     robot_file: &Path,
     robot: &Robot,
@@ -182,7 +200,7 @@ fn stages(
     staging: &Staging,
     options: &RunOptions,
     command: String,
-) -> anyhow::Result<()> {
+) -> anyhow::Result<LoopTally> {
     let robot = robot.clone();
     let mut report = Report::new(staging.path("report.md"), &robot, command);
     log::info!("robot: {robot}");
@@ -317,9 +335,9 @@ fn stages(
     // which the CPU-bound stages 4 and 4b then cannot disturb, it runs
     // beside them; without real-time scheduling it runs after them, as it
     // always did, so that its timing is not shared with the training.
-    let closed_loop = || -> anyhow::Result<String> {
+    let closed_loop = || -> anyhow::Result<(String, LoopTally)> {
         let t = Instant::now();
-        let section = closed_loop::closed_loop_section(
+        let done = closed_loop::closed_loop_section(
             robot_file,
             &statics,
             &model,
@@ -327,10 +345,10 @@ fn stages(
             options.quick.then_some(QUICK_LOOP_S),
         )?;
         log::info!("closed loop: done in {:.1} s", t.elapsed().as_secs_f64());
-        Ok(section)
+        Ok(done)
     };
     let beside = !options.no_closed_loop && realtime_available();
-    std::thread::scope(|scope| -> anyhow::Result<()> {
+    let tally = std::thread::scope(|scope| -> anyhow::Result<LoopTally> {
         let background = beside.then(|| {
             log::info!("closed loop: running beside the comparison (real-time scheduling)");
             scope.spawn(closed_loop)
@@ -358,16 +376,18 @@ fn stages(
             firmware_parity_section(&model, &staging.shown(&model), &staging.path("parity.json"))
         })?;
 
-        let section = match background {
+        let (section, tally) = match background {
             Some(handle) => handle
                 .join()
                 .map_err(|_| anyhow::anyhow!("the closed-loop stage panicked"))??,
-            None if options.no_closed_loop => {
-                "## 5. Closed loop\n\nSkipped on request (`--no-closed-loop`).\n".into()
-            }
+            None if options.no_closed_loop => (
+                "## 5. Closed loop\n\nSkipped on request (`--no-closed-loop`).\n".into(),
+                LoopTally::default(),
+            ),
             None => closed_loop()?,
         };
-        report.add(section)
+        report.add(section)?;
+        Ok(tally)
     })?;
 
     log::info!(
@@ -377,7 +397,7 @@ fn stages(
         length_mm(test_tip_mean_mm),
         staging.shown(&report.path).display()
     );
-    Ok(())
+    Ok(tally)
 }
 
 /// Stage 1's dataset for the robot in `robot_file`: `out/data.csv`, reused
@@ -511,4 +531,24 @@ pub fn example_shapes(statics: &Statics) -> anyhow::Result<Vec<BackboneCurve>> {
             })
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_loop_run_that_missed_its_bounds_fails_the_run_and_says_how_many() {
+        let out = Path::new("runs/a");
+        let clean = LoopTally { runs: 5, missed: 0 };
+        assert!(loop_status(&clean, out).is_ok());
+        assert!(
+            loop_status(&LoopTally::default(), out).is_ok(),
+            "skipped stage"
+        );
+        let e = loop_status(&LoopTally { runs: 5, missed: 2 }, out).unwrap_err();
+        let text = e.to_string();
+        assert!(text.contains("2 of 5 runs"), "{text}");
+        assert!(text.contains("runs/a/report.md"), "{text}");
+    }
 }
