@@ -515,8 +515,15 @@ pub fn run(
             }
         }
         // Paced chunks: the link's spare bandwidth, not more.
-        let chunk_due = now.saturating_sub(last_chunk) >= CHUNK_EVERY_MS * 1_000_000
-            && chip.backlog() <= CHUNK_MAX_BACKLOG;
+        // Before the first setpoint nothing else needs the link: the run's
+        // net goes as fast as the link takes it (the backlog bound alone).
+        let pace_ns = if first_net_pending {
+            0
+        } else {
+            CHUNK_EVERY_MS * 1_000_000
+        };
+        let chunk_due =
+            now.saturating_sub(last_chunk) >= pace_ns && chip.backlog() <= CHUNK_MAX_BACKLOG;
         if let (true, Some((blob, at, _))) = (chunk_due, &mut update) {
             last_chunk = now;
             let end = (*at + CHUNK_BYTES.min(MAX_CHUNK)).min(blob.len());
