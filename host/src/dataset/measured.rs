@@ -221,10 +221,10 @@ impl LocalForward {
     }
 
     /// The (up to) `k` rows nearest `t` in range-scaled tension space that
-    /// `usable` allows, as (a distance, row). From the k-d
-    /// tree, asking for a few more than `k` and more again while refused
-    /// rows leave fewer than `k` (O(k log n) for the few outliers and the
-    /// row itself a leave-one-out fit refuses); without a tree, a scan.
+    /// `usable` allows, as (a distance, row). From the k-d tree, asking for
+    /// a few more than `k` and more again while refused rows leave fewer
+    /// than `k` (O(k log n) for the few outliers and the row itself a
+    /// leave-one-out fit refuses); without a tree, a scan.
     fn nearest_usable(&self, t: &[f64], usable: &impl Fn(usize) -> bool) -> Vec<(f64, usize)> {
         let n = self.len();
         let Some(tree) = &self.tree else {

@@ -46,6 +46,36 @@ pub const WIDE_LANES: usize = 16;
 /// Most features a unit reads: the bias, the inputs, the hidden units.
 const MAX_FEATURES: usize = 1 + POSE_DIM + MAX_HIDDEN;
 
+/// A net's input and output ranges as `lo` and width (inputs the net does
+/// not have: 0 and 1, so they stay 0 as in the firmware's padding).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Ranges {
+    pub(super) in_lo: [f32; POSE_DIM],
+    pub(super) in_width: [f32; POSE_DIM],
+    pub(super) out_lo: [f32; MAX_TENDONS],
+    pub(super) out_width: [f32; MAX_TENDONS],
+}
+
+impl Ranges {
+    pub(super) fn of(net: &McuNet) -> Ranges {
+        let mut r = Ranges {
+            in_lo: [0.0; POSE_DIM],
+            in_width: [1.0; POSE_DIM],
+            out_lo: [0.0; MAX_TENDONS],
+            out_width: [0.0; MAX_TENDONS],
+        };
+        for (i, (&lo, &hi)) in net.input_lo().iter().zip(net.input_hi()).enumerate() {
+            r.in_lo[i] = lo;
+            r.in_width[i] = hi - lo;
+        }
+        for (o, (&lo, &hi)) in net.output_lo().iter().zip(net.output_hi()).enumerate() {
+            r.out_lo[o] = lo;
+            r.out_width[o] = hi - lo;
+        }
+        r
+    }
+}
+
 /// A decoded net ready for fast host inference: its rows packed without the
 /// firmware's padding, its ranges as `lo` and width. Built once per net.
 #[derive(Clone, Debug)]
@@ -55,10 +85,7 @@ pub struct HostNet {
     outputs: usize,
     hidden_act: Activation,
     output_act: Activation,
-    in_lo: [f32; POSE_DIM],
-    in_width: [f32; POSE_DIM],
-    out_lo: [f32; MAX_TENDONS],
-    out_width: [f32; MAX_TENDONS],
+    ranges: Ranges,
     /// Hidden row `k` (`1 + POSE_DIM + k` weights), then the output rows
     /// (`1 + POSE_DIM + hidden` each): the firmware's packed order.
     weights: Box<[f32]>,
@@ -72,18 +99,6 @@ impl HostNet {
     /// The net of `net`, laid out for the host.
     pub fn new(net: &McuNet) -> HostNet {
         let s = net.shape();
-        let mut in_lo = [0.0; POSE_DIM];
-        let mut in_width = [1.0; POSE_DIM];
-        for (i, (&lo, &hi)) in net.input_lo().iter().zip(net.input_hi()).enumerate() {
-            in_lo[i] = lo;
-            in_width[i] = hi - lo;
-        }
-        let mut out_lo = [0.0; MAX_TENDONS];
-        let mut out_width = [0.0; MAX_TENDONS];
-        for (o, (&lo, &hi)) in net.output_lo().iter().zip(net.output_hi()).enumerate() {
-            out_lo[o] = lo;
-            out_width[o] = hi - lo;
-        }
         let weights: Vec<f32> = (0..s.hidden)
             .filter_map(|k| net.hidden_row(k))
             .chain((0..s.outputs).filter_map(|o| net.output_row(o)))
@@ -96,10 +111,7 @@ impl HostNet {
             outputs: s.outputs,
             hidden_act: net.hidden_activation(),
             output_act: net.output_activation(),
-            in_lo,
-            in_width,
-            out_lo,
-            out_width,
+            ranges: Ranges::of(net),
             weights: weights.into_boxed_slice(),
             avx2: cpu_has_avx2(),
             relaxed: RelaxedNet::new(net),
@@ -222,7 +234,7 @@ impl HostNet {
     fn block<const L: usize>(&self, poses: &[[f32; POSE_DIM]]) -> [[f32; L]; MAX_TENDONS] {
         let mut f = [[0.0f32; L]; MAX_FEATURES];
         f[0] = [1.0; L];
-        let ranges = self.in_lo.iter().zip(&self.in_width);
+        let ranges = self.ranges.in_lo.iter().zip(&self.ranges.in_width);
         for (i, (fi, (&lo, &width))) in f[1..].iter_mut().zip(ranges).enumerate() {
             if i >= self.inputs {
                 break; // inputs the net does not have stay 0, as in the firmware
@@ -245,7 +257,7 @@ impl HostNet {
         let rows = self.weights.get(start..).unwrap_or(&[]).chunks_exact(len);
         for (o, (yo, w)) in y.iter_mut().zip(rows).take(self.outputs).enumerate() {
             let s = dot(w, &f[..len]);
-            let (lo, width) = (self.out_lo[o], self.out_width[o]);
+            let (lo, width) = (self.ranges.out_lo[o], self.ranges.out_width[o]);
             for (d, s) in yo.iter_mut().zip(s) {
                 *d = lo + self.output_act.apply(s) * width;
             }

@@ -37,7 +37,9 @@
 //! weight on `h_k = a + b g_k` becomes `w b` with `w a` added to its bias.
 //! Scaling by ½ is exact; the bias shift is one rounding.
 
-use tendril_shared::{Activation, McuNet, MAX_HIDDEN, MAX_TENDONS, POSE_DIM};
+use tendril_shared::{Activation, McuNet, MAX_HIDDEN, POSE_DIM};
+
+use super::fast::Ranges;
 
 /// Most features a unit reads: the bias, the inputs, the hidden units.
 const MAX_FEATURES: usize = 1 + POSE_DIM + MAX_HIDDEN;
@@ -110,12 +112,11 @@ pub(super) struct RelaxedNet {
     outputs: usize,
     hidden_tanh: bool,
     output: Unit,
-    in_lo: [f32; POSE_DIM],
+    ranges: Ranges,
+    /// 1 / the input widths: a multiply per input instead of a divide.
     in_inv_width: [f32; POSE_DIM],
-    out_lo: [f32; MAX_TENDONS],
-    out_width: [f32; MAX_TENDONS],
-    /// Hidden row `k` without its last weight (`POSE_DIM + k` long), then the output rows (`1 + POSE_DIM +
-    /// hidden`), all folded.
+    /// Hidden row `k` without its last weight (`POSE_DIM + k` long), then
+    /// the output rows (`1 + POSE_DIM + hidden`), all folded.
     weights: Box<[f32]>,
     /// Hidden row `k`'s last weight (on unit `k − 1`; for `k = 0`, on the
     /// last input), folded.
@@ -154,28 +155,15 @@ impl RelaxedNet {
         for o in 0..s.outputs {
             weights.extend(fold(net.output_row(o)?, output.scale));
         }
-        let mut in_lo = [0.0; POSE_DIM];
-        let mut in_inv_width = [0.0; POSE_DIM];
-        for (i, (&lo, &hi)) in net.input_lo().iter().zip(net.input_hi()).enumerate() {
-            in_lo[i] = lo;
-            in_inv_width[i] = 1.0 / (hi - lo);
-        }
-        let mut out_lo = [0.0; MAX_TENDONS];
-        let mut out_width = [0.0; MAX_TENDONS];
-        for (o, (&lo, &hi)) in net.output_lo().iter().zip(net.output_hi()).enumerate() {
-            out_lo[o] = lo;
-            out_width[o] = hi - lo;
-        }
+        let ranges = Ranges::of(net);
         Some(RelaxedNet {
             inputs: s.inputs.min(POSE_DIM),
             hidden: s.hidden.min(MAX_HIDDEN),
             outputs: s.outputs,
             hidden_tanh: hidden_unit.tanh,
             output,
-            in_lo,
-            in_inv_width,
-            out_lo,
-            out_width,
+            ranges,
+            in_inv_width: ranges.in_width.map(|w| 1.0 / w),
             weights: weights.into_boxed_slice(),
             newest: newest.into_boxed_slice(),
         })
@@ -205,7 +193,7 @@ impl RelaxedNet {
         f[0] = 1.0;
         // Inputs the net does not have stay 0, as in the firmware.
         for (i, fi) in f[1..=self.inputs].iter_mut().enumerate() {
-            *fi = (pose[i] - self.in_lo[i]) * self.in_inv_width[i];
+            *fi = (pose[i] - self.ranges.in_lo[i]) * self.in_inv_width[i];
         }
         let mut start = 0;
         for k in 0..self.hidden {
@@ -231,7 +219,7 @@ impl RelaxedNet {
             } else {
                 s
             };
-            *d = y.mul_add(self.out_width[o], self.out_lo[o]);
+            *d = y.mul_add(self.ranges.out_width[o], self.ranges.out_lo[o]);
         }
     }
 }

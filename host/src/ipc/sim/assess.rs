@@ -40,34 +40,45 @@ fn trajectory_hz(shape: &crate::plan::PathShape) -> f64 {
     }
 }
 
-/// Why the RMS bound does not apply to this run, if it does not: the RMS
-/// of a path with jumps is the jumps' transients, not the loop's accuracy
-/// (its steady states say that, and are bounded in its place), and an injected kill or stuck motor stops
-/// tracking by design (the fault records judge those).
-fn rms_bound_waived(cfg: &SimConfig, events: &[Event]) -> Option<String> {
-    use crate::plan::PathShape as S;
-    if matches!(cfg.planner.shape, S::Steps { .. } | S::Table { .. }) {
-        return Some(
-            "a path with jumps: its RMS is the jumps' transients; its steady states are held to \
-             the bound instead"
-                .into(),
-        );
-    }
-    if events.iter().any(|e| matches!(e.action, Action::Kill(_))) {
-        return Some("a process was killed by fault injection".into());
-    }
-    cfg.plant
-        .params
-        .faults
-        .stuck
-        .map(|_| "a stuck motor was injected (the loop holds by design)".into())
+/// What the run's tracking is held to (`--max-rms-mm`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Bound {
+    /// The RMS tracking error.
+    Rms,
+    /// The steady states: a path with jumps, whose RMS is the jumps'
+    /// transients, not the loop's accuracy.
+    SteadyStates,
+    /// Nothing: an injected fault stops tracking by design (the fault
+    /// records judge the run); why.
+    Waived(&'static str),
 }
 
-/// Whether the only reason the RMS bound is waived is the path's jumps (no
-/// kill, no stuck motor injected).
-fn jumps_only(cfg: &SimConfig, events: &[Event]) -> bool {
-    !events.iter().any(|e| matches!(e.action, Action::Kill(_)))
-        && cfg.plant.params.faults.stuck.is_none()
+impl Bound {
+    fn of(cfg: &SimConfig, events: &[Event]) -> Bound {
+        use crate::plan::PathShape as S;
+        if events.iter().any(|e| matches!(e.action, Action::Kill(_))) {
+            Bound::Waived("a process was killed by fault injection")
+        } else if cfg.plant.params.faults.stuck.is_some() {
+            Bound::Waived("a stuck motor was injected (the loop holds by design)")
+        } else if matches!(cfg.planner.shape, S::Steps { .. } | S::Table { .. }) {
+            Bound::SteadyStates
+        } else {
+            Bound::Rms
+        }
+    }
+
+    /// Why the RMS bound does not apply, if it does not.
+    fn rms_waived_because(self) -> Option<String> {
+        match self {
+            Bound::Rms => None,
+            Bound::SteadyStates => Some(
+                "a path with jumps: its RMS is the jumps' transients; its steady states are held \
+                 to the bound instead"
+                    .into(),
+            ),
+            Bound::Waived(why) => Some(why.into()),
+        }
+    }
 }
 
 /// The report of a finished run.
@@ -157,32 +168,32 @@ pub fn build_report(
             oscillation.windows
         ));
     }
-    let unbounded = rms_bound_waived(cfg, events);
-    if let Some(rms) = track
-        .rms
-        .filter(|&rms| unbounded.is_none() && rms > cfg.max_rms_mm)
-    {
-        problems.push(format!(
-            "RMS tracking error {rms:.3} mm exceeds the bound {} mm (--max-rms-mm)",
-            cfg.max_rms_mm
-        ));
-    }
-    // A path with jumps is judged by its steady states instead: the tip must
-    // settle on every target (a three-segment net once held one target of
-    // four 115 mm off and the run read "clean"). Not when a fault was
-    // injected: a kill or a stuck motor holds the tip away by design.
-    if unbounded.is_some() && jumps_only(cfg, events) {
-        if let Some(worst) = steady
-            .iter()
-            .max_by(|a, b| a.error_mm.total_cmp(&b.error_mm))
-            .filter(|s| s.error_mm > cfg.max_rms_mm)
-        {
-            problems.push(format!(
-                "steady-state error {:.3} mm at the target ({:.3}, {:.3}) mm exceeds the bound {} mm \
-                 (--max-rms-mm)",
-                worst.error_mm, worst.target_mm[0], worst.target_mm[1], cfg.max_rms_mm
-            ));
+    let bound = Bound::of(cfg, events);
+    match bound {
+        Bound::Rms => {
+            if let Some(rms) = track.rms.filter(|&rms| rms > cfg.max_rms_mm) {
+                problems.push(format!(
+                    "RMS tracking error {rms:.3} mm exceeds the bound {} mm (--max-rms-mm)",
+                    cfg.max_rms_mm
+                ));
+            }
         }
+        // The tip must settle on every target (a three-segment net once
+        // held one target of four 115 mm off and the run read "clean").
+        Bound::SteadyStates => {
+            if let Some(worst) = steady
+                .iter()
+                .max_by(|a, b| a.error_mm.total_cmp(&b.error_mm))
+                .filter(|s| s.error_mm > cfg.max_rms_mm)
+            {
+                problems.push(format!(
+                    "steady-state error {:.3} mm at the target ({:.3}, {:.3}) mm exceeds the \
+                     bound {} mm (--max-rms-mm)",
+                    worst.error_mm, worst.target_mm[0], worst.target_mm[1], cfg.max_rms_mm
+                ));
+            }
+        }
+        Bound::Waived(_) => {}
     }
     if controller.is_none() {
         problems.push("the controller wrote no statistics".into());
@@ -249,8 +260,8 @@ pub fn build_report(
         tracking_window_s: track.window,
         max_steady_state_error_mm: steady.iter().map(|s| s.error_mm).reduce(f64::max),
         max_rms_mm: cfg.max_rms_mm,
-        max_rms_applied: unbounded.is_none(),
-        max_rms_waived_because: unbounded,
+        max_rms_applied: bound == Bound::Rms,
+        max_rms_waived_because: bound.rms_waived_because(),
         oscillation,
         steady_state: steady,
         controller,
