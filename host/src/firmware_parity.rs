@@ -154,14 +154,10 @@ pub fn build_mcu_bin(
         .output()
         .map_err(|e| ParityError::Run(format!("starting cargo build: {e}")))?;
     if !out.status.success() {
-        let err = String::from_utf8_lossy(&out.stderr);
-        let first = err
-            .lines()
-            .find(|l| l.starts_with("error"))
-            .unwrap_or("(no error line)");
         return Err(ParityError::Run(format!(
-            "cargo build of the MCU binary failed ({}): {first}",
-            out.status
+            "cargo build of the MCU binary failed ({}): {}",
+            out.status,
+            first_error_line(&out.stderr)
         )));
     }
     let elf = target_dir.join(TARGET).join("release").join(bin);
@@ -169,6 +165,16 @@ pub fn build_mcu_bin(
     std::fs::copy(&elf, &copy)
         .map_err(|e| ParityError::Run(format!("copying {}: {e}", elf.display())))?;
     Ok(copy)
+}
+
+/// The first `error` line of a cargo build's captured stderr: what a
+/// message about a failed build quotes, instead of cargo's whole output.
+pub(crate) fn first_error_line(stderr: &[u8]) -> String {
+    String::from_utf8_lossy(stderr)
+        .lines()
+        .find(|l| l.starts_with("error"))
+        .unwrap_or("(no error line)")
+        .to_string()
 }
 
 /// Run `elf` under QEMU (the `cargo fw` command line) with a time limit;

@@ -282,12 +282,10 @@ pub fn build_image(bin: &str) -> Result<PathBuf> {
         .output()
         .context("running cargo build for the chip image")?;
     if !out.status.success() {
-        let err = String::from_utf8_lossy(&out.stderr);
-        let first = err
-            .lines()
-            .find(|l| l.starts_with("error"))
-            .unwrap_or("(no error line)");
-        bail!("building {bin} failed: {first}");
+        bail!(
+            "building {bin} failed: {}",
+            crate::firmware_parity::first_error_line(&out.stderr)
+        );
     }
     let image = dir.join(TARGET).join("release").join(bin);
     if !image.is_file() {

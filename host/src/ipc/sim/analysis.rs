@@ -383,9 +383,17 @@ pub fn path_error_rms(samples: &[Sample]) -> Option<f64> {
         .iter()
         .filter(|s| !s.hold)
         .map(|s| {
-            let from = vertices.partition_point(|v| v.0 < s.t - PATH_WINDOW_S);
-            let to = vertices.partition_point(|v| v.0 <= s.t + PATH_WINDOW_S);
-            let near = &vertices[from..to.max(from + 1).min(vertices.len())];
+            // The window, and always the vertex in force: a setpoint held
+            // longer than the window (a step's target) is still the path.
+            let current = vertices.partition_point(|v| v.0 <= s.t).saturating_sub(1);
+            let from = vertices
+                .partition_point(|v| v.0 < s.t - PATH_WINDOW_S)
+                .min(current);
+            let to = vertices
+                .partition_point(|v| v.0 <= s.t + PATH_WINDOW_S)
+                .max(current + 1)
+                .min(vertices.len());
+            let near = &vertices[from..to];
             let to_segments = near
                 .windows(2)
                 .map(|w| distance_to_segment(s.actual, w[0].1, w[1].1));
@@ -518,6 +526,23 @@ mod tests {
         // A lone setpoint is a path of one point: a steady state's error.
         let fixed = [sample(0.0, 0.01, 0.012, false)];
         assert!((path_error_rms(&fixed).unwrap() - 2.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_target_held_longer_than_the_window_is_still_the_path() {
+        // Steps: 10 mm, held 1 s, then 20 mm; the tip 1 mm short of the
+        // first target all along its dwell, on the second at once.
+        let s: Vec<Sample> = (0..2000)
+            .map(|i| {
+                let t = i as f64 * 1e-3;
+                let (d, a) = if t < 1.0 { (0.01, 0.009) } else { (0.02, 0.02) };
+                sample(t, d, a, false)
+            })
+            .collect();
+        let p = path_error_rms(&s).unwrap();
+        // 1 mm for the first half (not the distance to the next target,
+        // nor to the segment toward it), 0 for the second: RMS √½ mm.
+        assert!((p - 0.5f64.sqrt()).abs() < 1e-9, "{p}");
     }
 
     #[test]
