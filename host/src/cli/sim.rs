@@ -262,10 +262,11 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
     // A closed stdout (`| head`) is not an error of the run.
     let _ = writeln!(
         std::io::stdout(),
-        "tracking RMS {} mm, max {} mm over {} samples; controller {cycles} cycles, \
-         {overruns} overruns; IPC latency p50 {} µs",
+        "tracking RMS {} mm, max {} mm (off the path: {} mm RMS) over {} samples; \
+         controller {cycles} cycles, {overruns} overruns; IPC latency p50 {} µs",
         mm(r.rms_tracking_error_mm),
         mm(r.max_tracking_error_mm),
+        mm(r.rms_path_error_mm),
         r.tracking_samples,
         r.ipc_latency_us
             .map_or("–".into(), |s| format!("{:.1}", s.p50)),
