@@ -10,7 +10,8 @@
 //! times). Optional further arguments: a robot file and a
 //! step count, e.g. `cold bench/cpp-reference/till-4t.toml 20`, and anywhere
 //! after the mode the flags `tol=<N>` (the solver's residual tolerance),
-//! `start=<t1,t2,..>` (the chain's first tensions, default 4,3,0,0) and
+//! `final=<m>` (`SolverSettings::final_step_m`: a warm solve may end on an
+//! unverified chord step moving the tip at most this), `start=<t1,t2,..>` (the chain's first tensions, default 4,3,0,0) and
 //! `no-predict` (chain: no dx/dτ).
 
 use std::path::Path;
@@ -32,6 +33,7 @@ fn main() -> anyhow::Result<()> {
     };
     let predict = !args.iter().skip(2).any(|a| a == "no-predict");
     let tol: Option<f64> = flag("tol=").map(|s| s.parse()).transpose()?;
+    let final_step: Option<f64> = flag("final=").map(|s| s.parse()).transpose()?;
     let start: Option<Vec<f64>> = flag("start=")
         .map(|s| s.split(',').map(str::parse).collect())
         .transpose()?;
@@ -51,6 +53,7 @@ fn main() -> anyhow::Result<()> {
     let settings = SolverSettings {
         steps: steps.unwrap_or(SolverSettings::default().steps),
         tol: tol.unwrap_or(SolverSettings::default().tol),
+        final_step_m: final_step.unwrap_or_default(),
         ..SolverSettings::default()
     };
     let statics = Statics::new(&robot, settings);

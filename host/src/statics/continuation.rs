@@ -21,7 +21,7 @@
 use nalgebra::{Vector3, Vector6};
 
 use super::shoot::{
-    base_state, Shooting, Solution, SolveError, Statics, WarmStart, SENSITIVITY_PASS_COST,
+    base_state, NewtonOk, Shooting, Solution, SolveError, Statics, WarmStart, SENSITIVITY_PASS_COST,
 };
 use super::stability::{stability_pass, StabilityPass};
 
@@ -184,13 +184,13 @@ impl Statics {
             let predicted = slope * (target - lambda);
             let x_pred = x + predicted;
             let corrected = problem
-                .newton(x_pred, Some(pass.jacobian), false, &settings)
+                .newton(x_pred, Some(pass.jacobian), false, None, &settings)
                 .map_err(|(_, it, int)| (it, int));
             let accepted = match corrected {
                 Ok(ok) => {
-                    iterations += ok.4;
-                    integrations += ok.5;
-                    let jump = (ok.0 - x_pred).component_mul(&scale).norm();
+                    iterations += ok.iterations;
+                    integrations += ok.integrations;
+                    let jump = (ok.x - x_pred).component_mul(&scale).norm();
                     let limit =
                         MAX_CORRECTION * predicted.component_mul(&scale).norm() + CORRECTION_FLOOR;
                     (jump <= limit).then_some(ok)
@@ -207,7 +207,7 @@ impl Statics {
                 Some(ok) => {
                     let next = stability_pass(
                         &rod,
-                        base_state(&rod, &ok.0),
+                        base_state(&rod, &ok.x),
                         settings.steps,
                         &problem.f_ext,
                         &problem.m_ext,
@@ -227,14 +227,17 @@ impl Statics {
                 continue;
             };
             pass = next;
-            x = ok.0;
-            rotation = ok.1.rot;
+            x = ok.x;
+            rotation = ok.tip.rot;
             lambda = target;
             if lambda >= 1.0 {
                 let guess = rod.initial_guess(&tip_force, &tip_moment);
-                let (_, tip, jac, residual, _, _) = ok;
                 return Ok(self.solution(
-                    (x, tip, jac, residual, iterations, integrations),
+                    NewtonOk {
+                        iterations,
+                        integrations,
+                        ..ok
+                    },
                     guess,
                     tensions,
                 ));

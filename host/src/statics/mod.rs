@@ -25,14 +25,16 @@ pub mod tangent;
 pub use friction::{Friction, FrictionError, FrictionState, TensionProfile};
 pub use rod::SingularSystem;
 pub use shoot::{
-    RodShape, Solution, SolveError, SolverSettings, Statics, TensionSensitivity, WarmStart,
-    MAX_STEPS,
+    RodShape, Solution, SolveError, SolverSettings, Statics, TensionSensitivity, TipSensitivity,
+    WarmStart, MAX_STEPS,
 };
 
 #[cfg(test)]
 mod friction_tests;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_final_step;
 #[cfg(test)]
 mod tests_general;
 #[cfg(test)]

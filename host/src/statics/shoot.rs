@@ -9,7 +9,9 @@
 //! solution's together with dx/dτ, the shooting unknowns' sensitivity to the
 //! tensions: a nearby solve starts from the unknowns predicted to first
 //! order, x + (dx/dτ) Δτ, and corrects them with the carried Jacobian, so it
-//! costs about three plain passes.
+//! costs two to three plain passes. Allowed to (`SolverSettings::final_step_m`),
+//! it ends on the first of those chord steps without a pass to verify it,
+//! the tip moved by a carried ∂tip/∂x: one plain pass.
 //! (The `levenberg-marquardt` crate was not used: it recomputes a full
 //! finite-difference Jacobian every iteration, the cost this avoids.)
 
@@ -40,6 +42,16 @@ pub struct SolverSettings {
     pub tol: f64,
     /// Newton iterations before giving up.
     pub max_iter: usize,
+    /// A warm solve predicted by dx/dτ ([`Statics::add_tension_sensitivity`])
+    /// may end on a chord step that no further pass verifies, when that
+    /// step moves the tip by at most this (m): the tip is then the last
+    /// pass's, moved by the carried ∂tip/∂x, and the solution says so
+    /// ([`Solution::extrapolated`]). The step contracts the residual
+    /// 10–1000-fold, so the tip's error is a few percent of this bound
+    /// (`docs/design.md` §2, "Solve"). 0, the default: every solve ends on
+    /// a pass whose residual is below `tol`.
+    #[serde(default)]
+    pub final_step_m: f64,
 }
 
 impl Default for SolverSettings {
@@ -48,6 +60,7 @@ impl Default for SolverSettings {
             steps: 16,
             tol: 5e-10,
             max_iter: 60,
+            final_step_m: 0.0,
         }
     }
 }
@@ -55,6 +68,22 @@ impl Default for SolverSettings {
 /// dx/dτ: how the shooting unknowns x = [n(0); u(0)] of a solution move
 /// with the tensions, one column per tendon (the unused columns zero).
 pub type TensionSensitivity = SMatrix<f64, 6, MAX_TENDONS>;
+
+/// ∂tip/∂x: how the tip pose of the rod integrated from the unknowns x
+/// moves with them, one column per unknown; rows 0..3 the position (m),
+/// rows 3..12 the orientation R, column by column ([`pose_vector`]).
+pub type TipSensitivity = SMatrix<f64, 12, 6>;
+
+/// A tip pose as twelve numbers: position (m), then R column by column.
+type PoseVector = SMatrix<f64, 12, 1>;
+
+/// The tip pose of `tip` as a [`PoseVector`].
+fn pose_vector(tip: &RodState) -> PoseVector {
+    let mut v = PoseVector::zeros();
+    v.fixed_rows_mut::<3>(0).copy_from(&tip.p);
+    v.fixed_rows_mut::<9>(3).copy_from_slice(tip.rot.as_slice());
+    v
+}
 
 /// What a previous solve leaves for the next nearby one.
 #[derive(Clone, Debug, PartialEq)]
@@ -79,6 +108,9 @@ pub struct WarmStart {
     // carry would otherwise sit in every `Solution` (`fk --input` keeps a
     // chunk of 4,096 of them).
     dx_dtau: Option<Box<TensionSensitivity>>,
+    /// ∂tip/∂x near `x`, carried with `dx_dtau` when the solver may end on
+    /// an unverified chord step ([`SolverSettings::final_step_m`]).
+    tip_dx: Option<Box<TipSensitivity>>,
 }
 
 impl WarmStart {
@@ -128,8 +160,14 @@ pub struct Solution {
     pub quaternion: [f64; 4],
     /// Tip orientation (orthonormalised), columns = body axes in the base frame.
     pub rotation: Matrix3<f64>,
-    /// Norm of the tip residual at the solution.
+    /// Norm of the tip residual at the solution; when `extrapolated`, an
+    /// estimate: the last pass's residual times the least contraction a
+    /// carried Jacobian is trusted with.
     pub residual: f64,
+    /// Whether the solve ended on a chord step that no pass verified
+    /// ([`SolverSettings::final_step_m`]): the pose is then the last
+    /// pass's tip moved by ∂tip/∂x, within a few percent of that bound.
+    pub extrapolated: bool,
     /// Newton iterations used.
     pub iterations: usize,
     /// Rod passes used, in plain-pass equivalents: a pass with
@@ -329,22 +367,50 @@ impl Statics {
         // dx/dτ for the next solve: this solve's prediction, Broyden-updated
         // with the step it turned out to be.
         let mut carried = None;
+        // ∂tip/∂x for the next solve, when this one may end unverified.
+        let mut carried_tip_dx = None;
         let result = match warm_ok {
             Some(w) => match (w.dx_dtau.as_deref(), w.tension_step(tensions, &load)) {
                 // First-order prediction x + (dx/dτ) Δτ, corrected by chord
                 // steps with the carried Jacobian.
                 (Some(s), Some(dtau)) => {
-                    let out =
-                        problem.newton(w.x + s * dtau, Some(w.jacobian), true, &self.settings);
+                    let x_p = w.x + s * dtau;
+                    let mut tip_dx = w
+                        .tip_dx
+                        .as_deref()
+                        .copied()
+                        .filter(|_| self.settings.final_step_m > 0.0);
+                    // The pass at the prediction is taken here when the solve
+                    // may end unverified, so that one which goes on to verify
+                    // has the secant of ∂tip/∂x from it.
+                    let first = tip_dx.map(|_| problem.residual(&x_p));
+                    let out = problem.newton(
+                        x_p,
+                        Some(w.jacobian),
+                        true,
+                        tip_dx.as_ref().map(|t| (t, first)),
+                        &self.settings,
+                    );
                     if let Ok(ok) = &out {
                         // Broyden's update of dx/dτ: exact along the step
                         // just taken, for the next solve of a chain.
                         let n2 = dtau.norm_squared();
                         carried = Some(if n2 > 0.0 {
-                            s + (ok.0 - w.x - s * dtau) * dtau.transpose() / n2
+                            s + (ok.x - w.x - s * dtau) * dtau.transpose() / n2
                         } else {
                             *s
                         });
+                        // And of ∂tip/∂x, along the steps this solve verified
+                        // (at one tension vector: the tip moves with τ too).
+                        if let (Some(t), Some((_, Some(tip_p)))) = (tip_dx.as_mut(), first) {
+                            let step = ok.x - x_p;
+                            let n2 = step.norm_squared();
+                            if !ok.extrapolated && n2 > 0.0 {
+                                let moved = pose_vector(&ok.tip) - pose_vector(&tip_p);
+                                *t += (moved - *t * step) * step.transpose() / n2;
+                            }
+                        }
+                        carried_tip_dx = tip_dx.filter(|t| t.iter().all(|v| v.is_finite()));
                     }
                     out
                 }
@@ -354,6 +420,7 @@ impl Statics {
                     w.x + (guess - w.guess),
                     Some(w.jacobian),
                     false,
+                    None,
                     &self.settings,
                 ),
             },
@@ -361,11 +428,15 @@ impl Statics {
         };
         // A warm start that fails (a far neighbour) falls back to a cold start
         // from the analytic guess rather than reporting failure.
-        let (x, tip, jac, res, iterations, integrations) = match result {
+        let ok = match result {
             Ok(ok) => ok,
             Err((_, it0, int0)) => {
-                match problem.newton(guess, None, false, &self.settings) {
-                    Ok((x, tip, j, r, it, int)) => (x, tip, j, r, it + it0, int + int0),
+                match problem.newton(guess, None, false, None, &self.settings) {
+                    Ok(ok) => NewtonOk {
+                        iterations: ok.iterations + it0,
+                        integrations: ok.integrations + int0,
+                        ..ok
+                    },
                     Err((residual, it, _)) => {
                         // A singular system at the start point is the cause
                         // worth naming, not the NaN residual it leads to.
@@ -378,15 +449,12 @@ impl Statics {
                 }
             }
         };
-        let mut solution = self.solution(
-            (x, tip, jac, res, iterations, integrations),
-            guess,
-            tensions,
-        );
+        let mut solution = self.solution(ok, guess, tensions);
         solution.profile = rod.profile().cloned();
         solution.warm.load = load;
         if let Some(s) = carried.filter(|s| s.iter().all(|v| v.is_finite())) {
             solution.warm.dx_dtau = Some(Box::new(s));
+            solution.warm.tip_dx = carried_tip_dx.map(Box::new);
         }
         Ok(solution)
     }
@@ -409,18 +477,18 @@ impl Statics {
     /// The [`Solution`] of a Newton solve that ended at `ok` for `tensions`
     /// and the tip load whose analytic guess is `guess`.
     pub(super) fn solution(&self, ok: NewtonOk, guess: Vector6<f64>, tensions: &[f64]) -> Solution {
-        let (x, tip, jacobian, residual, iterations, integrations) = ok;
-        let rotation = orthonormalise(&tip.rot);
+        let rotation = orthonormalise(&ok.tip.rot);
         Solution {
-            position: tip.p,
+            position: ok.tip.p,
             quaternion: quaternion_wxyz(&rotation),
             rotation,
-            residual,
-            iterations,
-            integrations,
+            residual: ok.residual,
+            extrapolated: ok.extrapolated,
+            iterations: ok.iterations,
+            integrations: ok.integrations,
             warm: WarmStart {
-                x,
-                jacobian,
+                x: ok.x,
+                jacobian: ok.jacobian,
                 guess,
                 tensions: {
                     let mut t = [0.0; MAX_TENDONS];
@@ -430,6 +498,7 @@ impl Statics {
                 tendons: tensions.len(),
                 load: [Vector3::zeros(); 2],
                 dx_dtau: None,
+                tip_dx: None,
             },
             tensions: tensions.to_vec(),
             profile: None,
@@ -489,8 +558,10 @@ impl Statics {
     /// default robot). A warm solve from it starts at x + (dx/dτ) Δτ and
     /// hands dx/dτ on, Broyden-updated with the step it took, so a chain of
     /// nearby solves (a plant, a path) pays this once. Without it a warm
-    /// solve starts from the analytic guess's shift. A pass that meets a
-    /// singular system leaves `sol` as it was.
+    /// solve starts from the analytic guess's shift. With
+    /// [`SolverSettings::final_step_m`] the pass also carries the tip's
+    /// position and orientation, for ∂tip/∂x (6 % more). A pass
+    /// that meets a singular system leaves `sol` as it was.
     pub fn add_tension_sensitivity(&self, sol: &mut Solution) {
         let rod = self.solution_rod(sol);
         let [f_ext, m_ext] = sol.warm.load;
@@ -504,9 +575,11 @@ impl Statics {
                 || f_ext != Vector3::zeros()
                 || m_ext != Vector3::zeros(),
         };
-        if let Some((s, _)) = problem.tension_sensitivity(&sol.warm.x) {
-            sol.warm.set_tension_sensitivity(s);
-            sol.integrations += problem.tension_sensitivity_cost();
+        let with_tip = self.settings.final_step_m > 0.0;
+        if let Some(pass) = problem.tension_sensitivity(&sol.warm.x, with_tip) {
+            sol.warm.set_tension_sensitivity(pass.dx_dtau);
+            sol.warm.tip_dx = pass.tip_dx.map(Box::new);
+            sol.integrations += problem.tension_sensitivity_cost(with_tip);
         }
     }
 }
@@ -546,6 +619,11 @@ pub(super) struct Shooting<'a> {
 /// ≈ 400 k against ≈ 90 k instructions for 16 steps; BENCHMARKS.md).
 pub const SENSITIVITY_PASS_COST: f64 = 4.5;
 
+/// How much more the tension-sensitivity pass costs when it carries ∂p and
+/// ∂R too (callgrind on the default robot, 2026-12-04: 117,959 against
+/// 111,507 instructions).
+const TIP_COLUMNS_COST: f64 = 1.06;
+
 /// The Jacobian is integrated on a grid this many times coarser than the
 /// solve's. Newton needs the Jacobian only to pick its steps: the residual,
 /// and so the answer, is always the fine grid's. A Jacobian from a grid 8×
@@ -578,10 +656,37 @@ const TRUSTED_CHORD_CONTRACTION: f64 = 0.1;
 /// tolerance in one step gets a fresh Jacobian first.
 const STALE_CONTRACTION: f64 = 0.05;
 
-/// (unknowns, tip state there, Jacobian, residual norm, iterations, integrations)
-pub(super) type NewtonOk = (Vector6<f64>, RodState, Matrix6<f64>, f64, usize, f64);
+/// Where a Newton solve ended.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct NewtonOk {
+    /// The unknowns.
+    pub x: Vector6<f64>,
+    /// The tip state there (when `extrapolated`, only its pose is moved to
+    /// `x`; w and u are the last pass's).
+    pub tip: RodState,
+    /// The Jacobian last used.
+    pub jacobian: Matrix6<f64>,
+    /// The residual norm (an estimate when `extrapolated`).
+    pub residual: f64,
+    /// Newton iterations.
+    pub iterations: usize,
+    /// Plain-pass equivalents spent.
+    pub integrations: f64,
+    /// Whether the last step was taken without a pass to verify it.
+    pub extrapolated: bool,
+}
+
+/// dx/dτ and, when asked for, ∂tip/∂x from one pass
+/// ([`Shooting::tension_sensitivity`]).
+pub(super) struct TensionPass {
+    pub dx_dtau: TensionSensitivity,
+    pub tip_dx: Option<TipSensitivity>,
+}
 /// (best residual norm, iterations, integrations)
 pub(super) type NewtonErr = (f64, usize, f64);
+/// The residual at a point and the tip state it came from (`None` when the
+/// pass met a singular system).
+pub(super) type Residual = (Vector6<f64>, Option<RodState>);
 
 impl Shooting<'_> {
     pub(super) fn tip(&self, x: &Vector6<f64>) -> Result<RodState, SingularSystem> {
@@ -591,7 +696,7 @@ impl Shooting<'_> {
     /// The tip residual at `x` and the tip state it came from; a singular
     /// system on the way makes the residual infinite, which the Newton
     /// iteration treats as a failed step.
-    fn residual(&self, x: &Vector6<f64>) -> (Vector6<f64>, Option<RodState>) {
+    pub(super) fn residual(&self, x: &Vector6<f64>) -> (Vector6<f64>, Option<RodState>) {
         match self.tip(x) {
             Ok(tip) => (
                 self.rod.tip_residual(&tip, &self.f_ext, &self.m_ext),
@@ -619,18 +724,20 @@ impl Shooting<'_> {
     }
 
     /// dx/dτ = −R_x⁻¹ R_τ (implicit function theorem through r(x, τ) = 0)
-    /// and R_x, both from one coarse-grid pass of the rod with the six x
-    /// columns and one column per tendon, at `x`. `None` when that pass
+    /// from one coarse-grid pass of the rod with the six x
+    /// columns and one column per tendon, at `x`; with `with_tip`, the
+    /// pass carries ∂p and ∂R as well, for ∂tip/∂x. `None` when that pass
     /// meets a singular system or R_x is singular.
     pub(super) fn tension_sensitivity(
         &self,
         x: &Vector6<f64>,
-    ) -> Option<(TensionSensitivity, Matrix6<f64>)> {
+        with_tip: bool,
+    ) -> Option<TensionPass> {
         let start = FullSensitivity::at_base(
             &self.rod.kse,
             self.rod.n_tendons,
-            self.track_rotation,
-            false,
+            self.track_rotation || with_tip,
+            with_tip,
         );
         let (tip, t) = integrate_with_sensitivity(
             self.rod,
@@ -649,13 +756,31 @@ impl Shooting<'_> {
             let r_tau: Vector6<f64> = r.column(6 + i).into();
             s.set_column(i, &lu.solve(&(-r_tau))?);
         }
-        s.iter().all(|v| v.is_finite()).then_some((s, r_x))
+        let tip_dx = with_tip.then(|| {
+            let mut tip_dx = TipSensitivity::zeros();
+            for j in 0..6 {
+                tip_dx.fixed_view_mut::<3, 1>(0, j).copy_from(&t.p[j]);
+                tip_dx
+                    .fixed_view_mut::<9, 1>(3, j)
+                    .copy_from_slice(t.rot[j].as_slice());
+            }
+            tip_dx
+        });
+        let finite = s.iter().all(|v| v.is_finite())
+            && tip_dx.is_none_or(|t| t.iter().all(|v| v.is_finite()));
+        finite.then_some(TensionPass { dx_dtau: s, tip_dx })
     }
 
     /// What a [`Shooting::tension_sensitivity`] pass costs in plain passes:
-    /// a coarse Jacobian pass with (6 + tendons)/6 times the columns.
-    pub(super) fn tension_sensitivity_cost(&self) -> f64 {
-        self.jacobian_cost(Grid::Coarse) * (6 + self.rod.n_tendons) as f64 / 6.0
+    /// a coarse Jacobian pass with (6 + tendons)/6 times the columns, and
+    /// a little more when it carries ∂p and ∂R (`with_tip`).
+    pub(super) fn tension_sensitivity_cost(&self, with_tip: bool) -> f64 {
+        let columns = self.jacobian_cost(Grid::Coarse) * (6 + self.rod.n_tendons) as f64 / 6.0;
+        if with_tip {
+            columns * TIP_COLUMNS_COST
+        } else {
+            columns
+        }
     }
 
     /// What a [`Shooting::jacobian`] pass costs in plain passes.
@@ -675,12 +800,16 @@ impl Shooting<'_> {
     /// solution (warm start), used while it contracts; `trust`: use it even
     /// when one step would not reach the tolerance (the start is a
     /// first-order prediction, whose residual a few chord steps remove more
-    /// cheaply than a fresh Jacobian and a step).
+    /// cheaply than a fresh Jacobian and a step). `finish`: ∂tip/∂x near
+    /// `x0`, with which the first chord step may end the solve unverified
+    /// ([`SolverSettings::final_step_m`]), and the pass at `x0` when the
+    /// caller has taken it.
     pub(super) fn newton(
         &self,
         x0: Vector6<f64>,
         j0: Option<Matrix6<f64>>,
         trust: bool,
+        finish: Option<(&TipSensitivity, Option<Residual>)>,
         settings: &SolverSettings,
     ) -> Result<NewtonOk, NewtonErr> {
         let mut x = x0;
@@ -693,7 +822,10 @@ impl Shooting<'_> {
         } else {
             CHORD_CONTRACTION
         };
-        let (mut r, mut tip) = self.residual(&x);
+        let (mut r, mut tip) = match finish {
+            Some((_, Some(first))) => first,
+            _ => self.residual(&x),
+        };
         let mut integrations = 1.0;
         let mut norm = r.norm();
         // The Jacobian in use and, when it was computed at the current x and
@@ -716,13 +848,43 @@ impl Shooting<'_> {
             }
             if norm < settings.tol {
                 if let Some(tip) = tip {
-                    return Ok((x, tip, jac, norm, iter, integrations));
+                    return Ok(NewtonOk {
+                        x,
+                        tip,
+                        jacobian: jac,
+                        residual: norm,
+                        iterations: iter,
+                        integrations,
+                        extrapolated: false,
+                    });
                 }
             }
             let step = jac
                 .lu()
                 .solve(&(-r))
                 .filter(|d| d.iter().all(|v| v.is_finite()));
+            // The prediction's chord step, ended without a pass to verify it
+            // when it moves the tip by at most `final_step_m`.
+            if let (0, Some((tip_dx, _)), Some(dx), Some(at)) = (iter, finish, step, tip) {
+                let moved = tip_dx * dx;
+                let dp: Vector3<f64> = moved.fixed_rows::<3>(0).into();
+                if dp.norm() <= settings.final_step_m {
+                    let mut end = at;
+                    end.p += dp;
+                    for (r, d) in end.rot.iter_mut().zip(moved.fixed_rows::<9>(3).iter()) {
+                        *r += d;
+                    }
+                    return Ok(NewtonOk {
+                        x: x + dx,
+                        tip: end,
+                        jacobian: jac,
+                        residual: norm * TRUSTED_CHORD_CONTRACTION,
+                        iterations: 1,
+                        integrations,
+                        extrapolated: true,
+                    });
+                }
+            }
             let mut refresh = None;
             let mut accepted = false;
             if let Some(dx) = step {
@@ -779,9 +941,15 @@ impl Shooting<'_> {
             }
         }
         match tip {
-            Some(tip) if norm < settings.tol => {
-                Ok((x, tip, jac, norm, settings.max_iter, integrations))
-            }
+            Some(tip) if norm < settings.tol => Ok(NewtonOk {
+                x,
+                tip,
+                jacobian: jac,
+                residual: norm,
+                iterations: settings.max_iter,
+                integrations,
+                extrapolated: false,
+            }),
             _ => Err((norm, settings.max_iter, integrations)),
         }
     }
