@@ -62,6 +62,15 @@ pub const MCU_UPDATE_CAPACITY: usize = tendril_shared::MAX_NET_FILE;
 /// Bytes of a weight update's check per period on the chip.
 pub const SWAP_SLICE_BYTES: usize = crate::SWAP_SLICE_BYTES;
 
+/// Commands the plant may be behind over the link without it being a fault
+/// ([`PeriodConfig::commands_in_flight`]). A command reaches the plant
+/// through the bridge, and the plant's state comes back the same way, at
+/// most every ¾ period: the round trip can exceed the period, and then
+/// the state shows the command before last. Measured on the default
+/// robot's 10 s circle at 100 Hz: 174 of 1,217 periods were one behind,
+/// none more.
+pub const LINK_COMMANDS_IN_FLIGHT: u8 = 1;
+
 /// The first `n` entries.
 fn first(a: &[f32; MAX_TENDONS], n: usize) -> &[f32] {
     a.get(..n).unwrap_or(&[])
@@ -149,6 +158,7 @@ pub fn period_config(s: &Setup) -> Result<PeriodConfig, u8> {
         swap_slice_bytes: SWAP_SLICE_BYTES,
         jump_m: s.jump_m,
         settle_after_jump_ns: u64::from(s.settle_after_jump_ns),
+        commands_in_flight: LINK_COMMANDS_IN_FLIGHT,
     })
 }
 

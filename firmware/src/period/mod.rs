@@ -67,6 +67,11 @@ pub struct PeriodConfig {
     /// integrated: the robot is still on its way (motor lag, the rod's
     /// swing), and its error then is the step's, not the model's, ns.
     pub settle_after_jump_ns: u64,
+    /// Commands the plant may be behind without it being a fault: those
+    /// still on their way when its state was sent. 0 where the state comes
+    /// back within the period; over a link whose round trip can exceed
+    /// the period, 1 ([`crate::node::LINK_COMMANDS_IN_FLIGHT`]).
+    pub commands_in_flight: u8,
 }
 
 /// Largest frame age the lead compensates, ns: an older frame is led as if
@@ -505,9 +510,10 @@ impl Period {
             ev.bits |= event::PLANT_RECOVERED;
         }
         // A plant that has applied commands before should have applied the
-        // one sent a period ago.
+        // one sent a period ago, or as many periods ago as commands may be
+        // in flight.
         let behind = self.cmd.seq.saturating_sub(f.command_seq);
-        if behind > 0 && f.command_seq > 0 {
+        if behind > u64::from(self.cfg.commands_in_flight) && f.command_seq > 0 {
             self.counters.commands_not_applied += 1;
             ev.bits |= event::COMMANDS_NOT_APPLIED;
             ev.commands_behind = behind;

@@ -77,6 +77,7 @@ fn config() -> PeriodConfig {
         swap_slice_bytes: 4096,
         jump_m: 1e-3,
         settle_after_jump_ns: 100 * T,
+        commands_in_flight: 0,
     }
 }
 
@@ -363,6 +364,40 @@ fn the_lead_advances_setpoint_and_measured_tip_alike() {
         let b = plain.run(&mut *st, &with_sp(k, ahead));
         assert_eq!(a.command.tensions, b.command.tensions, "period {k}");
     }
+}
+
+/// Over the link a command may still be on its way when the plant's state
+/// leaves: one behind is not a fault there, two are, and the plant that
+/// stops applying commands is still seen one period later than on the host.
+#[test]
+fn commands_in_flight_are_not_unapplied_commands() {
+    let mut st = store(1);
+    let mut cfg = config();
+    cfg.commands_in_flight = 1;
+    let mut p = P::new(cfg, 0);
+    let mut k = 0;
+    let mut run = |p: &mut P, command_seq: u64| {
+        k += 1;
+        let mut i = with_sp(k, sp(k));
+        i.feedback = Some(fb(k, command_seq, p.last_command().tensions));
+        i.feedbacks = 1;
+        p.run(&mut *st, &i)
+    };
+    let mut o = run(&mut p, 0);
+    // Always one behind: the link's latency, never an event.
+    for _ in 0..5 {
+        let one_behind = o.command.seq.saturating_sub(1);
+        o = run(&mut p, one_behind);
+        assert!(!o.events.has(event::COMMANDS_NOT_APPLIED), "{:?}", o.events);
+    }
+    // The plant stops at the last command it applied.
+    let stopped = o.command.seq.saturating_sub(1);
+    let o = run(&mut p, stopped);
+    assert!(!o.events.has(event::COMMANDS_NOT_APPLIED));
+    let o = run(&mut p, stopped);
+    assert!(o.events.has(event::COMMANDS_NOT_APPLIED));
+    assert_eq!(o.events.commands_behind, 2);
+    assert_eq!(p.counters().commands_not_applied, 1);
 }
 
 fn swap_config() -> PeriodConfig {

@@ -137,6 +137,8 @@ pub fn period_config(
         swap_slice_bytes: tendril_firmware::SWAP_SLICE_BYTES,
         jump_m: correction::JUMP_M as f32,
         settle_after_jump_ns: (correction::SETTLE_AFTER_JUMP_S * 1e9) as u64,
+        // The plant's state comes back within the period over IPC.
+        commands_in_flight: 0,
     })
 }
 
