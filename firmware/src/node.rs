@@ -220,7 +220,8 @@ fn tangent_in(t: &tendril_shared::link::messages::Tangent) -> Tangent {
 
 impl<const U: usize> Node<U> {
     /// Unconfigured; `net_hash` identifies the built-in net (CRC-32 of
-    /// its `.tnet`) in the Hello; the board ticks every `tick_ns`. The
+    /// its `.tnet`) in the Hello until an update swaps in another, whose
+    /// hash the Hello gives from then on; the board ticks every `tick_ns`. The
     /// link is served every tick; the period runs every
     /// `period_ns / tick_ns` ticks (the Setup's period, a whole number of
     /// ticks: a 100 Hz loop on a 1 kHz board).
@@ -421,6 +422,13 @@ impl<const U: usize> Core<U> {
             return;
         };
         let out = period.run(store, &mut core.update, input);
+        if out.events.has(crate::period::event::WEIGHTS_SWAPPED) {
+            // The Hello names the net that runs, so that a host which
+            // reconnects sees whether its net is on the chip.
+            if let Some(hash) = core.update.blob_hash() {
+                core.net_hash = hash;
+            }
+        }
         if out.events.has(crate::period::event::WATCHDOG_HOLD) {
             core.last_hold_tick = core.ticks;
             core.last_hold_silence_us = (out.events.hold_silence_ns / 1000) as u32;

@@ -497,3 +497,47 @@ fn a_chunked_update_is_swapped_in_and_a_corrupted_one_rejected() {
     );
     assert_eq!(r.node.period().unwrap().counters().weight_swaps, 1);
 }
+
+/// The Hello names the net that runs: the built-in one until an update is
+/// swapped in (a refused one changes nothing), then the update's, so that a
+/// bridge that reconnects sends its net only when the chip lacks it.
+#[test]
+fn the_hello_names_the_net_that_runs() {
+    let builtin: &[u8] = include_bytes!("../vectors/default.tnet");
+    // Another valid net: one weight's lowest mantissa bit flipped, the CRC
+    // field made right again.
+    let mut other = builtin.to_vec();
+    let body = other.len() - 4;
+    other[(body / 2) & !3] ^= 1;
+    let crc = tendril_shared::crc32::crc32(&other[..body]);
+    other[body..].copy_from_slice(&crc.to_le_bytes());
+    let other_hash = tendril_shared::tnet::net_hash(&other);
+    assert_ne!(other_hash, DEFAULT_NET_CRC);
+    let mut r = configured();
+    r.step(0);
+    let ask = |r: &mut Rig| {
+        r.send(&Down::Hello {
+            protocol: tendril_shared::link::messages::PROTOCOL_VERSION,
+        });
+        hello(&r.tick()).unwrap().net_hash
+    };
+    assert_eq!(ask(&mut r), DEFAULT_NET_CRC);
+    let mut corrupt = other.clone();
+    corrupt[body / 3] ^= 0x5A;
+    let c = send_update(&mut r, &corrupt, 1);
+    assert_ne!(
+        c.iter().fold(0, |a, c| a | c.events) & event::WEIGHTS_REJECTED,
+        0
+    );
+    assert_eq!(
+        ask(&mut r),
+        DEFAULT_NET_CRC,
+        "a refused update changes nothing"
+    );
+    let c = send_update(&mut r, &other, 501);
+    assert_ne!(
+        c.iter().fold(0, |a, c| a | c.events) & event::WEIGHTS_SWAPPED,
+        0
+    );
+    assert_eq!(ask(&mut r), other_hash, "the swapped-in net's hash");
+}

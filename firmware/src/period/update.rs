@@ -109,6 +109,17 @@ impl<const U: usize> Update<U> {
         self.len = 0;
     }
 
+    /// The [`tendril_shared::tnet::net_hash`] of the blob in the buffer:
+    /// its trailing CRC field, which the check compared with the CRC of the
+    /// bytes before it. Meaningful in the period that reports
+    /// [`SliceOutcome::Swapped`] (the installed net's); `None` when the
+    /// buffer is shorter than a CRC.
+    pub fn blob_hash(&self) -> Option<u32> {
+        let blob = self.buf.get(..self.len)?;
+        let crc = blob.get(blob.len().checked_sub(4)?..)?;
+        Some(u32::from_le_bytes(crc.try_into().ok()?))
+    }
+
     /// Whether a blob is being received or checked.
     pub const fn busy(&self) -> bool {
         !matches!(self.state, State::Idle)
