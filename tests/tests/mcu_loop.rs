@@ -365,3 +365,50 @@ fn the_chip_detects_a_stuck_loaded_motor_and_holds() {
         );
     }
 }
+
+/// The default net with one weight's lowest mantissa bit flipped and its
+/// CRC made right again: a valid net the chip does not have built in.
+fn another_net() -> Vec<u8> {
+    let mut net = std::fs::read(tendril_tests::workspace_root().join(DEFAULT_NET)).unwrap();
+    let body = net.len() - 4;
+    net[(body / 2) & !3] ^= 1;
+    let crc = tendril_shared::crc32::crc32(&net[..body]);
+    net[body..].copy_from_slice(&crc.to_le_bytes());
+    net
+}
+
+/// A bridge that comes back to a chip already running the run's net sends
+/// it nothing: the chip's Hello names the net it runs, so across the two
+/// bridges of a cut and restored link the chip swaps once (twice when the
+/// Hello named the built-in net and the second bridge sent the net again).
+#[test]
+fn a_new_bridge_does_not_resend_the_net_the_chip_runs() {
+    let nets = tempfile::tempdir().unwrap();
+    let model = nets.path().join("another.tnet");
+    std::fs::write(&model, another_net()).unwrap();
+    let (dir, _stderr) = run_sim(&[
+        "--model",
+        model.to_str().unwrap(),
+        "--controller",
+        "mcu",
+        "--trajectory",
+        "circle",
+        "--settle",
+        "2",
+        "--duration",
+        "6",
+        "--cut-link-at",
+        "3.5",
+        "--restore-link-after",
+        "1.0",
+    ]);
+    let r = sim_report(dir.path());
+    let c = chip(&r);
+    assert!(f(&c["periods"]) >= 650.0, "the chip restarted: {c}");
+    assert_eq!(f(&c["weight_rejections"]), 0.0, "{c}");
+    assert_eq!(f(&c["weight_swaps"]), 1.0, "{c}");
+    assert!(
+        dir.path().join("controller-1.csv").exists(),
+        "no second bridge"
+    );
+}
