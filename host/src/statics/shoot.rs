@@ -71,7 +71,7 @@ pub type TensionSensitivity = SMatrix<f64, 6, MAX_TENDONS>;
 
 /// ∂tip/∂x: how the tip pose of the rod integrated from the unknowns x
 /// moves with them, one column per unknown; rows 0..3 the position (m),
-/// rows 3..12 the orientation R, column by column ([`pose_vector`]).
+/// rows 3..12 the orientation R, column by column.
 pub type TipSensitivity = SMatrix<f64, 12, 6>;
 
 /// A tip pose as twelve numbers: position (m), then R column by column.
@@ -696,7 +696,7 @@ impl Shooting<'_> {
     /// The tip residual at `x` and the tip state it came from; a singular
     /// system on the way makes the residual infinite, which the Newton
     /// iteration treats as a failed step.
-    pub(super) fn residual(&self, x: &Vector6<f64>) -> (Vector6<f64>, Option<RodState>) {
+    pub(super) fn residual(&self, x: &Vector6<f64>) -> Residual {
         match self.tip(x) {
             Ok(tip) => (
                 self.rod.tip_residual(&tip, &self.f_ext, &self.m_ext),
