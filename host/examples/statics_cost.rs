@@ -20,7 +20,7 @@ use std::sync::atomic::AtomicBool;
 use tendril::dataset::Sampler;
 use tendril::robot::{repo_robot, Robot};
 use tendril::statics::batch::{solve_all, Load};
-use tendril::statics::{SolverSettings, Statics};
+use tendril::statics::{walk_step, SolverSettings, Statics};
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
@@ -128,7 +128,7 @@ fn main() -> anyhow::Result<()> {
         let mut state = 12345u64;
         let (mut integrations, solves) = (0.0, 200);
         for _ in 0..solves {
-            walk(&mut state, &mut tau, &max);
+            walk_step(&mut state, &mut tau, &max);
             let sol = statics.solve(&tau, Some(&prev.warm))?;
             integrations += sol.integrations;
             prev = sol;
@@ -159,16 +159,6 @@ fn main() -> anyhow::Result<()> {
         integrations / solves as f64
     );
     Ok(())
-}
-
-/// One step of the chain's fixed pseudo-random walk: ±0.1 N on one tendon.
-fn walk(state: &mut u64, tau: &mut [f64], max: &[f64]) {
-    *state = state
-        .wrapping_mul(6364136223846793005)
-        .wrapping_add(1442695040888963407);
-    let i = (*state >> 33) as usize % tau.len();
-    let up = (*state >> 40) & 1 == 1;
-    tau[i] = (tau[i] + if up { 0.1 } else { -0.1 }).clamp(0.0, max[i]);
 }
 
 /// The tips "equal accuracy" is judged by: at the solver's settings, the
@@ -206,7 +196,7 @@ fn tips(robot: &Robot, statics: &Statics, first: &[f64]) -> anyhow::Result<()> {
             if k == 1 {
                 tau = first.to_vec();
             }
-            walk(&mut state, &mut tau, &max);
+            walk_step(&mut state, &mut tau, &max);
         }
         let p = statics.solve(&tau, Some(&predicted.warm))?;
         let n = statics.solve(&tau, Some(&plain.warm))?;

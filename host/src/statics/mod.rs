@@ -42,6 +42,19 @@ mod tests_stability;
 #[cfg(test)]
 mod tests_three_segment;
 
+/// One step of the fixed pseudo-random walk that chains of warm solves
+/// follow in the statics benchmarks and tests (`examples/statics_cost`
+/// chain and tips, BENCHMARKS.md "Statics"): ±0.1 N on one tendon, both
+/// picked by a 64-bit LCG in `state`, clamped to [0, `max`].
+pub fn walk_step(state: &mut u64, tau: &mut [f64], max: &[f64]) {
+    *state = state
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
+    let i = (*state >> 33) as usize % tau.len();
+    let up = (*state >> 40) & 1 == 1;
+    tau[i] = (tau[i] + if up { 0.1 } else { -0.1 }).clamp(0.0, max[i]);
+}
+
 /// [`crate::robot::repo_robot`]'s statics with the default solver settings:
 /// the repository's robot files for tests, benches and examples.
 pub fn repo_statics(file: &str) -> Statics {

@@ -67,16 +67,6 @@ fn the_tip_sensitivity_is_the_derivative_of_the_rods_tip() {
     }
 }
 
-/// One step of a fixed walk: ±0.1 N on one tendon, within [0, max].
-fn walk(state: &mut u64, tau: &mut [f64], max: &[f64]) {
-    *state = state
-        .wrapping_mul(6364136223846793005)
-        .wrapping_add(1442695040888963407);
-    let i = (*state >> 33) as usize % tau.len();
-    let up = (*state >> 40) & 1 == 1;
-    tau[i] = (tau[i] + if up { 0.1 } else { -0.1 }).clamp(0.0, max[i]);
-}
-
 /// A chain of warm solves allowed to end unverified mostly takes one pass,
 /// and every tip stays within a tenth of the final-step bound of the same
 /// chain solved to a residual of 1e-12 (measured worst: 2.8e-8 m here, 3.1e-8 m
@@ -113,7 +103,7 @@ fn a_chain_ending_on_unverified_steps_keeps_its_tips_within_the_bound() {
     let (mut worst_p, mut worst_r, mut worst_r_verified) = (0.0f64, 0.0f64, 0.0f64);
     let mut state = 12345u64;
     for k in 0..solves {
-        walk(&mut state, &mut tau, &max);
+        walk_step(&mut state, &mut tau, &max);
         let sol = fast.solve(&tau, Some(&prev.warm)).unwrap();
         let reference = tight.solve(&tau, Some(&prev_tight.warm)).unwrap();
         let check = verified.solve(&tau, Some(&prev_verified.warm)).unwrap();
