@@ -11,7 +11,8 @@
 //! step count, e.g. `cold bench/cpp-reference/till-4t.toml 20`, and anywhere
 //! after the mode the flags `tol=<N>` (the solver's residual tolerance),
 //! `final=<m>` (`SolverSettings::final_step_m`: a warm solve may end on an
-//! unverified chord step moving the tip at most this), `start=<t1,t2,..>` (the chain's first tensions, default 4,3,0,0) and
+//! unverified chord step moving the tip at most this), `start=<t1,t2,..>`
+//! (the chain's first tensions, default 4,3,0,0) and
 //! `no-predict` (chain: no dx/dτ).
 
 use std::path::Path;

@@ -75,10 +75,10 @@ pub type TensionSensitivity = SMatrix<f64, 6, MAX_TENDONS>;
 pub type TipSensitivity = SMatrix<f64, 12, 6>;
 
 /// A tip pose as twelve numbers: position (m), then R column by column.
-type PoseVector = SMatrix<f64, 12, 1>;
+pub(super) type PoseVector = SMatrix<f64, 12, 1>;
 
 /// The tip pose of `tip` as a [`PoseVector`].
-fn pose_vector(tip: &RodState) -> PoseVector {
+pub(super) fn pose_vector(tip: &RodState) -> PoseVector {
     let mut v = PoseVector::zeros();
     v.fixed_rows_mut::<3>(0).copy_from(&tip.p);
     v.fixed_rows_mut::<9>(3).copy_from_slice(tip.rot.as_slice());

@@ -5,7 +5,7 @@
 
 use nalgebra::{Vector3, Vector6};
 
-use super::shoot::{base_state, jacobian_steps, Shooting, TipSensitivity};
+use super::shoot::{base_state, jacobian_steps, pose_vector, Shooting, TipSensitivity};
 use super::*;
 use crate::robot::repo_robot;
 
@@ -45,11 +45,7 @@ fn the_tip_sensitivity_is_the_derivative_of_the_rods_tip() {
         .tip_dx
         .unwrap();
     let tip_at = |x: &Vector6<f64>| {
-        let tip = super::integrate::integrate(&rod, base_state(&rod, x), steps).unwrap();
-        let mut v = nalgebra::SVector::<f64, 12>::zeros();
-        v.fixed_rows_mut::<3>(0).copy_from(&tip.p);
-        v.fixed_rows_mut::<9>(3).copy_from_slice(tip.rot.as_slice());
-        v
+        pose_vector(&super::integrate::integrate(&rod, base_state(&rod, x), steps).unwrap())
     };
     for j in 0..6 {
         let h = 1e-5 * x[j].abs().max(1.0);
