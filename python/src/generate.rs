@@ -122,6 +122,8 @@ pub fn generate<'py>(
         samples,
         seed,
         sampler,
+        // The robot's default: resolved rows on three segments (design §3).
+        resolve: None,
         out: out.clone(),
         max_failure_fraction,
         test_fraction,

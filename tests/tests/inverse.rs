@@ -14,7 +14,7 @@ use std::path::PathBuf;
 
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
-use tendril::inverse::{tip_jacobian, ExactIk, IkSettings, InverseError, Target};
+use tendril::inverse::{tip_jacobian, ExactIk, IkSettings, InverseError, Redundancy, Target};
 use tendril::robot::{repo_robot as robot, Robot};
 use tendril::statics::rod::Rod;
 use tendril::statics::{SolverSettings, Statics};
@@ -218,6 +218,122 @@ fn least_total_tension_uses_only_the_two_adjacent_facing_tendons() {
         }
         assert!(distance(&fk(&robot, &answer.tensions), &pose) <= 1e-6);
     }
+}
+
+/// Σ over each segment's three tendons (120° apart) of (τ − their mean)²:
+/// 2/3 of the squared bending moment each segment's tendons apply.
+fn bending_effort(t: &[f64]) -> f64 {
+    t.chunks(3)
+        .map(|g| {
+            let mean = g.iter().sum::<f64>() / 3.0;
+            g.iter().map(|x| (x - mean).powi(2)).sum::<f64>()
+        })
+        .sum()
+}
+
+#[test]
+fn least_bending_resolution_is_a_local_minimum_on_the_target_set() {
+    // Three segments, nine tendons (listed segment by segment), position
+    // targets: a six-dimensional target set. Independent of phase 2's
+    // projection: from random nearby starts, phase 1 alone (Gauss–Newton
+    // back onto the target set) never finds tensions of less bending
+    // effort; neither the drawn tensions nor the least-total answer has
+    // less.
+    let robot = robot("tdcr-3seg.toml");
+    let with = |redundancy| {
+        ExactIk::new(
+            &robot,
+            IkSettings {
+                redundancy,
+                ..IkSettings::default()
+            },
+        )
+    };
+    let (least_bending, any, least_total) = (
+        with(Redundancy::LeastBending),
+        with(Redundancy::Any),
+        with(Redundancy::LeastTotal),
+    );
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(30);
+    for drawn in [
+        [0.3, 0.2, 0.0, 0.0, 0.4, 0.1, 0.2, 0.0, 0.5],
+        [0.0, 0.6, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0, 0.3],
+        [0.1, 0.0, 0.7, 0.0, 0.2, 0.6, 0.4, 0.4, 0.0],
+    ] {
+        let pose = fk(&robot, &drawn);
+        let target = Target::from_pose(&pose, true).unwrap();
+        let answer = least_bending.solve(&target, None, None).unwrap();
+        assert!(distance(&fk(&robot, &answer.tensions), &pose) <= 1e-6);
+        let least = bending_effort(&answer.tensions);
+        let total = least_total.solve(&target, None, None).unwrap();
+        assert!(
+            least <= bending_effort(&drawn),
+            "{least} vs drawn {drawn:?}"
+        );
+        assert!(
+            least <= bending_effort(&total.tensions) + 1e-9,
+            "{:?}",
+            total.tensions
+        );
+        for _ in 0..12 {
+            let start: Vec<f64> = answer
+                .tensions
+                .iter()
+                .map(|t| (t + rng.random_range(-0.03..0.03)).clamp(0.0, 1.0))
+                .collect();
+            let other = any.solve(&target, Some(&start), None).unwrap();
+            assert!(distance(&fk(&robot, &other.tensions), &pose) <= 1e-6);
+            assert!(
+                bending_effort(&other.tensions) >= least - 1e-7,
+                "{:?} ({}) below the answer {:?} ({least})",
+                other.tensions,
+                bending_effort(&other.tensions),
+                answer.tensions
+            );
+        }
+    }
+}
+
+#[test]
+fn least_bending_tensions_follow_a_moving_target_without_jumps() {
+    // Along a 20 mm straight line of tip positions, 1 mm apart, each solved
+    // cold: the least-bending answer moves by a similar amount per step (a
+    // function a learner can follow; the least total tension jumps between
+    // tendon sets).
+    let robot = robot("tdcr-3seg.toml");
+    let ik = ExactIk::new(
+        &robot,
+        IkSettings {
+            redundancy: Redundancy::LeastBending,
+            ..IkSettings::default()
+        },
+    );
+    let start = fk(&robot, &[0.3, 0.2, 0.0, 0.0, 0.4, 0.1, 0.2, 0.0, 0.5]);
+    let answers: Vec<Vec<f64>> = (0..=20)
+        .map(|k| {
+            let p = Vector3::new(start[0] - 0.001 * k as f64, start[1], start[2]);
+            let target = Target::Position(p);
+            ik.solve(&target, None, None).unwrap().tensions
+        })
+        .collect();
+    let steps: Vec<f64> = answers
+        .windows(2)
+        .map(|w| {
+            w[0].iter()
+                .zip(&w[1])
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max)
+        })
+        .collect();
+    let mut sorted = steps.clone();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[sorted.len() / 2];
+    assert!(median > 0.0);
+    assert!(
+        sorted[sorted.len() - 1] <= 3.0 * median,
+        "largest tension step {} N against a median {median} N: {steps:?}",
+        sorted[sorted.len() - 1]
+    );
 }
 
 #[test]

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use super::common::{stop_flag, RobotArg};
 use crate::dataset::job::{self, GenerateRequest, DEFAULT_MAX_FAILURE_FRACTION, DEFAULT_SAMPLES};
 use crate::dataset::split::TEST_FRACTION;
-use crate::dataset::Sampler;
+use crate::dataset::{Resolve, Sampler};
 use crate::statics::SolverSettings;
 
 /// Sample tensions, solve the statics for each, write CSV + JSON sidecar.
@@ -22,6 +22,11 @@ pub struct GenerateArgs {
     /// Tension sampler [default: adjacent for robots with more than two tendons, else uniform].
     #[arg(long, value_enum)]
     pub sampler: Option<Sampler>,
+    /// Which tensions each row keeps: the drawn ones, or the least bending effort that reaches
+    /// the drawn tip position [default: least-bending for robots with more than four bending
+    /// degrees of freedom (three segments), else drawn] (docs/design.md §3).
+    #[arg(long, value_enum)]
+    pub resolve: Option<Resolve>,
     /// Output CSV, a regular file (not a device or FIFO); the sidecar goes beside it as <name>.json.
     #[arg(long, value_name = "CSV", default_value = "data.csv")]
     pub out: PathBuf,
@@ -66,6 +71,7 @@ impl GenerateArgs {
             samples: self.samples,
             seed: self.seed,
             sampler: self.sampler,
+            resolve: self.resolve,
             out: self.out.clone(),
             max_failure_fraction: self.max_failure_fraction,
             test_fraction: self.test_fraction,

@@ -18,7 +18,8 @@ use rayon::prelude::*;
 
 use super::io::ColumnRange;
 use super::sample::{snake_order, Sampler};
-use super::Dataset;
+use super::{Dataset, Resolve};
+use crate::inverse::{ExactIk, IkSettings, Target};
 use crate::robot::anchor_groups;
 use crate::statics::{Solution, SolveError, Statics, WarmStart};
 
@@ -37,6 +38,8 @@ pub struct GenerateOptions {
     pub seed: u64,
     /// Sampler.
     pub sampler: Sampler,
+    /// Which tensions each row keeps.
+    pub resolve: Resolve,
     /// Show a progress bar on stderr.
     pub progress: bool,
 }
@@ -50,8 +53,8 @@ pub struct Tally {
     pub resolved_cold: usize,
     /// Samples dropped because the cold solve also failed.
     pub dropped: usize,
-    /// The first few failures, for the log.
-    pub failures: Vec<(Vec<f64>, SolveError)>,
+    /// The first few failures (drawn tensions, why), for the log.
+    pub failures: Vec<(Vec<f64>, String)>,
     /// Per-column minima and maxima of the kept rows (tensions, then pose).
     pub lo: Vec<f64>,
     /// See `lo`.
@@ -113,7 +116,21 @@ where
         hi: vec![f64::NEG_INFINITY; width],
         ..Tally::default()
     };
-    let bar = solve_bar(opts.samples, opts.progress);
+    // Resolving a row costs one exact IK run, ~50 statics solves: the bar
+    // counts both passes.
+    let passes = if opts.resolve == Resolve::Drawn { 1 } else { 2 };
+    let bar = solve_bar(passes * opts.samples, opts.progress);
+    let resolver = match opts.resolve {
+        Resolve::Drawn => None,
+        resolve => Some(ExactIk::new(
+            statics.robot(),
+            IkSettings {
+                statics: *statics.settings(),
+                redundancy: resolve.redundancy(),
+                ..IkSettings::default()
+            },
+        )),
+    };
     let mut done = 0;
     for b in 0.. {
         if done >= opts.samples {
@@ -134,16 +151,26 @@ where
             Outcome::Failed(e) => Err(e),
         })
         .ok_or(StreamError::Interrupted)?;
-        for (t, outcome) in tensions.into_iter().zip(outcomes) {
-            let pose = match outcome {
-                Ok((pose, resolved_cold)) => {
+        let outcomes = match &resolver {
+            None => outcomes
+                .into_iter()
+                .zip(&tensions)
+                .map(|(o, t)| o.map(|(pose, cold)| (t.clone(), pose, cold)))
+                .map(|o| o.map_err(|e| e.to_string()))
+                .collect(),
+            Some(ik) => resolve_rows(statics, ik, &tensions, outcomes, &bar, stop)
+                .ok_or(StreamError::Interrupted)?,
+        };
+        for (drawn, outcome) in tensions.into_iter().zip(outcomes) {
+            let (t, pose) = match outcome {
+                Ok((t, pose, resolved_cold)) => {
                     tally.resolved_cold += usize::from(resolved_cold);
-                    pose
+                    (t, pose)
                 }
                 Err(e) => {
                     tally.dropped += 1;
                     if tally.failures.len() < FAILURES_KEPT {
-                        tally.failures.push((t, e));
+                        tally.failures.push((drawn, e));
                     }
                     continue;
                 }
@@ -158,6 +185,52 @@ where
     }
     bar.finish_and_clear();
     Ok(tally)
+}
+
+/// A row as kept: tensions, pose, whether its statics was re-solved cold;
+/// or why it was dropped.
+type Row = Result<(Vec<f64>, [f64; 7], bool), String>;
+
+/// Each solved row's tip position solved again by `ik` from the floors
+/// (cold, so the answer depends on the position alone, not on the drawn
+/// tensions), in parallel; a row keeps the tensions found, slackened
+/// ([`super::resolve::slacken`]), and the pose they reach. `None` if `stop`
+/// was set.
+fn resolve_rows(
+    statics: &Statics,
+    ik: &ExactIk,
+    tensions: &[Vec<f64>],
+    solved: Vec<Result<([f64; 7], bool), SolveError>>,
+    bar: &ProgressBar,
+    stop: &AtomicBool,
+) -> Option<Vec<Row>> {
+    let rows: Vec<Option<Row>> = solved
+        .into_par_iter()
+        .zip(tensions.par_iter())
+        .map(|(outcome, drawn)| {
+            if stop.load(Ordering::Relaxed) {
+                return None;
+            }
+            bar.inc(1);
+            let (pose, cold) = match outcome {
+                Ok(p) => p,
+                Err(e) => return Some(Err(e.to_string())),
+            };
+            let target = Target::Position(nalgebra::Vector3::new(pose[0], pose[1], pose[2]));
+            let found = ik.solve(&target, None, None).map_err(|e| {
+                format!("its tip position, drawn from {drawn:?}, not reached again: {e}")
+            });
+            Some(found.and_then(|s| {
+                let mut t = s.tensions;
+                super::resolve::slacken(statics.robot(), &mut t);
+                match statics.solve(&t, Some(&s.warm)) {
+                    Ok(sol) => Ok((t, sol.pose(), cold)),
+                    Err(e) => Err(format!("its slackened tensions {t:?}: {e}")),
+                }
+            }))
+        })
+        .collect();
+    rows.into_iter().collect()
 }
 
 /// Outcome of one sample of a batch solve.

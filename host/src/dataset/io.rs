@@ -300,6 +300,11 @@ pub struct Sidecar {
     /// `uniform`, and in sidecars written before it was recorded.
     #[serde(default)]
     pub sampler_groups: Vec<Vec<usize>>,
+    /// Which tensions each row keeps ([`super::Resolve`]: `drawn`, or
+    /// `least-bending` for each drawn tip position); `drawn` in sidecars
+    /// written before it was recorded.
+    #[serde(default = "drawn")]
+    pub resolve: super::Resolve,
     /// Random seed.
     pub seed: u64,
     /// Samples asked for.
@@ -324,6 +329,11 @@ pub struct Sidecar {
     pub seconds: f64,
     /// tendril version that wrote it.
     pub tendril_version: String,
+}
+
+/// The resolution of sidecars written before it was recorded.
+fn drawn() -> super::Resolve {
+    super::Resolve::Drawn
 }
 
 impl Sidecar {

@@ -19,7 +19,7 @@ use super::disk::{free_bytes, parent_dir, same_file};
 use super::generate::{column_ranges, generate_rows, GenerateOptions, StreamError};
 use super::io::{RowWriter, MAX_VALUE_BYTES};
 use super::split::{test_mask, MinMax, Ranges, SPLIT_SEED, TEST_FRACTION};
-use super::{DatasetError, Sampler, Sidecar};
+use super::{DatasetError, Resolve, Sampler, Sidecar};
 use crate::robot::anchor_groups;
 use crate::robot::{Robot, RobotError};
 use crate::statics::{SolverSettings, Statics};
@@ -47,6 +47,9 @@ pub struct GenerateRequest {
     pub seed: u64,
     /// Tension sampler; `None` = [`Sampler::default_for`] the robot.
     pub sampler: Option<Sampler>,
+    /// Which tensions each row keeps; `None` = [`Resolve::default_for`] the
+    /// robot.
+    pub resolve: Option<Resolve>,
     /// Output CSV; the sidecar goes beside it ([`Sidecar::path_for`]).
     pub out: PathBuf,
     /// Fail (after writing) if more than this fraction of solves fails, in [0, 1].
@@ -65,6 +68,7 @@ impl GenerateRequest {
             samples: DEFAULT_SAMPLES,
             seed: 1,
             sampler: None,
+            resolve: None,
             out: out.to_path_buf(),
             max_failure_fraction: DEFAULT_MAX_FAILURE_FRACTION,
             test_fraction: TEST_FRACTION,
@@ -276,10 +280,12 @@ pub fn generate(
     let sampler = req
         .sampler
         .unwrap_or(Sampler::default_for(robot.n_tendons()));
+    let resolve = req.resolve.unwrap_or(Resolve::default_for(&robot));
     let opts = GenerateOptions {
         samples: req.samples,
         seed: req.seed,
         sampler,
+        resolve,
         progress,
     };
     let temp = crate::fsutil::Temporary::for_output(&req.out).map_err(|e| io_error(&dir, &e))?;
@@ -324,6 +330,7 @@ pub fn generate(
         robot_name: robot.name.clone(),
         sampler: sampler.name().into(),
         sampler_groups: sampler_groups(sampler, &robot),
+        resolve,
         seed: req.seed,
         requested: req.samples,
         count: tally.kept,
@@ -332,7 +339,9 @@ pub fn generate(
         resolved_cold: tally.resolved_cold,
         dropped: tally.dropped,
         failure_policy: "a warm-started solve that misses the tolerance is re-solved cold; \
-                         a sample whose cold solve fails too is dropped and counted here"
+                         a sample whose cold solve fails too is dropped and counted here; \
+                         with least-bending rows, so is a drawn tip position the exact IK \
+                         does not reach again"
             .into(),
         test_fraction: req.test_fraction,
         train_ranges: Some(train_ranges),
@@ -429,6 +438,7 @@ pub fn is_up_to_date(req: &GenerateRequest) -> bool {
         && side.robot_sha256 == hex(&Sha256::digest(source.as_bytes()))
         && side.sampler == sampler.name()
         && same_groups(&side.sampler_groups, &sampler_groups(sampler, &robot))
+        && side.resolve == req.resolve.unwrap_or(Resolve::default_for(&robot))
         && side.seed == req.seed
         && side.requested == req.samples
         && side.solver.steps == req.steps
@@ -502,6 +512,99 @@ mod tests {
         assert_eq!(px.max, data.poses.column(0).max());
         assert!(is_up_to_date(&req));
         assert!(!is_up_to_date(&GenerateRequest { seed: 2, ..req }));
+    }
+
+    #[test]
+    fn three_segment_rows_keep_the_least_bending_tensions_of_the_drawn_tip() {
+        // The independent facts: every kept row's pose is the statics of its
+        // tensions; its tip is the drawn row's tip to the µm of axial strain
+        // (the sampler redrawn with the same seed); the drawn tensions reach
+        // that tip too, so they
+        // cannot bend the robot with less effort (Σ over each segment's
+        // three tendons of (τ − their mean)²); and each segment has a slack
+        // tendon, as the command stage leaves it.
+        let dir = tempfile::tempdir().unwrap();
+        let robot_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/tdcr-3seg.toml");
+        let req = GenerateRequest {
+            samples: 24,
+            seed: 5,
+            ..GenerateRequest::new(&robot_path, &dir.path().join("d.csv"))
+        };
+        let side = generate(&req, false, &AtomicBool::new(false)).unwrap();
+        assert_eq!(side.resolve, Resolve::LeastBending);
+        assert_eq!((side.count, side.dropped), (24, 0));
+        let data = Dataset::read_csv(&req.out).unwrap();
+        let robot = Robot::load(&robot_path).unwrap();
+        let statics = Statics::new(&robot, SolverSettings::default());
+        let groups = anchor_groups(&robot);
+        let drawn = Sampler::Adjacent.draw_grouped(
+            24,
+            &robot.min_tensions(),
+            &robot.max_tensions(),
+            &groups,
+            5,
+        );
+        let effort = |t: &[f64]| -> f64 {
+            groups
+                .iter()
+                .map(|g| {
+                    let mean = g.iter().map(|&i| t[i]).sum::<f64>() / g.len() as f64;
+                    g.iter().map(|&i| (t[i] - mean).powi(2)).sum::<f64>()
+                })
+                .sum()
+        };
+        let mut lighter = 0;
+        for (r, d) in drawn.iter().enumerate() {
+            let kept: Vec<f64> = data.tensions.row(r).iter().copied().collect();
+            let pose = statics.solve(&kept, None).unwrap().pose();
+            let drawn_tip = statics.solve(d, None).unwrap().position;
+            for (c, v) in pose.iter().enumerate() {
+                assert!((v - data.poses[(r, c)]).abs() < 1e-9, "row {r}");
+            }
+            // Slackening moves the tip by the axial strain only: µm.
+            for (c, v) in pose.iter().take(3).enumerate() {
+                assert!((drawn_tip[c] - v).abs() < 1e-4, "row {r}: {d:?}");
+            }
+            assert!(
+                effort(&kept) <= effort(d) + 1e-9,
+                "row {r}: {kept:?} vs {d:?}"
+            );
+            lighter += usize::from(effort(&kept) < 0.9 * effort(d));
+            for g in &groups {
+                let slack = g.iter().map(|&i| kept[i]).fold(f64::INFINITY, f64::min);
+                assert!(slack.abs() <= 1e-9, "row {r}: {kept:?}");
+            }
+        }
+        // Not a copy of the draws: most rows spread the bending over more tendons.
+        assert!(lighter >= 12, "{lighter} of 24 rows lighter than drawn");
+        // A dataset resolved otherwise is not reused for this request.
+        assert!(is_up_to_date(&req));
+        std::fs::write(
+            req.sidecar_path(),
+            std::fs::read_to_string(req.sidecar_path())
+                .unwrap()
+                .replace("\"least-bending\"", "\"drawn\""),
+        )
+        .unwrap();
+        assert!(!is_up_to_date(&req));
+        assert!(is_up_to_date(&GenerateRequest {
+            resolve: Some(Resolve::Drawn),
+            ..req
+        }));
+    }
+
+    #[test]
+    fn robots_up_to_two_segments_keep_the_drawn_tensions() {
+        for (file, dof, resolve) in [
+            ("seed-4t.toml", 2, Resolve::Drawn),
+            ("seed-1t.toml", 1, Resolve::Drawn),
+            ("tdcr-2seg.toml", 4, Resolve::Drawn),
+            ("tdcr-3seg.toml", 6, Resolve::LeastBending),
+        ] {
+            let robot = crate::robot::repo_robot(file);
+            assert_eq!(crate::robot::bending_dof(&robot), dof, "{file}");
+            assert_eq!(Resolve::default_for(&robot), resolve, "{file}");
+        }
     }
 
     #[test]

@@ -13,10 +13,12 @@ pub mod generate;
 pub mod io;
 pub mod job;
 pub mod measured;
+pub mod resolve;
 pub mod sample;
 pub mod split;
 
 pub use io::{Dataset, DatasetError, Sidecar};
+pub use resolve::Resolve;
 pub use sample::Sampler;
 pub use split::{prepare, prepare_excluding, split_indices, MinMax, Prepared};
 

@@ -19,7 +19,7 @@ pub mod table;
 use nalgebra::{DMatrix, UnitQuaternion, Vector2, Vector3};
 
 pub use jacobian::{tip_jacobian, JacobianError, TipJacobian};
-pub use solve::{ExactIk, IkSettings};
+pub use solve::{ExactIk, IkSettings, Redundancy};
 pub use table::SeedTable;
 
 use crate::statics::{SolveError, WarmStart};

@@ -34,7 +34,9 @@ use super::table::SeedTable;
 
 mod redundancy;
 use super::{IkSolution, InverseError, Target};
-use crate::robot::Robot;
+use tendril_shared::CoContraction;
+
+use crate::robot::{cocontraction_sets, Robot};
 use crate::statics::pose::angle_between;
 use crate::statics::rod::Rod;
 use crate::statics::{Solution, SolverSettings, Statics, WarmStart};
@@ -56,10 +58,32 @@ pub struct IkSettings {
     /// table's samples nearest the target, when the first start does not
     /// reach it (`docs/design.md` §4.1); 0: a local answer only.
     pub restarts: usize,
-    /// Resolve the redundancy to the least total tension (phase 2).
-    pub least_tension: bool,
+    /// How phase 2 resolves the redundancy among the tensions that reach
+    /// the target.
+    pub redundancy: Redundancy,
     /// The forward statics' settings.
     pub statics: SolverSettings,
+}
+
+/// Which of the tensions that reach a target phase 2 picks
+/// (`docs/design.md` §4.1). Tension counts above the floors τ_min.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Redundancy {
+    /// Wherever phase 1 ends.
+    Any,
+    /// The least total tension Σ (τ − τ_min): the cheapest to hold, a
+    /// vertex of the tension box's faces, so the answer jumps between
+    /// tendon sets as the target moves.
+    LeastTotal,
+    /// The least bending effort: Σ of the squared tensions once each
+    /// co-contraction set's common part is taken out (for three tendons
+    /// 120° apart, 2/3 of the squared bending moment the set applies).
+    /// Smooth in the target wherever no tendon meets its upper limit: the
+    /// family a learner can follow on a robot with more bending freedom
+    /// than its tip position uses (three segments, `docs/design.md` §3).
+    /// Co-contraction costs no bending effort, so it stays where phase 1
+    /// left it ([`crate::dataset::resolve::slacken`] takes it out).
+    LeastBending,
 }
 
 impl Default for IkSettings {
@@ -70,7 +94,7 @@ impl Default for IkSettings {
             orientation_weight: None,
             max_solves: 200,
             restarts: 6,
-            least_tension: true,
+            redundancy: Redundancy::LeastTotal,
             statics: SolverSettings::default(),
         }
     }
@@ -103,6 +127,9 @@ pub struct ExactIk {
     rod: Rod,
     lo: Vec<f64>,
     hi: Vec<f64>,
+    /// The robot's co-contraction sets, which [`Redundancy::LeastBending`]
+    /// takes out of the tensions.
+    sets: CoContraction,
     weight: f64,
     settings: IkSettings,
     /// The coarse forward-kinematics table of the tension box the global
@@ -168,6 +195,7 @@ impl ExactIk {
             rod: Rod::new(robot),
             lo: robot.min_tensions(),
             hi: robot.max_tensions(),
+            sets: cocontraction_sets(robot),
             weight: settings.orientation_weight.unwrap_or(robot.length),
             settings,
             table: Arc::new(OnceLock::new()),
@@ -240,10 +268,9 @@ impl ExactIk {
         let first = self.point(target, tau0, warm, solves)?;
         match self.reach(target, first, solves, budget)? {
             Reach::Converged(p) => {
-                let p = if self.settings.least_tension {
-                    self.least_tension(target, p, solves, budget)?
-                } else {
-                    p
+                let p = match self.settings.redundancy {
+                    Redundancy::Any => p,
+                    objective => self.least_tension(target, p, objective, solves, budget)?,
                 };
                 let p = self.onto_limits(target, p, solves)?;
                 Ok(Local::Reached(Box::new(self.answer(target, &p, *solves))))

@@ -5,7 +5,9 @@
 //! reachable pose (the rest of the position and the orientation follow)
 //! with the exact IK: a [`Target::Position`] (k = 3), [`Target::Lateral`]
 //! (k = 2) or [`Target::Along`] (k = 1) solved by bounded Gauss–Newton on
-//! the tensions, the redundancy resolved to the least total tension, each
+//! the tensions, the redundancy resolved to the least total tension (the
+//! least bending effort on robots whose datasets are resolved so, three
+//! segments: [`crate::dataset::Resolve`]), each
 //! point warm-started from the previous one along the path. The lift also
 //! gives the tangent `∂pose/∂u_j` of that family from the same tip Jacobian,
 //! along which the firmware's integral loop moves a setpoint
@@ -14,7 +16,8 @@
 use nalgebra::{DMatrix, DVector, Matrix3xX, Vector2, Vector3};
 
 use super::{Family, PlanError};
-use crate::inverse::{ExactIk, IkSettings, IkSolution, InverseError, Target};
+use crate::dataset::Resolve;
+use crate::inverse::{ExactIk, IkSettings, IkSolution, InverseError, Redundancy, Target};
 use crate::statics::{Statics, WarmStart};
 
 /// `∂pose/∂u_j` (per metre) along the family's axes: how a reachable pose
@@ -64,6 +67,10 @@ const FREE: f64 = 1e-9;
 /// largest are dropped, and a tension direction must meet the asked move to
 /// this relative accuracy.
 const RANK_RATIO: f64 = 1e-6;
+/// Half-step of [`Lifter::tangent_by_differences`], m: small against the
+/// family's curvature (tensions change by ~3 N/m over 0.3 m), large against
+/// the IK's tolerances (1e-7 m, a phase-2 optimum to ~1e-6 N).
+const DIFFERENCE_STEP: f64 = 1e-4;
 /// Resolution of the height range search (m).
 const HEIGHT_TOLERANCE: f64 = 1e-4;
 /// Lateral directions at which [`Lifter::mid_height`] samples a circle.
@@ -77,8 +84,11 @@ impl Lifter {
 
     /// A lifter for `statics`' robot planning in `family`'s coordinates.
     pub fn on(statics: &Statics, family: Family) -> Lifter {
+        // The redundancy resolved as the robot's dataset resolves it, so a
+        // lifted pose is one the net was trained on (docs/design.md §3).
         let settings = IkSettings {
             statics: *statics.settings(),
+            redundancy: Resolve::default_for(statics.robot()).redundancy(),
             ..IkSettings::default()
         };
         Lifter::with_settings(statics, family, settings)
@@ -171,7 +181,15 @@ impl Lifter {
                 e => PlanError::Inverse(e),
             })?,
         };
-        let (tangent, dtau) = self.tangent(&solution).ok_or_else(|| PlanError::Singular {
+        let tangent = match self.settings.redundancy {
+            // At the edge of the reachable set a side of the difference
+            // may not reach: the least-norm tangent there.
+            Redundancy::LeastBending => self
+                .tangent_by_differences(&solution, &u)
+                .or_else(|| self.tangent(&solution)),
+            _ => self.tangent(&solution),
+        };
+        let (tangent, dtau) = tangent.ok_or_else(|| PlanError::Singular {
             coordinates_m: given.to_vec(),
         })?;
         self.previous = Some(Previous {
@@ -245,6 +263,57 @@ impl Lifter {
         Some((tangent, dtaus))
     }
 
+    /// The tangent of a least-bending family ([`Redundancy::LeastBending`])
+    /// by central differences of lifts at u ± h e_j, each warm from `s`.
+    /// Its tensions spread over more tendons than the family has
+    /// dimensions, and the optimum slides along the target set as the
+    /// target moves, so the least-norm tension direction of
+    /// [`Lifter::tangent`] is not the family's: a setpoint moved along it
+    /// would leave the family the net was trained on (in orientation).
+    fn tangent_by_differences(
+        &self,
+        s: &IkSolution,
+        u: &[f64; 3],
+    ) -> Option<(FamilyTangent, Vec<DVector<f64>>)> {
+        let k = self.family.dim();
+        let mut columns = [[0.0; 7]; 3];
+        let mut dtaus = Vec::with_capacity(k);
+        for (j, column) in columns.iter_mut().enumerate().take(k) {
+            let side = |sign: f64| {
+                let mut v = *u;
+                v[j] += sign * DIFFERENCE_STEP;
+                self.ik
+                    .solve(&self.target(&v), Some(&s.tensions), Some(&s.warm))
+                    .ok()
+            };
+            let (plus, minus) = (side(1.0)?, side(-1.0)?);
+            // The quaternions on s's side of the double cover.
+            let aligned = |q: &[f64; 7]| {
+                let dot: f64 = (3..7).map(|c| q[c] * s.pose[c]).sum();
+                let sign = if dot < 0.0 { -1.0 } else { 1.0 };
+                let mut q = *q;
+                q[3..].iter_mut().for_each(|c| *c *= sign);
+                q
+            };
+            let (p, m) = (aligned(&plus.pose), aligned(&minus.pose));
+            for (c, out) in column.iter_mut().enumerate() {
+                *out = (p[c] - m[c]) / (2.0 * DIFFERENCE_STEP);
+            }
+            dtaus.push(DVector::from_iterator(
+                s.tensions.len(),
+                plus.tensions
+                    .iter()
+                    .zip(&minus.tensions)
+                    .map(|(a, b)| (a - b) / (2.0 * DIFFERENCE_STEP)),
+            ));
+        }
+        let tangent = FamilyTangent {
+            family: self.family,
+            columns,
+        };
+        Some((tangent, dtaus))
+    }
+
     /// The tip's reachable height range (m) at lateral position `xy` (m) on
     /// a robot whose tip reaches a volume: from the least-total-tension
     /// lateral lift there, the highest and lowest heights whose
@@ -254,7 +323,7 @@ impl Lifter {
         // Local runs: the bisection follows one branch of warm starts, and
         // a global search at every height past the end would cost ~7 runs.
         let reach = IkSettings {
-            least_tension: false,
+            redundancy: Redundancy::Any,
             restarts: 0,
             ..self.settings
         };
@@ -506,6 +575,7 @@ mod tests {
         let settings = IkSettings {
             position_tol: 1e-12,
             statics: *s.settings(),
+            redundancy: Resolve::default_for(s.robot()).redundancy(),
             ..IkSettings::default()
         };
         Lifter::with_settings(s, Family::of(s).unwrap(), settings)
@@ -607,6 +677,45 @@ mod tests {
     fn two_segment_tangent_matches_central_differences() {
         let s = statics_of("tdcr-2seg.toml");
         check_tangent_against_central_differences(&s, &two_segment_points(&s), 2e-5, 1e-4);
+    }
+
+    /// Tips of the three-segment robot, whose lift resolves its six
+    /// bending freedoms to the least bending effort, where that family has
+    /// one branch: bent to one side (near the axis, below the straight
+    /// height, mirror-image S-bends tie; docs/design.md §3).
+    fn three_segment_points(s: &Statics) -> Vec<Vec<f64>> {
+        [
+            [0.3, 0.2, 0.0, 0.0, 0.4, 0.1, 0.2, 0.0, 0.5],
+            [0.4, 0.0, 0.0, 0.4, 0.0, 0.0, 0.0, 0.4, 0.0],
+            [0.5, 0.3, 0.0, 0.2, 0.0, 0.0, 0.0, 0.4, 0.1],
+        ]
+        .iter()
+        .map(|t| {
+            let p = s.solve(t, None).unwrap().position;
+            vec![p.x, p.y, p.z]
+        })
+        .collect()
+    }
+
+    #[test]
+    fn three_segment_lifts_reproduce_3d_targets() {
+        let s = statics_of("tdcr-3seg.toml");
+        check_lifts_reproduce_targets(&s, &three_segment_points(&s));
+    }
+
+    /// The tangent is the least-bending family's: a setpoint moved along it
+    /// stays on the poses the net was trained on. (The least-norm tension
+    /// direction that serves the least-total family misses this in
+    /// orientation by far more than the tolerance.)
+    #[test]
+    fn three_segment_tangent_matches_central_differences() {
+        let s = statics_of("tdcr-3seg.toml");
+        // Differences over 0.4 mm, to 2 %: phase 2 finds the least bending
+        // effort to ~1e-6 rad in orientation, which a difference over 2h
+        // reads as 1e-6 / 2h (2.5e-3 /m here, against columns of 0.4–18 /m),
+        // and the family is steep in height (second order near straight),
+        // so a longer difference would read its curvature.
+        check_tangent_against_central_differences(&s, &three_segment_points(&s), 2e-4, 2e-2);
     }
 
     /// The mid height lies inside the height range at the circle's start,

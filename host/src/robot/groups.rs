@@ -15,6 +15,12 @@ use super::Robot;
 /// Two anchors or offsets closer than this (m) are the same.
 const SAME_M: f64 = 1e-9;
 
+/// Bending degrees of freedom of `robot`: each anchor group (segment)
+/// bends in as many directions as it has tendons, at most two.
+pub fn bending_dof(robot: &Robot) -> usize {
+    anchor_groups(robot).iter().map(|g| g.len().min(2)).sum()
+}
+
 /// The robot's tendons grouped by anchor (`end`), the group nearest the base
 /// first; within a group, counter-clockwise by angle from +x, so that
 /// neighbours in the list (and the last and the first) are neighbours on

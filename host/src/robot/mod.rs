@@ -14,7 +14,7 @@ pub mod fingerprint;
 pub mod groups;
 
 pub use file::{RobotError, BUILTIN_DEFAULT_TOML, DEFAULT_ROBOT};
-pub use groups::{anchor_groups, cocontraction_sets};
+pub use groups::{anchor_groups, bending_dof, cocontraction_sets};
 
 /// Largest tendon count a robot file may declare (the one capacity in `tendril_shared`).
 pub use tendril_shared::MAX_TENDONS;

@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use super::net::OutputKind;
 use super::quickprop::QuickpropParams;
-use crate::robot::anchor_groups;
+use crate::robot::bending_dof;
 use crate::robot::Robot;
 
 /// How the output weights are trained.
@@ -113,12 +113,6 @@ impl Default for CascorOptions {
             progress: true,
         }
     }
-}
-
-/// Bending degrees of freedom of `robot`: each anchor group (segment)
-/// bends in as many directions as it has tendons, at most two.
-pub fn bending_dof(robot: &Robot) -> usize {
-    anchor_groups(robot).iter().map(|g| g.len().min(2)).sum()
 }
 
 impl CascorOptions {
