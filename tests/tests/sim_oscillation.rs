@@ -70,11 +70,14 @@ fn the_dynamic_plant_at_a_gain_outside_its_bound_oscillates_and_the_run_is_not_c
         (0.8 * f1..=1.05 * f1).contains(&f),
         "limit cycle at {f:.2} Hz, the first mode is at {f1:.2} Hz"
     );
+    // The tone is part of the error in the windows it was found in; the
+    // run's RMS is no bound on it (a CI run's limit cycle grew after the
+    // settle: tone 13.2 mm, run 12.6 mm).
     let tone = osc["tone_rms_mm"].as_f64().expect("tone");
-    let rms = r["rms_tracking_error_mm"].as_f64().unwrap();
+    let whole = osc["window_rms_mm"].as_f64().expect("window error");
     assert!(
-        tone >= 0.1 && tone <= rms * 1.01,
-        "tone {tone} mm RMS against a total of {rms} mm"
+        tone >= 0.1 && tone <= whole * 1.01,
+        "tone {tone} mm RMS against {whole} mm of error in its windows"
     );
     let md = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
     assert!(md.contains("| oscillation | **yes**"), "{md}");

@@ -63,6 +63,12 @@ pub struct Oscillation {
     /// Median RMS of the tone over those windows (all three axes), mm; the
     /// amplitude of a sinusoid is √2 times this.
     pub tone_rms_mm: Option<f64>,
+    /// Median RMS of the whole tracking error (all three axes) over the same
+    /// windows, mm: what the tone is a part of. The run's own RMS is no
+    /// bound on the tone, since a limit cycle that grows after the settle
+    /// is larger in its late windows than over the run.
+    #[serde(default)]
+    pub window_rms_mm: Option<f64>,
 }
 
 /// The lower edge of the band for a trajectory whose own content ends at
@@ -145,6 +151,16 @@ fn detrended(values: impl Iterator<Item = f64>) -> Vec<f64> {
         .collect()
 }
 
+/// RMS of a window's error over its three axes, mm.
+fn window_rms(window: &[[f64; 3]]) -> f64 {
+    let ms = window
+        .iter()
+        .map(|e| e.iter().map(|v| v * v).sum::<f64>())
+        .sum::<f64>()
+        / window.len() as f64;
+    ms.sqrt()
+}
+
 fn median(v: &mut [f64]) -> Option<f64> {
     v.sort_by(f64::total_cmp);
     v.get(v.len() / 2).copied()
@@ -191,7 +207,7 @@ pub fn detect(samples: &[Sample], band_from_hz: f64) -> Oscillation {
         }
     };
     let n = (WINDOW_S * FS_HZ) as usize;
-    let (mut freqs, mut rms) = (Vec::new(), Vec::new());
+    let (mut freqs, mut rms, mut whole) = (Vec::new(), Vec::new(), Vec::new());
     let mut j = 0;
     for t0 in starts {
         let t1 = t0 + WINDOW_S;
@@ -226,12 +242,14 @@ pub fn detect(samples: &[Sample], band_from_hz: f64) -> Oscillation {
             if r >= MIN_TONE_RMS_MM && share >= MIN_TONE_SHARE {
                 freqs.push(f);
                 rms.push(r);
+                whole.push(window_rms(&window));
             }
         }
     }
     out.windows_with_tone = freqs.len();
     out.frequency_hz = median(&mut freqs);
     out.tone_rms_mm = median(&mut rms);
+    out.window_rms_mm = median(&mut whole);
     out.detected = out.windows_with_tone >= MIN_TONE_WINDOWS
         && out.windows_with_tone as f64 >= MIN_WINDOW_SHARE * out.windows as f64;
     out
@@ -290,6 +308,47 @@ mod tests {
         assert!((f - 3.3).abs() < 0.15, "frequency {f}");
         let r = o.tone_rms_mm.unwrap();
         assert!((r - 1.0).abs() < 0.1, "tone RMS {r} mm, expected 1 mm");
+    }
+
+    /// A limit cycle that grows after the first 3 s (0.2 → 2 mm) is larger
+    /// in most windows than over the whole run, but never larger than the
+    /// error in the windows it was found in.
+    #[test]
+    fn a_growing_ripple_is_bounded_by_its_windows_error_not_by_the_runs() {
+        let w = 2.0 * std::f64::consts::PI * 3.3;
+        let amplitude = |t: f64| 0.2e-3 + 1.8e-3 * (t - 3.0).clamp(0.0, 1.0);
+        let samples = run(10.0, |t| {
+            let s = slow(t);
+            let a = amplitude(t);
+            [s[0] + a * (w * t).cos(), s[1] + a * (w * t).sin(), s[2]]
+        });
+        let o = detect(&samples, band_from(0.2));
+        assert!(o.detected, "{o:?}");
+        let tone = o.tone_rms_mm.unwrap();
+        let whole = o.window_rms_mm.unwrap();
+        assert!(
+            tone <= whole,
+            "tone {tone} mm above its windows' error {whole} mm"
+        );
+        assert!(
+            tone >= 0.8 * whole,
+            "tone {tone} mm, windows' error {whole} mm"
+        );
+        let run_rms = (samples
+            .iter()
+            .map(|s| {
+                (0..3)
+                    .map(|k| (s.desired[k] - s.actual[k]).powi(2))
+                    .sum::<f64>()
+            })
+            .sum::<f64>()
+            / samples.len() as f64)
+            .sqrt()
+            * 1e3;
+        assert!(
+            run_rms < tone,
+            "run {run_rms} mm, tone {tone} mm: the case this test is about"
+        );
     }
 
     #[test]
