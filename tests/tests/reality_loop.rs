@@ -32,9 +32,9 @@ fn mm(report: &serde_json::Value, key: &str) -> f64 {
 /// clean (no oscillation) and within `bound_mm` RMS. One revolution (5 s)
 /// on the quasi-static plants, whose circles sit at a tenth of the bound;
 /// two where the correction must learn the error's map on the first
-/// (`stiffer-10pct`) or the rod swings (`everything`: a short run has few
-/// 2 s windows, and its settle's ringing then weighs on the oscillation
-/// test; one 5 s run was once flagged).
+/// (`stiffer-10pct`) or the rod swings (`everything`: one 5 s run of it
+/// failed here, its reason not captured; a short run also gives the
+/// oscillation test few 2 s windows).
 fn circle_within(reality: &str, bound_mm: f64, seconds: &str) {
     let r = against(
         reality,
