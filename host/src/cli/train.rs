@@ -43,6 +43,15 @@ pub enum SolverArg {
     Quickprop,
 }
 
+/// What the polish minimises, on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PolishLossArg {
+    /// The tip displacement the tension error causes (the robot's tip Jacobian per row).
+    Tip,
+    /// The plain tension error.
+    Plain,
+}
+
 /// Outlier handling for measured rows on the command line.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum OutliersArg {
@@ -164,6 +173,18 @@ pub struct TrainArgs {
     /// [default: 3000; 10000 for a robot with more than two bending degrees of freedom].
     #[arg(long)]
     pub cand_patterns: Option<usize>,
+    /// Polish: after growth, train every weight together by L-BFGS for at
+    /// most this many steps, keeping the best validation net (0 = off)
+    /// [default: 0; 2000 for a robot with more than two bending degrees of freedom].
+    #[arg(long, value_name = "STEPS")]
+    pub polish: Option<usize>,
+    /// Polish: what it minimises — the tip displacement the tension error causes
+    /// (needs the robot), or the plain tension error.
+    #[arg(long, value_enum, default_value_t = PolishLossArg::Tip)]
+    pub polish_loss: PolishLossArg,
+    /// Polish: stop after this many steps without a better validation RMSE.
+    #[arg(long, default_value_t = 200)]
+    pub polish_patience: usize,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
@@ -222,6 +243,15 @@ impl TrainArgs {
             target_rmse: self.target_rmse,
             pilot_units: self.pilot_units,
             candidate_patterns: self.cand_patterns.unwrap_or(d.candidate_patterns),
+            polish: cascor::PolishOptions {
+                max_iterations: self.polish.unwrap_or(d.polish.max_iterations),
+                patience: self.polish_patience,
+                loss: match self.polish_loss {
+                    PolishLossArg::Tip => cascor::PolishLoss::Tip,
+                    PolishLossArg::Plain => cascor::PolishLoss::Plain,
+                },
+                ..d.polish.clone()
+            },
             ..d
         }
     }

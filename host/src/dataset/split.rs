@@ -157,6 +157,10 @@ pub struct Prepared {
     pub test_x: DMatrix<f64>,
     /// Normalised test targets.
     pub test_y: DMatrix<f64>,
+    /// The dataset's row of each `train_x` row.
+    pub fit_rows: Vec<usize>,
+    /// The dataset's row of each `valid_x` row.
+    pub valid_rows: Vec<usize>,
 }
 
 impl Prepared {
@@ -205,6 +209,8 @@ pub fn prepare_excluding(
         valid_y: y_range.normalise(&valid.tensions),
         test_x: x_range.normalise(&test.poses),
         test_y: y_range.normalise(&test.tensions),
+        fit_rows: fit_idx.iter().map(|&k| train_idx[k]).collect(),
+        valid_rows: valid_idx.iter().map(|&k| train_idx[k]).collect(),
         train,
         test,
         x_range,

@@ -107,6 +107,7 @@ pub struct RunOptions {
     pub samples: Option<usize>,
     /// A smoke run to check a new robot file end to end in a minute or two:
     /// [`QUICK_SAMPLES`] samples, at most [`QUICK_HIDDEN`] hidden units and
+    /// [`QUICK_POLISH_STEPS`] polish steps, and
     /// [`QUICK_LOOP_S`]-second closed-loop runs. The numbers are not the
     /// robot's best; every stage still runs.
     pub quick: bool,
@@ -121,6 +122,9 @@ pub struct RunOptions {
 pub const QUICK_SAMPLES: usize = 2_000;
 /// Hidden units of a `--quick` run's net.
 pub const QUICK_HIDDEN: usize = 16;
+
+/// Polish steps at most with `--quick` (where the robot's options polish at all).
+pub const QUICK_POLISH_STEPS: usize = 200;
 /// Most seconds of trajectory per closed-loop run of a `--quick` run.
 pub const QUICK_LOOP_S: f64 = 4.0;
 
@@ -250,6 +254,7 @@ fn stages(
     let mut cascor = CascorOptions::for_robot(&robot);
     if options.quick {
         cascor.max_hidden = cascor.max_hidden.min(QUICK_HIDDEN);
+        cascor.polish.max_iterations = cascor.polish.max_iterations.min(QUICK_POLISH_STEPS);
     }
     let t0 = Instant::now();
     log::info!(

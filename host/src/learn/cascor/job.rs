@@ -15,7 +15,9 @@ use tendril_shared::{max_hidden_for, MAX_HIDDEN};
 
 pub use super::data_robot::{robot_for_data, DataRobot};
 use super::export::{write_tnet_with, ExportError, Ranges};
-use super::{train_with_stop, CascorOptions, GrowingNet, TrainReport};
+use super::polish::{PolishLoss, RowMetrics};
+use super::tip_metric::tip_metrics;
+use super::{train_with_stop, CascorOptions, GrowingNet, Metrics, TrainReport};
 use crate::dataset::split::{SPLIT_SEED, TEST_FRACTION, VALID_FRACTION};
 use crate::dataset::{prepare_excluding, Dataset};
 use crate::fsutil::{check_distinct, write_atomic, write_atomic_with, PathCollision};
@@ -379,8 +381,19 @@ fn train_and_write(job: &TrainJob<'_>, stop: &AtomicBool) -> Result<TrainResult,
         );
         options.max_hidden = cap;
     }
+    let metrics = polish_metrics(job, &options, data, &p, stop)?;
     let (net, report) = train_with_stop(
-        &p.train_x, &p.train_y, &p.valid_x, &p.valid_y, &options, s.seed, stop,
+        &p.train_x,
+        &p.train_y,
+        &p.valid_x,
+        &p.valid_y,
+        &options,
+        s.seed,
+        stop,
+        Metrics {
+            train: metrics.as_ref().map(|m| &m.0),
+            valid: metrics.as_ref().map(|m| &m.1),
+        },
     )?;
     // The last unit may have finished after Ctrl-C: still write nothing.
     if stop.load(Ordering::SeqCst) {
@@ -474,6 +487,54 @@ fn train_and_write(job: &TrainJob<'_>, stop: &AtomicBool) -> Result<TrainResult,
         test_rmse_norm100,
         measured,
     })
+}
+
+/// The tip metrics (`tip_metric`) of the fitted and validation rows, when
+/// the polish runs with the tip loss and the robot is known.
+fn polish_metrics(
+    job: &TrainJob<'_>,
+    options: &CascorOptions,
+    data: &Dataset,
+    p: &crate::dataset::Prepared,
+    stop: &AtomicBool,
+) -> Result<Option<(RowMetrics, RowMetrics)>, TrainError> {
+    let polish = &options.polish;
+    if polish.max_iterations == 0 || polish.loss != PolishLoss::Tip {
+        return Ok(None);
+    }
+    let Some(robot) = job.robot.as_ref() else {
+        log::info!("no robot: the polish minimises the plain output error");
+        return Ok(None);
+    };
+    let span: Vec<f64> = p
+        .y_range
+        .hi
+        .iter()
+        .zip(&p.y_range.lo)
+        .map(|(h, l)| h - l)
+        .collect();
+    let rows: Vec<usize> = p.fit_rows.iter().chain(&p.valid_rows).copied().collect();
+    let tensions = data.tensions.select_rows(&rows);
+    let bar = crate::dataset::generate::solve_bar(
+        rows.len(),
+        options.progress && log::log_enabled!(log::Level::Info),
+    );
+    let all = tip_metrics(robot, &tensions, &span, stop, &|k| bar.inc(k as u64))?;
+    bar.finish_and_clear();
+    let Some(all) = all else {
+        return Err(LearnError::Interrupted.into());
+    };
+    let o2 = all.outputs * all.outputs;
+    let cut = p.fit_rows.len() * o2;
+    let fit = RowMetrics {
+        outputs: all.outputs,
+        m: all.m[..cut].to_vec(),
+    };
+    let valid = RowMetrics {
+        outputs: all.outputs,
+        m: all.m[cut..].to_vec(),
+    };
+    Ok(Some((fit, valid)))
 }
 
 /// The held-out error of `net` on measured rows against the noise floor

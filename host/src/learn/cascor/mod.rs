@@ -10,6 +10,8 @@
 //! - `growth`: the candidate phase and installation of a unit;
 //! - [`train`]: the grow-and-freeze loop, the choice of output configuration,
 //!   stopping and progress;
+//! - [`polish`]: every weight trained together after growth;
+//! - [`tip_metric`]: what an output error costs at the tip, the polish's weights;
 //! - [`job`]: a whole `tendril train` run — split, train, write every output;
 //! - [`export`]: the `.tnet` weight file (`docs/design.md` §5.1).
 
@@ -21,7 +23,9 @@ pub mod job;
 pub mod net;
 pub mod options;
 mod outputs;
+pub mod polish;
 pub mod quickprop;
+pub mod tip_metric;
 pub mod train;
 
 use nalgebra::DMatrix;
@@ -29,8 +33,9 @@ use nalgebra::DMatrix;
 pub use candidates::Objective;
 pub use net::{GrowingNet, OutputKind};
 pub use options::{CascorOptions, ObjectiveChoice, OutputSolver};
+pub use polish::{PolishLoss, PolishOptions, PolishReport};
 pub use quickprop::QuickpropParams;
-pub use train::{train, train_with_stop, TrainReport, UnitLog};
+pub use train::{train, train_with_stop, Metrics, TrainReport, UnitLog};
 
 use tendril_shared::POSE_DIM;
 

@@ -4,6 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::net::OutputKind;
+use super::polish::PolishOptions;
 use super::quickprop::QuickpropParams;
 use crate::robot::bending_dof;
 use crate::robot::Robot;
@@ -74,6 +75,9 @@ pub struct CascorOptions {
     pub candidate_patterns: usize,
     /// Show a progress bar on stderr.
     pub progress: bool,
+    /// The polish phase after growth (`docs/design.md` §4, "Polish"; off by default, on past two bending degrees of freedom).
+    #[serde(default)]
+    pub polish: PolishOptions,
 }
 
 impl Default for CascorOptions {
@@ -111,21 +115,31 @@ impl Default for CascorOptions {
             pilot_units: 3,
             candidate_patterns: 3000,
             progress: true,
+            polish: PolishOptions::default(),
         }
     }
 }
+
+/// Polish steps of [`CascorOptions::for_robot`] past two bending degrees of
+/// freedom. On the two-segment robot the held-out p95 still falls at this
+/// count (`docs/design.md` §4, "Polish"); each step costs about one pass of
+/// the training rows forward and back.
+pub const POLISH_STEPS: usize = 10_000;
 
 impl CascorOptions {
     /// The defaults for `robot` (`docs/design.md` §4): past two bending
     /// degrees of freedom (a two-segment robot) the inverse map is harder
     /// and the 64 units are the limit, so each unit gets a better pick —
-    /// twice the pool, candidates trained on 10,000 rows instead of 3,000.
-    /// One and two (the single-segment robots) keep the defaults.
+    /// twice the pool, candidates trained on 10,000 rows instead of 3,000 —
+    /// and then every weight is polished together ([`POLISH_STEPS`] L-BFGS
+    /// steps on the tip loss). One and two (the single-segment robots, whose
+    /// net is at the f32 floor) keep the defaults.
     pub fn for_robot(robot: &Robot) -> CascorOptions {
         let mut o = CascorOptions::default();
         if bending_dof(robot) > 2 {
             o.pool = 16;
             o.candidate_patterns = 10_000;
+            o.polish.max_iterations = POLISH_STEPS;
         }
         o
     }
@@ -154,5 +168,7 @@ mod tests {
         );
         let two = CascorOptions::for_robot(&robot("tdcr-2seg.toml"));
         assert_eq!((two.pool, two.candidate_patterns), (16, 10_000));
+        assert_eq!(two.polish.max_iterations, POLISH_STEPS);
+        assert_eq!(two.polish.loss, super::super::PolishLoss::Tip);
     }
 }

@@ -5,7 +5,7 @@
 //! Also the choice between output configurations (pilot units, validation
 //! picks), stopping, and the progress bar.
 
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -15,6 +15,7 @@ use serde::{Deserialize, Serialize};
 use super::candidates::{Candidate, Objective};
 use super::net::{GrowingNet, OutputKind};
 use super::outputs::{rmse, Data, State};
+use super::polish::{polish, PolishReport, RowMetrics, Rows};
 use crate::learn::LearnError;
 
 pub use super::options::{CascorOptions, ObjectiveChoice, OutputSolver};
@@ -59,6 +60,9 @@ pub struct TrainReport {
     pub best_valid_rmse: f64,
     /// Installed units per objective: (covariance, cascade2).
     pub objective_wins: (usize, usize),
+    /// What the polish phase did, when it ran.
+    #[serde(default)]
+    pub polish: Option<PolishReport>,
     /// Total wall time, seconds.
     pub seconds: f64,
 }
@@ -100,13 +104,14 @@ impl State {
         row
     }
 
+    /// The kept net, taking the centred inputs `2x − 1` the phases train on.
     pub(super) fn finish(&self, n_inputs: usize) -> GrowingNet {
         let (hidden, w) = match &self.best {
             Some((_, h, w)) => (h.clone(), w.clone()),
             None => (self.hidden.clone(), self.w.clone()),
         };
         let m = w.nrows();
-        let mut net = GrowingNet {
+        GrowingNet {
             n_inputs,
             n_outputs: w.ncols(),
             hidden,
@@ -114,9 +119,7 @@ impl State {
                 .map(|o| (0..m).map(|r| w[(r, o)]).collect())
                 .collect(),
             output_kind: self.kind,
-        };
-        net.fold_input_affine(&vec![2.0; n_inputs], &vec![-1.0; n_inputs]);
-        net
+        }
     }
 
     pub(super) fn done(&self, opts: &CascorOptions) -> bool {
@@ -152,11 +155,32 @@ pub fn train(
     opts: &CascorOptions,
     seed: u64,
 ) -> Result<(GrowingNet, TrainReport), LearnError> {
-    train_with_stop(x, y, vx, vy, opts, seed, &AtomicBool::new(false))
+    train_with_stop(
+        x,
+        y,
+        vx,
+        vy,
+        opts,
+        seed,
+        &AtomicBool::new(false),
+        Metrics::default(),
+    )
+}
+
+/// Per-row metrics the polish phase weighs the training and validation
+/// rows' errors by (`super::tip_metric`); `None`: plain squared error.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Metrics<'a> {
+    /// One per training row.
+    pub train: Option<&'a RowMetrics>,
+    /// One per validation row.
+    pub valid: Option<&'a RowMetrics>,
 }
 
 /// [`train`], checking `stop` before every unit it grows: once it is set,
-/// training ends with [`LearnError::Interrupted`] and returns no net.
+/// training ends with [`LearnError::Interrupted`] and returns no net. The
+/// polish phase, when the options ask for it, weighs errors by `metrics`.
+#[allow(clippy::too_many_arguments)]
 pub fn train_with_stop(
     x: &DMatrix<f64>,
     y: &DMatrix<f64>,
@@ -165,8 +189,24 @@ pub fn train_with_stop(
     opts: &CascorOptions,
     seed: u64,
     stop: &AtomicBool,
+    metrics: Metrics<'_>,
 ) -> Result<(GrowingNet, TrainReport), LearnError> {
     check(x, y, "training split")?;
+    for (m, rows, what) in [
+        (metrics.train, x.nrows(), "training"),
+        (metrics.valid, vx.nrows(), "validation"),
+    ] {
+        if let Some(m) = m {
+            if m.rows() != rows || m.outputs != y.ncols() {
+                return Err(LearnError::BadData(format!(
+                    "{what} metric: {} rows of {} outputs for {rows} rows of {}",
+                    m.rows(),
+                    m.outputs,
+                    y.ncols()
+                )));
+            }
+        }
+    }
     check(vx, vy, "validation split")?;
     if x.nrows() < 2 || x.ncols() == 0 || y.ncols() == 0 {
         return Err(LearnError::BadData(format!(
@@ -278,7 +318,10 @@ pub fn train_with_stop(
         bar.set_message(format!("valid RMSE×100 {:.4}", 100.0 * row.valid_rmse));
     }
     bar.finish_and_clear();
-    let net = st.finish(x.ncols());
+    let mut net = st.finish(x.ncols());
+    let polish = (opts.polish.max_iterations > 0 && !stop.load(Ordering::SeqCst))
+        .then(|| polish_net(&mut net, x, vx, &d, metrics));
+    net.fold_input_affine(&vec![2.0; x.ncols()], &vec![-1.0; x.ncols()]);
     let wins = st
         .history
         .iter()
@@ -295,6 +338,7 @@ pub fn train_with_stop(
         best_valid_rmse: st.best.as_ref().map_or(f64::NAN, |b| b.0),
         history: st.history,
         objective_wins: wins,
+        polish,
         seconds: d.start.elapsed().as_secs_f64(),
     };
     log::debug!(
@@ -304,6 +348,60 @@ pub fn train_with_stop(
         report.seconds
     );
     Ok((net, report))
+}
+
+/// Polish `net` (centred inputs) on the training rows with a progress bar.
+fn polish_net(
+    net: &mut GrowingNet,
+    x: &DMatrix<f64>,
+    vx: &DMatrix<f64>,
+    d: &Data<'_>,
+    metrics: Metrics<'_>,
+) -> PolishReport {
+    let centre = |m: &DMatrix<f64>| m.map(|v| 2.0 * v - 1.0);
+    let (cx, cvx) = (centre(x), centre(vx));
+    let train = Rows {
+        x: &cx,
+        y: d.y,
+        metric: metrics.train,
+    };
+    let valid = Rows {
+        x: &cvx,
+        y: d.vy,
+        metric: metrics.valid,
+    };
+    let opts = &d.opts.polish;
+    let bar = ProgressBar::with_draw_target(
+        Some(opts.max_iterations as u64),
+        if d.opts.progress && log::log_enabled!(log::Level::Info) {
+            ProgressDrawTarget::stderr()
+        } else {
+            ProgressDrawTarget::hidden()
+        },
+    );
+    bar.set_style(
+        ProgressStyle::with_template("polish {bar:30} {pos}/{len} steps {msg} [{elapsed_precise}]")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let r = polish(net, train, valid, opts, d.stop, |i, v| {
+        bar.set_position(i as u64);
+        bar.set_message(format!("valid RMSE×100 {:.4}", 100.0 * v));
+        if i % 100 == 0 {
+            log::debug!("cascor polish: step {i}, valid RMSE {v:.6}");
+        }
+    });
+    bar.finish_and_clear();
+    log::debug!(
+        "cascor polish: {} iterations (best {}), train RMSE {:.6} → {:.6}, valid RMSE {:.6} → {:.6}, {:.1} s",
+        r.iterations,
+        r.best_iteration,
+        r.train_rmse.0,
+        r.train_rmse.1,
+        r.valid_rmse.0,
+        r.valid_rmse.1,
+        r.seconds
+    );
+    r
 }
 
 fn log_unit(st: &State, row: &UnitLog) {
