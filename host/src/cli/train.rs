@@ -175,7 +175,7 @@ pub struct TrainArgs {
     pub cand_patterns: Option<usize>,
     /// Polish: after growth, train every weight together by L-BFGS for at
     /// most this many steps, keeping the best validation net (0 = off)
-    /// [default: 0; 2000 for a robot with more than two bending degrees of freedom].
+    /// [default: 0; 10,000 for a robot with more than two bending degrees of freedom].
     #[arg(long, value_name = "STEPS")]
     pub polish: Option<usize>,
     /// Polish: what it minimises — the tip displacement the tension error causes
