@@ -401,6 +401,7 @@ pub fn polish(
                 pairs.pop_front();
             }
         }
+        log::trace!("polish step {it}: loss {f:e} → {ft:e}, step {step:e}, slope {slope:e}");
         theta = trial;
         f = ft;
         g = gt;
