@@ -182,6 +182,10 @@ pub struct TrainArgs {
     /// (needs the robot), or the plain tension error.
     #[arg(long, value_enum, default_value_t = PolishLossArg::Tip)]
     pub polish_loss: PolishLossArg,
+    /// Polish: a robust loss, pseudo-Huber with δ = K × the median row error at the start
+    /// (0 = squared) [default: 0; 3 for a robot with more than four bending degrees of freedom].
+    #[arg(long, value_name = "K")]
+    pub polish_robust: Option<f64>,
     /// Polish: stop after this many steps without a better validation RMSE.
     #[arg(long, default_value_t = 200)]
     pub polish_patience: usize,
@@ -246,6 +250,7 @@ impl TrainArgs {
             polish: cascor::PolishOptions {
                 max_iterations: self.polish.unwrap_or(d.polish.max_iterations),
                 patience: self.polish_patience,
+                robust: self.polish_robust.unwrap_or(d.polish.robust),
                 loss: match self.polish_loss {
                     PolishLossArg::Tip => cascor::PolishLoss::Tip,
                     PolishLossArg::Plain => cascor::PolishLoss::Plain,

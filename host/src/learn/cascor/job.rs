@@ -301,6 +301,12 @@ fn check(job: &TrainJob<'_>) -> Result<(), TrainError> {
             job.options.max_hidden
         )));
     }
+    let robust = job.options.polish.robust;
+    if !(robust.is_finite() && robust >= 0.0) {
+        return Err(TrainError::BadInput(format!(
+            "--polish-robust {robust}: must be a finite number ≥ 0 (0 = squared loss)"
+        )));
+    }
     Ok(())
 }
 
@@ -682,6 +688,19 @@ mod tests {
         j.outputs.log = j.outputs.model.clone();
         let err = run(&j, &AtomicBool::new(false)).unwrap_err();
         assert!(matches!(err, TrainError::Paths(_)), "{err}");
+        assert!(nothing_written(dir.path()));
+    }
+
+    #[test]
+    fn a_negative_or_nan_robust_scale_is_refused_before_writing() {
+        let dir = tempfile::tempdir().unwrap();
+        let data = rows(200);
+        for bad in [-1.0, f64::NAN, f64::INFINITY] {
+            let mut j = job(&data, dir.path());
+            j.options.polish.robust = bad;
+            let err = run(&j, &AtomicBool::new(false)).unwrap_err();
+            assert!(err.to_string().contains("--polish-robust"), "{bad}: {err}");
+        }
         assert!(nothing_written(dir.path()));
     }
 

@@ -126,6 +126,10 @@ impl Default for CascorOptions {
 /// the training rows forward and back.
 pub const POLISH_STEPS: usize = 10_000;
 
+/// The robust loss's δ, in median row errors, of [`CascorOptions::for_robot`]
+/// past four bending degrees of freedom (three segments).
+pub const ROBUST_SCALE: f64 = 3.0;
+
 impl CascorOptions {
     /// The defaults for `robot` (`docs/design.md` §4): past two bending
     /// degrees of freedom (a two-segment robot) the inverse map is harder
@@ -140,6 +144,13 @@ impl CascorOptions {
             o.pool = 16;
             o.candidate_patterns = 10_000;
             o.polish.max_iterations = POLISH_STEPS;
+        }
+        if bending_dof(robot) > 4 {
+            // Three segments: held-out errors are heavy-tailed (rows on the
+            // fold between mirror S-bends), the squared loss chases them and
+            // its validation error rises from the first step; the robust
+            // loss halves the held-out p95 (`docs/design.md` §4, "Polish").
+            o.polish.robust = ROBUST_SCALE;
         }
         o
     }
@@ -170,5 +181,9 @@ mod tests {
         assert_eq!((two.pool, two.candidate_patterns), (16, 10_000));
         assert_eq!(two.polish.max_iterations, POLISH_STEPS);
         assert_eq!(two.polish.loss, super::super::PolishLoss::Tip);
+        assert_eq!(two.polish.robust, 0.0);
+        let three = CascorOptions::for_robot(&robot("tdcr-3seg.toml"));
+        assert_eq!(bending_dof(&robot("tdcr-3seg.toml")), 6);
+        assert_eq!(three.polish.robust, ROBUST_SCALE);
     }
 }

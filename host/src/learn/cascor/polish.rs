@@ -41,6 +41,10 @@ pub struct PolishOptions {
     pub max_iterations: usize,
     /// What it minimises.
     pub loss: PolishLoss,
+    /// Robust loss: δ = this × the median row error at the start (0:
+    /// squared loss). See [`Rows::delta`].
+    #[serde(default)]
+    pub robust: f64,
     /// Stop after this many iterations without a new best validation RMSE.
     pub patience: usize,
     /// Curvature pairs kept by L-BFGS.
@@ -52,6 +56,7 @@ impl Default for PolishOptions {
         PolishOptions {
             max_iterations: 0,
             loss: PolishLoss::Tip,
+            robust: 0.0,
             patience: 200,
             memory: 12,
         }
@@ -69,8 +74,30 @@ pub struct PolishReport {
     pub valid_rmse: (f64, f64),
     /// Iteration of the kept weights (0: the unpolished net was best).
     pub best_iteration: usize,
+    /// δ of the robust loss, when there was one (the RMSEs above are then its counterparts).
+    #[serde(default)]
+    pub delta: Option<f64>,
     /// Wall time, seconds.
     pub seconds: f64,
+}
+
+/// Each row's error r = √(eᵀ M_r e) under `net`.
+pub fn row_errors(net: &GrowingNet, rows: Rows<'_>) -> Vec<f64> {
+    let mut scratch = Scratch::new(net);
+    (0..rows.x.nrows())
+        .map(|r| scratch.row_error(net, rows, r))
+        .collect()
+}
+
+/// δ of the robust loss: `scale` × the median row error of `net` on `rows`.
+pub fn robust_delta(net: &GrowingNet, rows: Rows<'_>, scale: f64) -> Option<f64> {
+    let mut r = row_errors(net, rows);
+    if r.is_empty() || scale.is_nan() || scale <= 0.0 {
+        return None;
+    }
+    r.sort_by(f64::total_cmp);
+    let median = r[r.len() / 2];
+    (median > 0.0 && median.is_finite()).then_some(scale * median)
 }
 
 /// Rows per block of the gradient sum: fixed, so the sum's order is too.
@@ -114,10 +141,15 @@ pub struct Rows<'a> {
     pub y: &'a DMatrix<f64>,
     /// Per-row metric (`None`: plain squared error).
     pub metric: Option<&'a RowMetrics>,
+    /// Robust loss: row r costs δ²(√(1 + r²/δ²) − 1) with r² = eᵀ M_r e
+    /// (pseudo-Huber: r²/2 for r ≪ δ, growing like δ·r past it) instead
+    /// of r²/2. `None`: squared.
+    pub delta: Option<f64>,
 }
 
 impl Rows<'_> {
-    /// √(Σ_r eᵀ M_r e / (n·O)) of `net`: the RMSE in the metric's units.
+    /// √(Σ_r eᵀ M_r e / (n·O)) of `net`: the RMSE in the metric's units
+    /// (with `delta`, √(2 Σ_r loss_r / (n·O)), its robust counterpart).
     pub fn rmse(&self, net: &GrowingNet) -> f64 {
         if self.y.is_empty() {
             return 0.0;
@@ -209,12 +241,30 @@ impl Scratch {
             Some(m) => m.apply(r, &self.e, &mut self.me),
             None => self.me.copy_from_slice(&self.e),
         }
-        let loss = 0.5 * dot(&self.e, &self.me);
+        let r2 = dot(&self.e, &self.me);
+        let loss = match rows.delta {
+            Some(delta) => {
+                let root = (1.0 + r2 / (delta * delta)).sqrt();
+                // ∂loss/∂e = M e / √(1 + r²/δ²).
+                self.me.iter_mut().for_each(|v| *v /= root);
+                delta * delta * (root - 1.0)
+            }
+            None => 0.5 * r2,
+        };
         if grad.is_empty() {
             return loss;
         }
         self.backward(net, grad);
         loss
+    }
+
+    /// Row `r`'s tip error r = √(eᵀ M_r e).
+    fn row_error(&mut self, net: &GrowingNet, rows: Rows<'_>, r: usize) -> f64 {
+        let plain = Rows {
+            delta: None,
+            ..rows
+        };
+        (2.0 * self.accumulate(net, plain, r, &mut [])).sqrt()
     }
 
     /// ∂out_k/∂θ of row `r` into `grad`.
@@ -328,6 +378,9 @@ pub fn polish(
     mut on_iteration: impl FnMut(usize, f64),
 ) -> PolishReport {
     let start = std::time::Instant::now();
+    let delta = robust_delta(net, train, opts.robust);
+    let train = Rows { delta, ..train };
+    let valid = Rows { delta, ..valid };
     let judge = if valid.x.nrows() > 0 { valid } else { train };
     let valid_of = |n: &GrowingNet| judge.rmse(n);
     let train0 = train.rmse(net);
@@ -421,6 +474,7 @@ pub fn polish(
         train_rmse: (train0, train.rmse(net)),
         valid_rmse: (valid0, best.0),
         best_iteration: best.2,
+        delta,
         seconds: start.elapsed().as_secs_f64(),
     }
 }
@@ -468,32 +522,73 @@ mod tests {
             let (x, y) = toy_data(300);
             let m = toy_metric(x.nrows());
             for metric in [None, Some(&m)] {
-                let rows = Rows {
-                    x: &x,
-                    y: &y,
-                    metric,
-                };
-                let (_, g) = loss_and_gradient(&net, rows, true);
-                let theta = flatten(&net);
-                let mut probe = net.clone();
-                for k in 0..theta.len() {
-                    let h = 1e-6;
-                    let mut t = theta.clone();
-                    t[k] += h;
-                    unflatten(&mut probe, &t);
-                    let (fp, _) = loss_and_gradient(&probe, rows, false);
-                    t[k] -= 2.0 * h;
-                    unflatten(&mut probe, &t);
-                    let (fm, _) = loss_and_gradient(&probe, rows, false);
-                    let fd = (fp - fm) / (2.0 * h);
-                    assert!(
-                        (fd - g[k]).abs() <= 1e-6 * (1.0 + fd.abs()),
-                        "{kind} weight {k}: finite difference {fd}, backprop {}",
-                        g[k]
-                    );
+                for delta in [None, Some(0.05)] {
+                    let rows = Rows {
+                        x: &x,
+                        y: &y,
+                        metric,
+                        delta,
+                    };
+                    let (_, g) = loss_and_gradient(&net, rows, true);
+                    let theta = flatten(&net);
+                    let mut probe = net.clone();
+                    for k in 0..theta.len() {
+                        let h = 1e-6;
+                        let mut t = theta.clone();
+                        t[k] += h;
+                        unflatten(&mut probe, &t);
+                        let (fp, _) = loss_and_gradient(&probe, rows, false);
+                        t[k] -= 2.0 * h;
+                        unflatten(&mut probe, &t);
+                        let (fm, _) = loss_and_gradient(&probe, rows, false);
+                        let fd = (fp - fm) / (2.0 * h);
+                        assert!(
+                            (fd - g[k]).abs() <= 1e-6 * (1.0 + fd.abs()),
+                            "{kind} weight {k}: finite difference {fd}, backprop {}",
+                            g[k]
+                        );
+                    }
                 }
             }
         }
+    }
+
+    #[test]
+    fn the_robust_loss_is_half_the_square_for_small_errors_and_linear_for_large() {
+        let net = toy_net(OutputKind::Linear);
+        let (x, y) = toy_data(50);
+        let plain = Rows {
+            x: &x,
+            y: &y,
+            metric: None,
+            delta: None,
+        };
+        let r = row_errors(&net, plain);
+        let (squared, _) = loss_and_gradient(&net, plain, false);
+        assert!((0.5 * r.iter().map(|v| v * v).sum::<f64>() - squared).abs() < 1e-12);
+        // δ far above every row's error: the squared loss to first order.
+        let wide = Rows {
+            delta: Some(1e3),
+            ..plain
+        };
+        assert!((loss_and_gradient(&net, wide, false).0 - squared).abs() < 1e-6 * squared);
+        // δ far below: each row costs about δ·r.
+        let delta = 1e-6;
+        let narrow = Rows {
+            delta: Some(delta),
+            ..plain
+        };
+        let linear: f64 = r.iter().map(|v| delta * v).sum();
+        let robust = loss_and_gradient(&net, narrow, false).0;
+        assert!(
+            (robust - linear).abs() < 1e-3 * linear,
+            "{robust} vs {linear}"
+        );
+        // δ from the median: scale × the middle row error.
+        let mut sorted = r.clone();
+        sorted.sort_by(f64::total_cmp);
+        assert_eq!(robust_delta(&net, plain, 3.0), Some(3.0 * sorted[25]));
+        assert_eq!(robust_delta(&net, plain, 0.0), None);
     }
 
     /// A different symmetric positive definite 2×2 per row.
@@ -520,11 +615,13 @@ mod tests {
             x: &tx,
             y: &ty,
             metric: None,
+            delta: None,
         };
         let valid = Rows {
             x: &vx,
             y: &vy,
             metric: None,
+            delta: None,
         };
         let r = polish(
             &mut net,
@@ -554,6 +651,7 @@ mod tests {
             x: &x,
             y: &y,
             metric: None,
+            delta: None,
         };
         let r = polish(
             &mut net,
@@ -583,6 +681,7 @@ mod tests {
             x: &x,
             y: &y,
             metric: None,
+            delta: None,
         };
         let a = one.install(|| loss_and_gradient(&net, rows, true));
         let b = two.install(|| loss_and_gradient(&net, rows, true));

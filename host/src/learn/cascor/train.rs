@@ -364,11 +364,13 @@ fn polish_net(
         x: &cx,
         y: d.y,
         metric: metrics.train,
+        delta: None,
     };
     let valid = Rows {
         x: &cvx,
         y: d.vy,
         metric: metrics.valid,
+        delta: None,
     };
     let opts = &d.opts.polish;
     let bar = ProgressBar::with_draw_target(
