@@ -1,7 +1,8 @@
 //! The polish phase (`docs/design.md` §4, "Polish"): after cascade correlation has
 //! grown and frozen its units, every weight — hidden and output — is
-//! trained together by full-batch L-BFGS on the training rows' squared
-//! error, keeping the weights with the lowest validation RMSE.
+//! trained together by full-batch L-BFGS on the training rows' error —
+//! squared, weighted per row by the tip metric, optionally robust — keeping
+//! the weights with the lowest validation error.
 //!
 //! Why: cascade correlation trains each unit once, against the residual of
 //! the units before it, and never moves it again; on a capacity-bound net
@@ -68,9 +69,9 @@ impl Default for PolishOptions {
 pub struct PolishReport {
     /// Iterations run.
     pub iterations: usize,
-    /// Training RMSE before and after (normalised units).
+    /// Training RMSE before and after (normalised outputs, in the metric's units).
     pub train_rmse: (f64, f64),
-    /// Validation RMSE before and after (normalised units); "after" is the kept weights'.
+    /// Validation RMSE before and after (as `train_rmse`); "after" is the kept weights'.
     pub valid_rmse: (f64, f64),
     /// Iteration of the kept weights (0: the unpolished net was best).
     pub best_iteration: usize,
@@ -211,6 +212,7 @@ pub fn loss_and_gradient(net: &GrowingNet, rows: Rows<'_>, with_gradient: bool) 
 
 /// Per-row buffers of the backward pass.
 struct Scratch {
+    x: Vec<f64>,
     z: Vec<f64>,
     dz: Vec<f64>,
     out: Vec<f64>,
@@ -222,6 +224,7 @@ impl Scratch {
     fn new(net: &GrowingNet) -> Scratch {
         let m = 1 + net.n_inputs + net.n_hidden();
         Scratch {
+            x: vec![0.0; net.n_inputs],
             z: Vec::with_capacity(m),
             dz: vec![0.0; m],
             out: vec![0.0; net.n_outputs],
@@ -230,10 +233,17 @@ impl Scratch {
         }
     }
 
+    /// Row `r` through `net`: features into `z`, outputs into `out`.
+    fn forward(&mut self, net: &GrowingNet, rows: Rows<'_>, r: usize) {
+        for (c, xc) in self.x.iter_mut().enumerate() {
+            *xc = rows.x[(r, c)];
+        }
+        net.forward_into(&self.x, &mut self.z, &mut self.out);
+    }
+
     /// Add row `r`'s gradient to `grad` (when it is not empty); return its loss.
     fn accumulate(&mut self, net: &GrowingNet, rows: Rows<'_>, r: usize, grad: &mut [f64]) -> f64 {
-        let xi: Vec<f64> = (0..net.n_inputs).map(|c| rows.x[(r, c)]).collect();
-        net.forward_into(&xi, &mut self.z, &mut self.out);
+        self.forward(net, rows, r);
         for o in 0..net.n_outputs {
             self.e[o] = self.out[o] - rows.y[(r, o)];
         }
@@ -276,8 +286,7 @@ impl Scratch {
         k: usize,
         grad: &mut [f64],
     ) {
-        let xi: Vec<f64> = (0..net.n_inputs).map(|c| rows.x[(r, c)]).collect();
-        net.forward_into(&xi, &mut self.z, &mut self.out);
+        self.forward(net, rows, r);
         self.me.iter_mut().for_each(|v| *v = 0.0);
         self.me[k] = 1.0;
         self.backward(net, grad);

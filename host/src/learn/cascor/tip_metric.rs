@@ -25,11 +25,12 @@ use nalgebra::DMatrix;
 use rayon::prelude::*;
 
 use super::polish::RowMetrics;
-use crate::inverse::{ExactIk, IkSettings};
+use crate::inverse::tip_jacobian;
 use crate::learn::LearnError;
 use crate::robot::Robot;
 use crate::statics::batch::{solve_all, Load};
-use crate::statics::{SolverSettings, Statics};
+use crate::statics::rod::Rod;
+use crate::statics::{Solution, SolverSettings, Statics};
 
 /// Share of the plain squared error kept beside the tip's (κ).
 pub const PLAIN_SHARE: f64 = 0.05;
@@ -55,35 +56,25 @@ pub fn tip_metrics(
     }
     let settings = SolverSettings::default();
     let statics = Statics::new(robot, settings);
-    let ik = ExactIk::new(
-        robot,
-        IkSettings {
-            statics: settings,
-            ..IkSettings::default()
-        },
-    );
+    let rod = Rod::new(robot);
     let loads: Vec<Load> = (0..tensions.nrows())
         .map(|r| Load::tensions(tensions.row(r).iter().copied().collect()))
         .collect();
     let Some(solutions) = solve_all(&statics, &loads, stop, done) else {
         return Ok(None);
     };
-    let ell2 = robot.length * robot.length;
     let raw: Vec<Option<Vec<f64>>> = solutions
         .par_iter()
         .zip(loads.par_iter())
         .map(|(sol, load)| {
-            let sol = sol.as_ref().ok()?;
-            let j = ik.tip_jacobian_at(&load.tensions, &sol.warm).ok()?;
-            // J D: columns scaled to the normalised outputs.
-            let jd = DMatrix::from_fn(6, t, |i, c| j[(i, c)] * span[c]);
-            let jp = jd.rows(0, 3);
-            let jt = jd.rows(3, 3);
-            let m = jp.transpose() * jp + (jt.transpose() * jt) * ell2;
-            m.iter().all(|v| v.is_finite()).then(|| {
-                // Row-major (M is symmetric, so either order).
-                m.as_slice().to_vec()
-            })
+            raw_metric(
+                &rod,
+                robot.length,
+                settings.steps,
+                sol.as_ref().ok()?,
+                &load.tensions,
+                span,
+            )
         })
         .collect();
     let good: Vec<&Vec<f64>> = raw.iter().flatten().collect();
@@ -119,6 +110,31 @@ pub fn tip_metrics(
     Ok(Some(RowMetrics { outputs: t, m: out }))
 }
 
+/// Row-major Dᵀ (J_pᵀ J_p + ℓ² J_θᵀ J_θ) D at the solution `sol` of
+/// `tensions`, before the scale s and the plain share; `None` where the
+/// Jacobian cannot be formed or is not finite.
+fn raw_metric(
+    rod: &Rod,
+    ell: f64,
+    steps: usize,
+    sol: &Solution,
+    tensions: &[f64],
+    span: &[f64],
+) -> Option<Vec<f64>> {
+    let mut rod = rod.clone();
+    rod.set_tensions(tensions);
+    let j = tip_jacobian(&rod, &sol.warm.x, steps).ok()?.jacobian;
+    // J D: columns scaled to the normalised outputs.
+    let jd = DMatrix::from_fn(6, span.len(), |i, c| j[(i, c)] * span[c]);
+    let jp = jd.rows(0, 3);
+    let jt = jd.rows(3, 3);
+    let m = jp.transpose() * jp + (jt.transpose() * jt) * (ell * ell);
+    // Symmetric, so its column-major storage is its row-major layout.
+    m.iter()
+        .all(|v| v.is_finite())
+        .then(|| m.as_slice().to_vec())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -133,14 +149,19 @@ mod tests {
         let t = robot.n_tendons();
         let tau = [1.5, 0.2, 0.4, 0.3];
         let span = vec![2.0; t];
-        let rows = DMatrix::from_row_slice(1, t, &tau);
-        let m = tip_metrics(&robot, &rows, &span, &AtomicBool::new(false), &|_| {})
-            .unwrap()
-            .unwrap();
-        // The same metric without the scale s and the plain share.
-        let e = [0.004, -0.003, 0.002, 0.001];
-        let statics = Statics::new(&robot, SolverSettings::default());
+        let settings = SolverSettings::default();
+        let statics = Statics::new(&robot, settings);
         let a = statics.solve(&tau, None).unwrap();
+        let raw = raw_metric(
+            &Rod::new(&robot),
+            robot.length,
+            settings.steps,
+            &a,
+            &tau,
+            &span,
+        )
+        .unwrap();
+        let e = [0.004, -0.003, 0.002, 0.001];
         let moved: Vec<f64> = (0..t).map(|i| tau[i] + span[i] * e[i]).collect();
         let b = statics.solve(&moved, None).unwrap();
         let dp = (b.position - a.position).norm_squared();
@@ -148,25 +169,26 @@ mod tests {
             .scaled_axis()
             .norm_squared();
         let truth = dp + robot.length * robot.length * dth;
-        // One row: s is its own trace / T, so undo it from the diagonal.
-        let mm = DMatrix::from_row_slice(t, t, &m.m);
-        let unscaled = &mm - DMatrix::identity(t, t) * PLAIN_SHARE;
+        let m = DMatrix::from_row_slice(t, t, &raw);
         let ev = nalgebra::DVector::from_column_slice(&e);
-        let quad = (ev.transpose() * &unscaled * &ev)[(0, 0)];
-        let s_tr = unscaled.trace() / t as f64;
-        // quad · s = eᵀ M_raw e; recover s from the raw trace of a fresh Jacobian.
-        let j = ExactIk::new(&robot, IkSettings::default())
-            .tip_jacobian_at(&tau, &a.warm)
-            .unwrap();
-        let jd = DMatrix::from_fn(6, t, |i, c| j[(i, c)] * span[c]);
-        let raw = jd.rows(0, 3).transpose() * jd.rows(0, 3)
-            + jd.rows(3, 3).transpose() * jd.rows(3, 3) * (robot.length * robot.length);
-        let s = raw.trace() / t as f64;
-        assert!((s_tr - 1.0).abs() < 1e-9, "scaled mean trace {s_tr}");
-        let predicted = quad * s;
+        let predicted = (ev.transpose() * &m * &ev)[(0, 0)];
         assert!(
             (predicted - truth).abs() < 1e-3 * truth,
             "eᵀMe {predicted:e} vs displacement² {truth:e}"
         );
+        // tip_metrics scales it to a mean trace of one and adds the plain share.
+        let rows = DMatrix::from_row_slice(1, t, &tau);
+        let scaled = tip_metrics(&robot, &rows, &span, &AtomicBool::new(false), &|_| {})
+            .unwrap()
+            .unwrap();
+        let s = m.trace() / t as f64;
+        for (k, (got, r)) in scaled.m.iter().zip(&raw).enumerate() {
+            let plain = if k % (t + 1) == 0 { PLAIN_SHARE } else { 0.0 };
+            assert!(
+                (got - (r / s + plain)).abs() < 1e-9,
+                "entry {k}: {got} vs {}",
+                r / s + plain
+            );
+        }
     }
 }

@@ -254,17 +254,10 @@ pub fn train_with_stop(
     }
     configs.dedup();
 
-    let bar = ProgressBar::with_draw_target(
-        Some(opts.max_hidden as u64),
-        if opts.progress && log::log_enabled!(log::Level::Info) {
-            ProgressDrawTarget::stderr()
-        } else {
-            ProgressDrawTarget::hidden()
-        },
-    );
-    bar.set_style(
-        ProgressStyle::with_template("cascor {bar:30} {pos}/{len} units {msg} [{elapsed_precise}]")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    let bar = progress_bar(
+        opts,
+        opts.max_hidden,
+        "cascor {bar:30} {pos}/{len} units {msg} [{elapsed_precise}]",
     );
 
     let mut states: Vec<State> = configs
@@ -350,6 +343,23 @@ pub fn train_with_stop(
     Ok((net, report))
 }
 
+/// A bar of `len` on stderr in `template`, when the options ask for
+/// progress and info logging is on; else hidden.
+fn progress_bar(opts: &CascorOptions, len: usize, template: &str) -> ProgressBar {
+    let bar = ProgressBar::with_draw_target(
+        Some(len as u64),
+        if opts.progress && log::log_enabled!(log::Level::Info) {
+            ProgressDrawTarget::stderr()
+        } else {
+            ProgressDrawTarget::hidden()
+        },
+    );
+    bar.set_style(
+        ProgressStyle::with_template(template).unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar
+}
+
 /// Polish `net` (centred inputs) on the training rows with a progress bar.
 fn polish_net(
     net: &mut GrowingNet,
@@ -373,17 +383,10 @@ fn polish_net(
         delta: None,
     };
     let opts = &d.opts.polish;
-    let bar = ProgressBar::with_draw_target(
-        Some(opts.max_iterations as u64),
-        if d.opts.progress && log::log_enabled!(log::Level::Info) {
-            ProgressDrawTarget::stderr()
-        } else {
-            ProgressDrawTarget::hidden()
-        },
-    );
-    bar.set_style(
-        ProgressStyle::with_template("polish {bar:30} {pos}/{len} steps {msg} [{elapsed_precise}]")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    let bar = progress_bar(
+        d.opts,
+        opts.max_iterations,
+        "polish {bar:30} {pos}/{len} steps {msg} [{elapsed_precise}]",
     );
     let r = polish(net, train, valid, opts, d.stop, |i, v| {
         bar.set_position(i as u64);
