@@ -16,7 +16,8 @@
 //!
 //! A third builds the two-segment robot's six-tendon net
 //! (`firmware/vectors/tdcr-2seg.tnet`) into flash with vectors made for it
-//! (`TENDRIL_FW_VECTORS`). A fourth runs the hot-swap image
+//! (`TENDRIL_FW_VECTORS`), a fourth the three-segment robot's nine-tendon
+//! net (`firmware/vectors/tdcr-3seg.tnet`). A fifth runs the hot-swap image
 //! `tendril-fw-swap` (docs/design.md §5.3): the largest net the MCU accepts (7-64-8) swapped in while the
 //! control loop runs, every period's instruction count against the budget
 //! and every period's inference against the net that should be running.
@@ -212,6 +213,30 @@ fn two_segment_robot_net_runs_bit_identically_on_the_mcu() {
     assert!(
         out.lines()
             .any(|l| l.starts_with("net 7 ") && l.split(' ').nth(3) == Some("6")),
+        "{out}"
+    );
+}
+
+/// The three-segment robot's exported net (nine tendons, 7-63-9: the
+/// robust-polished net of `tendril run --robot robots/tdcr-3seg.toml`,
+/// committed as `firmware/vectors/tdcr-3seg.tnet`) in flash, with vectors
+/// made for it: the most tendons the MCU takes, on the largest net a robot
+/// file has produced.
+#[test]
+fn three_segment_robot_net_runs_bit_identically_on_the_mcu() {
+    require_prerequisites();
+    let root = workspace_root();
+    let net = root.join("firmware/vectors/tdcr-3seg.tnet");
+    let vectors = parity::write_vectors(&net, &mcu_target_dir(&root).join("vectors-3seg"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let out = check_parity(&net, true, Some(&vectors), "3seg");
+    let shape = McuNet::decode(&std::fs::read(&net).expect("net"))
+        .expect("decodes")
+        .shape();
+    assert_eq!(shape.outputs, 9, "the three-segment robot has nine tendons");
+    assert!(
+        out.lines()
+            .any(|l| l.starts_with("net 7 ") && l.split(' ').nth(3) == Some("9")),
         "{out}"
     );
 }
