@@ -150,6 +150,7 @@ pub fn one_loop_at_a_time() -> LoopGuard {
 pub fn run_sim(args: &[&str]) -> (tempfile::TempDir, String) {
     let _one = one_loop_at_a_time();
     let dir = tempfile::tempdir().expect("temp dir");
+    let steal_before = cpu_steal_ms();
     let out = Command::new(tendril_bin())
         .arg("sim")
         .args(args)
@@ -158,13 +159,83 @@ pub fn run_sim(args: &[&str]) -> (tempfile::TempDir, String) {
         .current_dir(workspace_root())
         .output()
         .expect("spawn tendril sim");
+    if let (Some(before), Some(after)) = (steal_before, cpu_steal_ms()) {
+        let lines: String = before
+            .iter()
+            .zip(&after)
+            .enumerate()
+            .map(|(cpu, (b, a))| format!("{cpu} {}\n", a.saturating_sub(*b)))
+            .collect();
+        std::fs::write(dir.path().join(STEAL_FILE), lines).expect("write the steal record");
+    }
     let stderr = String::from_utf8_lossy(&out.stderr).to_string();
     assert!(out.status.success(), "tendril sim failed: {stderr}");
     (dir, stderr)
+}
+
+/// Where [`run_sim`] records each CPU's stolen time during the run.
+const STEAL_FILE: &str = "test-cpu-steal-ms.txt";
+
+/// Each CPU's *steal* time so far, ms (`/proc/stat`, the eighth field of
+/// the `cpuN` lines: time the hypervisor ran something else while this VM
+/// wanted the CPU); `None` where the kernel does not say.
+fn cpu_steal_ms() -> Option<Vec<u64>> {
+    let text = std::fs::read_to_string("/proc/stat").ok()?;
+    // USER_HZ is 100 on every Linux ABI this runs on (getconf CLK_TCK).
+    const MS_PER_TICK: u64 = 10;
+    let steal: Vec<u64> = text
+        .lines()
+        .filter(|l| l.starts_with("cpu") && l.as_bytes().get(3).is_some_and(u8::is_ascii_digit))
+        .map(|l| l.split_whitespace().nth(8)?.parse::<u64>().ok())
+        .collect::<Option<_>>()?;
+    (!steal.is_empty()).then(|| steal.iter().map(|t| t * MS_PER_TICK).collect())
+}
+
+/// Time the hypervisor took CPU `cpu` away from this machine during the
+/// [`run_sim`] run that wrote `dir`, ms (0 when unknown). A VM that loses
+/// its CPU for 0.3 s skips 300 periods of a 1 kHz loop whatever the loop
+/// does; timing assertions discount that, and say so.
+pub fn stolen_ms(dir: &Path, cpu: usize) -> u64 {
+    std::fs::read_to_string(dir.join(STEAL_FILE))
+        .ok()
+        .and_then(|t| {
+            t.lines().find_map(|l| {
+                let (c, ms) = l.split_once(' ')?;
+                (c.parse::<usize>().ok()? == cpu).then(|| ms.parse().ok())?
+            })
+        })
+        .unwrap_or(0)
+}
+
+/// The CPU the run in `dir` pinned its controller to (its
+/// `controller.config.json`), if it pinned one.
+pub fn controller_cpu(dir: &Path) -> Option<usize> {
+    let text = std::fs::read_to_string(dir.join("controller.config.json")).ok()?;
+    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
+    v["cpu"].as_u64().map(|c| c as usize)
 }
 
 /// The `report.json` a sim wrote into `dir`.
 pub fn sim_report(dir: &Path) -> serde_json::Value {
     let text = std::fs::read_to_string(dir.join("report.json")).expect("report.json");
     serde_json::from_str(&text).expect("report is JSON")
+}
+
+#[cfg(test)]
+mod steal_tests {
+    use super::*;
+
+    #[test]
+    fn steal_is_read_per_cpu_and_recorded_per_run() {
+        // This machine's kernel reports steal for every CPU it has.
+        let steal = cpu_steal_ms().expect("/proc/stat has per-CPU steal");
+        let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
+        assert!(steal.len() >= cpus, "{steal:?} for {cpus} CPUs");
+        let dir = tempfile::tempdir().expect("temp dir");
+        assert_eq!(stolen_ms(dir.path(), 1), 0, "no record: nothing stolen");
+        std::fs::write(dir.path().join(STEAL_FILE), "0 20\n1 340\n").expect("write");
+        assert_eq!(stolen_ms(dir.path(), 1), 340);
+        assert_eq!(stolen_ms(dir.path(), 0), 20);
+        assert_eq!(stolen_ms(dir.path(), 2), 0);
+    }
 }

@@ -63,19 +63,35 @@ fn assert_plant_saw_only_valid_tensions(dir: &Path) {
     assert!(checked > 1000, "too few plant rows checked: {checked}");
 }
 
+/// Time the hypervisor took the controller's CPU away during the run in
+/// `dir`, in 1 kHz periods (0 unknown or unpinned): periods no loop could
+/// have run.
+fn stolen_periods(dir: &Path) -> f64 {
+    tendril_tests::controller_cpu(dir).map_or(0.0, |cpu| tendril_tests::stolen_ms(dir, cpu) as f64)
+}
+
 /// Expected controller periods for a run of `secs` at 1 kHz, with slack
-/// for start-up and shutdown.
-fn assert_loop_kept_its_period(report: &Value, secs: f64) {
+/// for start-up and shutdown; at most 2 % skipped, beyond the periods the
+/// hypervisor stole from the controller's CPU (`/proc/stat`; a CI VM
+/// once skipped 281 of 7,330 right after a build, and this is how the
+/// test tells the machine's stall from the loop's).
+fn assert_loop_kept_its_period(report: &Value, dir: &Path, secs: f64) {
     let c = &report["controller"];
     let cycles = f(&c["cycles"]);
+    let stolen = stolen_periods(dir);
     assert!(
-        cycles >= 0.9 * secs * 1000.0,
-        "only {cycles} cycles in {secs} s"
+        cycles + stolen >= 0.9 * secs * 1000.0,
+        "only {cycles} cycles in {secs} s ({stolen} periods stolen)"
     );
     let skipped = f(&c["skipped"]);
+    if skipped >= 0.02 * cycles && stolen > 0.0 {
+        eprintln!(
+            "{skipped} periods skipped of {cycles}, {stolen} of them stolen by the hypervisor"
+        );
+    }
     assert!(
-        skipped < 0.02 * cycles,
-        "{skipped} periods skipped of {cycles}"
+        skipped < 0.02 * cycles + stolen,
+        "{skipped} periods skipped of {cycles} ({stolen} stolen by the hypervisor)"
     );
 }
 
@@ -111,7 +127,7 @@ fn nominal_circle_tracks_within_a_millimetre_rms_with_correction() {
     assert!(rms <= 1.0, "circle RMS {rms} mm");
     assert!(f(&r["max_tracking_error_mm"]) < 3.0);
     assert!(f(&r["tracking_samples"]) > 4000.0);
-    assert_loop_kept_its_period(&r, 7.5);
+    assert_loop_kept_its_period(&r, dir.path(), 7.5);
     assert_eq!(f(&r["plant"]["out_of_range_commands"]), 0.0);
     assert_eq!(
         r["faults"].as_array().map(Vec::len),
@@ -311,7 +327,7 @@ fn bad_setpoints_and_a_corrupted_weight_update_are_rejected_without_breaking_the
     assert_eq!(f(&c["weight_rejections"]), 1.0);
     assert_eq!(f(&c["weight_swaps"]), 1.0);
     assert!(stderr.contains("rejected"), "rejections were not logged");
-    assert_loop_kept_its_period(&r, 6.0);
+    assert_loop_kept_its_period(&r, dir.path(), 6.0);
     let rms = f(&r["rms_tracking_error_mm"]);
     assert!(rms <= 1.0, "RMS {rms} mm with rejected inputs");
     assert_eq!(f(&r["plant"]["out_of_range_commands"]), 0.0);
@@ -440,7 +456,15 @@ fn a_stuck_loaded_motor_is_detected_and_the_tensions_are_held() {
     // The stuck-motor hold is its own entry, not a watchdog trip (the
     // planner never fell silent; only a late planner may trip it here).
     assert_eq!(c["stuck_motor_holds"], 1);
-    assert_eq!(c["watchdog_trips"], c["watchdog_trips_late_planner"]);
+    // A stolen CPU stalls the controller past its watchdog with the
+    // planner on time: each such stall (≥ one 10 ms steal tick) may add
+    // one trip.
+    let unexplained = f(&c["watchdog_trips"]) - f(&c["watchdog_trips_late_planner"]);
+    let stolen_ticks = (stolen_periods(dir.path()) / 10.0).floor();
+    assert!(
+        unexplained <= stolen_ticks,
+        "{unexplained} watchdog trips without a late planner ({stolen_ticks} steal ticks): {c}"
+    );
     let found_ns = f(&stuck[0]["t_ns"]);
     // When it stuck, from the plant's own log (its MOTOR_STUCK status bit).
     let (h, rows) = csv(&dir.path().join("plant-0.csv"));
