@@ -102,6 +102,39 @@ pub fn col(header: &[String], name: &str) -> usize {
         .unwrap_or_else(|| panic!("no column {name}"))
 }
 
+/// A JSON file, parsed (panics naming the file if it is missing or not JSON).
+pub fn json(path: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// `tendril evaluate` of `model` on the test split of `data` (both relative
+/// to `dir`), tips through `robot`'s statics: the held-out tip error's mean, mm.
+pub fn held_out_tip_mean_mm(dir: &Path, model: &str, data: &str, robot: &Path) -> f64 {
+    let out = format!("{model}.{data}.eval.json");
+    let robot = robot.to_str().expect("robot path is UTF-8");
+    let o = tendril_in(
+        dir,
+        &[
+            "evaluate",
+            "--model",
+            model,
+            "--data",
+            data,
+            "--robot",
+            robot,
+            "--rows",
+            "test",
+            "--json-out",
+            &out,
+        ],
+    );
+    assert_ok(&o, &format!("evaluate {model} on {data}"));
+    json(&dir.join(out))["metrics"]["position_mm"]["mean"]
+        .as_f64()
+        .expect("evaluate reports the tip error's mean")
+}
+
 /// One closed loop at a time: each sim is three real-time processes pinned
 /// to one CPU, and the timing assertions (periods kept, watchdog within
 /// three periods) measure the loop, not how many other loops share the

@@ -5,11 +5,7 @@
 
 use std::path::Path;
 
-use tendril_tests::{assert_ok, robot, tendril_in};
-
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
+use tendril_tests::{assert_ok, held_out_tip_mean_mm, json, robot, tendril_in};
 
 /// Train `name.tnet` with `extra` flags and return its held-out tip mean, mm.
 fn train_and_judge(dir: &Path, name: &str, extra: &[&str]) -> f64 {
@@ -27,28 +23,7 @@ fn train_and_judge(dir: &Path, name: &str, extra: &[&str]) -> f64 {
     ];
     let o = tendril_in(dir, &[&base[..], extra].concat());
     assert_ok(&o, name);
-    let out = format!("{name}.eval.json");
-    let two = robot("tdcr-2seg.toml");
-    let o = tendril_in(
-        dir,
-        &[
-            "evaluate",
-            "--model",
-            &model,
-            "--data",
-            "d.csv",
-            "--robot",
-            two.to_str().unwrap(),
-            "--rows",
-            "test",
-            "--json-out",
-            &out,
-        ],
-    );
-    assert_ok(&o, "evaluate");
-    json(&dir.join(out))["metrics"]["position_mm"]["mean"]
-        .as_f64()
-        .unwrap()
+    held_out_tip_mean_mm(dir, &model, "d.csv", &robot("tdcr-2seg.toml"))
 }
 
 #[test]

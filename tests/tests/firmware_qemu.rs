@@ -200,19 +200,28 @@ fn tendril_fw_net_selects_the_flash_net() {
 /// up to `MAX_TENDONS`.
 #[test]
 fn two_segment_robot_net_runs_bit_identically_on_the_mcu() {
+    robot_net_runs_bit_identically("tdcr-2seg", 6);
+}
+
+/// The committed net `firmware/vectors/<name>.tnet` of a robot with
+/// `tendons` tendons in flash, with vectors made for it: parity, and the
+/// MCU reports running a net with that many outputs.
+fn robot_net_runs_bit_identically(name: &str, tendons: usize) {
     require_prerequisites();
     let root = workspace_root();
-    let net = root.join("firmware/vectors/tdcr-2seg.tnet");
-    let vectors = parity::write_vectors(&net, &mcu_target_dir(&root).join("vectors-2seg"))
-        .unwrap_or_else(|e| panic!("{e}"));
-    let out = check_parity(&net, true, Some(&vectors), "2seg");
+    let net = root.join(format!("firmware/vectors/{name}.tnet"));
+    let vectors =
+        parity::write_vectors(&net, &mcu_target_dir(&root).join(format!("vectors-{name}")))
+            .unwrap_or_else(|e| panic!("{e}"));
+    let out = check_parity(&net, true, Some(&vectors), name);
     let shape = McuNet::decode(&std::fs::read(&net).expect("net"))
         .expect("decodes")
         .shape();
-    assert_eq!(shape.outputs, 6, "the two-segment robot has six tendons");
+    assert_eq!(shape.outputs, tendons, "{name} has {tendons} tendons");
+    let outputs = tendons.to_string();
     assert!(
         out.lines()
-            .any(|l| l.starts_with("net 7 ") && l.split(' ').nth(3) == Some("6")),
+            .any(|l| l.starts_with("net 7 ") && l.split(' ').nth(3) == Some(outputs.as_str())),
         "{out}"
     );
 }
@@ -224,21 +233,7 @@ fn two_segment_robot_net_runs_bit_identically_on_the_mcu() {
 /// file has produced.
 #[test]
 fn three_segment_robot_net_runs_bit_identically_on_the_mcu() {
-    require_prerequisites();
-    let root = workspace_root();
-    let net = root.join("firmware/vectors/tdcr-3seg.tnet");
-    let vectors = parity::write_vectors(&net, &mcu_target_dir(&root).join("vectors-3seg"))
-        .unwrap_or_else(|e| panic!("{e}"));
-    let out = check_parity(&net, true, Some(&vectors), "3seg");
-    let shape = McuNet::decode(&std::fs::read(&net).expect("net"))
-        .expect("decodes")
-        .shape();
-    assert_eq!(shape.outputs, 9, "the three-segment robot has nine tendons");
-    assert!(
-        out.lines()
-            .any(|l| l.starts_with("net 7 ") && l.split(' ').nth(3) == Some("9")),
-        "{out}"
-    );
+    robot_net_runs_bit_identically("tdcr-3seg", 9);
 }
 
 /// One `period` line of the hot-swap image.

@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
-use tendril_tests::{assert_ok, robot, stderr, tendril_in};
+use tendril_tests::{assert_ok, held_out_tip_mean_mm, json, robot, stderr, tendril_in};
 
 fn seed_robot() -> PathBuf {
     robot("seed-4t.toml")
@@ -89,10 +89,6 @@ fn train(dir: &Path, out: &str, extra: &[&str]) -> Output {
     ]
     .concat();
     tendril_in(dir, &args)
-}
-
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
 #[test]
@@ -229,28 +225,7 @@ fn impossible_rows_are_refused_naming_line_and_column() {
 /// Held-out tip error (mean, mm) of `model` against the noiseless rows, on
 /// the robot that made them.
 fn held_out_against_truth(dir: &Path, model: &str) -> f64 {
-    let seed = seed_robot();
-    let out = format!("{model}.truth.json");
-    let o = tendril_in(
-        dir,
-        &[
-            "evaluate",
-            "--model",
-            model,
-            "--data",
-            "clean.csv",
-            "--robot",
-            seed.to_str().unwrap(),
-            "--rows",
-            "test",
-            "--json-out",
-            &out,
-        ],
-    );
-    assert_ok(&o, "evaluate against the truth");
-    json(&dir.join(out))["metrics"]["position_mm"]["mean"]
-        .as_f64()
-        .unwrap()
+    held_out_tip_mean_mm(dir, model, "clean.csv", &seed_robot())
 }
 
 #[test]

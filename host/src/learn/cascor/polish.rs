@@ -148,7 +148,17 @@ pub struct Rows<'a> {
     pub delta: Option<f64>,
 }
 
-impl Rows<'_> {
+impl<'a> Rows<'a> {
+    /// Rows with the plain squared error: no metric, no robust loss.
+    pub fn plain(x: &'a DMatrix<f64>, y: &'a DMatrix<f64>) -> Self {
+        Rows {
+            x,
+            y,
+            metric: None,
+            delta: None,
+        }
+    }
+
     /// √(Σ_r eᵀ M_r e / (n·O)) of `net`: the RMSE in the metric's units
     /// (with `delta`, √(2 Σ_r loss_r / (n·O)), its robust counterpart).
     pub fn rmse(&self, net: &GrowingNet) -> f64 {
@@ -533,10 +543,9 @@ mod tests {
             for metric in [None, Some(&m)] {
                 for delta in [None, Some(0.05)] {
                     let rows = Rows {
-                        x: &x,
-                        y: &y,
                         metric,
                         delta,
+                        ..Rows::plain(&x, &y)
                     };
                     let (_, g) = loss_and_gradient(&net, rows, true);
                     let theta = flatten(&net);
@@ -566,12 +575,7 @@ mod tests {
     fn the_robust_loss_is_half_the_square_for_small_errors_and_linear_for_large() {
         let net = toy_net(OutputKind::Linear);
         let (x, y) = toy_data(50);
-        let plain = Rows {
-            x: &x,
-            y: &y,
-            metric: None,
-            delta: None,
-        };
+        let plain = Rows::plain(&x, &y);
         let r = row_errors(&net, plain);
         let (squared, _) = loss_and_gradient(&net, plain, false);
         assert!((0.5 * r.iter().map(|v| v * v).sum::<f64>() - squared).abs() < 1e-12);
@@ -620,18 +624,8 @@ mod tests {
             max_iterations: 300,
             ..PolishOptions::default()
         };
-        let train = Rows {
-            x: &tx,
-            y: &ty,
-            metric: None,
-            delta: None,
-        };
-        let valid = Rows {
-            x: &vx,
-            y: &vy,
-            metric: None,
-            delta: None,
-        };
+        let train = Rows::plain(&tx, &ty);
+        let valid = Rows::plain(&vx, &vy);
         let r = polish(
             &mut net,
             train,
@@ -656,12 +650,7 @@ mod tests {
             max_iterations: 50,
             ..PolishOptions::default()
         };
-        let rows = Rows {
-            x: &x,
-            y: &y,
-            metric: None,
-            delta: None,
-        };
+        let rows = Rows::plain(&x, &y);
         let r = polish(
             &mut net,
             rows,
@@ -686,12 +675,7 @@ mod tests {
             .num_threads(2)
             .build()
             .unwrap();
-        let rows = Rows {
-            x: &x,
-            y: &y,
-            metric: None,
-            delta: None,
-        };
+        let rows = Rows::plain(&x, &y);
         let a = one.install(|| loss_and_gradient(&net, rows, true));
         let b = two.install(|| loss_and_gradient(&net, rows, true));
         assert_eq!(a.0.to_bits(), b.0.to_bits());

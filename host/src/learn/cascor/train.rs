@@ -371,16 +371,12 @@ fn polish_net(
     let centre = |m: &DMatrix<f64>| m.map(|v| 2.0 * v - 1.0);
     let (cx, cvx) = (centre(x), centre(vx));
     let train = Rows {
-        x: &cx,
-        y: d.y,
         metric: metrics.train,
-        delta: None,
+        ..Rows::plain(&cx, d.y)
     };
     let valid = Rows {
-        x: &cvx,
-        y: d.vy,
         metric: metrics.valid,
-        delta: None,
+        ..Rows::plain(&cvx, d.vy)
     };
     let opts = &d.opts.polish;
     let bar = progress_bar(
