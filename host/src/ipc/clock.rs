@@ -17,6 +17,69 @@ pub fn now_ns() -> u64 {
     ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
 }
 
+/// How long a loop thread has waited for a CPU: runnable, but another
+/// task or a throttle had the CPU (`/proc/thread-self/schedstat`, read
+/// with one `pread` per period: no allocation, no disk). Time blocked in a
+/// system call is not waiting for a CPU, so a loop that stalls on its own
+/// I/O cannot hide behind it. Where the kernel keeps no schedstat every
+/// reading is `None` and nothing is attributed to the machine.
+pub struct CpuWait {
+    file: Option<std::fs::File>,
+    first_ns: Option<u64>,
+    last_ns: Option<u64>,
+    /// Periods skipped while the thread was waiting for a CPU at least as
+    /// long: the machine's stall, not the loop's.
+    pub skipped_waiting: u64,
+}
+
+impl CpuWait {
+    /// Start counting for the calling thread (open it on the loop's thread).
+    pub fn for_this_thread() -> CpuWait {
+        let file = std::fs::File::open("/proc/thread-self/schedstat").ok();
+        let mut w = CpuWait {
+            file,
+            first_ns: None,
+            last_ns: None,
+            skipped_waiting: 0,
+        };
+        w.first_ns = w.read();
+        w.last_ns = w.first_ns;
+        w
+    }
+
+    /// The thread's total wait so far (ns), if the kernel says.
+    pub fn read(&self) -> Option<u64> {
+        use std::os::unix::fs::FileExt;
+        let mut buf = [0u8; 96];
+        let n = self.file.as_ref()?.read_at(&mut buf, 0).ok()?;
+        let text = std::str::from_utf8(&buf[..n]).ok()?;
+        text.split_whitespace().nth(1)?.parse().ok()
+    }
+
+    /// Called once a period, right after waking, with the periods the
+    /// ticker skipped to get here.
+    pub fn after_wake(&mut self, skipped: u64, period_ns: u64) {
+        let now = self.read();
+        if let (Some(now), Some(last)) = (now, self.last_ns) {
+            self.skipped_waiting += skipped_for_wait(skipped, now.saturating_sub(last), period_ns);
+        }
+        if now.is_some() {
+            self.last_ns = now;
+        }
+    }
+
+    /// Total wait since [`CpuWait::for_this_thread`] (ns), if the kernel says.
+    pub fn total_ns(&self) -> Option<u64> {
+        Some(self.last_ns?.saturating_sub(self.first_ns?))
+    }
+}
+
+/// Of `skipped` periods, those the thread spent waiting for a CPU
+/// (`wait_ns` since the last period, whole periods of `period_ns`).
+pub fn skipped_for_wait(skipped: u64, wait_ns: u64, period_ns: u64) -> u64 {
+    skipped.min(wait_ns / period_ns.max(1))
+}
+
 /// Ask the kernel for 1 ns timer slack instead of the default 50 µs, so
 /// `clock_nanosleep` wakes close to the deadline. Harmless if refused.
 pub fn tighten_timer_slack() {
@@ -146,6 +209,12 @@ pub struct Ticker {
     pub overruns: u64,
     /// Periods skipped because the task was a full period or more behind.
     pub skipped: u64,
+    /// Times the task fell behind and skipped (one stall may skip many
+    /// periods): a loop too slow for its period stalls often and briefly,
+    /// a machine that takes the CPU away stalls rarely and long.
+    pub stalls: u64,
+    /// Most periods skipped in one stall.
+    pub longest_stall: u64,
 }
 
 /// What [`Ticker::wait`] reports about the period it just started.
@@ -171,6 +240,8 @@ impl Ticker {
             cycles: 0,
             overruns: 0,
             skipped: 0,
+            stalls: 0,
+            longest_stall: 0,
         }
     }
 
@@ -198,6 +269,10 @@ impl Ticker {
             k = latest;
         }
         self.skipped += skipped;
+        if skipped > 0 {
+            self.stalls += 1;
+            self.longest_stall = self.longest_stall.max(skipped);
+        }
         self.next = k + 1;
         self.cycles += 1;
         (k, skipped)
@@ -264,6 +339,50 @@ mod tests {
         // Late but within one period: run period 4 late, skip nothing.
         assert!(!t.finish(390));
         assert_eq!(t.plan(450), (4, 0));
+        // A second stall, of one period: two stalls, the longest of two.
+        assert_eq!(t.plan(650), (6, 1));
+        assert_eq!((t.skipped, t.stalls, t.longest_stall), (3, 2, 2));
+    }
+
+    #[test]
+    fn only_whole_periods_of_waiting_excuse_skipped_ones() {
+        assert_eq!(skipped_for_wait(0, 5_000_000, 1_000_000), 0);
+        assert_eq!(skipped_for_wait(3, 999_999, 1_000_000), 0);
+        assert_eq!(skipped_for_wait(3, 2_500_000, 1_000_000), 2);
+        assert_eq!(skipped_for_wait(3, 9_000_000, 1_000_000), 3);
+    }
+
+    #[test]
+    fn cpu_wait_is_counted_where_the_kernel_keeps_it() {
+        if !std::path::Path::new("/proc/thread-self/schedstat").exists() {
+            eprintln!("skipped: this kernel keeps no schedstat");
+            return;
+        }
+        let mut wait = CpuWait::for_this_thread();
+        // A busy thread on every CPU besides this one: more runnable
+        // threads than CPUs for 0.3 s, so this one waits.
+        let busy: Vec<_> = (0..allowed_cpus().len())
+            .map(|_| {
+                std::thread::spawn(|| {
+                    let t = now_ns();
+                    while now_ns() - t < 300_000_000 {
+                        std::hint::spin_loop();
+                    }
+                })
+            })
+            .collect();
+        let t = now_ns();
+        while now_ns() - t < 300_000_000 {
+            std::hint::spin_loop();
+        }
+        for b in busy {
+            b.join().unwrap();
+        }
+        // As if the whole stretch had skipped a million 1 µs periods.
+        wait.after_wake(1_000_000, 1_000);
+        let total = wait.total_ns().expect("schedstat parses");
+        assert!(total > 0, "no wait counted while oversubscribed");
+        assert_eq!(wait.skipped_waiting, total / 1_000);
     }
 
     #[test]

@@ -210,13 +210,13 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
         if command.is_some() {
             peers.heard(stamp);
         } else if peers.lost(stamp) {
-            log.flush()?;
+            log.close()?;
             return Err(IpcError::PeersLost(format!(
                 "planner: no tension command from a controller for {:.1} s",
                 peers.silence_s(stamp)
             )));
         }
     }
-    log.flush()?;
+    log.close()?;
     Ok(seq)
 }

@@ -3,12 +3,14 @@
 //!
 //! The controller's loop must not allocate (`docs/design.md` §6), so its
 //! durations go into a fixed-size [`Histogram`] instead of a growing
-//! sample vector, and [`CsvLog::row`] formats straight into the log's
-//! fixed buffer.
+//! sample vector, and [`CsvLog::row`] formats straight into a buffer that
+//! a writer thread takes to the file (no I/O in the loop).
 
 use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TrySendError};
+use std::thread::JoinHandle;
 
 use serde::{Deserialize, Serialize};
 
@@ -154,16 +156,127 @@ impl Histogram {
     }
 }
 
-/// A CSV log written as the process runs (buffered, flushed on `flush` and
-/// on drop), so a process killed mid-run still leaves all but its last few
-/// rows for the launcher. Not atomic by design: it is a log, not an output.
-/// Under `tendril sim` it is a scratch file in the run's work directory,
-/// moved into `--out` only when the run completes; a standalone process's
-/// `--log` is opened in place (`File::create`), so a symlink is followed and
-/// a device or FIFO written through, never replaced (issue 31).
+/// A CSV log written as the process runs, so a process killed mid-run
+/// still leaves all but its last ~100 ms of rows for the launcher. Not
+/// atomic by design: it is a log, not an output. Under `tendril sim` it is
+/// a scratch file in the run's work directory, moved into `--out` only
+/// when the run completes; a standalone process's `--log` is opened in
+/// place (`File::create`), so a symlink is followed and a device or FIFO
+/// written through, never replaced (issue 31).
+///
+/// Rows are formatted into an in-memory buffer and the file is written by
+/// a writer thread, never by the caller: a `write(2)` can block for tens
+/// of milliseconds when the kernel throttles a process with dirty pages
+/// (a CI machine right after a build), and the caller is a 1 kHz loop.
+/// Create the log *before* switching the caller to `SCHED_FIFO` or pinning
+/// it, so the writer stays an ordinary thread on any CPU.
 pub struct CsvLog {
     path: PathBuf,
-    out: Option<BufWriter<File>>,
+    inner: Option<Writer>,
+}
+
+/// Bytes of rows after which a buffer goes to the writer thread.
+const HAND_OFF_BYTES: usize = 32 * 1024;
+/// Capacity of each buffer: a hand-off threshold plus room for rows.
+const BUFFER_BYTES: usize = 64 * 1024;
+/// Buffers in circulation (caller, queue, writer): ~1 s of the
+/// controller's log in flight before a buffer has to grow.
+const BUFFERS: usize = 16;
+
+/// The caller's end of a log: the buffer being filled, the queue to the
+/// writer thread and the queue of emptied buffers back from it.
+struct Writer {
+    buf: Vec<u8>,
+    full: Option<SyncSender<Vec<u8>>>,
+    empty: Receiver<Vec<u8>>,
+    thread: Option<JoinHandle<std::io::Result<()>>>,
+}
+
+impl Writer {
+    fn start(file: File, header: &str) -> std::io::Result<Writer> {
+        let (full_tx, full_rx) = sync_channel::<Vec<u8>>(BUFFERS);
+        let (empty_tx, empty_rx) = std::sync::mpsc::channel::<Vec<u8>>();
+        for _ in 1..BUFFERS {
+            let _ = empty_tx.send(Vec::with_capacity(BUFFER_BYTES));
+        }
+        let thread = std::thread::Builder::new().name("csv-log".into()).spawn(
+            move || -> std::io::Result<()> {
+                let mut file = file;
+                for mut buf in full_rx {
+                    file.write_all(&buf)?;
+                    buf.clear();
+                    // The caller may be gone (closing): nothing to return to.
+                    let _ = empty_tx.send(buf);
+                }
+                file.flush()
+            },
+        )?;
+        let mut buf = Vec::with_capacity(BUFFER_BYTES);
+        buf.extend_from_slice(header.as_bytes());
+        buf.push(b'\n');
+        Ok(Writer {
+            buf,
+            full: Some(full_tx),
+            empty: empty_rx,
+            thread: Some(thread),
+        })
+    }
+
+    /// Give the filled buffer to the writer if an empty one is back;
+    /// otherwise keep filling this one (the writer is behind: the buffer
+    /// grows, nothing blocks).
+    fn hand_off(&mut self) -> std::io::Result<()> {
+        if self.buf.is_empty() {
+            return Ok(());
+        }
+        let Ok(spare) = self.empty.try_recv() else {
+            return self.check_alive();
+        };
+        let filled = std::mem::replace(&mut self.buf, spare);
+        match self.full.as_ref().map(|tx| tx.try_send(filled)) {
+            Some(Ok(())) => Ok(()),
+            // Cannot happen (the queue holds every buffer there is), but
+            // if it did, keep the rows and drop the spare.
+            Some(Err(TrySendError::Full(filled))) => {
+                self.buf = filled;
+                Ok(())
+            }
+            Some(Err(TrySendError::Disconnected(_))) | None => self.check_alive(),
+        }
+    }
+
+    /// The writer thread's error, if it stopped.
+    fn check_alive(&mut self) -> std::io::Result<()> {
+        if self.thread.as_ref().is_some_and(|t| t.is_finished()) || self.thread.is_none() {
+            return self.join();
+        }
+        Ok(())
+    }
+
+    /// Send what is left, close the queue and wait for the writer.
+    fn join(&mut self) -> std::io::Result<()> {
+        if let Some(tx) = self.full.take() {
+            if !self.buf.is_empty() {
+                let _ = tx.send(std::mem::take(&mut self.buf));
+            }
+        }
+        match self.thread.take() {
+            Some(t) => t
+                .join()
+                .unwrap_or_else(|_| Err(std::io::Error::other("the log writer panicked"))),
+            None => Err(std::io::Error::other("the log writer is not running")),
+        }
+    }
+}
+
+impl Drop for Writer {
+    fn drop(&mut self) {
+        if self.thread.is_some() {
+            if let Err(e) = self.join() {
+                log::warn!("log: {e}");
+            }
+        }
+    }
 }
 
 impl CsvLog {
@@ -173,51 +286,60 @@ impl CsvLog {
         let Some(path) = path else {
             return Ok(CsvLog {
                 path: PathBuf::new(),
-                out: None,
+                inner: None,
             });
         };
         let io = |source| IpcError::Io {
             path: path.to_path_buf(),
             source,
         };
-        let mut out = BufWriter::with_capacity(64 * 1024, File::create(path).map_err(io)?);
-        writeln!(out, "{header}").map_err(io)?;
+        let file = File::create(path).map_err(io)?;
         Ok(CsvLog {
             path: path.to_path_buf(),
-            out: Some(out),
+            inner: Some(Writer::start(file, header).map_err(io)?),
         })
+    }
+
+    fn io(&self, source: std::io::Error) -> IpcError {
+        IpcError::Io {
+            path: self.path.clone(),
+            source,
+        }
     }
 
     /// Append one row of numbers, formatted straight into the buffer (no
-    /// allocation: the controller calls this every period).
+    /// allocation and no system call while the writer keeps up: the
+    /// controller calls this every period).
     pub fn row(&mut self, values: &[f64]) -> Result<(), IpcError> {
-        let Some(out) = self.out.as_mut() else {
+        let Some(w) = self.inner.as_mut() else {
             return Ok(());
         };
-        let mut write = || -> std::io::Result<()> {
-            for (i, v) in values.iter().enumerate() {
-                if i > 0 {
-                    out.write_all(b",")?;
-                }
-                write!(out, "{v}")?;
+        for (i, v) in values.iter().enumerate() {
+            if i > 0 {
+                w.buf.push(b',');
             }
-            out.write_all(b"\n")
-        };
-        write().map_err(|source| IpcError::Io {
-            path: self.path.clone(),
-            source,
-        })
-    }
-
-    /// Push buffered rows to the file.
-    pub fn flush(&mut self) -> Result<(), IpcError> {
-        if let Some(out) = self.out.as_mut() {
-            out.flush().map_err(|source| IpcError::Io {
-                path: self.path.clone(),
-                source,
-            })?;
+            // Writing into a Vec cannot fail.
+            let _ = write!(w.buf, "{v}");
+        }
+        w.buf.push(b'\n');
+        if w.buf.len() >= HAND_OFF_BYTES {
+            let r = w.hand_off();
+            r.map_err(|e| self.io(e))?;
         }
         Ok(())
+    }
+
+    /// Pass the rows so far on to the writer thread (they reach the file
+    /// soon after, not before this returns; [`CsvLog::close`] waits).
+    pub fn flush(&mut self) -> Result<(), IpcError> {
+        let r = self.inner.as_mut().map_or(Ok(()), Writer::hand_off);
+        r.map_err(|e| self.io(e))
+    }
+
+    /// Write every row to the file and wait for it: the end of a run.
+    pub fn close(mut self) -> Result<(), IpcError> {
+        let r = self.inner.as_mut().map_or(Ok(()), Writer::join);
+        r.map_err(|e| self.io(e))
     }
 }
 

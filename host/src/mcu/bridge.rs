@@ -652,7 +652,7 @@ pub fn run(
             )));
         }
     };
-    log.flush()?;
+    log.close()?;
     // The chip's last counts.
     chip.poll(Duration::from_millis(250));
     for msg in chip.drain() {

@@ -313,8 +313,10 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
     let mut overran = false;
     let mut last_flush = start;
     let mut peers = super::PeerWatch::new(cfg.peer_timeout_s, cfg.peer_start_grace_s, start);
+    let mut cpu_wait = super::clock::CpuWait::for_this_thread();
     let outcome = loop {
         let tick = ticker.wait(spin_ns);
+        cpu_wait.after_wake(tick.skipped, period_ns);
         let t_wake = now_ns();
         // Newest messages since the last period.
         let mut superseded_nonfinite = 0;
@@ -362,8 +364,10 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
             )));
         }
     };
-    log.flush()?;
-    let stats = ctl.stats(&ticker);
+    log.close()?;
+    let mut stats = ctl.stats(&ticker);
+    stats.cpu_wait_ms = cpu_wait.total_ns().map(|ns| ns as f64 * 1e-6);
+    stats.skipped_waiting_for_cpu = cpu_wait.skipped_waiting;
     if let Some(path) = &cfg.stats {
         let json = serde_json::to_vec_pretty(&stats).map_err(|e| IpcError::Other(e.to_string()))?;
         super::write_file(path, &json)?;

@@ -14,6 +14,18 @@ pub struct ControllerStats {
     pub overruns: u64,
     /// Periods skipped after an overrun (never run late).
     pub skipped: u64,
+    /// Times the loop fell behind and skipped periods (see
+    /// [`crate::ipc::clock::Ticker::stalls`]).
+    pub stalls: u64,
+    /// Most periods skipped in one stall.
+    pub longest_stall_periods: u64,
+    /// Time the loop thread was runnable but had no CPU during the run
+    /// (ms; another task, a throttle or wake-up latency had it), from
+    /// [`crate::ipc::clock::CpuWait`]; `None` where the kernel does not say.
+    pub cpu_wait_ms: Option<f64>,
+    /// Of the skipped periods, those the loop spent waiting for a CPU at
+    /// least as long: the machine's stall, not the loop's.
+    pub skipped_waiting_for_cpu: u64,
     /// `overruns / cycles`.
     pub overrun_fraction: f64,
     /// Wake-up time minus deadline (µs).

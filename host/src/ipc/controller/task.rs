@@ -346,6 +346,8 @@ impl Controller {
         stats.cycles = ticker.cycles;
         stats.overruns = ticker.overruns;
         stats.skipped = ticker.skipped;
+        stats.stalls = ticker.stalls;
+        stats.longest_stall_periods = ticker.longest_stall;
         stats.overrun_fraction = ticker.overruns as f64 / ticker.cycles.max(1) as f64;
         stats.lateness_us = self.lateness.summary();
         stats.step_us = self.work.summary();

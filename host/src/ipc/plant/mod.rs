@@ -317,14 +317,14 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
         if received > 0 {
             peers.heard(t1);
         } else if peers.lost(t1) {
-            log.flush()?;
+            log.close()?;
             return Err(IpcError::PeersLost(format!(
                 "plant: no tension command for {:.1} s",
                 peers.silence_s(t1)
             )));
         }
     }
-    log.flush()?;
+    log.close()?;
     if let Some(r) = runlog.take() {
         r.log.line(
             now_ns(),

@@ -343,7 +343,16 @@ impl SimReport {
             Some(c) => {
                 row("controller cycles", c.cycles.to_string());
                 row("controller overruns", c.overruns.to_string());
-                row("controller skipped periods", c.skipped.to_string());
+                row(
+                    "controller skipped periods (stalls, longest)",
+                    format!("{} ({}, {})", c.skipped, c.stalls, c.longest_stall_periods),
+                );
+                if let Some(ms) = c.cpu_wait_ms {
+                    row(
+                        "controller waited for a CPU: ms (periods skipped for it)",
+                        format!("{ms:.1} ({})", c.skipped_waiting_for_cpu),
+                    );
+                }
                 row(
                     "watchdog trips (of which a late planner)",
                     format!("{} ({})", c.watchdog_trips, c.watchdog_trips_late_planner),
