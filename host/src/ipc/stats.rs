@@ -445,6 +445,34 @@ mod tests {
         assert_eq!(rows, vec![vec![1.0, 2.5], vec![3.0, -4.0]]);
     }
 
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_write_error_in_the_writer_thread_reaches_the_caller() {
+        // /dev/full takes the open and fails every write with ENOSPC.
+        let full = Path::new("/dev/full");
+        if !full.exists() {
+            eprintln!("skipped: no /dev/full");
+            return;
+        }
+        let mut log = CsvLog::create(Some(full), "a,b").unwrap();
+        let row = [1.0; 2];
+        // Enough rows for several hand-offs: the writer fails on the first
+        // and a later hand-off says so, naming the file.
+        let mut failed = None;
+        for _ in 0..200_000 {
+            if let Err(e) = log.row(&row) {
+                failed = Some(e);
+                break;
+            }
+        }
+        let e = match failed {
+            Some(e) => e,
+            None => log.close().expect_err("closing a log on /dev/full fails"),
+        };
+        let text = e.to_string();
+        assert!(text.contains("/dev/full"), "{text}");
+    }
+
     #[cfg(unix)]
     #[test]
     fn a_log_through_a_symlink_or_into_a_device_leaves_the_link_and_the_device() {
