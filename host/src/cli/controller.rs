@@ -45,8 +45,18 @@ pub struct LoopOpts {
     pub correction: OnOff,
     /// Integral gain of the correction, 1/s (docs/design.md §6.3: stable
     /// with the dynamic rod's first mode, the motors and a 40 Hz tracker).
+    /// Given for the default robot: scaled down for a robot with a lower
+    /// first mode unless `--scale-gains-to-mode off` (the report gives the
+    /// gain applied).
     #[arg(long, default_value_t = correction::KI_PER_S)]
     pub ki: f64,
+    /// Scale the correction's bandwidth (`--ki`, `--correction-map-gain`,
+    /// the corner of `--correction-filter-ms`) by the robot's first
+    /// bending mode over the default robot's 3.6 Hz, when lower, so the loop
+    /// keeps its margins on a softer robot (docs/design.md §6.3). `off`:
+    /// the gains apply as given.
+    #[arg(long, value_enum, default_value_t = OnOff::On)]
+    pub scale_gains_to_mode: OnOff,
     /// Bound on the correction per axis, mm (above the model errors of a
     /// real robot: ±10 % stiffness moves the default robot's tip ≈ 3 mm;
     /// the shift along the reachable poses is first order, accurate to
@@ -58,11 +68,11 @@ pub struct LoopOpts {
     #[arg(long, default_value_t = correction::WINDOW_M * 1e3)]
     pub correction_window_mm: f64,
     /// Time constant of the low-pass filter on the tip error before it is
-    /// integrated, ms (0 = none).
+    /// integrated, ms (0 = none); lengthened with `--scale-gains-to-mode`.
     #[arg(long, default_value_t = correction::FILTER_TAU_S * 1e3)]
     pub correction_filter_ms: f64,
     /// Adaptation gain of the correction's error map, 1/s (0 = a constant
-    /// correction only).
+    /// correction only); scaled with `--scale-gains-to-mode`.
     #[arg(long, default_value_t = correction::MAP_GAIN_PER_S)]
     pub correction_map_gain: f64,
     /// No tracker frame for this long freezes the correction, ms.
@@ -187,6 +197,7 @@ impl LoopOpts {
         cfg.correction_filter_tau_s = self.correction_filter_ms * 1e-3;
         cfg.tracker_timeout_s = self.tracker_timeout_ms * 1e-3;
         cfg.correction_map_gain_per_s = self.correction_map_gain;
+        cfg.scale_gains_to_mode = self.scale_gains_to_mode == OnOff::On;
         cfg.lead_s = self.lead_ms * 1e-3;
         cfg.slew_n_per_s = self.slew;
     }

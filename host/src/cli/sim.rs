@@ -233,13 +233,27 @@ impl SimArgs {
             Some(p) => format!("plant robot {}, {reality}", p.display()),
             None => reality,
         };
+        // The gain as given, and as the controller applies it.
+        let scale = if cfg.controller.scale_gains_to_mode {
+            crate::ipc::controller::correction::mode_scale(&crate::robot::Robot::load(&cfg.robot)?)
+        } else {
+            1.0
+        };
+        let ki = if scale < 1.0 && self.tuning.correction == OnOff::On {
+            format!(
+                "ki {}/s, applied {:.3}/s for the robot's first mode",
+                self.tuning.ki,
+                self.tuning.ki * scale
+            )
+        } else {
+            format!("ki {}/s", self.tuning.ki)
+        };
         cfg.label = format!(
-            "controller {:?}, trajectory {:?}, correction {:?} (ki {}/s), lead {} ms, {reality}, \
+            "controller {:?}, trajectory {:?}, correction {:?} ({ki}), lead {} ms, {reality}, \
              {} s, real-time {}, pinned {:?}",
             self.controller,
             self.traj.trajectory,
             self.tuning.correction,
-            self.tuning.ki,
             self.tuning.lead_ms,
             self.duration,
             if cfg.realtime { "on" } else { "off" },
@@ -279,4 +293,42 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cmd {
+        #[command(flatten)]
+        sim: SimArgs,
+    }
+
+    fn config(args: &[&str]) -> SimConfig {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let robot = root.join("robots/tdcr-3seg.toml");
+        let mut all = vec!["sim", "--robot", robot.to_str().unwrap()];
+        all.extend_from_slice(args);
+        Cmd::try_parse_from(all).unwrap().sim.config().unwrap()
+    }
+
+    #[test]
+    fn the_report_gives_the_gain_applied_to_a_softer_robot_and_off_turns_the_scaling_off() {
+        let robot = crate::robot::Robot::load(
+            &Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/tdcr-3seg.toml"),
+        )
+        .unwrap();
+        let scale = crate::ipc::controller::correction::mode_scale(&robot);
+        // The three-segment rod's first mode (≈ 1.07 Hz) is below 3.6 Hz.
+        assert!(scale > 0.2 && scale < 0.4, "{scale}");
+        let scaled = config(&["--ki", "12"]);
+        assert!(scaled.controller.scale_gains_to_mode);
+        let applied = format!("applied {:.3}/s", 12.0 * scale);
+        assert!(scaled.label.contains(&applied), "{}", scaled.label);
+        let given = config(&["--ki", "12", "--scale-gains-to-mode", "off"]);
+        assert!(!given.controller.scale_gains_to_mode);
+        assert!(given.label.contains("(ki 12/s)"), "{}", given.label);
+    }
 }
