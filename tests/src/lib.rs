@@ -250,8 +250,7 @@ pub fn controller_cpu(dir: &Path) -> Option<usize> {
 
 /// The `report.json` a sim wrote into `dir`.
 pub fn sim_report(dir: &Path) -> serde_json::Value {
-    let text = std::fs::read_to_string(dir.join("report.json")).expect("report.json");
-    serde_json::from_str(&text).expect("report is JSON")
+    json(&dir.join("report.json"))
 }
 
 #[cfg(test)]

@@ -173,15 +173,17 @@ impl SimArgs {
                 .real_robot(&robot)
                 .map_err(|e| anyhow::anyhow!("--reality {}: {e}", reality.name))?;
         }
-        if cfg.plant_robot.is_some() {
-            let model = crate::robot::Robot::load(&cfg.robot)?;
-            if model.n_tendons() != robot.n_tendons() {
-                anyhow::bail!(
-                    "--plant-robot has {} tendons but --robot has {}",
-                    robot.n_tendons(),
-                    model.n_tendons()
-                );
-            }
+        // The robot the controller models (its gains scale to its mode).
+        let model = match &cfg.plant_robot {
+            Some(_) => crate::robot::Robot::load(&cfg.robot)?,
+            None => robot.clone(),
+        };
+        if model.n_tendons() != robot.n_tendons() {
+            anyhow::bail!(
+                "--plant-robot has {} tendons but --robot has {}",
+                robot.n_tendons(),
+                model.n_tendons()
+            );
         }
         cfg.plant.spin = self.plant.spin;
         // The launcher puts the file in the run's directory (`run.mcap`).
@@ -235,7 +237,7 @@ impl SimArgs {
         };
         // The gain as given, and as the controller applies it.
         let scale = if cfg.controller.scale_gains_to_mode {
-            crate::ipc::controller::correction::mode_scale(&crate::robot::Robot::load(&cfg.robot)?)
+            crate::ipc::controller::correction::mode_scale(&model)
         } else {
             1.0
         };
@@ -306,9 +308,12 @@ mod tests {
         sim: SimArgs,
     }
 
+    fn three_segment() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/tdcr-3seg.toml")
+    }
+
     fn config(args: &[&str]) -> SimConfig {
-        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-        let robot = root.join("robots/tdcr-3seg.toml");
+        let robot = three_segment();
         let mut all = vec!["sim", "--robot", robot.to_str().unwrap()];
         all.extend_from_slice(args);
         Cmd::try_parse_from(all).unwrap().sim.config().unwrap()
@@ -316,10 +321,7 @@ mod tests {
 
     #[test]
     fn the_report_gives_the_gain_applied_to_a_softer_robot_and_off_turns_the_scaling_off() {
-        let robot = crate::robot::Robot::load(
-            &Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/tdcr-3seg.toml"),
-        )
-        .unwrap();
+        let robot = crate::robot::Robot::load(&three_segment()).unwrap();
         let scale = crate::ipc::controller::correction::mode_scale(&robot);
         // The three-segment rod's first mode (≈ 1.07 Hz) is below 3.6 Hz.
         assert!(scale > 0.2 && scale < 0.4, "{scale}");
