@@ -1,42 +1,103 @@
-//! Ctrl-C, SIGTERM and SIGHUP as a request to stop: the first one sets a
-//! flag that long jobs check between work units (training units, dataset
-//! chunks), so they stop without writing anything half-done, their
-//! temporary files are dropped, and the binary exits 130. A second signal
-//! exits at once after removing the temporaries still open; every output is
-//! written atomically ([`crate::fsutil`]), so even that leaves no partial
-//! file, and the main job's staging directory is removed with the
-//! temporaries (`docs/design.md` §7).
+//! Ctrl-C, SIGTERM and SIGHUP as a request to stop — the one signal
+//! mechanism of every tendril process (`docs/design.md` §7). The binary
+//! calls [`install`] once, first thing; the library only reads the flag
+//! ([`stop_requested`], [`stop_flag`]), so a library user (the Python
+//! package) keeps its own handling.
 //!
-//! The `ctrlc` crate (with its `termination` feature) runs one handler for
-//! all three signals and does not say which arrived, so the exit status is
-//! 130 (128 + SIGINT) for each of them.
+//! The first signal sets the flag, which long jobs check between work units
+//! (training units, dataset chunks) and every process loop checks each
+//! period: they stop without writing anything half-done, their temporary
+//! files are dropped, and the binary exits [`EXIT_INTERRUPTED`] naming the
+//! signal. A second signal exits at once after removing the temporaries
+//! still open — unless a finished run is being moved into place
+//! ([`crate::fsutil::Publishing`]), which takes milliseconds and would mix
+//! two runs if cut. Every output is written atomically ([`crate::fsutil`]),
+//! so even that leaves no partial file.
+//!
+//! signal-hook delivers the signals to an ordinary thread (its self-pipe
+//! iterator), so what happens on a signal — printing, removing files — is
+//! plain code, not a signal handler's async-signal-safe subset. iceoryx2's
+//! own handler is switched off on every node
+//! ([`crate::ipc::transport::node`]): two handlers for one signal would
+//! each see only some of them.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
 use std::sync::Once;
 
-/// Exit status of a command stopped by Ctrl-C, SIGTERM or SIGHUP (128 +
-/// SIGINT, as shells report Ctrl-C; the handler cannot tell the signals apart).
+use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+
+/// Exit status of a command stopped by Ctrl-C, SIGTERM or SIGHUP: 128 +
+/// SIGINT, as shells report Ctrl-C, for each of them (scripts test one
+/// number); the message names the signal that came.
 pub const EXIT_INTERRUPTED: u8 = 130;
 
 static STOP: AtomicBool = AtomicBool::new(false);
-static HANDLER: Once = Once::new();
+/// The first signal that asked to stop (0: none, or [`request_stop`]).
+static SIGNAL: AtomicI32 = AtomicI32::new(0);
+static INSTALLED: Once = Once::new();
 
-/// The stop flag, set by the first Ctrl-C, SIGTERM or SIGHUP. Installs the handler on first use;
-/// if a handler is already installed (a library user's), theirs is kept and
-/// the flag is only ever set by [`request_stop`].
-pub fn stop_flag() -> &'static AtomicBool {
-    HANDLER.call_once(|| {
-        let _ = ctrlc::set_handler(|| {
-            // A run moving its finished outputs into place
-            // (`fsutil::Publishing`) ends by itself in milliseconds; exiting
-            // half-way would mix two runs' files.
-            if STOP.swap(true, Ordering::SeqCst) && !crate::fsutil::Publishing::active() {
-                crate::fsutil::remove_temporaries();
-                std::process::exit(i32::from(EXIT_INTERRUPTED));
-            }
-            eprintln!("\ninterrupted: stopping; existing outputs are left as they were");
-        });
+/// Route SIGINT, SIGTERM and SIGHUP to the stop flag (idempotent). With
+/// `announce`, the first signal prints one line saying the command is
+/// stopping (the processes a sim supervises stay quiet: their launcher
+/// speaks for them).
+pub fn install(announce: bool) -> std::io::Result<()> {
+    let mut result = Ok(());
+    INSTALLED.call_once(|| {
+        result = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP]).and_then(
+            |mut signals| {
+                std::thread::Builder::new()
+                    .name("tendril-signals".into())
+                    .spawn(move || {
+                        for signal in signals.forever() {
+                            on_signal(signal, announce);
+                        }
+                    })
+                    .map(drop)
+            },
+        );
     });
+    result
+}
+
+fn on_signal(signal: i32, announce: bool) {
+    let _ = SIGNAL.compare_exchange(0, signal, Ordering::SeqCst, Ordering::SeqCst);
+    if STOP.swap(true, Ordering::SeqCst) {
+        if !crate::fsutil::Publishing::active() {
+            crate::fsutil::remove_temporaries();
+            std::process::exit(i32::from(EXIT_INTERRUPTED));
+        }
+        return;
+    }
+    if announce {
+        eprintln!(
+            "\n{}: stopping; existing outputs are left as they were",
+            signal_name(signal)
+        );
+    }
+}
+
+/// `SIGINT (Ctrl-C)`, `SIGTERM`, `SIGHUP` — how messages name a signal.
+pub fn signal_name(signal: i32) -> &'static str {
+    match signal {
+        SIGINT => "SIGINT (Ctrl-C)",
+        SIGTERM => "SIGTERM",
+        SIGHUP => "SIGHUP",
+        _ => "a signal",
+    }
+}
+
+/// The signal that stopped this process, named; `None` when none came
+/// (also when [`request_stop`] asked).
+pub fn stopped_by() -> Option<&'static str> {
+    match SIGNAL.load(Ordering::SeqCst) {
+        0 => None,
+        s => Some(signal_name(s)),
+    }
+}
+
+/// The stop flag, for jobs that poll it between work units. Set by the
+/// first signal once [`install`]ed, or by [`request_stop`].
+pub fn stop_flag() -> &'static AtomicBool {
     &STOP
 }
 
@@ -45,7 +106,7 @@ pub fn request_stop() {
     STOP.store(true, Ordering::SeqCst);
 }
 
-/// Whether a stop was requested (by Ctrl-C or [`request_stop`]).
+/// Whether a stop was requested (by a signal or [`request_stop`]).
 pub fn stop_requested() -> bool {
     STOP.load(Ordering::SeqCst)
 }

@@ -8,15 +8,33 @@ use clap::Parser;
 fn main() -> ExitCode {
     quiet_broken_pipe();
     let cli = tendril::cli::Cli::parse();
+    // One line of its own on a signal, unless a sim supervises this
+    // process (its launcher speaks for it).
+    let supervised = std::env::var_os(tendril::ipc::SUPERVISED_ENV).is_some();
+    if let Err(e) = tendril::interrupt::install(!supervised) {
+        eprintln!("tendril: error: signal handling: {e}");
+        return ExitCode::FAILURE;
+    }
     tendril::cli::console::init(cli.verbosity());
     match tendril::cli::run(cli) {
         Ok(()) => ExitCode::SUCCESS,
-        Err(_) if tendril::interrupt::stop_requested() => {
-            eprintln!("tendril: interrupted; no output was written or changed");
+        Err(e) if tendril::interrupt::stop_requested() => {
+            let by = tendril::interrupt::stopped_by().unwrap_or("a stop request");
+            let line = tendril::cli::console::error_line(&e);
+            // What the command says it left, with the signal named.
+            let left = line
+                .strip_prefix("interrupted")
+                .unwrap_or(&line)
+                .trim_start_matches([':', ';', ' ']);
+            if left.is_empty() {
+                eprintln!("tendril: interrupted by {by}; no output was written or changed");
+            } else {
+                eprintln!("tendril: interrupted by {by}: {left}");
+            }
             ExitCode::from(tendril::interrupt::EXIT_INTERRUPTED)
         }
         Err(e) => {
-            eprintln!("tendril: error: {e:#}");
+            eprintln!("tendril: error: {}", tendril::cli::console::error_line(&e));
             ExitCode::FAILURE
         }
     }

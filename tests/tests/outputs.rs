@@ -207,8 +207,13 @@ fn generate_stopped_by(sig: &str) {
     };
     let o = child.wait_with_output().unwrap();
     assert!(!status.success(), "exit 0 after SIG{sig}");
-    // The handler cannot tell the signals apart (ctrlc): 130 for each.
+    // 130 for each signal (scripts test one number); the message names it.
     assert_eq!(status.code(), Some(130), "{status}: {}", stderr(&o));
+    assert!(
+        stderr(&o).contains(&format!("interrupted by SIG{sig}")),
+        "the signal is not named: {}",
+        stderr(&o)
+    );
     assert_eq!(temporaries(dir.path()), Vec::<String>::new());
     assert!(!out.exists(), "a dataset was written after SIG{sig}");
 }
@@ -425,4 +430,110 @@ fn generate_into_a_device_is_refused_and_no_sidecar_is_made_beside_it() {
     );
     let kind = std::fs::symlink_metadata(&null).unwrap().file_type();
     assert!(kind.is_char_device(), "{} was replaced", null.display());
+}
+
+/// `tendril plant` alone, its run log at `mcap`: with no controller it
+/// stops after a second without commands (exit 1, "peers lost") and then
+/// publishes its log.
+fn plant_with_log(mcap: &Path, prefix: &str) -> std::process::Output {
+    Command::new(tendril_bin())
+        .args(["plant", "--peer-timeout", "1", "--prefix", prefix, "--mcap"])
+        .arg(mcap)
+        .current_dir(workspace_root())
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn a_run_log_into_a_full_device_fails_and_the_device_stays_a_device() {
+    let dir = tempfile::tempdir().unwrap();
+    let full = full_device(dir.path());
+    let o = plant_with_log(&full, &format!("outlog{}a", std::process::id()));
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("No space left on device"),
+        "the log's failure is not reported: {}",
+        stderr(&o)
+    );
+    let kind = std::fs::symlink_metadata(&full).unwrap().file_type();
+    assert!(kind.is_char_device(), "{} was replaced", full.display());
+}
+
+#[test]
+fn a_run_log_through_a_symlink_writes_its_target_and_the_link_stays() {
+    let dir = tempfile::tempdir().unwrap();
+    let link = dir.path().join("run.mcap");
+    std::os::unix::fs::symlink("real.mcap", &link).unwrap();
+    let o = plant_with_log(&link, &format!("outlog{}b", std::process::id()));
+    assert!(stderr(&o).contains("peers lost"), "{}", stderr(&o));
+    let meta = std::fs::symlink_metadata(&link).unwrap();
+    assert!(meta.file_type().is_symlink(), "the link was replaced");
+    let bytes = std::fs::read(dir.path().join("real.mcap")).unwrap();
+    assert!(bytes.starts_with(b"\x89MCAP0\r\n"), "the target is no MCAP");
+    let names: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(names.len(), 2, "left beside them: {names:?}");
+}
+
+#[test]
+fn a_run_log_into_a_directory_or_a_fifo_without_reader_is_refused_before_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let sub = dir.path().join("logs");
+    std::fs::create_dir(&sub).unwrap();
+    let o = plant_with_log(&sub, &format!("outlog{}c", std::process::id()));
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("is a directory"), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("peers lost"), "the run went on");
+    assert!(!dir.path().join("logs.partial").exists());
+
+    let fifo = dir.path().join("run.fifo");
+    assert!(Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    let started = Instant::now();
+    let o = plant_with_log(&fifo, &format!("outlog{}d", std::process::id()));
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("no reader"), "{}", stderr(&o));
+    // Refused after the wait for a reader, not after a hung open.
+    assert!(started.elapsed() < Duration::from_secs(20));
+    let kind = std::fs::symlink_metadata(&fifo).unwrap().file_type();
+    assert!(kind.is_fifo(), "the FIFO was replaced");
+}
+
+#[test]
+fn dynamics_with_its_run_log_on_a_full_device_exits_non_zero_and_keeps_the_device() {
+    let dir = tempfile::tempdir().unwrap();
+    let full = full_device(dir.path());
+    let out = dir.path().join("dyn");
+    std::fs::create_dir(&out).unwrap();
+    std::os::unix::fs::symlink(&full, out.join("run.mcap")).unwrap();
+    let o = Command::new(tendril_bin())
+        .args([
+            "dynamics",
+            "--tensions-step",
+            "0,0,0,0:2,0,0,0@0.05",
+            "--duration",
+            "0.1",
+            "--out",
+        ])
+        .arg(&out)
+        .current_dir(workspace_root())
+        .output()
+        .unwrap();
+    assert!(!o.status.success(), "exit 0 with its log lost");
+    assert!(
+        stderr(&o).contains("No space left on device"),
+        "{}",
+        stderr(&o)
+    );
+    let kind = std::fs::symlink_metadata(&full).unwrap().file_type();
+    assert!(kind.is_char_device(), "{} was replaced", full.display());
+    assert!(std::fs::symlink_metadata(out.join("run.mcap"))
+        .unwrap()
+        .file_type()
+        .is_symlink());
 }

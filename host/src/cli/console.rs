@@ -47,3 +47,49 @@ pub fn init(verbosity: Verbosity) {
         })
         .init();
 }
+
+/// An error and its causes as one line, `outer: cause: …`, each cause
+/// left out when the message before it already says it: many errors
+/// carry their source in their own message (`{path}: {source}`), and
+/// `{:#}` would print it twice.
+pub fn error_line(e: &anyhow::Error) -> String {
+    let mut line = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if text.is_empty() || line.contains(&text) {
+            continue;
+        }
+        if !line.is_empty() {
+            line.push_str(": ");
+        }
+        line.push_str(&text);
+    }
+    line
+}
+
+#[cfg(test)]
+mod tests {
+    use super::error_line;
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("out/run.mcap: {source}")]
+    struct WithSource {
+        source: std::io::Error,
+    }
+
+    #[test]
+    fn a_cause_already_in_the_message_is_said_once() {
+        let io = std::io::Error::other("No space left on device");
+        let e = anyhow::Error::new(WithSource { source: io }).context("publishing the run");
+        assert_eq!(
+            error_line(&e),
+            "publishing the run: out/run.mcap: No space left on device"
+        );
+    }
+
+    #[test]
+    fn a_cause_not_in_the_message_is_added() {
+        let e = anyhow::anyhow!("disk full").context("writing data.csv");
+        assert_eq!(error_line(&e), "writing data.csv: disk full");
+    }
+}

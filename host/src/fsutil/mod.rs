@@ -13,6 +13,11 @@ use std::io::{self, Read, Seek, Write};
 use std::path::{Component, Path, PathBuf};
 use std::sync::Mutex;
 
+mod staged;
+pub mod staging;
+
+pub use staged::{partial_path, StagedFile};
+
 /// Whether `path` is `-`, which every single-file output reads as stdout.
 pub fn is_stdout(path: &Path) -> bool {
     path.as_os_str() == "-"
@@ -291,8 +296,7 @@ where
 {
     let mut w: Box<dyn Write> = match sink {
         Sink::Stdout => Box::new(io::stdout().lock()),
-        // No truncate, no create: the node exists and is not a regular file.
-        Sink::Through(p) => Box::new(OpenOptions::new().write(true).open(p)?),
+        Sink::Through(p) => Box::new(open_through(p)?),
         Sink::Replace(_) => unreachable!("a regular file is written through a temporary"),
     };
     let mut buf = io::BufWriter::new(&mut w);
@@ -300,6 +304,70 @@ where
     buf.flush()?;
     drop(buf);
     w.flush()
+}
+
+/// How long [`open_through`] waits for a FIFO's reader to appear.
+pub const FIFO_READER_WAIT: std::time::Duration = std::time::Duration::from_secs(5);
+
+/// Open a node that is written through (a device, FIFO, socket or
+/// descriptor) for writing: no truncate, no create (it exists and is not a
+/// regular file). A FIFO is opened without blocking: with no reader the
+/// open is retried for [`FIFO_READER_WAIT`] (a reader started beside the
+/// command may come a moment later), or until a stop is requested, and
+/// then refused with an error that says so — a blocking open would hang
+/// the command, deaf to SIGTERM, until somebody reads.
+pub fn open_through(path: &Path) -> io::Result<File> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        use std::os::unix::fs::OpenOptionsExt;
+        use std::os::unix::io::AsRawFd;
+        if std::fs::metadata(path)?.file_type().is_socket() {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                "a socket, which cannot be opened as a file",
+            ));
+        }
+        let deadline = std::time::Instant::now() + FIFO_READER_WAIT;
+        loop {
+            match OpenOptions::new()
+                .write(true)
+                .custom_flags(libc::O_NONBLOCK)
+                .open(path)
+            {
+                Ok(file) => {
+                    // Writes block again (a slow reader is waited for, not
+                    // an error); only the open had to not wait.
+                    // SAFETY: fcntl on a descriptor this File owns.
+                    let fd = file.as_raw_fd();
+                    let flags = unsafe { libc::fcntl(fd, libc::F_GETFL) };
+                    if flags < 0
+                        || unsafe { libc::fcntl(fd, libc::F_SETFL, flags & !libc::O_NONBLOCK) } < 0
+                    {
+                        return Err(io::Error::last_os_error());
+                    }
+                    return Ok(file);
+                }
+                Err(e) if e.raw_os_error() == Some(libc::ENXIO) => {
+                    if std::time::Instant::now() >= deadline || crate::interrupt::stop_requested() {
+                        return Err(io::Error::new(
+                            io::ErrorKind::BrokenPipe,
+                            format!(
+                                "a FIFO with no reader (waited {} s): start its reader first",
+                                FIFO_READER_WAIT.as_secs()
+                            ),
+                        ));
+                    }
+                    std::thread::sleep(std::time::Duration::from_millis(20));
+                }
+                Err(e) => return Err(e),
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        OpenOptions::new().write(true).open(path)
+    }
 }
 
 /// Write `bytes` to `path` by the output policy (see the module documentation).

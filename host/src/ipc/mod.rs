@@ -20,7 +20,6 @@ pub mod sim;
 pub mod stats;
 pub mod transport;
 
-use iceoryx2_bb_posix::signal::SignalHandler;
 use tendril_shared::messages::{control_command, Control};
 
 pub use transport::DEFAULT_PREFIX;
@@ -97,7 +96,8 @@ pub fn die_with_parent(supervised: bool) -> Result<bool, IpcError> {
     }
     // Catch SIGTERM before asking for it (no signal can have arrived yet:
     // the default action would have ended the process).
-    let _ = SignalHandler::termination_requested();
+    crate::interrupt::install(false)
+        .map_err(|e| IpcError::Config(format!("signal handling: {e}")))?;
     // SAFETY: PR_SET_PDEATHSIG takes a signal number and touches no memory.
     let rc = unsafe {
         libc::prctl(
@@ -214,7 +214,7 @@ impl StopWatch {
     /// Whether a stop was requested since the last call (cheap: one
     /// shared-memory poll and an atomic read).
     pub fn requested(&self) -> bool {
-        if SignalHandler::termination_requested() || launcher_gone() {
+        if crate::interrupt::stop_requested() || launcher_gone() {
             return true;
         }
         let mut stop = false;

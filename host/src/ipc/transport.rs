@@ -305,6 +305,8 @@ pub fn node(name: &str) -> Result<Node<Svc>, IpcError> {
         NodeName::new(name).map_err(|e| IpcError::BadName(format!("node name {name:?}: {e:?}")))?;
     NodeBuilder::new()
         .name(&node_name)
+        // The one signal mechanism is crate::interrupt's.
+        .signal_handling_mode(iceoryx2::prelude::SignalHandlingMode::Disabled)
         .create::<Svc>()
         .map_err(|e| IpcError::Service(format!("node {name}: {e:?}")))
 }

@@ -10,7 +10,6 @@
 //! interrupted or failed run leaves exactly the previous run's outputs.
 
 pub mod closed_loop;
-pub mod staging;
 
 pub use closed_loop::{run_dir, LoopTally};
 
@@ -25,6 +24,7 @@ use crate::dataset::job::{generate as generate_dataset, is_up_to_date, GenerateR
 use crate::dataset::split::prepare;
 use crate::dataset::{Dataset, Sidecar};
 use crate::evaluate::job::evaluate_net;
+use crate::fsutil::staging::{self, Staging};
 use crate::fsutil::write_atomic;
 use crate::interrupt::stop_flag;
 use crate::learn::cascor::job::{self as train_job, SplitSpec, TrainJob, TrainOutputs};
@@ -35,7 +35,6 @@ use crate::plot::workspace::{draw_workspace, BackboneCurve};
 use crate::robot::{Robot, DEFAULT_ROBOT};
 use crate::statics::{SolverSettings, Statics};
 use crate::units::length_mm;
-use staging::Staging;
 
 /// Where the main job writes.
 pub const OUT_DIR: &str = "out";
@@ -171,9 +170,9 @@ pub fn run(
             "the run failed; {} was left as it was",
             out.display()
         ))),
-        Err(e) => Err(e),
-        // A signal in a stage that does not poll the flag: still nothing is published.
-        Ok(_) => Err(anyhow::anyhow!("interrupted")),
+        // Whatever the stage said, the staging directory is gone: nothing
+        // was published (also when the stage did not poll the flag).
+        _ => Err(anyhow::anyhow!("interrupted")),
     }
 }
 

@@ -1,6 +1,7 @@
 //! Adding what is known only after a run (the report's summary) to its
 //! MCAP file as metadata: the file is rewritten beside itself and renamed
-//! over the original, so a failure leaves the original as it was.
+//! over the original (the output policy, [`crate::fsutil`]), so a failure
+//! leaves the original as it was.
 
 use std::collections::BTreeMap;
 use std::io::BufWriter;
@@ -9,7 +10,6 @@ use std::path::Path;
 use mcap::read::Options;
 
 use super::read::ReadError;
-use super::writer::partial_path;
 
 /// Write the MCAP at `source` to `path` with a metadata record `name` of
 /// `values` added, keeping every message, channel, schema and other
@@ -34,8 +34,10 @@ pub fn add_metadata(
         path: source.to_path_buf(),
         source: source_err,
     })?;
-    let partial = partial_path(path);
-    let file = std::fs::File::create(&partial).map_err(io)?;
+    // By the output policy: a temporary beside a regular file, renamed
+    // over it; a device or FIFO written through.
+    let tmp = crate::fsutil::Temporary::for_output(path).map_err(io)?;
+    let file = tmp.as_file().try_clone().map_err(io)?;
     let result = (|| {
         let options = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Zstd))
@@ -71,11 +73,6 @@ pub fn add_metadata(
         file.sync_all().map_err(io)?;
         Ok(())
     })();
-    match result {
-        Ok(()) => std::fs::rename(&partial, path).map_err(io),
-        Err(e) => {
-            let _ = std::fs::remove_file(&partial);
-            Err(e)
-        }
-    }
+    result?;
+    tmp.persist(path).map_err(io)
 }

@@ -10,7 +10,7 @@
 
 use std::collections::BTreeMap;
 use std::io::BufWriter;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TrySendError};
 use std::sync::Arc;
@@ -24,6 +24,7 @@ use foxglove::{Channel, ChannelBuilder, Context, PartialMetadata, RawChannel, Sc
 use serde::{Deserialize, Serialize};
 
 use super::channels::{self as ch, StatusMsg, TensionsMsg, TrackingMsg};
+use crate::fsutil::StagedFile;
 
 /// Records the queue holds: 4 s of a 1 kHz loop.
 const QUEUE: usize = 4096;
@@ -45,7 +46,8 @@ const STATUS_HEARTBEAT_NS: u64 = 100_000_000;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RunLogConfig {
-    /// The MCAP file (written as `FILE.partial`, renamed when closed).
+    /// The MCAP file (written as `FILE.partial`, renamed when closed; a
+    /// device or FIFO is written through when the run ends).
     pub mcap: Option<PathBuf>,
     /// Serve the Foxglove WebSocket protocol here (`host:port`).
     pub live: Option<String>,
@@ -171,7 +173,8 @@ pub struct RunLogStats {
     pub messages: BTreeMap<String, u64>,
     /// Records dropped because the writer was behind.
     pub dropped: u64,
-    /// The MCAP file, once closed and renamed.
+    /// The MCAP file, once closed and renamed (`None` when it went
+    /// through a device or FIFO).
     pub file: Option<PathBuf>,
     /// Its size, bytes.
     pub bytes: u64,
@@ -331,13 +334,6 @@ impl Drop for RunLog {
     }
 }
 
-/// The `.partial` name a file is written under until it is closed.
-pub fn partial_path(path: &Path) -> PathBuf {
-    let mut name = path.file_name().unwrap_or_default().to_os_string();
-    name.push(".partial");
-    path.with_file_name(name)
-}
-
 struct Channels {
     scene: Channel<SceneUpdate>,
     tf: Channel<FrameTransforms>,
@@ -351,6 +347,7 @@ struct Sinks {
     ctx: Arc<Context>,
     mcap: Option<(
         foxglove::McapWriterHandle<BufWriter<std::fs::File>>,
+        StagedFile,
         PathBuf,
     )>,
     server: Option<foxglove::WebSocketServerHandle>,
@@ -382,12 +379,15 @@ impl Sinks {
         let mcap = match &cfg.mcap {
             None => None,
             Some(path) => {
-                let partial = partial_path(path);
                 let file_err = |message: String| RunLogError::File {
-                    path: partial.clone(),
+                    path: path.clone(),
                     message,
                 };
-                let file = std::fs::File::create(&partial).map_err(|e| file_err(e.to_string()))?;
+                // The output policy (crate::fsutil): a directory, a socket
+                // or a FIFO without a reader is refused here, before the
+                // run; a device or FIFO is written through at the end.
+                let staged = StagedFile::create(path).map_err(|e| file_err(e.to_string()))?;
+                let file = staged.writer().map_err(|e| file_err(e.to_string()))?;
                 let options = mcap::WriteOptions::new()
                     .compression(Some(mcap::Compression::Zstd))
                     .chunk_size(Some(CHUNK_BYTES))
@@ -402,7 +402,7 @@ impl Sinks {
                         .write_metadata("run", cfg.metadata.clone())
                         .map_err(|e| file_err(e.to_string()))?;
                 }
-                Some((handle, path.clone()))
+                Some((handle, staged, path.clone()))
             }
         };
         let server = match &cfg.live {
@@ -466,8 +466,7 @@ impl Sinks {
         if let Some(server) = self.server.take() {
             server.stop().wait_blocking();
         }
-        if let Some((handle, path)) = self.mcap.take() {
-            let partial = partial_path(&path);
+        if let Some((handle, staged, path)) = self.mcap.take() {
             let file_err = |message: String| RunLogError::File {
                 path: path.clone(),
                 message,
@@ -475,17 +474,15 @@ impl Sinks {
             let writer = handle.close().map_err(|e| file_err(e.to_string()))?;
             if discard.load(Ordering::SeqCst) {
                 drop(writer);
-                let _ = std::fs::remove_file(&partial);
+                staged.discard();
                 return Ok(stats);
             }
             let file = writer
                 .into_inner()
                 .map_err(|e| file_err(e.error().to_string()))?;
-            file.sync_all().map_err(|e| file_err(e.to_string()))?;
+            stats.bytes = file.metadata().map(|m| m.len()).unwrap_or(0);
             drop(file);
-            std::fs::rename(&partial, &path).map_err(|e| file_err(e.to_string()))?;
-            stats.bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
-            stats.file = Some(path);
+            stats.file = staged.commit().map_err(|e| file_err(e.to_string()))?;
         }
         drop(self.ctx);
         Ok(stats)

@@ -13,6 +13,7 @@ use std::collections::VecDeque;
 use std::path::PathBuf;
 use std::time::Duration;
 
+use iceoryx2::port::listener::ListenerWaitError;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -194,9 +195,11 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
                 std::hint::spin_loop();
             }
         } else {
-            listener
-                .timed_wait(|_| {}, idle)
-                .map_err(|e| IpcError::Receive(format!("tension_cmd event: {e:?}")))?;
+            // A signal cuts the wait short: the loop then sees the stop.
+            match listener.timed_wait(|_| {}, idle) {
+                Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
+                Err(e) => return Err(IpcError::Receive(format!("tension_cmd event: {e:?}"))),
+            }
         }
         pending.clear();
         transport::drain(&commands, &mut pending)?;
@@ -318,10 +321,15 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
             peers.heard(t1);
         } else if peers.lost(t1) {
             log.close()?;
-            return Err(IpcError::PeersLost(format!(
-                "plant: no tension command for {:.1} s",
-                peers.silence_s(t1)
-            )));
+            let lost = format!("plant: no tension command for {:.1} s", peers.silence_s(t1));
+            // The run log is still published (the run happened); a failure
+            // to publish it is part of the error, not lost in a Drop.
+            if let Some(r) = runlog.take() {
+                if let Err(e) = r.log.finish() {
+                    return Err(IpcError::PeersLost(format!("{lost}; and {e}")));
+                }
+            }
+            return Err(IpcError::PeersLost(lost));
         }
     }
     log.close()?;

@@ -30,7 +30,7 @@ use tendril_shared::messages::{control_command, Control, Header};
 pub use self::faults::SimFaults;
 use self::faults::{weight_update, Action};
 use self::report::{ModelUsed, SimReport};
-use self::supervisor::{install_interrupt_latch, interrupted, Children, ProcessEnd, Role};
+use self::supervisor::{Children, ProcessEnd, Role};
 use self::workdir::{write_json, Configs, RunDir};
 use super::clock::now_ns;
 use super::controller::ControllerConfig;
@@ -38,6 +38,7 @@ use super::planner::{Injections, PlannerConfig};
 use super::plant::PlantConfig;
 use super::transport::{self, Services};
 use super::IpcError;
+use crate::interrupt::stop_requested as interrupted;
 use crate::plan::PathShape;
 use crate::statics::Statics;
 
@@ -363,7 +364,6 @@ pub fn run(cfg: &SimConfig) -> Result<SimReport, SimError> {
         robot.max_tensions().len(),
         budget::free_bytes(&cfg.out),
     )?;
-    install_interrupt_latch();
     check_model(cfg)?;
     let dir = RunDir::create(&cfg.out)?;
     let result = run_in(cfg, &dir);
@@ -662,7 +662,7 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
 /// chunk: it becomes `run.mcap` too.
 fn finish_run_log(dir: &RunDir, report: &SimReport) -> Result<(), SimError> {
     let path = dir.file(RUN_MCAP);
-    let partial = crate::runlog::writer::partial_path(&path);
+    let partial = crate::fsutil::partial_path(&path);
     let source = if path.exists() {
         path.clone()
     } else if partial.exists() {
@@ -675,7 +675,7 @@ fn finish_run_log(dir: &RunDir, report: &SimReport) -> Result<(), SimError> {
     crate::runlog::finalize::add_metadata(&source, &path, "report", summary)
         .map_err(|e| SimError::Config(format!("run log: {e}")))?;
     if source == partial {
-        // add_metadata wrote through the same partial name and renamed it.
+        // Its contents are in run.mcap now.
         let _ = std::fs::remove_file(&partial);
     }
     Ok(())

@@ -13,10 +13,8 @@
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use iceoryx2_bb_posix::signal::SignalHandler;
 use serde::{Deserialize, Serialize};
 
 use super::SimError;
@@ -147,35 +145,6 @@ pub struct Children {
     running: Vec<Running>,
     ended: Vec<Ended>,
     generations: [usize; 3],
-}
-
-static INTERRUPTED: AtomicBool = AtomicBool::new(false);
-static HANGUP: AtomicBool = AtomicBool::new(false);
-
-extern "C" fn on_hangup(_: libc::c_int) {
-    HANGUP.store(true, Ordering::SeqCst);
-}
-
-/// Install the SIGINT/SIGTERM/SIGHUP latch (idempotent). Call before the
-/// first child starts. iceoryx2's handler latches SIGINT and SIGTERM; SIGHUP
-/// (a closed terminal) gets its own, so that it too ends the run the same
-/// way — children stopped, the work directory removed — instead of killing
-/// the launcher where it stands (issue 31: exit 129 left `.sim-run` behind).
-pub fn install_interrupt_latch() {
-    interrupted();
-    // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
-    unsafe {
-        libc::signal(libc::SIGHUP, on_hangup as *const () as libc::sighandler_t);
-    }
-}
-
-/// Whether SIGINT, SIGTERM or SIGHUP reached this process since the latch was installed.
-pub fn interrupted() -> bool {
-    // The handler records the last signal and forgets it when read: keep it.
-    if SignalHandler::termination_requested() || HANGUP.load(Ordering::SeqCst) {
-        INTERRUPTED.store(true, Ordering::SeqCst);
-    }
-    INTERRUPTED.load(Ordering::SeqCst)
 }
 
 fn role_index(role: Role) -> usize {

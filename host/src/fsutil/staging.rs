@@ -1,4 +1,5 @@
-//! Where the main job writes until it has finished (`docs/design.md` §7):
+//! Where a job with many outputs (the main job, `tendril robustness`)
+//! writes until it has finished (`docs/design.md` §7):
 //! a staging directory inside the (locked) output directory, published only
 //! when every stage is done. An interrupt — Ctrl-C, SIGTERM, SIGHUP, even a
 //! second one — or a failure therefore leaves exactly the previous run's
@@ -17,7 +18,7 @@
 use std::io;
 use std::path::{Path, PathBuf};
 
-use crate::fsutil::{move_into_place, register_temporary_dir, unregister_temporary_dir, DirLock};
+use super::{move_into_place, register_temporary_dir, unregister_temporary_dir, DirLock};
 
 /// The staging directory's name inside the output directory.
 pub const STAGING: &str = ".tendril-staging";
