@@ -1,5 +1,5 @@
-//! `tendril train`, `evaluate` and `compare` refuse requests that cannot give
-//! a meaningful result or would destroy a file — with a one-line error,
+//! `tendril train`, `evaluate`, `compare` and `robustness` refuse requests
+//! that cannot give a meaningful result or would destroy a file — with a one-line error,
 //! a non-zero exit, and every existing file as it was (`docs/design.md` §7).
 
 use std::path::{Path, PathBuf};
@@ -228,5 +228,71 @@ fn compare_output_over_its_data_is_refused() {
     assert_eq!(
         std::fs::read(dir.path().join("cmp/compare.csv")).unwrap(),
         before
+    );
+}
+
+/// A reality file named `name` in `dir`, the `ideal` reality otherwise.
+fn reality_file(dir: &Path, file: &str, name: &str) -> PathBuf {
+    let path = dir.join(file);
+    std::fs::write(&path, format!("name = {name:?}\n")).unwrap();
+    path
+}
+
+#[test]
+fn a_reality_named_like_a_path_is_refused_and_nothing_is_made_outside_out() {
+    let dir = tempfile::tempdir().unwrap();
+    for (i, name) in ["../escaped", "/tmp/tendril-escaped-abs"]
+        .iter()
+        .enumerate()
+    {
+        let file = reality_file(dir.path(), &format!("r{i}.toml"), name);
+        let out = tendril(
+            dir.path(),
+            &[
+                "robustness",
+                "--realities",
+                file.to_str().unwrap(),
+                "--out",
+                "s/t",
+            ],
+        );
+        refused(&out, "name");
+        assert!(stderr(&out).contains("'/'"), "{}", stderr(&out));
+    }
+    assert!(!dir.path().join("escaped").exists());
+    assert!(
+        !dir.path().join("s").exists(),
+        "a refused table left its directory"
+    );
+    assert!(!Path::new("/tmp/tendril-escaped-abs").exists());
+}
+
+#[test]
+fn two_realities_of_one_name_and_an_out_that_is_a_file_are_refused_before_any_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = reality_file(dir.path(), "a.toml", "same");
+    let b = reality_file(dir.path(), "b.toml", "same");
+    let list = format!("{},{}", a.display(), b.display());
+    let out = tendril(
+        dir.path(),
+        &["robustness", "--realities", &list, "--out", "s"],
+    );
+    refused(&out, "both named \"same\"");
+    assert!(!dir.path().join("s").exists());
+
+    std::fs::write(dir.path().join("table.md"), "mine").unwrap();
+    let started = std::time::Instant::now();
+    let out = tendril(
+        dir.path(),
+        &["robustness", "--realities", "ideal", "--out", "table.md"],
+    );
+    refused(&out, "not a directory");
+    assert!(
+        started.elapsed() < std::time::Duration::from_secs(10),
+        "ran first"
+    );
+    assert_eq!(
+        std::fs::read_to_string(dir.path().join("table.md")).unwrap(),
+        "mine"
     );
 }

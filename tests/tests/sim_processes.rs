@@ -576,3 +576,44 @@ fn a_planner_stopped_for_a_moment_trips_the_watchdog_and_is_counted_as_late() {
     assert_eq!(late, trips, "a late planner's trip counted as a silent one");
     assert_eq!(c["stuck_motor_holds"], 0);
 }
+
+#[test]
+fn an_interrupted_robustness_table_leaves_exactly_the_previous_table() {
+    let _one = one_sim_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("table");
+    std::fs::create_dir_all(out.join("ideal/sim")).unwrap();
+    std::fs::write(out.join("robustness.md"), "old table").unwrap();
+    std::fs::write(out.join("ideal/sim/report.json"), "old run").unwrap();
+    let mut child = Command::new(tendril_bin())
+        .args(["robustness", "--model", DEFAULT_NET, "--corrected-only"])
+        .args(["--realities", "ideal,em-tracker", "--quick", "0.5", "--out"])
+        .arg(&out)
+        .current_dir(workspace_root())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The first run is finished (in the staging directory) before the signal.
+    let staged = out.join(".tendril-staging/ideal/sim/report.json");
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while !staged.exists() {
+        assert!(Instant::now() < deadline, "the first run never finished");
+        assert!(child.try_wait().unwrap().is_none(), "the table ended early");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    signal(child.id(), "INT");
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    assert!(stderr(&o).contains("left as it was"), "{}", stderr(&o));
+    assert_eq!(
+        std::fs::read_to_string(out.join("robustness.md")).unwrap(),
+        "old table"
+    );
+    assert_eq!(
+        std::fs::read_to_string(out.join("ideal/sim/report.json")).unwrap(),
+        "old run",
+        "a finished run of the interrupted table replaced the previous one"
+    );
+    assert!(!out.join(".tendril-staging").exists());
+}

@@ -48,23 +48,88 @@ pub fn run(args: RobustnessArgs) -> anyhow::Result<()> {
     if let Some(q) = args.quick {
         super::controller::check("--quick", q, q > 0.0, "a number of seconds > 0")?;
     }
-    let realities = if args.realities.is_empty() {
+    let specs: Vec<PathBuf> = if args.realities.is_empty() {
         BUILTIN
             .iter()
-            .map(|(name, _)| Reality::load(Path::new(name)))
-            .collect::<Result<Vec<_>, _>>()?
+            .map(|(name, _)| PathBuf::from(name))
+            .collect()
     } else {
-        args.realities
-            .iter()
-            .map(|p| Reality::load(p))
-            .collect::<Result<Vec<_>, _>>()?
+        args.realities.clone()
     };
+    let realities = specs
+        .iter()
+        .map(|p| Reality::load(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    refuse_shared_names(&specs, &realities)?;
+    // Everything goes to a staging directory first and is published when
+    // the table is done: an interrupted or failed table leaves exactly the
+    // previous one (its runs' directories too).
+    let locked = crate::fsutil::staging::LockedOutput::acquire(&args.out)?;
+    let staging = locked
+        .staging()
+        .with_context(|| format!("creating a staging directory in {}", args.out.display()))?;
+    let result = table(&args, realities, staging.dir());
+    match result {
+        Ok((runs, failed)) if !crate::interrupt::stop_requested() => {
+            staging.publish().with_context(|| {
+                format!("moving the finished table into {}", args.out.display())
+            })?;
+            let rows_md = args.out.join("robustness.md");
+            let _ = writeln!(
+                std::io::stdout(),
+                "{runs} runs; {failed} corrected runs not clean; table in {}",
+                rows_md.display()
+            );
+            Ok(())
+        }
+        other => {
+            drop(staging);
+            locked.abandon();
+            match other {
+                Err(e) if !crate::interrupt::stop_requested() => Err(e.context(format!(
+                    "the table failed; {} was left as it was",
+                    args.out.display()
+                ))),
+                _ => Err(anyhow::anyhow!(
+                    "interrupted: {} was left as it was",
+                    args.out.display()
+                )),
+            }
+        }
+    }
+}
+
+/// Each reality's name is a directory of the output: two of one name
+/// would write one directory twice.
+fn refuse_shared_names(specs: &[PathBuf], realities: &[Reality]) -> anyhow::Result<()> {
+    for (i, r) in realities.iter().enumerate() {
+        if let Some(j) = realities[..i].iter().position(|x| x.name == r.name) {
+            anyhow::bail!(
+                "--realities: {} and {} are both named {:?}, and the name is the directory of \
+                 each one's runs: rename one",
+                specs[j].display(),
+                specs[i].display(),
+                r.name
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Run (or redraw) the table into `dir`; returns how many runs it has and
+/// how many of the corrected ones were not clean.
+fn table(
+    args: &RobustnessArgs,
+    realities: Vec<Reality>,
+    dir: &Path,
+) -> anyhow::Result<(usize, usize)> {
     let rows = if args.redraw.is_empty() {
         let cfg = RobustnessConfig {
             exe: std::env::current_exe().context("locating the tendril executable")?,
             robot: args.robot.clone(),
-            model: ModelSource::resolve(args.model, Path::new("out/model.tnet")),
-            out: args.out.clone(),
+            model: ModelSource::resolve(args.model.clone(), Path::new("out/model.tnet")),
+            out: dir.to_path_buf(),
+            shown_out: args.out.clone(),
             realities,
             quick_s: args.quick,
             net_alone: !args.corrected_only,
@@ -88,25 +153,16 @@ pub fn run(args: RobustnessArgs) -> anyhow::Result<()> {
         }
         rows
     };
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
     let md = robustness::markdown(&rows, &args.robot);
-    crate::fsutil::write_atomic(&args.out.join("robustness.md"), md.as_bytes())?;
+    crate::fsutil::write_atomic(&dir.join("robustness.md"), md.as_bytes())?;
     let json = serde_json::to_vec_pretty(&rows)?;
-    crate::fsutil::write_atomic(&args.out.join("robustness.json"), &json)?;
+    crate::fsutil::write_atomic(&dir.join("robustness.json"), &json)?;
     let title = format!(
         "{}: tracking error against each reality, default gains",
         args.robot.display()
     );
-    robustness::figure::draw(&rows, &title, &args.out.join("robustness.png"))
+    robustness::figure::draw(&rows, &title, &dir.join("robustness.png"))
         .map_err(|e| anyhow::anyhow!("robustness figure: {e}"))?;
     let failed = rows.iter().filter(|r| r.correction && !r.clean).count();
-    let _ = writeln!(
-        std::io::stdout(),
-        "{} runs; {} corrected runs not clean; table in {}",
-        rows.len(),
-        failed,
-        args.out.join("robustness.md").display()
-    );
-    Ok(())
+    Ok((rows.len(), failed))
 }

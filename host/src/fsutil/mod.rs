@@ -575,6 +575,39 @@ fn flock_exclusive(_file: &File) -> io::Result<()> {
     Ok(())
 }
 
+/// Longest name [`check_plain_name`] accepts, bytes.
+pub const MAX_PLAIN_NAME: usize = 64;
+
+/// Check that `name`, read from a file, can become one file or directory
+/// name inside an output directory: letters, digits, `-`, `_` and `.`,
+/// not starting with `.` (no `..`, no hidden file), at most
+/// [`MAX_PLAIN_NAME`] bytes. The error says what is wrong.
+pub fn check_plain_name(name: &str) -> Result<(), String> {
+    if name.is_empty() {
+        return Err("must not be empty".into());
+    }
+    if name.len() > MAX_PLAIN_NAME {
+        return Err(format!(
+            "{name:?} is longer than {MAX_PLAIN_NAME} characters"
+        ));
+    }
+    if let Some(c) = name
+        .chars()
+        .find(|c| !(c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.')))
+    {
+        return Err(format!(
+            "{name:?} has {c:?}: it names a directory of the output, so only letters, digits, \
+             '-', '_' and '.' are allowed"
+        ));
+    }
+    if name.starts_with('.') {
+        return Err(format!(
+            "{name:?} starts with '.': it names a directory of the output"
+        ));
+    }
+    Ok(())
+}
+
 /// Two of a command's files resolve to the same path.
 #[derive(Debug, thiserror::Error)]
 #[error("{output} {} is the same file as {other}: refusing to overwrite it", .path.display())]

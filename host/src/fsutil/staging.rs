@@ -96,6 +96,58 @@ impl Staging {
     }
 }
 
+/// A job's output directory, locked for the job: created if missing, and
+/// removed again by [`LockedOutput::abandon`] when the job publishes
+/// nothing into a directory it created (no empty `out/` holding a lock).
+#[derive(Debug)]
+pub struct LockedOutput {
+    out: PathBuf,
+    existed: bool,
+    lock: DirLock,
+}
+
+impl LockedOutput {
+    /// Create `out` if needed and lock it (see [`DirLock`]). A path that
+    /// is there but is not a directory is refused, naming it.
+    pub fn acquire(out: &Path) -> Result<LockedOutput, super::LockError> {
+        let existed = match std::fs::metadata(out) {
+            Ok(m) if m.is_dir() => true,
+            Ok(_) => {
+                return Err(super::LockError::Io {
+                    path: out.to_path_buf(),
+                    source: io::Error::new(
+                        io::ErrorKind::NotADirectory,
+                        "is not a directory (this output is a directory)",
+                    ),
+                })
+            }
+            Err(_) => false,
+        };
+        let lock = DirLock::acquire(out)?;
+        Ok(LockedOutput {
+            out: out.to_path_buf(),
+            existed,
+            lock,
+        })
+    }
+
+    /// A staging directory in it (see [`Staging`]).
+    pub fn staging(&self) -> io::Result<Staging> {
+        Staging::create(&self.out, &self.lock)
+    }
+
+    /// Release the lock; if this job created the directory and nothing
+    /// but the lock is in it, remove it.
+    pub fn abandon(self) {
+        let LockedOutput { out, existed, lock } = self;
+        drop(lock);
+        if !existed {
+            let _ = std::fs::remove_file(out.join(DirLock::FILE));
+            let _ = std::fs::remove_dir(&out);
+        }
+    }
+}
+
 /// Put directory `from` at `to` (a symlink's target when `to` is a link to
 /// a directory), moving what was there to `old` first and removing it after.
 fn swap_dir(from: &Path, to: &Path, old: &Path) -> io::Result<()> {

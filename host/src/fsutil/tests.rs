@@ -282,3 +282,23 @@ fn a_line_capped_reader_fails_on_an_endless_line_and_passes_csv() {
         .unwrap();
     assert_eq!(text, csv);
 }
+
+#[test]
+fn a_name_from_a_file_is_one_plain_component() {
+    for ok in ["ideal", "em-tracker", "dynamic_light.v2"] {
+        assert_eq!(check_plain_name(ok), Ok(()), "{ok}");
+    }
+    for bad in [
+        "",
+        "../escaped",
+        "/abs",
+        "a/b",
+        ".hidden",
+        "..",
+        "a b",
+        "x\0y",
+    ] {
+        assert!(check_plain_name(bad).is_err(), "{bad:?} accepted");
+    }
+    assert!(check_plain_name(&"x".repeat(MAX_PLAIN_NAME + 1)).is_err());
+}

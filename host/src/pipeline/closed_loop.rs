@@ -27,6 +27,23 @@ pub fn run_dir(run: &LoopRun, correction: bool) -> String {
     }
 }
 
+/// Where the runs are written (`dir`, a staging directory) and where the
+/// user will find them once it is published: what the reports record.
+#[derive(Clone, Copy, Debug)]
+pub struct LoopOut<'a> {
+    /// The directory the sims write into.
+    pub dir: &'a Path,
+    /// Where it is published.
+    pub published: &'a Path,
+}
+
+impl LoopOut<'_> {
+    fn sim(&self, mut sim: SimConfig) -> SimConfig {
+        sim.staged_as = Some((self.dir.to_path_buf(), self.published.to_path_buf()));
+        sim
+    }
+}
+
 /// Run every run of [`default_loop_runs`] for the robot (by its reachable
 /// family, `docs/design.md` §6.1) with the net alone and with the
 /// correction, writing under `out`; `quick_s` caps each run's seconds of
@@ -37,7 +54,7 @@ pub fn closed_loop_section(
     robot_file: &Path,
     statics: &Statics,
     model: &Path,
-    out: &Path,
+    out: LoopOut<'_>,
     quick_s: Option<f64>,
 ) -> anyhow::Result<(String, LoopTally)> {
     let exe = std::env::current_exe()
@@ -73,12 +90,12 @@ pub fn closed_loop_section(
                     "IK net alone"
                 }
             );
-            let mut sim = SimConfig::new(
+            let mut sim = out.sim(SimConfig::new(
                 exe.clone(),
                 robot_file.to_path_buf(),
                 ModelSource::File(model.to_path_buf()),
-                out.join(&dir),
-            );
+                out.dir.join(&dir),
+            ));
             sim.duration_s = quick_s.map_or(run.duration_s, |q| q.min(run.duration_s));
             sim.planner.shape = run.shape.clone();
             sim.set_correction(correction);
@@ -156,7 +173,7 @@ fn chip_run(
     exe: &Path,
     robot_file: &Path,
     model: &Path,
-    out: &Path,
+    out: LoopOut<'_>,
     run: &LoopRun,
     quick_s: Option<f64>,
     tally: &mut LoopTally,
@@ -175,12 +192,12 @@ fn chip_run(
             format!("{title}\n\nNot run: {why}.\n"),
         ));
     }
-    let mut sim = SimConfig::new(
+    let mut sim = out.sim(SimConfig::new(
         exe.to_path_buf(),
         robot_file.to_path_buf(),
         ModelSource::File(model.to_path_buf()),
-        out.join(&dir),
-    );
+        out.dir.join(&dir),
+    ));
     sim.duration_s = quick_s.map_or(run.duration_s, |q| q.min(run.duration_s));
     sim.planner.shape = run.shape.clone();
     sim.set_correction(true);

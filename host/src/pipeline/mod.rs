@@ -146,10 +146,10 @@ pub fn run(
     command: String,
 ) -> anyhow::Result<()> {
     let robot = Robot::load(robot_file)?;
-    let existed = std::fs::symlink_metadata(out).is_ok();
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let lock = crate::fsutil::DirLock::acquire(out)?; // held for the whole run (issue 31)
-    let staging = Staging::create(out, &lock)
+    // Locked for the whole run (issue 31).
+    let locked = crate::fsutil::staging::LockedOutput::acquire(out)?;
+    let staging = locked
+        .staging()
         .with_context(|| format!("creating {}", out.join(staging::STAGING).display()))?;
     let result = stages(robot_file, &robot, out, &staging, options, command);
     if let (Ok(tally), false) = (&result, crate::interrupt::stop_requested()) {
@@ -159,12 +159,7 @@ pub fn run(
         return loop_status(tally, out);
     }
     drop(staging); // removes everything this run wrote
-    if !existed {
-        // The directory was this run's: leave no empty `out/` with a lock in it.
-        drop(lock);
-        let _ = std::fs::remove_file(out.join(crate::fsutil::DirLock::FILE));
-        let _ = std::fs::remove_dir(out);
-    }
+    locked.abandon();
     match result {
         Err(e) if !crate::interrupt::stop_requested() => Err(e.context(format!(
             "the run failed; {} was left as it was",
@@ -345,7 +340,10 @@ fn stages(
             robot_file,
             &statics,
             &model,
-            staging.dir(),
+            closed_loop::LoopOut {
+                dir: staging.dir(),
+                published: out,
+            },
             options.quick.then_some(QUICK_LOOP_S),
         )?;
         log::info!("closed loop: done in {:.1} s", t.elapsed().as_secs_f64());

@@ -233,8 +233,10 @@ impl Reality {
             }
             _ => Ok(()),
         };
-        if self.name.trim().is_empty() {
-            return Err(err("name", "must not be empty".into()));
+        // The name becomes a directory of `tendril robustness --out`: one
+        // plain file name, never a path out of it.
+        if let Err(problem) = crate::fsutil::check_plain_name(&self.name) {
+            return Err(err("name", problem));
         }
         let r = &self.robot;
         let scale = "a factor in [0.5, 2]";

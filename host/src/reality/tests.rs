@@ -56,6 +56,10 @@ fn errors_name_the_file_the_field_and_the_problem() {
         "unknown field `stiffness`",
     );
     bad("name = \"\"\n", "name", "empty");
+    // The name is a directory of `robustness --out`: never a path out of it.
+    bad("name = \"../escaped\"\n", "name", "'/'");
+    bad("name = \"/tmp/abs\"\n", "name", "'/'");
+    bad("name = \"..\"\n", "name", "starts with '.'");
     bad(
         "name = \"x\"\n[robot]\ntendon_angle_delta_deg = [1.0, 40.0]\n",
         "robot.tendon_angle_delta_deg[1]",

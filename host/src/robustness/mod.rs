@@ -27,8 +27,10 @@ pub struct RobustnessConfig {
     pub robot: PathBuf,
     /// The net.
     pub model: ModelSource,
-    /// Output directory.
+    /// Where the runs are written (a staging directory).
     pub out: PathBuf,
+    /// Where the user will find `out` once it is published.
+    pub shown_out: PathBuf,
     /// The realities, in table order.
     pub realities: Vec<Reality>,
     /// Cap on each run's seconds of trajectory.
@@ -105,6 +107,7 @@ pub fn run(cfg: &RobustnessConfig) -> Result<Vec<Row>, SimError> {
                     cfg.model.clone(),
                     cfg.out.join(&dir),
                 );
+                sim.staged_as = Some((cfg.out.clone(), cfg.shown_out.clone()));
                 sim.duration_s = cfg
                     .quick_s
                     .map_or(run.duration_s, |q| q.min(run.duration_s));

@@ -152,6 +152,10 @@ pub struct SimConfig {
     pub model: ModelSource,
     /// Output directory.
     pub out: PathBuf,
+    /// (a staging directory, where a job publishes it later): paths under
+    /// the first are recorded in the report as under the second, where the
+    /// user will find them.
+    pub staged_as: Option<(PathBuf, PathBuf)>,
     /// Service-name prefix (`None`: unique per run).
     pub prefix: Option<String>,
     /// Seconds of trajectory after the settle hold.
@@ -199,6 +203,18 @@ pub fn unique_prefix() -> String {
 }
 
 impl SimConfig {
+    /// Where the user will find `path` once a staging directory is
+    /// published ([`Self::staged_as`]).
+    pub fn shown(&self, path: &Path) -> PathBuf {
+        match &self.staged_as {
+            Some((staging, published)) => match path.strip_prefix(staging) {
+                Ok(rel) => published.join(rel),
+                Err(_) => path.to_path_buf(),
+            },
+            None => path.to_path_buf(),
+        }
+    }
+
     /// The defaults of `tendril sim`: the 30 mm circle at 0.2 Hz after a
     /// 2 s settle, 10 s, the firmware's integral correction on (ki 10/s),
     /// 20.5 ms motor-lag lead, the default plant, real-time and pinned.
@@ -212,6 +228,7 @@ impl SimConfig {
             plant_robot: None,
             model,
             out,
+            staged_as: None,
             prefix: None,
             duration_s: 10.0,
             planner: PlannerConfig {
@@ -420,7 +437,7 @@ fn model_file(cfg: &SimConfig, dir: &RunDir) -> Result<(PathBuf, Vec<u8>, ModelU
                     }
                 })?;
             let used = ModelUsed {
-                path: path.clone(),
+                path: cfg.shown(path),
                 built_in: false,
             };
             (path.clone(), bytes, used)
@@ -428,7 +445,7 @@ fn model_file(cfg: &SimConfig, dir: &RunDir) -> Result<(PathBuf, Vec<u8>, ModelU
         ModelSource::BuiltIn => {
             let path = write("default.tnet", BUILT_IN_NET)?;
             let used = ModelUsed {
-                path: cfg.out.join("default.tnet"),
+                path: cfg.shown(&cfg.out.join("default.tnet")),
                 built_in: true,
             };
             (path, BUILT_IN_NET.to_vec(), used)
@@ -447,7 +464,7 @@ fn model_file(cfg: &SimConfig, dir: &RunDir) -> Result<(PathBuf, Vec<u8>, ModelU
                 .map_err(|e| SimError::Config(format!("the quick net: {e}")))?;
             let path = write("quick.tnet", &blob)?;
             let used = ModelUsed {
-                path: cfg.out.join("quick.tnet"),
+                path: cfg.shown(&cfg.out.join("quick.tnet")),
                 built_in: false,
             };
             (path, blob, used)
