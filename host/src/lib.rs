@@ -23,6 +23,7 @@ pub mod numerics;
 pub mod pipeline;
 pub mod plan;
 pub mod plot;
+pub mod progress;
 pub mod reality;
 pub mod robot;
 pub mod robustness;

@@ -97,6 +97,19 @@ pub fn degrees(deg: f64) -> String {
     format!("{}°", number(deg, 3))
 }
 
+/// A value the user gave, echoed in a message: Rust's shortest
+/// round-trip form, in exponent form when that is shorter ("1e300", not
+/// 301 digits).
+pub fn given(v: f64) -> String {
+    let plain = format!("{v}");
+    let exponent = format!("{v:e}");
+    if exponent.len() < plain.len() {
+        exponent
+    } else {
+        plain
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

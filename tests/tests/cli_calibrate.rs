@@ -117,3 +117,200 @@ fn calibrate_names_a_missing_column() {
     );
     assert!(!dir.path().join("c.toml").exists());
 }
+
+/// `rows` synthetic measurements of `robot` (default the seed robot) in
+/// `dir/name`, with `extra` generate flags.
+fn measured(dir: &Path, name: &str, rows: usize, extra: &[&str]) -> String {
+    let path = dir.join(name).to_str().unwrap().to_string();
+    let mut args = vec![
+        "generate",
+        "--quiet",
+        "--robot",
+        "robots/seed-4t.toml",
+        "--out",
+        &path,
+    ];
+    let rows = rows.to_string();
+    args.extend(["--samples", rows.as_str()]);
+    args.extend(extra);
+    ok(&tendril(&args));
+    path
+}
+
+fn calibrate_to(data: &str, out: &Path, extra: &[&str]) -> std::process::Output {
+    let mut args = vec!["calibrate", "--data", data, "--out", out.to_str().unwrap()];
+    args.extend(extra);
+    tendril(&args)
+}
+
+fn report(out: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(out.with_extension("report.json")).unwrap();
+    serde_json::from_str(&text).unwrap()
+}
+
+fn fitted(report: &serde_json::Value, name: &str) -> f64 {
+    let p = (report["parameters"].as_array().unwrap().iter())
+        .find(|p| p["name"] == name)
+        .unwrap_or_else(|| panic!("no {name} in {report}"));
+    p["fitted"].as_f64().unwrap()
+}
+
+#[test]
+fn a_tracker_far_from_the_base_is_fitted_as_a_frame_not_as_a_bent_rod() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = measured(
+        dir.path(),
+        "far.csv",
+        100,
+        &["--noise-mm", "0.05", "--frame-offset-mm", "200,-100,50"],
+    );
+    let out = dir.path().join("cal.toml");
+    let o = calibrate_to(
+        &data,
+        &out,
+        &["--fit", "density,length,base_t", "--positions-only"],
+    );
+    ok(&o);
+    let r = report(&out);
+    for (name, truth) in [("base_tx", 0.2), ("base_ty", -0.1), ("base_tz", 0.05)] {
+        let x = fitted(&r, name);
+        assert!((x - truth).abs() < 1e-3, "{name} {x} (truth {truth})");
+    }
+    assert!((fitted(&r, "length") - 0.4).abs() < 1e-3, "{r}");
+    assert_eq!(r["verdict"]["calibrated"], true, "{}", r["verdict"]);
+    assert!(r["held_out_after"]["rms_m"].as_f64().unwrap() < 0.3e-3);
+}
+
+#[test]
+fn rows_no_fit_can_use_are_refused_and_nothing_is_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = measured(dir.path(), "m.csv", 40, &["--noise-mm", "0.1"]);
+    let text = std::fs::read_to_string(&data).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let (px, t0) = (col("px"), col("t0"));
+    let rewrite = |f: &dyn Fn(usize, &str) -> String| {
+        let mut out = header.join(",") + "\n";
+        for l in text.lines().skip(1) {
+            let cells: Vec<String> = l.split(',').enumerate().map(|(k, c)| f(k, c)).collect();
+            out += &(cells.join(",") + "\n");
+        }
+        out
+    };
+    // Positions in millimetres.
+    let mm = rewrite(&|k, c| {
+        if (px..px + 3).contains(&k) {
+            (c.parse::<f64>().unwrap() * 1e3).to_string()
+        } else {
+            c.to_string()
+        }
+    });
+    // Every row at zero tension.
+    let zero = rewrite(&|k, c| {
+        if (t0..t0 + 4).contains(&k) {
+            "0".into()
+        } else {
+            c.into()
+        }
+    });
+    std::fs::write(dir.path().join("old.toml"), "mine").unwrap();
+    for (name, rows, needle) in [
+        ("mm.csv", mm, "metres"),
+        ("zero.csv", zero, "same tensions"),
+    ] {
+        let path = dir.path().join(name);
+        std::fs::write(&path, rows).unwrap();
+        let o = calibrate_to(path.to_str().unwrap(), &dir.path().join("old.toml"), &[]);
+        assert_eq!(o.status.code(), Some(1), "{name}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(needle), "{name}: {err}");
+        assert_eq!(
+            std::fs::read_to_string(dir.path().join("old.toml")).unwrap(),
+            "mine"
+        );
+        assert!(!dir.path().join("old.report.json").exists());
+    }
+}
+
+#[test]
+fn a_fit_to_mostly_outliers_is_reported_as_no_calibration_and_writes_no_robot_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = measured(
+        dir.path(),
+        "o.csv",
+        60,
+        &["--noise-mm", "0.1", "--outlier-fraction", "0.9"],
+    );
+    let out = dir.path().join("cal.toml");
+    std::fs::write(&out, "previous").unwrap();
+    let o = calibrate_to(
+        &data,
+        &out,
+        &["--fit", "density,base_t", "--positions-only"],
+    );
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("not a calibration"), "{err}");
+    assert_eq!(std::fs::read_to_string(&out).unwrap(), "previous");
+    let r = report(&out);
+    assert_eq!(r["verdict"]["calibrated"], false);
+    let md = std::fs::read_to_string(out.with_extension("report.md")).unwrap();
+    assert!(md.contains("Not a calibration"), "{md}");
+}
+
+#[test]
+fn g_is_fixed_as_unseen_without_torsion_and_no_held_out_rows_show_no_figures() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = measured(dir.path(), "m.csv", 40, &["--noise-mm", "0.05"]);
+    let out = dir.path().join("cal.toml");
+    let o = calibrate_to(
+        &data,
+        &out,
+        &["--fit", "G,base_t", "--positions-only", "--holdout", "0"],
+    );
+    ok(&o);
+    let r = report(&out);
+    let g = (r["parameters"].as_array().unwrap().iter())
+        .find(|p| p["name"] == "G")
+        .unwrap();
+    assert_eq!(g["fixed"], true, "{g}");
+    let why = &r["unidentifiable"][0]["separate_with"];
+    assert!(why.as_str().unwrap().contains("torsion"), "{why}");
+    assert_eq!(r["rows_held_out"], 0);
+    let md = std::fs::read_to_string(out.with_extension("report.md")).unwrap();
+    assert!(md.contains("| held out (0) | calibrated | — |"), "{md}");
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("held-out tip error"));
+}
+
+#[test]
+fn a_plan_too_large_to_measure_and_a_plan_beside_data_are_refused_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = dir.path().join("p.csv");
+    let started = std::time::Instant::now();
+    let o = tendril(&[
+        "calibrate",
+        "--plan",
+        "99999999999",
+        "--out",
+        plan.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("at most 5000 rows"));
+    assert!(started.elapsed() < std::time::Duration::from_secs(10));
+    let o = tendril(&[
+        "calibrate",
+        "--plan",
+        "5",
+        "--data",
+        "x.csv",
+        "--out",
+        plan.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2), "--plan with --data");
+    let data = measured(dir.path(), "m.csv", 20, &[]);
+    let o = calibrate_to(&data, Path::new("-"), &[]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--out -"));
+    assert!(!plan.exists());
+}

@@ -6,14 +6,13 @@
 use std::time::Instant;
 
 use nalgebra::{DMatrix, DVector, UnitQuaternion, Vector3};
-use rand::seq::SliceRandom;
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
 use super::data::Measurements;
+use super::identify::identify;
 use super::params::{bounds, scale, Param, Values};
-use super::report::{DownWeighted, FittedParam, Report, ResidualStats, Unidentified};
+use super::report::{DownWeighted, FittedParam, Report, ResidualStats};
+use super::rows::{check_rows, split};
 use super::CalibError;
 use crate::robot::Robot;
 use crate::statics::{Solution, SolverSettings, Statics};
@@ -207,6 +206,22 @@ impl Problem<'_> {
     }
 }
 
+/// What a fit of `data` will cost, in words, before it starts: the solves
+/// of one Levenberg–Marquardt iteration and a typical fit's dozen, timed
+/// by one solve of the robot on this machine.
+pub fn cost_estimate(robot: &Robot, data: &Measurements, opts: &FitOptions) -> String {
+    let rod = opts.fit.iter().filter(|p| p.moves_rod()).count();
+    let per_iteration = data.len() * (2 * rod + 2);
+    let threads = rayon::current_num_threads().max(1);
+    let seconds = 12.0 * per_iteration as f64 * super::seconds_per_solve(robot) / threads as f64;
+    format!(
+        "fitting {} parameters to {} rows: {per_iteration} statics solves per iteration, about \
+         {seconds:.0} s for a typical dozen iterations on {threads} threads",
+        opts.fit.len(),
+        data.len()
+    )
+}
+
 /// Per-row norms of a row-major residual vector with `d` entries a row.
 fn row_norms(r: &DVector<f64>, d: usize) -> Vec<f64> {
     r.as_slice()
@@ -257,82 +272,6 @@ fn cost(norms: &[f64], w: &[f64]) -> f64 {
     norms.iter().zip(w).map(|(n, w)| w * n * n).sum()
 }
 
-/// The identifiability rule (`docs/design.md` §11): while the least
-/// determined direction v of the scaled parameters has a standard deviation
-/// σ / √λ_min above `fraction`, fix the parameter that weighs most in it
-/// (ties within 30 % by [`Param::fix_priority`]) and look again. Returns
-/// the parameters left free and what was fixed, with its partners.
-fn identify(
-    a: &DMatrix<f64>,
-    params: &[Param],
-    sigma: f64,
-    fraction: f64,
-) -> (Vec<Param>, Vec<Unidentified>) {
-    let mut free: Vec<usize> = (0..params.len()).collect();
-    let mut fixed = Vec::new();
-    while !free.is_empty() {
-        let sub = DMatrix::from_fn(free.len(), free.len(), |i, j| a[(free[i], free[j])]);
-        let eig = sub.symmetric_eigen();
-        let (k, &lmin) = eig
-            .eigenvalues
-            .iter()
-            .enumerate()
-            .min_by(|x, y| x.1.total_cmp(y.1))
-            .expect("non-empty");
-        let std = sigma / lmin.max(0.0).sqrt();
-        if std <= fraction {
-            break;
-        }
-        let v = eig.eigenvectors.column(k);
-        let vmax = v.amax();
-        let pick = (0..free.len())
-            .filter(|&i| v[i].abs() >= 0.7 * vmax)
-            .min_by_key(|&i| (params[free[i]].fix_priority(), free[i]))
-            .expect("the largest component qualifies");
-        let partners: Vec<String> = (0..free.len())
-            .filter(|&i| i != pick && v[i].abs() >= 0.2 * vmax)
-            .map(|i| params[free[i]].to_string())
-            .collect();
-        let p = params[free[pick]];
-        fixed.push(Unidentified {
-            fixed: p.to_string(),
-            confounded_with: partners.clone(),
-            std_fraction: std,
-            separate_with: separating_data(p, &partners),
-        });
-        free.remove(pick);
-    }
-    (free.iter().map(|&i| params[i]).collect(), fixed)
-}
-
-/// What measurement would separate `p` from its partners, in words.
-fn separating_data(p: Param, partners: &[String]) -> String {
-    let with = |s: &str| partners.iter().any(|x| x.starts_with(s));
-    match p {
-        Param::YoungsModulus | Param::TensionScale(_) | Param::Offset(_)
-            if with("offset") || with("tension_scale") || with("E") || with("density") =>
-        {
-            "tendons and weight bend the rod by τ·s·d/(E·I) and ρ·A·g/(E·I): only the ratios \
-             are seen in tip positions. A known tip load (fx,fy,fz columns: a hung weight), \
-             a measured tendon offset or a load-cell-calibrated tension separates them"
-                .into()
-        }
-        Param::ShearModulus => "G shows only in torsion and shear: tip orientations under \
-            helical routing or a known tip moment (mx,my,mz columns) separate it"
-            .into(),
-        Param::Density => "the rod's weight is seen only against its stiffness: a known tip \
-            load, or weighing the rod, separates it"
-            .into(),
-        Param::Angle(_) | Param::BaseRotation(_) => "a common turn of the tendons looks like \
-            a turn of the base about its axis: tip orientations (qw..qz) or rows at zero \
-            tension under gravity along another axis separate them"
-            .into(),
-        _ => "more rows spread over the tension limits (tendril calibrate --plan N) or \
-            orientation columns"
-            .into(),
-    }
-}
-
 /// Fit `opts.fit` of `nominal` to `data` (checked against `nominal` by
 /// [`super::data::parse_measurements`]).
 pub fn calibrate(
@@ -347,24 +286,20 @@ pub fn calibrate(
             opts.holdout_fraction
         )));
     }
-    let mut order: Vec<usize> = (0..data.len()).collect();
-    order.shuffle(&mut ChaCha8Rng::seed_from_u64(opts.seed));
-    let n_held = (data.len() as f64 * opts.holdout_fraction).round() as usize;
-    let mut held: Vec<usize> = order[..n_held].to_vec();
-    let mut rows: Vec<usize> = order[n_held..].to_vec();
-    held.sort_unstable();
-    rows.sort_unstable();
+    check_rows(nominal, data)?;
+    let (rows, held) = split(data, opts.holdout_fraction, opts.seed);
     if rows.len() < opts.fit.len() {
         return Err(CalibError::TooFewRows {
             rows: rows.len(),
             params: opts.fit.len(),
         });
     }
+    let use_orientation = opts.use_orientation && data.quaternions.is_some();
     let problem = Problem {
         nominal,
         nominal_values: Values::of(nominal),
         data,
-        use_orientation: opts.use_orientation && data.quaternions.is_some(),
+        use_orientation,
         orientation_m_per_rad: opts.orientation_m_per_rad,
         settings: opts.settings,
     };
@@ -382,12 +317,26 @@ pub fn calibrate(
     let ones = vec![1.0; rows.len()];
     let r0 = problem.residuals(&v, &rows, &sols);
     let (a0, _) = normal_equations(&jac0, &r0, &ones, d);
+    let any_moment = data.tip_moments.iter().any(|m| m.iter().any(|x| *x != 0.0));
+    let g_unseen =
+        super::identify::shear_modulus_unseen(nominal, &opts.fit, use_orientation, any_moment);
+    let candidates: Vec<Param> = match &g_unseen {
+        Some(_) => (opts.fit.iter().copied())
+            .filter(|p| *p != Param::ShearModulus)
+            .collect(),
+        None => opts.fit.clone(),
+    };
+    let keep: Vec<usize> = (0..opts.fit.len())
+        .filter(|&j| candidates.contains(&opts.fit[j]))
+        .collect();
+    let a0 = DMatrix::from_fn(keep.len(), keep.len(), |i, j| a0[(keep[i], keep[j])]);
     let (mut free, mut unidentified) = identify(
         &a0,
-        &opts.fit,
+        &candidates,
         opts.noise_floor_m,
         opts.identifiable_fraction,
     );
+    unidentified.extend(g_unseen);
 
     let mut iterations = 0;
     let mut weights;
@@ -493,7 +442,21 @@ pub fn calibrate(
         .collect();
     downweighted.sort_by_key(|x| x.line);
     let robot = v.robot(nominal);
-    let report = Report {
+    let at_bound: Vec<String> = (free.iter())
+        .filter(|&&p| {
+            let (lo, hi) = bounds(p, nv);
+            let tol = 1e-9 * scale(p, nv);
+            v.get(p) <= lo + tol || v.get(p) >= hi - tol
+        })
+        .map(|p| p.to_string())
+        .collect();
+    let measured_tips: Vec<Vector3<f64>> =
+        data.positions.iter().map(|&x| Vector3::from(x)).collect();
+    let evidence = super::verdict::Evidence {
+        at_bound,
+        median_spread_m: super::rows::median_spread_m(&measured_tips),
+    };
+    let mut report = Report {
         robot: nominal.name.clone(),
         rows_fit: rows.len(),
         rows_held_out: held.len(),
@@ -513,7 +476,9 @@ pub fn calibrate(
         iterations,
         solves,
         seconds: started.elapsed().as_secs_f64(),
+        verdict: Default::default(),
     };
+    report.verdict = super::verdict::judge(&report, &evidence);
     let mut held_out = vec![false; data.len()];
     for &i in &held {
         held_out[i] = true;

@@ -7,10 +7,13 @@
 
 pub mod data;
 pub mod fit;
+pub mod identify;
 pub mod noise;
 pub mod params;
 pub mod plan;
 pub mod report;
+pub mod rows;
+pub mod verdict;
 
 #[cfg(test)]
 mod tests;
@@ -21,6 +24,23 @@ pub use params::{parse_fit_list, robot_toml, Param, Values};
 pub use report::Report;
 
 use crate::statics::SolveError;
+
+/// Seconds of one statics solve of `robot` on this machine (the median of
+/// five cold solves at the lower tension limits): what the cost estimates
+/// of a fit and a plan multiply.
+pub fn seconds_per_solve(robot: &crate::robot::Robot) -> f64 {
+    let s = crate::statics::Statics::new(robot, crate::statics::SolverSettings::default());
+    let tau = robot.min_tensions();
+    let mut t: Vec<f64> = (0..5)
+        .map(|_| {
+            let started = std::time::Instant::now();
+            let _ = s.solve(&tau, None);
+            started.elapsed().as_secs_f64()
+        })
+        .collect();
+    t.sort_by(f64::total_cmp);
+    t[2]
+}
 
 /// The parameters `tendril calibrate` fits when `--fit` is not given.
 pub const DEFAULT_FIT: &str = "E,density,length,offsets,angles,base";

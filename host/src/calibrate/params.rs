@@ -17,8 +17,12 @@ const FACTOR_BOUND: f64 = 5.0;
 const LENGTH_BOUND: f64 = 0.5;
 /// A tendon's angle stays within ±30° of the nominal.
 const ANGLE_BOUND_RAD: f64 = PI / 6.0;
-/// The tracker's frame is within 50 mm of the robot's base.
-const BASE_TRANSLATION_BOUND_M: f64 = 0.05;
+/// The robot's base is within 5 m of the tracker's origin: a tracker's
+/// working volume is a metre or two. (A 50 mm bound made a tracker 200 mm
+/// away look like a bent rod: E at a third of its value, issue 47; the
+/// translation enters the tips linearly, so Levenberg–Marquardt reaches it
+/// from zero once nothing stops it.)
+const BASE_TRANSLATION_BOUND_M: f64 = 5.0;
 /// ... and turned by at most 0.2 rad (≈ 11°): a small rotation.
 const BASE_ROTATION_BOUND_RAD: f64 = 0.2;
 
@@ -297,7 +301,7 @@ pub fn scale(p: Param, nominal: &Values) -> f64 {
 /// The interval a fitted `p` must stay in, from the nominal values: the
 /// moduli, offsets and density within a factor of 5 (density ≥ 0), the
 /// length within ±50 %, offsets below half the length, angles within ±30°,
-/// tension scales in [0.5, 2], the base within 50 mm and 0.2 rad.
+/// tension scales in [0.5, 2], the base within 5 m and 0.2 rad.
 pub fn bounds(p: Param, nominal: &Values) -> (f64, f64) {
     let x = nominal.get(p);
     match p {

@@ -12,6 +12,28 @@ use crate::statics::{SolverSettings, Statics};
 
 /// Candidates drawn per planned row.
 pub const CANDIDATES_PER_ROW: usize = 8;
+/// The largest plan: rows someone measures by hand. (The work grows with
+/// its square: 5,000 rows are 40,000 candidates, each compared at every
+/// one of the 5,000 steps.)
+pub const MAX_PLAN_ROWS: usize = 5000;
+
+/// The parameters of `params` a plan can serve: G is left out (with a
+/// warning) when it cannot show in tip positions — straight tendons and
+/// no tip moment — since the planner judges rows by positions alone.
+pub fn plannable(robot: &Robot, params: &[Param]) -> Vec<Param> {
+    if super::identify::shear_modulus_unseen(robot, params, false, false).is_some() {
+        log::warn!(
+            "--plan: G is left out of the plan: with straight tendons and no tip moment it \
+             shows only in tip orientations, which the planner does not weigh"
+        );
+        return params
+            .iter()
+            .copied()
+            .filter(|p| *p != Param::ShearModulus)
+            .collect();
+    }
+    params.to_vec()
+}
 
 /// `n` tension sets for `robot` that make a fit of `params` (from tip
 /// positions) well conditioned: from `n × 8` (at least 200) candidates
@@ -29,9 +51,27 @@ pub fn plan(
     if n == 0 {
         return Err(CalibError::Options("--plan needs at least one row".into()));
     }
+    if n > MAX_PLAN_ROWS {
+        return Err(CalibError::Options(format!(
+            "--plan {n}: at most {MAX_PLAN_ROWS} rows (a plan is measured by hand; for more \
+             rows, measure tension sets spread at random: tendril generate --sampler uniform)"
+        )));
+    }
     let nv = Values::of(robot);
     let rod: Vec<Param> = params.iter().copied().filter(Param::moves_rod).collect();
     let count = (n * CANDIDATES_PER_ROW).max(200);
+    let solves = count * 2 * rod.len();
+    let threads = rayon::current_num_threads().max(1);
+    log::info!(
+        "planning {n} rows from {count} candidates: {solves} statics solves, about {:.0} s on \
+         {threads} threads",
+        solves as f64 * super::seconds_per_solve(robot) / threads as f64
+    );
+    let bar = crate::progress::bar(
+        count as u64 + n as u64,
+        true,
+        "{spinner} planning [{bar:30}] {pos}/{len} eta {eta}",
+    );
     let mut candidates =
         Sampler::Uniform.draw_between(count, &robot.min_tensions(), &robot.max_tensions(), seed);
     candidates.push(robot.min_tensions());
@@ -56,6 +96,10 @@ pub fn plan(
                 let d = (tip(&plus, tau)? - tip(&minus, tau)?) / (2.0 * super::FD_STEP);
                 b.set_column(j, &d);
             }
+            bar.inc(1);
+            if crate::interrupt::stop_requested() {
+                return Err(CalibError::Options("interrupted".into()));
+            }
             Ok(b)
         })
         .collect::<Result<_, CalibError>>()?;
@@ -79,8 +123,10 @@ pub fn plan(
             .map(|(c, _)| c)
             .expect("a candidate is left");
         taken[best] = true;
+        bar.inc(1);
         info += blocks[best].transpose() * &blocks[best];
         chosen.push(candidates[best].clone());
     }
+    bar.finish_and_clear();
     Ok(chosen)
 }

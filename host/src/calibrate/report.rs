@@ -47,7 +47,8 @@ pub struct DownWeighted {
     pub weight: f64,
 }
 
-/// Tip position errors ‖p_measured − p_model‖ over a set of rows.
+/// Tip position errors ‖p_measured − p_model‖ over a set of rows (all
+/// zero for no rows: check `rows` before reading them).
 #[derive(Clone, Debug, Serialize)]
 pub struct ResidualStats {
     /// Rows.
@@ -124,6 +125,8 @@ pub struct Report {
     pub solves: usize,
     /// Wall time, s.
     pub seconds: f64,
+    /// Whether the fit is a calibration, and why not.
+    pub verdict: super::verdict::Verdict,
 }
 
 impl Report {
@@ -182,6 +185,18 @@ impl Report {
         let mut s = String::new();
         let mm = |x: f64| format!("{:.3}", x * 1e3);
         let _ = writeln!(s, "# Calibration of {}\n", self.robot);
+        if !self.verdict.calibrated {
+            let _ = writeln!(
+                s,
+                "**Not a calibration: no robot file was written.**\n\n{}\n",
+                self.verdict
+                    .problems
+                    .iter()
+                    .map(|p| format!("- {p}"))
+                    .collect::<Vec<_>>()
+                    .join("\n")
+            );
+        }
         let _ = writeln!(
             s,
             "{} fit rows, {} held out; orientation {}; {} LM iterations, {} solves, {:.2} s; \
@@ -218,16 +233,19 @@ impl Report {
             for u in &self.unidentifiable {
                 let _ = writeln!(
                     s,
-                    "- **{}** moves with {} (σ of that direction {:.2} of the scales): fixed at \
-                     the nominal value; those parameters are effective values relative to it. \
-                     To separate them: {}.",
+                    "- **{}** moves with {} ({}): fixed at the nominal value; those parameters \
+                     are effective values relative to it. To separate them: {}.",
                     u.fixed,
                     if u.confounded_with.is_empty() {
                         "nothing the tip sees".to_string()
                     } else {
                         u.confounded_with.join(", ")
                     },
-                    u.std_fraction,
+                    if u.std_fraction.is_finite() {
+                        format!("σ of that direction {:.2} of the scales", u.std_fraction)
+                    } else {
+                        "unseen in these rows whatever their number".to_string()
+                    },
                     u.separate_with
                 );
             }
@@ -250,6 +268,11 @@ impl Report {
             ("held out", "nominal", &self.held_out_before),
             ("held out", "calibrated", &self.held_out_after),
         ] {
+            if st.rows == 0 {
+                // No rows, no figure: a zero would read as a perfect fit.
+                let _ = writeln!(s, "| {rows} (0) | {model} | — | — | — |");
+                continue;
+            }
             let _ = writeln!(
                 s,
                 "| {rows} ({}) | {model} | {} | {} | {} |",

@@ -18,7 +18,12 @@ pub struct CalibrateArgs {
     #[command(flatten)]
     pub robot: RobotArg,
     /// Measured CSV: t0..t{n-1} [N], px,py,pz [m], optional qw..qz, fx,fy,fz, mx,my,mz.
-    #[arg(long, value_name = "CSV", required_unless_present = "plan")]
+    #[arg(
+        long,
+        value_name = "CSV",
+        required_unless_present = "plan",
+        conflicts_with = "plan"
+    )]
     pub data: Option<PathBuf>,
     /// Parameters to fit: E, G, density, length, offsets, angles, tension_scale, base
     /// (base_t, base_r; offset2 etc. for one tendon).
@@ -28,7 +33,8 @@ pub struct CalibrateArgs {
     /// report goes beside it as <stem>.report.json, .report.md and .png.
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
-    /// Propose N tension sets (greedy D-optimal) instead of fitting.
+    /// Propose N tension sets (greedy D-optimal) instead of fitting; at most
+    /// 5,000 (rows someone measures by hand). `--out -` prints them.
     #[arg(long, value_name = "N")]
     pub plan: Option<usize>,
     /// Fraction of rows held out of the fit to judge it, in [0, 0.5].
@@ -40,10 +46,15 @@ pub struct CalibrateArgs {
     /// Ignore the orientation columns even when present.
     #[arg(long)]
     pub positions_only: bool,
-    /// Weight of an orientation error against a position error, mm per degree.
+    /// Weight of an orientation error against a position error, mm per
+    /// degree, in [0.001, 1000].
     #[arg(long, default_value_t = 0.1 * 1e3 * std::f64::consts::PI / 180.0)]
     pub mm_per_deg: f64,
 }
+
+/// The weights of an orientation error `--mm-per-deg` accepts: beyond
+/// them one kind of error silences the other.
+const MM_PER_DEG: std::ops::RangeInclusive<f64> = 1e-3..=1e3;
 
 /// Run `tendril calibrate`.
 pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
@@ -52,6 +63,7 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
         calibrate::parse_fit_list(&args.fit, robot.n_tendons()).map_err(anyhow::Error::msg)?;
     if let Some(n) = args.plan {
         crate::fsutil::check_distinct(&[("--robot", &args.robot.robot)], &[("--out", &args.out)])?;
+        let fit = calibrate::plan::plannable(&robot, &fit);
         let rows = calibrate::plan::plan(&robot, &fit, n, args.seed)?;
         let header: Vec<String> = (0..robot.n_tendons()).map(|i| format!("t{i}")).collect();
         let mut text = header.join(",") + "\n";
@@ -72,6 +84,19 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
         .data
         .clone()
         .expect("clap requires --data without --plan");
+    super::common::refuse_stdout(
+        "--out",
+        &args.out,
+        "the calibrated robot file has its report and figure beside it",
+    )?;
+    if !MM_PER_DEG.contains(&args.mm_per_deg) {
+        anyhow::bail!(
+            "--mm-per-deg must be in [{}, {}] mm per degree, got {}",
+            MM_PER_DEG.start(),
+            MM_PER_DEG.end(),
+            crate::units::given(args.mm_per_deg)
+        );
+    }
     let stem = args.out.with_extension("");
     let side = |ext: &str| PathBuf::from(format!("{}.{ext}", stem.display()));
     let (json, md, png) = (side("report.json"), side("report.md"), side("png"));
@@ -89,20 +114,18 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
     opts.holdout_fraction = args.holdout;
     opts.seed = args.seed;
     opts.use_orientation = !args.positions_only;
-    if !(args.mm_per_deg.is_finite() && args.mm_per_deg > 0.0) {
-        anyhow::bail!(
-            "--mm-per-deg must be a positive number, got {}",
-            args.mm_per_deg
-        );
-    }
     opts.orientation_m_per_rad = args.mm_per_deg * 1e-3 * 180.0 / std::f64::consts::PI;
+    log::info!("{}", calibrate::fit::cost_estimate(&robot, &data, &opts));
     let c = calibrate::calibrate(&robot, &data, &opts)?;
-    // The robot file must read back as a valid robot before it is written.
-    let text = c.robot_file();
-    crate::robot::Robot::from_toml(&text, &args.out)
-        .context("the calibrated robot does not pass the robot-file checks")?;
-    crate::fsutil::write_atomic(&args.out, text.as_bytes())
-        .with_context(|| format!("{}", args.out.display()))?;
+    let calibrated = c.report.verdict.calibrated;
+    if calibrated {
+        // The robot file must read back as a valid robot before it is written.
+        let text = c.robot_file();
+        crate::robot::Robot::from_toml(&text, &args.out)
+            .context("the calibrated robot does not pass the robot-file checks")?;
+        crate::fsutil::write_atomic(&args.out, text.as_bytes())
+            .with_context(|| format!("{}", args.out.display()))?;
+    }
     crate::fsutil::write_atomic(&json, c.report.json().as_bytes())
         .with_context(|| format!("{}", json.display()))?;
     crate::fsutil::write_atomic(&md, c.report.markdown().as_bytes())
@@ -110,12 +133,28 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
     crate::plot::calibration::draw_calibration(&c, &png)
         .map_err(|e| anyhow::anyhow!("{}: {e}", png.display()))?;
     let r = &c.report;
+    if !calibrated {
+        anyhow::bail!(
+            "the fit is not a calibration, so no robot file was written ({} left as it was); \
+             the report says why ({}): {}",
+            args.out.display(),
+            md.display(),
+            r.verdict.problems.join("; ")
+        );
+    }
+    let held = if r.rows_held_out == 0 {
+        "no rows held out".to_string()
+    } else {
+        format!(
+            "held-out tip error rms {:.3} mm -> {:.3} mm",
+            r.held_out_before.rms_m * 1e3,
+            r.held_out_after.rms_m * 1e3
+        )
+    };
     log::info!(
-        "calibrated {} in {:.2} s: held-out tip error rms {:.3} mm -> {:.3} mm (fit rows {:.3} -> {:.3} mm); {} fixed as unidentifiable; {} rows down-weighted; wrote {}",
+        "calibrated {} in {:.2} s: {held} (fit rows {:.3} -> {:.3} mm); {} fixed as unidentifiable; {} rows down-weighted; wrote {}",
         r.robot,
         r.seconds,
-        r.held_out_before.rms_m * 1e3,
-        r.held_out_after.rms_m * 1e3,
         r.fit_before.rms_m * 1e3,
         r.fit_after.rms_m * 1e3,
         r.unidentifiable.len(),

@@ -128,20 +128,27 @@ fn rows(n: usize) -> String {
 fn tracker_noise(
     args: &GenerateArgs,
 ) -> anyhow::Result<Option<crate::calibrate::noise::TrackerNoise>> {
-    for (flag, x) in [
-        ("--noise-mm", args.noise_mm),
-        ("--noise-deg", args.noise_deg),
+    use crate::units::given;
+    // Synthetic trackers within what a lab meets (a tracker 10 m from the
+    // base, a metre of jitter are already absurd): beyond, the numbers
+    // only overflow.
+    for (flag, x, max) in [
+        ("--noise-mm", args.noise_mm, 1000.0),
+        ("--noise-deg", args.noise_deg, 180.0),
+        ("--outlier-mm", args.outlier_mm, 10_000.0),
     ] {
-        if !(x.is_finite() && x >= 0.0) {
-            anyhow::bail!("{flag} must be a finite number >= 0, got {x}");
+        if !(x.is_finite() && (0.0..=max).contains(&x)) {
+            anyhow::bail!("{flag} must be in [0, {max}], got {}", given(x));
         }
     }
     let offset = match &args.frame_offset_mm {
         None => [0.0; 3],
         Some(text) => {
             let v = super::common::parse_list(text, "--frame-offset-mm")?;
-            if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
-                anyhow::bail!("--frame-offset-mm takes three finite numbers x,y,z, got {text:?}");
+            if v.len() != 3 || v.iter().any(|x| !(x.is_finite() && x.abs() <= 10_000.0)) {
+                anyhow::bail!(
+                    "--frame-offset-mm takes three numbers x,y,z within ±10000 mm, got {text:?}"
+                );
             }
             [v[0] * 1e-3, v[1] * 1e-3, v[2] * 1e-3]
         }
@@ -149,13 +156,7 @@ fn tracker_noise(
     if !(0.0..=1.0).contains(&args.outlier_fraction) {
         anyhow::bail!(
             "--outlier-fraction must be in [0, 1], got {}",
-            args.outlier_fraction
-        );
-    }
-    if !(args.outlier_mm.is_finite() && args.outlier_mm >= 0.0) {
-        anyhow::bail!(
-            "--outlier-mm must be a finite number >= 0, got {}",
-            args.outlier_mm
+            given(args.outlier_fraction)
         );
     }
     let outliers = args.outlier_fraction > 0.0 && args.outlier_mm > 0.0;

@@ -4,7 +4,6 @@
 use std::path::Path;
 use std::time::Instant;
 
-use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::DMatrix;
 
 use super::{CompareError, CompareOptions, Comparison, Entry};
@@ -213,15 +212,10 @@ pub fn compare(
     let fit_poses = p.x_range.denormalise(&p.train_x);
     let fit_tensions = truth.y_range.denormalise(&truth.train_y);
     let task_idx = subsample(p.train_x.nrows(), opts.train_task_rows, opts.seed);
-    let bar = if opts.progress && log::log_enabled!(log::Level::Info) {
-        ProgressBar::new(learners.len() as u64)
-    } else {
-        ProgressBar::hidden()
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} learners, {elapsed} {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
+    let bar = crate::progress::bar(
+        learners.len() as u64,
+        opts.progress,
+        "{prefix} [{bar:30}] {pos}/{len} learners, {elapsed} {msg}",
     );
     bar.set_prefix("compare");
     let mut entries = Vec::new();

@@ -13,7 +13,7 @@
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::ProgressBar;
 use rayon::prelude::*;
 
 use super::io::ColumnRange;
@@ -331,18 +331,11 @@ where
 
 /// A progress bar on stderr for `len` solves, or a hidden one.
 pub fn solve_bar(len: usize, visible: bool) -> ProgressBar {
-    if !visible {
-        return ProgressBar::hidden();
-    }
-    let b = ProgressBar::new(len as u64);
-    b.set_style(
-        ProgressStyle::with_template(
-            "{spinner} solving statics [{bar:30}] {pos}/{len} {per_sec} eta {eta}",
-        )
-        .unwrap_or_else(|_| ProgressStyle::default_bar())
-        .progress_chars("=> "),
-    );
-    b
+    crate::progress::bar(
+        len as u64,
+        visible,
+        "{spinner} solving statics [{bar:30}] {pos}/{len} {per_sec} eta {eta}",
+    )
 }
 
 /// Per-column value ranges, for the sidecar, from the minima `lo` and maxima

@@ -5,7 +5,6 @@
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::Vector3;
 
 use super::{Damping, Dynamics, DynamicsError, DynamicsSettings};
@@ -314,15 +313,10 @@ pub fn run(job: &OfflineRun, stop: &AtomicBool) -> Result<PathBuf, OfflineError>
         }
         _ => {}
     }
-    let bar = if job.progress {
-        ProgressBar::new(steps)
-    } else {
-        ProgressBar::hidden()
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} steps, {elapsed} {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
+    let bar = crate::progress::bar(
+        steps,
+        job.progress,
+        "{prefix} [{bar:30}] {pos}/{len} steps, {elapsed} {msg}",
     );
     bar.set_prefix("dynamics");
     let started = std::time::Instant::now();

@@ -8,7 +8,7 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use indicatif::ProgressBar;
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
@@ -346,18 +346,7 @@ pub fn train_with_stop(
 /// A bar of `len` on stderr in `template`, when the options ask for
 /// progress and info logging is on; else hidden.
 fn progress_bar(opts: &CascorOptions, len: usize, template: &str) -> ProgressBar {
-    let bar = ProgressBar::with_draw_target(
-        Some(len as u64),
-        if opts.progress && log::log_enabled!(log::Level::Info) {
-            ProgressDrawTarget::stderr()
-        } else {
-            ProgressDrawTarget::hidden()
-        },
-    );
-    bar.set_style(
-        ProgressStyle::with_template(template).unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    bar
+    crate::progress::bar(len as u64, opts.progress, template)
 }
 
 /// Polish `net` (centred inputs) on the training rows with a progress bar.
