@@ -338,6 +338,23 @@ fn impossible_durations_are_rejected_before_anything_starts() {
             "--duration {bad} started a run"
         );
     }
+    // Faults the run would never reach (it ends at 2 s settle + 3 s).
+    for bad in [
+        &["--inject-nan-at", "100"][..],
+        &["--kill-plant-at", "50"],
+        &["--kill-plant-at", "1", "--restart-plant-after", "100"],
+        &["--stuck", "1@30"],
+    ] {
+        let mut args = vec!["--model", DEFAULT_NET, "--duration", "3"];
+        args.extend(bad);
+        let o = run_sim(&out, &args);
+        assert!(!o.status.success(), "{bad:?} accepted");
+        assert!(
+            stderr(&o).contains("would never happen"),
+            "{bad:?}: {}",
+            stderr(&o)
+        );
+    }
     assert!(!out.exists(), "a rejected run created its output directory");
 }
 

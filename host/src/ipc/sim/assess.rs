@@ -81,6 +81,88 @@ impl Bound {
     }
 }
 
+/// Real-time bounds of a controller run, beyond what the machine took
+/// from it (hypervisor steal on its CPU, and the periods it spent runnable
+/// without a CPU): at most [`MAX_SKIPPED_FRACTION`] of its periods
+/// skipped (the hardware-in-the-loop tests' bound), at most
+/// [`MAX_OVERRUN_FRACTION`] overrun, no stall longer than
+/// [`MAX_STALL_PERIODS`].
+pub const MAX_SKIPPED_FRACTION: f64 = 0.02;
+/// See [`MAX_SKIPPED_FRACTION`].
+pub const MAX_OVERRUN_FRACTION: f64 = 0.05;
+/// See [`MAX_SKIPPED_FRACTION`]: 50 ms without a command at 1 kHz, two
+/// and a half motor time constants.
+pub const MAX_STALL_PERIODS: u64 = 50;
+
+/// The ways the controller missed real time (see [`MAX_SKIPPED_FRACTION`]).
+fn real_time_problems(c: &ControllerStats, rate_hz: f64, steal_ms: Option<u64>) -> Vec<String> {
+    let period_ms = 1e3 / rate_hz.max(1.0);
+    let stolen = steal_ms.map_or(0.0, |ms| ms as f64 / period_ms);
+    let excused = stolen + c.skipped_waiting_for_cpu as f64;
+    let took = format!(
+        "the machine took {stolen:.0} periods (hypervisor) and {} (waiting for a CPU)",
+        c.skipped_waiting_for_cpu
+    );
+    let cycles = c.cycles as f64;
+    let mut out = Vec::new();
+    if c.skipped as f64 > MAX_SKIPPED_FRACTION * cycles + excused {
+        out.push(format!(
+            "real time missed: the controller skipped {} of {} periods in {} stalls (bound 2 %); \
+             {took}",
+            c.skipped, c.cycles, c.stalls
+        ));
+    }
+    if c.overruns as f64 > MAX_OVERRUN_FRACTION * cycles + excused {
+        out.push(format!(
+            "real time missed: {} of {} periods overran (bound 5 %); {took}",
+            c.overruns, c.cycles
+        ));
+    }
+    if c.longest_stall_periods > MAX_STALL_PERIODS && (c.longest_stall_periods as f64) > excused {
+        out.push(format!(
+            "real time missed: the controller stalled for {} periods at once (bound \
+             {MAX_STALL_PERIODS}); {took}",
+            c.longest_stall_periods
+        ));
+    }
+    out
+}
+
+#[cfg(test)]
+mod real_time_tests {
+    use super::*;
+
+    fn stats(cycles: u64, skipped: u64, overruns: u64, longest: u64) -> ControllerStats {
+        ControllerStats {
+            cycles,
+            skipped,
+            overruns,
+            stalls: 3,
+            longest_stall_periods: longest,
+            ..ControllerStats::default()
+        }
+    }
+
+    #[test]
+    fn misses_beyond_the_bounds_make_problems_unless_the_machine_took_them() {
+        // The careless user's run: 567 overruns, 115 skipped, a 53-period stall.
+        let c = stats(7000, 115, 567, 53);
+        let found = real_time_problems(&c, 1000.0, Some(0));
+        assert_eq!(found.len(), 2, "{found:?}");
+        assert!(found
+            .iter()
+            .any(|p| p.contains("567 of 7000 periods overran")));
+        assert!(found.iter().any(|p| p.contains("53 periods at once")));
+        // The same, with 600 ms stolen by the hypervisor: the machine's.
+        assert!(real_time_problems(&c, 1000.0, Some(600)).is_empty());
+        // Skipping 3 % of the periods.
+        let skipped = real_time_problems(&stats(7000, 210, 10, 5), 1000.0, None);
+        assert_eq!(skipped.len(), 1, "{skipped:?}");
+        assert!(skipped[0].contains("skipped 210 of 7000"));
+        assert!(real_time_problems(&stats(7000, 100, 10, 5), 1000.0, None).is_empty());
+    }
+}
+
 /// The report of a finished run.
 #[allow(clippy::too_many_arguments)]
 pub fn build_report(
@@ -91,6 +173,7 @@ pub fn build_report(
     events: &[Event],
     prefix: &str,
     model: ModelUsed,
+    steal_ms: Option<u64>,
 ) -> Result<SimReport, SimError> {
     let planners = children.started(Role::Planner);
     let plants = children.started(Role::Plant);
@@ -168,7 +251,17 @@ pub fn build_report(
             oscillation.windows
         ));
     }
+    let growth = oscillation::growth(&samples);
     let bound = Bound::of(cfg, events);
+    if let (false, Some(g)) = (matches!(bound, Bound::Waived(_)), &growth) {
+        if g.growing {
+            problems.push(format!(
+                "the tracking error grows over the run ({:.3} mm RMS in its first third, {:.3} mm \
+                 in its last): the loop drifts away or swings slower than the tone test sees",
+                g.first_third_rms_mm, g.last_third_rms_mm
+            ));
+        }
+    }
     match bound {
         Bound::Rms => {
             if let Some(rms) = track.rms.filter(|&rms| rms > cfg.max_rms_mm) {
@@ -195,8 +288,19 @@ pub fn build_report(
         }
         Bound::Waived(_) => {}
     }
-    if controller.is_none() {
-        problems.push("the controller wrote no statistics".into());
+    match controller.as_ref() {
+        None => problems.push("the controller wrote no statistics".into()),
+        Some(c) => problems.extend(real_time_problems(c, cfg.controller.rate_hz, steal_ms)),
+    }
+    let dropped: u64 = (plant.generations.iter())
+        .filter_map(|g| g.runlog.as_ref())
+        .map(|r| r.dropped)
+        .sum();
+    if dropped > 0 {
+        problems.push(format!(
+            "the run log dropped {dropped} records (its writer fell behind): run.mcap is \
+             incomplete (fewer --scene-hz or --backbone-points)"
+        ));
     }
     if let Some(link) = controller.as_ref().and_then(|c| c.link.as_ref()) {
         problems.extend(link_problems(link));
@@ -263,6 +367,8 @@ pub fn build_report(
         max_rms_applied: bound == Bound::Rms,
         max_rms_waived_because: bound.rms_waived_because(),
         oscillation,
+        growth,
+        controller_cpu_steal_ms: steal_ms,
         steady_state: steady,
         controller,
         ipc_latency_us,

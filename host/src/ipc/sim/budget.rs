@@ -21,6 +21,15 @@ use super::{SimConfig, SimError};
 const ROW_BASE_BYTES: f64 = 70.0;
 /// Bytes per tendon in one log row (commanded and measured tensions).
 const ROW_BYTES_PER_TENDON: f64 = 40.0;
+/// Bytes per second of a run log (`run.mcap`) apart from its scenes: the
+/// 1 kHz tensions, tracking and status channels, zstd-compressed,
+/// measured: 511 kB for a 4.5 s run with one two-point scene a second.
+const RUN_LOG_BASE_BYTES_PER_S: f64 = 115e3;
+/// Bytes per scene point (the backbone and each tendon's line), measured
+/// over 4.5 s runs of the default robot: 25.5 at 30 scenes/s of 41
+/// points, 22.7 at 100 × 200, 21.5 at 1000 × 1000 (the largest that
+/// `--scene-hz` and `--backbone-points` allow: 108 MB/s).
+const RUN_LOG_BYTES_PER_SCENE_POINT: f64 = 26.0;
 /// Default cap on a run's logs, GB (≈ 45 min at 1 kHz with 4 tendons).
 pub const DEFAULT_MAX_LOG_GB: f64 = 2.0;
 
@@ -36,10 +45,16 @@ pub struct Cost {
 
 /// The cost of `cfg` for a robot with `tendons` tendons: one row per
 /// planner setpoint, per controller period and per plant step (the plant
-/// steps at the command rate).
+/// steps at the command rate), and the run log with its scenes.
 pub fn estimate(cfg: &SimConfig, tendons: usize) -> Cost {
     let rows_per_s = cfg.planner.rate_hz + 2.0 * cfg.controller.rate_hz;
-    let bytes_per_s = rows_per_s * (ROW_BASE_BYTES + ROW_BYTES_PER_TENDON * tendons as f64);
+    let mut bytes_per_s = rows_per_s * (ROW_BASE_BYTES + ROW_BYTES_PER_TENDON * tendons as f64);
+    let runlog = &cfg.plant.runlog;
+    if runlog.mcap.is_some() {
+        let points = runlog.backbone_points as f64 * (1 + tendons) as f64;
+        bytes_per_s +=
+            RUN_LOG_BASE_BYTES_PER_S + RUN_LOG_BYTES_PER_SCENE_POINT * runlog.scene_hz * points;
+    }
     Cost {
         bytes_per_s,
         log_bytes: bytes_per_s * (cfg.planner.settle_s + cfg.duration_s),
@@ -167,5 +182,32 @@ mod tests {
             err.contains("≈ 8.3 MB") && err.contains("cap is 0.0 MB"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn the_run_log_and_its_scenes_are_costed_as_measured() {
+        let mut c = cfg(4.0);
+        c.planner.settle_s = 0.5;
+        let csv_only = estimate(&c, 4).bytes_per_s;
+        c.plant.runlog.mcap = Some("run.mcap".into());
+        // Measured run.mcap sizes over 4.5 s (module constants' sources).
+        for (scene_hz, points, measured_bytes) in [
+            (30.0, 41, 1_217_636.0),
+            (100.0, 200, 10_719_191.0),
+            (1000.0, 1000, 484_949_520.0),
+        ] {
+            c.plant.runlog.scene_hz = scene_hz;
+            c.plant.runlog.backbone_points = points;
+            let log = (estimate(&c, 4).bytes_per_s - csv_only) * 4.5;
+            let ratio = log / measured_bytes;
+            assert!(
+                (0.9..1.4).contains(&ratio),
+                "{scene_hz} Hz × {points}: {ratio}"
+            );
+        }
+        // The hostile case: every scene as dense as allowed, for 2000 s.
+        c.duration_s = 2000.0;
+        let err = check(&c, 4, Some(u64::MAX)).unwrap_err().to_string();
+        assert!(err.contains("GB"), "{err}");
     }
 }

@@ -92,6 +92,46 @@ impl SimFaults {
         Ok(())
     }
 
+    /// Every scheduled time, with the flag that set it: a restart at its
+    /// kill's time plus its delay.
+    pub fn scheduled(&self) -> Vec<(&'static str, f64)> {
+        let mut out = Vec::new();
+        for (kill, restart, k, r) in [
+            (
+                self.kill_planner_at,
+                self.restart_planner_after,
+                "kill-planner-at",
+                "restart-planner-after",
+            ),
+            (
+                self.kill_plant_at,
+                self.restart_plant_after,
+                "kill-plant-at",
+                "restart-plant-after",
+            ),
+            (
+                self.cut_link_at,
+                self.restore_link_after,
+                "cut-link-at",
+                "restore-link-after",
+            ),
+        ] {
+            if let Some(t) = kill {
+                out.push((k, t));
+                if let Some(d) = restart {
+                    out.push((r, t + d));
+                }
+            }
+        }
+        out.extend(
+            self.corrupt_weights_at
+                .iter()
+                .map(|&t| ("corrupt-weights-at", t)),
+        );
+        out.extend(self.swap_weights_at.iter().map(|&t| ("swap-weights-at", t)));
+        out
+    }
+
     /// The actions in time order, those before `end` only.
     pub fn script(&self, end: f64) -> Vec<(f64, Action)> {
         let mut plan: Vec<(f64, Action)> = Vec::new();

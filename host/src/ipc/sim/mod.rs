@@ -316,7 +316,39 @@ impl SimConfig {
                 "--cut-link-at needs the chip in the loop (--controller mcu)".into(),
             ));
         }
-        self.faults.validate()
+        self.faults.validate()?;
+        self.check_schedule_within_the_run()
+    }
+
+    /// Refuse a fault or injection scheduled at or after the run's end (the
+    /// settle plus `duration_s`): it would never happen, and a run that
+    /// reports no fault because none was injected would look clean.
+    fn check_schedule_within_the_run(&self) -> Result<(), SimError> {
+        let end_s = self.planner.settle_s + self.duration_s;
+        let inject = &self.planner.inject;
+        let plant = &self.plant.params.faults;
+        let mut scheduled = self.faults.scheduled();
+        scheduled.extend(inject.nan_at_s.iter().map(|&t| ("inject-nan-at", t)));
+        scheduled.extend(
+            inject
+                .outside_at_s
+                .iter()
+                .map(|&t| ("inject-outside-at", t)),
+        );
+        scheduled.extend(plant.stuck.map(|s| ("stuck", s.at_s)));
+        scheduled.extend(plant.drop.map(|d| ("drop", d.from_s)));
+        scheduled.extend(plant.delay.map(|d| ("delay", d.from_s)));
+        match scheduled.iter().find(|(_, t)| *t >= end_s) {
+            Some((flag, t)) => Err(SimError::Config(format!(
+                "--{flag}: at {} s, at or after the run's end ({} s: {} s settle + {} s \
+                 --duration), so it would never happen; schedule it earlier or run longer",
+                crate::units::given(*t),
+                crate::units::given(end_s),
+                crate::units::given(self.planner.settle_s),
+                crate::units::given(self.duration_s)
+            ))),
+            None => Ok(()),
+        }
     }
 }
 
@@ -524,6 +556,7 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
 
     let mut children = Children::new(&cfg.exe, &dir.file("pids"));
     let started = now_ns();
+    let steal_before = super::clock::cpu_steal_ms();
     let stop_now = |children: &mut Children| {
         children.stop_all(Duration::from_millis(500));
         node.try_cleanup_dead_nodes();
@@ -607,6 +640,9 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
         }
     }
     let stopped_ns = now_ns();
+    let steal_ms = steal_before
+        .zip(super::clock::cpu_steal_ms())
+        .map(|(b, a)| super::clock::steal_between(&b, &a, cpus.0));
     match ending {
         Ending::Interrupted => {
             stop_now(&mut children);
@@ -642,7 +678,9 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
         return Err(SimError::Interrupted);
     }
 
-    let report = assess::build_report(cfg, dir, t0, &children, &events, &prefix, model_used)?;
+    let report = assess::build_report(
+        cfg, dir, t0, &children, &events, &prefix, model_used, steal_ms,
+    )?;
     write_json(&dir.file("report.json"), &report)?;
     crate::fsutil::write_atomic(&dir.file("report.md"), report.markdown().as_bytes()).map_err(
         |source| SimError::Io {

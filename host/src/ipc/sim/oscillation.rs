@@ -71,6 +71,47 @@ pub struct Oscillation {
     pub window_rms_mm: Option<f64>,
 }
 
+/// The error's last third against its first: a loop that drifts away or
+/// whose limit cycle is slower than the tone band (a tracker 500 ms late
+/// under the integral correction swung 25 mm at a fraction of a hertz, and
+/// the tone test found nothing) has a tracking error that grows.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Growth {
+    /// RMS of the tracking error over the first third of the tracked samples, mm.
+    pub first_third_rms_mm: f64,
+    /// ... over the last third, mm.
+    pub last_third_rms_mm: f64,
+    /// The last third's RMS is above [`GROWTH_FACTOR`] times the first's
+    /// and above [`GROWTH_FLOOR_MM`].
+    pub growing: bool,
+}
+
+/// How much larger the last third's error must be to count as growth.
+pub const GROWTH_FACTOR: f64 = 3.0;
+/// ... and how large at least, mm (below it, noise and settling).
+pub const GROWTH_FLOOR_MM: f64 = 0.5;
+
+/// The [`Growth`] of the tracking error over the tracked samples (holds
+/// left out); `None` with fewer than 30 samples.
+pub fn growth(samples: &[Sample]) -> Option<Growth> {
+    let tracked: Vec<f64> = samples
+        .iter()
+        .filter(|s| !s.hold)
+        .map(|s| s.error_mm())
+        .collect();
+    let n = tracked.len();
+    if n < 30 {
+        return None;
+    }
+    let rms = |e: &[f64]| (e.iter().map(|x| x * x).sum::<f64>() / e.len() as f64).sqrt();
+    let (first, last) = (rms(&tracked[..n / 3]), rms(&tracked[n - n / 3..]));
+    Some(Growth {
+        first_third_rms_mm: first,
+        last_third_rms_mm: last,
+        growing: last > GROWTH_FACTOR * first && last > GROWTH_FLOOR_MM,
+    })
+}
+
 /// The lower edge of the band for a trajectory whose own content ends at
 /// `trajectory_hz`: five harmonics above it, and never below 1 Hz.
 pub fn band_from(trajectory_hz: f64) -> f64 {
@@ -399,5 +440,19 @@ mod tests {
         );
         assert!(!burst.detected, "{burst:?}");
         assert!(burst.windows_with_tone > 0, "{burst:?}");
+    }
+
+    #[test]
+    fn an_error_that_grows_is_growth_and_a_steady_or_settling_one_is_not() {
+        // A slow swing that builds up: 0.1 mm early, 2 mm late.
+        let grows = growth(&run(12.0, |t| [1e-4 * (1.0 + 1.5 * t), 0.0, 0.0])).unwrap();
+        assert!(grows.growing, "{grows:?}");
+        assert!(grows.last_third_rms_mm > 3.0 * grows.first_third_rms_mm);
+        let steady = growth(&run(12.0, slow)).unwrap();
+        assert!(!steady.growing, "{steady:?}");
+        // Tiny errors that grow stay below the floor: noise, not a drift.
+        let tiny = growth(&run(12.0, |t| [1e-6 * t, 0.0, 0.0])).unwrap();
+        assert!(!tiny.growing, "{tiny:?}");
+        assert!(growth(&run(0.01, slow)).is_none());
     }
 }

@@ -68,6 +68,14 @@ pub struct SimReport {
     /// sustained tone makes the run not clean.
     #[serde(default)]
     pub oscillation: Oscillation,
+    /// The tracking error's last third against its first.
+    #[serde(default)]
+    pub growth: Option<super::oscillation::Growth>,
+    /// Time the hypervisor took from the controller's CPU during the run,
+    /// ms (the most any CPU lost when it was not pinned); `None` where the
+    /// kernel does not say.
+    #[serde(default)]
+    pub controller_cpu_steal_ms: Option<u64>,
     /// Every stretch of ≥ 1 s with one target: mean true error over its last 0.5 s.
     pub steady_state: Vec<SteadyState>,
     /// Worst of `steady_state`, mm; `null` when there was no such stretch.
@@ -339,6 +347,23 @@ impl SimReport {
                 ),
             },
         );
+        if let Some(g) = &self.growth {
+            row(
+                "tracking error RMS, first → last third of the run (mm)",
+                format!(
+                    "{:.3} → {:.3}{}",
+                    g.first_third_rms_mm,
+                    g.last_third_rms_mm,
+                    if g.growing { " (**growing**)" } else { "" }
+                ),
+            );
+        }
+        if let Some(ms) = self.controller_cpu_steal_ms {
+            row(
+                "hypervisor steal on the controller's CPU (ms)",
+                ms.to_string(),
+            );
+        }
         match &self.controller {
             Some(c) => {
                 row("controller cycles", c.cycles.to_string());
