@@ -253,3 +253,80 @@ fn leaving_outliers_out_beats_fitting_them_on_held_out_truth() {
         "robust fit {reject} mm vs plain fit {keep} mm (held-out mean, against the truth)"
     );
 }
+
+#[test]
+fn rows_below_the_robots_floors_a_stale_sidecar_and_copied_rows_are_not_taken_at_face_value() {
+    let dir = tempfile::tempdir().unwrap();
+    let dir = dir.path();
+    clean_and_noisy(dir, 200, "0.1", "0");
+    // The seed robot's rows (tensions from 0 N) for a robot whose floors
+    // are 5 N: refused, naming the floor.
+    let paper = robot("seed-paper.toml");
+    let o = tendril_in(
+        dir,
+        &[
+            "train",
+            "--data",
+            "noisy.csv",
+            "--robot",
+            paper.to_str().unwrap(),
+            "--out",
+            "p.tnet",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("min_tension"), "{}", stderr(&o));
+    assert!(!dir.join("p.tnet").exists());
+
+    // Measured rows saved over a generated CSV, its sidecar left beside:
+    // the rows are measured, and the warning says why.
+    std::fs::copy(dir.join("noisy.csv"), dir.join("stale.csv")).unwrap();
+    std::fs::copy(dir.join("clean.json"), dir.join("stale.json")).unwrap();
+    let seed = seed_robot();
+    let seed = seed.to_str().unwrap();
+    let o = tendril_in(
+        dir,
+        &[
+            "train",
+            "--data",
+            "stale.csv",
+            "--robot",
+            seed,
+            "--out",
+            "s.tnet",
+            "--max-hidden",
+            "2",
+        ],
+    );
+    assert_ok(&o, "train beside a stale sidecar");
+    assert!(stderr(&o).contains("stale sidecar"), "{}", stderr(&o));
+    assert!(json(&dir.join("s.train.json"))["measured"].is_object());
+
+    // The file twice over: the copies are dropped, not read as repeats
+    // (which would give a noise floor of 0).
+    let text = std::fs::read_to_string(dir.join("noisy.csv")).unwrap();
+    let body: String = text.lines().skip(1).map(|l| format!("{l}\n")).collect();
+    std::fs::write(dir.join("twice.csv"), format!("{text}{body}")).unwrap();
+    let o = tendril_in(
+        dir,
+        &[
+            "train",
+            "--data",
+            "twice.csv",
+            "--robot",
+            seed,
+            "--out",
+            "t.tnet",
+            "--max-hidden",
+            "2",
+        ],
+    );
+    assert_ok(&o, "train on a doubled file");
+    assert!(
+        stderr(&o).contains("200 rows copy an earlier row"),
+        "{}",
+        stderr(&o)
+    );
+    let f = &json(&dir.join("t.train.json"))["measured"]["noise_floor"];
+    assert_ne!(f["noise_source"], "repeated-rows", "{f}");
+}

@@ -263,16 +263,40 @@ impl TrainArgs {
 }
 
 impl TrainArgs {
-    /// Whether `--data` holds measured rows: it has no sidecar, or a
+    /// Whether `--data` holds measured rows: it has no sidecar, a sidecar
+    /// that does not describe `data` (said once, as a warning), or a
     /// measured-rows option is given.
-    pub fn measured(&self) -> bool {
-        self.noise_mm.is_some()
-            || self.outliers.is_some()
-            || !crate::dataset::Sidecar::path_for(&self.data).exists()
+    pub fn measured(&self, data: &Dataset) -> bool {
+        if self.noise_mm.is_some() || self.outliers.is_some() {
+            return true;
+        }
+        let path = crate::dataset::Sidecar::path_for(&self.data);
+        if !path.exists() {
+            return true;
+        }
+        match crate::dataset::Sidecar::read(&path).map_err(|e| e.to_string()) {
+            Ok(sidecar) => match sidecar.describes(data) {
+                Ok(()) => false,
+                Err(why) => {
+                    log::warn!(
+                        "{} does not describe {} ({why}): a stale sidecar; the rows are taken \
+                         as measured",
+                        path.display(),
+                        self.data.display()
+                    );
+                    true
+                }
+            },
+            Err(e) => {
+                log::warn!("{e}: the rows are taken as measured");
+                true
+            }
+        }
     }
 
-    /// The training job these arguments describe, on `data` read from `--data`.
-    pub fn job<'a>(&self, data: &'a Dataset) -> anyhow::Result<TrainJob<'a>> {
+    /// The training job these arguments describe, on `data` read from
+    /// `--data` (`measured`: [`Self::measured`]).
+    pub fn job<'a>(&self, data: &'a Dataset, measured: bool) -> anyhow::Result<TrainJob<'a>> {
         // The log, curve and report go beside the net unless named: beside a
         // device, FIFO or stdout there is no place for them (they would land
         // in /dev).
@@ -318,7 +342,7 @@ impl TrainArgs {
                 seed: self.seed,
                 test_fraction: self.test_fraction,
                 valid_fraction: self.valid_fraction,
-                measured: self.measured().then_some(job::MeasuredSpec {
+                measured: measured.then_some(job::MeasuredSpec {
                     reject_outliers: self.outliers != Some(OutliersArg::Keep),
                     noise_mm: self.noise_mm,
                 }),
@@ -343,10 +367,28 @@ pub fn run(a: TrainArgs) -> anyhow::Result<()> {
     let mut data = Dataset::read_csv(&a.data)?;
     let r = job::robot_for_data(&data, &a.data, a.robot.as_deref(), a.allow_robot_mismatch)?;
     crate::dataset::measured::check_rows(&data, &r.robot, &a.data)?;
-    if a.measured() {
+    let measured = a.measured(&data);
+    if measured {
         crate::dataset::measured::canonical_quaternions(&mut data);
+        let (kept, copies) = crate::dataset::measured::drop_copies(&data);
+        if !copies.is_empty() {
+            log::warn!(
+                "{}: {} rows copy an earlier row to the last bit (lines {}{}): a tracker never \
+                 measures one pose twice exactly, so they are copies, dropped (not repeats)",
+                a.data.display(),
+                copies.len(),
+                copies
+                    .iter()
+                    .take(5)
+                    .map(|l| l.to_string())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                if copies.len() > 5 { ", …" } else { "" }
+            );
+            data = kept;
+        }
     }
-    let job = a.job(&data)?;
+    let job = a.job(&data, measured)?;
     let t = job::run(&job, stop_flag())?;
     let o = &job.outputs;
     log::info!(
@@ -360,34 +402,59 @@ pub fn run(a: TrainArgs) -> anyhow::Result<()> {
         o.report.display()
     );
     if let Some(m) = &t.measured {
-        let f = &m.noise_floor;
-        let mm = crate::units::length_mm;
-        log::info!(
-            "measured rows: {} of {} training rows are outliers ({}, tip off by > {}); \
-             held-out tip error (predicted tensions through the local fit of the training \
-             rows, {} rows, {} outliers left out) RMS {} / mean {} against a noise floor of \
-             RMS {} (σ {} per axis, {}): the net's own share ≈ {}",
-            m.outliers.count,
-            m.outliers.rows,
-            if m.outliers_rejected {
-                "left out"
-            } else {
-                "kept"
-            },
-            mm(m.outliers.threshold_mm),
-            f.rows,
-            f.outlier_rows,
-            mm(f.held_out_rms_mm),
-            mm(f.held_out_mean_mm),
-            mm(f.floor_rms_mm),
-            mm(f.noise_sigma_mm),
-            match f.noise_source {
-                crate::dataset::measured::NoiseSource::Given => "given",
-                crate::dataset::measured::NoiseSource::RepeatedRows => "from repeated rows",
-                crate::dataset::measured::NoiseSource::LocalFit => "estimated from the local fit",
-            },
-            mm(f.excess_rms_mm)
-        );
+        log::info!("{}", measured_summary(m));
     }
     Ok(())
+}
+
+/// What training on measured rows found, in one line.
+fn measured_summary(m: &job::MeasuredReport) -> String {
+    use crate::dataset::measured::NoiseSource;
+    let f = &m.noise_floor;
+    let mm = crate::units::length_mm;
+    let outliers = format!(
+        "measured rows: {} of {} training rows are outliers ({}, tip off by > {})",
+        m.outliers.count,
+        m.outliers.rows,
+        if m.outliers_rejected {
+            "left out"
+        } else {
+            "kept"
+        },
+        mm(m.outliers.threshold_mm)
+    );
+    let held_out = format!(
+        "held-out tip error (predicted tensions through the local fit of the training rows, {} \
+         rows, {} outliers left out) RMS {} / mean {}",
+        f.rows,
+        f.outlier_rows,
+        mm(f.held_out_rms_mm),
+        mm(f.held_out_mean_mm)
+    );
+    match (f.noise_sigma_mm, f.floor_rms_mm, f.excess_rms_mm) {
+        (Some(sigma), Some(floor), Some(excess)) => format!(
+            "{outliers}; {held_out} against a noise floor of RMS {} (σ {} per axis, {}): the \
+             net's own share ≈ {}",
+            mm(floor),
+            mm(sigma),
+            match f.noise_source {
+                NoiseSource::Given => "given",
+                NoiseSource::RepeatedRows => "from repeated rows",
+                NoiseSource::LocalFit => "estimated from the local fit",
+            },
+            mm(excess)
+        ),
+        _ => {
+            let [narrow, wide] = m.outliers.noise_check;
+            format!(
+                "{outliers}; {held_out}. The noise floor cannot be estimated from these rows: \
+                 the local fit's own error is in its residuals (σ {} per axis from the nearest \
+                 rows, {} from twice as many; jitter alone gives the same), so the floor, the \
+                 net's share and the outlier threshold are upper bounds. Give the tracker's \
+                 jitter with --noise-mm, or measure some tension sets more than once",
+                mm(narrow),
+                mm(wide)
+            )
+        }
+    }
 }

@@ -342,6 +342,38 @@ impl Sidecar {
         csv.with_extension("json")
     }
 
+    /// Whether this sidecar describes `data`: the same row count and, per
+    /// column, the same smallest and largest value (to the CSV's printed
+    /// precision). `Err` says how it differs: a sidecar left beside a CSV
+    /// that was replaced (measured rows saved over a generated file) would
+    /// make the rows pass for exact solves.
+    pub fn describes(&self, data: &Dataset) -> Result<(), String> {
+        if self.count != data.len() {
+            return Err(format!(
+                "it records {} rows, the CSV has {}",
+                self.count,
+                data.len()
+            ));
+        }
+        let columns = (0..data.n_tendons)
+            .map(|j| data.tensions.column(j))
+            .chain((0..7).map(|k| data.poses.column(k)));
+        for (range, column) in self.ranges.iter().zip(columns) {
+            let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs()).max(1e-3);
+            if !(close(range.min, column.min()) && close(range.max, column.max())) {
+                return Err(format!(
+                    "column {} spans [{}, {}] in the CSV, [{}, {}] in the sidecar",
+                    range.column,
+                    column.min(),
+                    column.max(),
+                    range.min,
+                    range.max
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// Write atomically as pretty JSON.
     pub fn write(&self, path: &Path) -> Result<(), DatasetError> {
         let text = serde_json::to_string_pretty(self).map_err(|e| DatasetError::Io {

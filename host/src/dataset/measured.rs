@@ -41,8 +41,14 @@ pub const NEIGHBOURS: usize = 40;
 /// almost never dropped.
 pub const OUTLIER_SIGMAS: f64 = 5.0;
 
-/// Refuse rows that no robot produced: a tension below zero or above the
-/// robot's `max_tension`, a quaternion whose norm is off 1 by more than
+/// A measured tension may sit this far below its tendon's `min_tension`
+/// (as a fraction of `max_tension`): a load cell's noise around a
+/// pretension the drive keeps. Further below, the rows are another robot's.
+pub const BELOW_FLOOR_TOLERANCE: f64 = 0.01;
+
+/// Refuse rows that no robot produced: a tension below zero, below the
+/// robot's `min_tension` (by more than [`BELOW_FLOOR_TOLERANCE`] of its
+/// range) or above its `max_tension`, a quaternion whose norm is off 1 by more than
 /// [`QUATERNION_TOLERANCE`]. The error names the file's line (header = 1)
 /// and the column. The tendon count must be the robot's.
 pub fn check_rows(data: &Dataset, robot: &Robot, file: &Path) -> Result<(), DatasetError> {
@@ -63,6 +69,7 @@ pub fn check_rows(data: &Dataset, robot: &Robot, file: &Path) -> Result<(), Data
         });
     }
     let max = robot.max_tensions();
+    let min = robot.min_tensions();
     for i in 0..data.len() {
         for (j, &hi) in max.iter().enumerate() {
             let t = data.tensions[(i, j)];
@@ -70,6 +77,16 @@ pub fn check_rows(data: &Dataset, robot: &Robot, file: &Path) -> Result<(), Data
                 return Err(row_err(
                     i,
                     format!("column t{j}: tension {t} N is negative (a tendon cannot push)"),
+                ));
+            }
+            if t < min[j] - BELOW_FLOOR_TOLERANCE * hi {
+                return Err(row_err(
+                    i,
+                    format!(
+                        "column t{j}: tension {t} N is below the robot's min_tension {} N for \
+                         tendon {j}: rows of another robot (robot {})?",
+                        min[j], robot.name
+                    ),
                 ));
             }
             if t > hi {
@@ -129,8 +146,13 @@ pub struct LocalForward {
 }
 
 impl LocalForward {
-    /// The model over `data`'s rows (at least 8 rows).
+    /// The model over `data`'s rows (at least 8 rows), on [`NEIGHBOURS`].
     pub fn new(data: &Dataset) -> LocalForward {
+        Self::with_neighbours(data, NEIGHBOURS)
+    }
+
+    /// The model over `data`'s rows, fitting each point on its `k` nearest.
+    pub fn with_neighbours(data: &Dataset, k: usize) -> LocalForward {
         let scale: Vec<f64> = (0..data.n_tendons)
             .map(|j| {
                 let c = data.tensions.column(j);
@@ -148,7 +170,7 @@ impl LocalForward {
         LocalForward {
             tensions: data.tensions.clone(),
             positions: data.poses.columns(0, 3).into_owned(),
-            k: NEIGHBOURS.min(data.len().saturating_sub(1)).max(1),
+            k: k.min(data.len().saturating_sub(1)).max(1),
             tree: KdTree::build(&scaled).ok(),
             scale,
         }
@@ -310,9 +332,19 @@ pub struct OutlierReport {
     /// ([`OUTLIER_SIGMAS`] × `residual_sigma_mm`).
     pub threshold_mm: f64,
     /// The jitter per axis the residuals imply, mm: `residual_sigma_mm`
-    /// without the local fit's share (≈ p/k of the variance).
-    pub noise_sigma_mm: f64,
+    /// without the local fit's share (≈ p/k of the variance) — `None` when
+    /// the rows cannot tell (see `noise_check`).
+    pub noise_sigma_mm: Option<f64>,
+    /// The same estimate from fits over [`NEIGHBOURS`] and twice as many
+    /// rows, mm. Jitter alone gives the same σ from both; when the wider
+    /// fit's is more than [`NOISE_CHECK_RATIO`] times the narrower's, the
+    /// local fit's own error (the curvature of the map between rows) is in
+    /// the residuals and the noise floor cannot be estimated from them.
+    pub noise_check: [f64; 2],
 }
+
+/// See [`OutlierReport::noise_check`].
+pub const NOISE_CHECK_RATIO: f64 = 1.3;
 
 /// Flag rows whose measured tip disagrees with the local fit of their
 /// neighbours by more than [`OUTLIER_SIGMAS`] robust standard deviations.
@@ -339,13 +371,19 @@ pub fn flag_outliers(data: &Dataset) -> OutlierReport {
     }
     let n_t = data.n_tendons;
     let p = (1 + n_t + n_t * (n_t + 1) / 2) as f64;
-    let k = model.k as f64;
+    let jitter = |sigma: f64, k: usize| sigma * 1e3 / (1.0 + (p / k as f64).min(1.0)).sqrt();
+    let narrow = jitter(sigma, model.k);
+    let wide_model = LocalForward::with_neighbours(data, 2 * NEIGHBOURS);
+    let wide_sigma = robust_sigma(&wide_model.loo_residuals(&usable), |i| usable[i]).unwrap_or(0.0);
+    let wide = jitter(wide_sigma, wide_model.k);
+    let consistent = wide <= NOISE_CHECK_RATIO * narrow && wide_model.k > model.k;
     OutlierReport {
         count: flagged.iter().filter(|&&f| f).count(),
         rows: n,
         residual_sigma_mm: sigma * 1e3,
         threshold_mm: OUTLIER_SIGMAS * sigma.max(1e-9) * 1e3,
-        noise_sigma_mm: sigma * 1e3 / (1.0 + (p / k).min(1.0)).sqrt(),
+        noise_sigma_mm: consistent.then_some(narrow),
+        noise_check: [narrow, wide],
         flagged,
     }
 }
@@ -367,6 +405,29 @@ pub fn training_outliers(
         exclude[i] = report.flagged[k];
     }
     (exclude, report)
+}
+
+/// `data` without the rows that copy an earlier row exactly (tensions and
+/// pose, bit for bit), and the file lines (header = 1) of the copies. A
+/// tracker never measures one pose twice to the last bit: such rows are
+/// copies (a concatenated file), not repeated measurements, and would pass
+/// for noiseless repeats and land on both sides of the held-out split.
+pub fn drop_copies(data: &Dataset) -> (Dataset, Vec<usize>) {
+    use std::collections::HashSet;
+    let mut seen: HashSet<Vec<u64>> = HashSet::new();
+    let (mut keep, mut copies) = (Vec::new(), Vec::new());
+    for i in 0..data.len() {
+        let key: Vec<u64> = (data.tensions.row(i).iter())
+            .chain(data.poses.row(i).iter())
+            .map(|x| x.to_bits())
+            .collect();
+        if seen.insert(key) {
+            keep.push(i);
+        } else {
+            copies.push(i + 2);
+        }
+    }
+    (data.rows(&keep), copies)
 }
 
 /// Jitter per axis estimated from rows measured more than once (the same
@@ -409,15 +470,15 @@ pub enum NoiseSource {
 /// A learner's held-out error on measured rows against the noise floor.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct NoiseFloorReport {
-    /// Jitter per position axis, mm.
-    pub noise_sigma_mm: f64,
+    /// Jitter per position axis, mm; `None` when it could not be estimated.
+    pub noise_sigma_mm: Option<f64>,
     /// Where it came from.
     pub noise_source: NoiseSource,
     /// The RMS 3-D distance between a measured and the true tip, √3 σ, mm.
     /// A learner asked for the measured pose follows the jitter along the
     /// directions the robot can move, so its RMS against measured tips can
     /// fall below this; well above it, the learner is the larger error.
-    pub floor_rms_mm: f64,
+    pub floor_rms_mm: Option<f64>,
     /// Held-out rows judged (their own measured tip not an outlier).
     pub rows: usize,
     /// Held-out rows left out because their measured tip is an outlier.
@@ -428,7 +489,7 @@ pub struct NoiseFloorReport {
     /// Its mean, mm.
     pub held_out_mean_mm: f64,
     /// The learner's own share, √max(0, rms² − floor²), mm.
-    pub excess_rms_mm: f64,
+    pub excess_rms_mm: Option<f64>,
 }
 
 /// Judge predicted tensions `pred` for the measured `test` rows: the tip
@@ -442,7 +503,7 @@ pub fn held_out_vs_noise(
     train_outliers: &OutlierReport,
     test: &Dataset,
     pred: &DMatrix<f64>,
-    noise: (f64, NoiseSource),
+    noise: (Option<f64>, NoiseSource),
 ) -> NoiseFloorReport {
     let model = LocalForward::new(train);
     let limit = train_outliers.threshold_mm * 1e-3;
@@ -463,7 +524,7 @@ pub fn held_out_vs_noise(
         rows += 1;
     }
     let (sigma_mm, source) = noise;
-    let floor = 3f64.sqrt() * sigma_mm;
+    let floor = sigma_mm.map(|s| 3f64.sqrt() * s);
     let rms = (ss / rows.max(1) as f64).sqrt() * 1e3;
     NoiseFloorReport {
         noise_sigma_mm: sigma_mm,
@@ -473,7 +534,7 @@ pub fn held_out_vs_noise(
         outlier_rows: outliers,
         held_out_rms_mm: rms,
         held_out_mean_mm: sum / rows.max(1) as f64 * 1e3,
-        excess_rms_mm: (rms * rms - floor * floor).max(0.0).sqrt(),
+        excess_rms_mm: floor.map(|f| (rms * rms - f * f).max(0.0).sqrt()),
     }
 }
 
@@ -522,11 +583,32 @@ mod tests {
         }
         assert!(r.count <= bad.len() + 2, "{found:?}");
         // The true jitter is 0.14 mm per axis.
-        assert!(
-            (r.noise_sigma_mm - 0.14).abs() < 0.03,
-            "{}",
-            r.noise_sigma_mm
-        );
+        let sigma = r.noise_sigma_mm.expect("jitter alone: estimated");
+        assert!((sigma - 0.14).abs() < 0.03, "{sigma} ({:?})", r.noise_check);
+    }
+
+    #[test]
+    fn a_map_the_local_fit_cannot_follow_gives_no_noise_floor() {
+        // A quartic the local quadratic cannot follow: its error grows as
+        // the fourth power of the neighbourhood's radius, so the wider fit
+        // misses far more than the narrow one; jitter alone would not.
+        let mut data = rows(1000, 1.4e-4, &[]);
+        for i in 0..data.len() {
+            let t = data.tensions[(i, 0)] - 2.5;
+            data.poses[(i, 0)] += 0.2 * t.powi(4);
+        }
+        let r = flag_outliers(&data);
+        assert_eq!(r.noise_sigma_mm, None, "{:?}", r.noise_check);
+        assert!(r.noise_check[1] > NOISE_CHECK_RATIO * r.noise_check[0]);
+    }
+
+    #[test]
+    fn exact_copies_are_dropped_and_named_by_line() {
+        let data = rows(20, 1e-4, &[]);
+        let doubled = data.rows(&(0..20).chain([3, 7]).collect::<Vec<_>>());
+        let (kept, copies) = drop_copies(&doubled);
+        assert_eq!(kept.len(), 20);
+        assert_eq!(copies, vec![22, 23]);
     }
 
     #[test]

@@ -574,8 +574,8 @@ fn measured_report(
         pred = crate::command_stage::command_rows(&limits, &pred);
     }
     let noise = match (m.noise_mm, noise_from_repeats(&train)) {
-        (Some(n), _) => (n, NoiseSource::Given),
-        (None, Some((sigma, _))) => (sigma * 1e3, NoiseSource::RepeatedRows),
+        (Some(n), _) => (Some(n), NoiseSource::Given),
+        (None, Some((sigma, _))) => (Some(sigma * 1e3), NoiseSource::RepeatedRows),
         (None, None) => (report.noise_sigma_mm, NoiseSource::LocalFit),
     };
     let noise_floor = held_out_vs_noise(&train, &report, &test, &pred, noise);
