@@ -76,7 +76,9 @@ fn the_chip_tracks_the_circle_like_the_host_controller() {
     let (host, _dh, _) = sim(&common);
     let mut mcu_args = common.to_vec();
     mcu_args.extend(["--controller", "mcu"]);
-    let (mcu, _dm, _) = sim(&mcu_args);
+    let (mcu, _dm, stderr) = sim(&mcu_args);
+    // Without --mcu-image the image is built in the checkout: said, not silent.
+    assert!(stderr.contains("building the chip image"), "{stderr}");
     let (rh, rm) = (
         f(&host["rms_tracking_error_mm"]),
         f(&mcu["rms_tracking_error_mm"]),

@@ -256,6 +256,23 @@ pub fn build_image(bin: &str) -> Result<PathBuf> {
         .map(PathBuf::from)
         .unwrap_or_else(|| workspace.join("target"));
     let dir = base.join("thumbv7em-chip");
+    if !workspace.join("firmware").join("Cargo.toml").is_file() {
+        bail!(
+            "no chip image given and no source checkout to build one at {} (this tendril was \
+             built there): build the image and give it with --mcu-image",
+            workspace.display()
+        );
+    }
+    // Said, not done silently: it compiles in the checkout this binary was
+    // built from, whatever the current directory (a minute the first time).
+    static SAID: std::sync::Once = std::sync::Once::new();
+    SAID.call_once(|| {
+        log::info!(
+            "building the chip image {bin} in {} (cargo build --release; give --mcu-image to \
+             use one you built)",
+            workspace.display()
+        );
+    });
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
     let out = Command::new(cargo)
         .current_dir(&workspace)

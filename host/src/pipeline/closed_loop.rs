@@ -78,8 +78,15 @@ pub fn closed_loop_section(
     let mut tally = LoopTally::default();
     let letters = "abcdefghijklmnopqrstuvwxyz";
     let mut k = 0;
+    // A smoke run (--quick) checks that the loop works: the corrected run
+    // of each path is enough, and its net is too weak to compare with.
+    let modes: &[bool] = if quick_s.is_some() {
+        &[true]
+    } else {
+        &[false, true]
+    };
     for run in &runs {
-        for correction in [false, true] {
+        for &correction in modes {
             let dir = run_dir(run, correction);
             let what = format!(
                 "{}, {}",
@@ -97,6 +104,7 @@ pub fn closed_loop_section(
                 out.dir.join(&dir),
             ));
             sim.duration_s = quick_s.map_or(run.duration_s, |q| q.min(run.duration_s));
+            sim.smoke = quick_s.is_some();
             sim.planner.shape = run.shape.clone();
             sim.set_correction(correction);
             sim.label = what.clone();
@@ -199,6 +207,7 @@ fn chip_run(
         out.dir.join(&dir),
     ));
     sim.duration_s = quick_s.map_or(run.duration_s, |q| q.min(run.duration_s));
+    sim.smoke = quick_s.is_some();
     sim.planner.shape = run.shape.clone();
     sim.set_correction(true);
     sim.controller.rate_hz = crate::mcu::bridge::MCU_RATE_HZ;

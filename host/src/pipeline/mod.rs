@@ -233,7 +233,7 @@ fn stages(
     );
     draw_workspace(&data.poses, &shapes, &title, &fig)
         .map_err(|e| anyhow::anyhow!("drawing {}: {e}", fig.display()))?;
-    log::info!("workspace figure: {}", fig.display());
+    log::info!("workspace figure: {}", staging.shown(&fig).display());
     report.add(format!(
         "## 2. Workspace\n\n![workspace]({})\n\nTip positions of every sample in three \
          projections, and backbone shapes for a few tensions.\n",
@@ -447,7 +447,7 @@ fn firmware_parity_section(model: &Path, shown: &Path, json: &Path) -> String {
         .join("thumbv7em-parity");
     log::info!(
         "firmware parity: building the MCU binary with {}",
-        model.display()
+        shown.display()
     );
     let t = Instant::now();
     match crate::firmware_parity::check(&root, model, &target_dir) {

@@ -176,6 +176,10 @@ pub struct SimConfig {
     pub label: String,
     /// A run whose RMS tracking error exceeds this (mm) is not clean.
     pub max_rms_mm: f64,
+    /// A smoke run (`tendril run --quick`): no accuracy bound, since its
+    /// net is weak on purpose; the processes, faults and real time are
+    /// still judged.
+    pub smoke: bool,
     /// Cap on the run's estimated log size, GB ([`budget`]).
     pub max_log_gb: f64,
     /// The chip in the loop instead of the host controller: the launcher
@@ -229,6 +233,7 @@ impl SimConfig {
             model,
             out,
             staged_as: None,
+            smoke: false,
             prefix: None,
             duration_s: 10.0,
             planner: PlannerConfig {
