@@ -11,7 +11,7 @@
 //! signal. A second signal exits at once after removing the temporaries
 //! still open — unless a finished run is being moved into place
 //! ([`crate::fsutil::Publishing`]), which takes milliseconds and would mix
-//! two runs if cut. Every output is written atomically ([`crate::fsutil`]),
+//! two runs if cut (both through [`ExitHooks`]). Every output is written atomically ([`crate::fsutil`]),
 //! so even that leaves no partial file.
 //!
 //! signal-hook delivers the signals to an ordinary thread (its self-pipe
@@ -36,11 +36,27 @@ static STOP: AtomicBool = AtomicBool::new(false);
 static SIGNAL: AtomicI32 = AtomicI32::new(0);
 static INSTALLED: Once = Once::new();
 
+/// What a second signal does before the forced exit, given by the caller
+/// (the output policy's, [`crate::fsutil::exit_hooks`]): this module sits
+/// below every other and uses none.
+#[derive(Clone, Copy, Debug)]
+pub struct ExitHooks {
+    /// Remove the temporary files still open.
+    pub cleanup: fn(),
+    /// Whether a finished run is being moved into place right now: then
+    /// the second signal waits for it.
+    pub deferring: fn() -> bool,
+}
+
 /// Route SIGINT, SIGTERM and SIGHUP to the stop flag (idempotent). With
-/// `announce`, the first signal prints one line saying the command is
-/// stopping (the processes a sim supervises stay quiet: their launcher
-/// speaks for them).
-pub fn install(announce: bool) -> std::io::Result<()> {
+/// `hooks` (a command someone runs), the first signal prints one line
+/// saying the command is stopping and a second forces the exit; without
+/// (a process a sim supervises), every signal only asks to stop: its
+/// launcher speaks for it, and a forced exit would skip the clean-up of
+/// its shared memory (a launcher's death can signal a child more than
+/// once: the kernel sends the parent-death signal once per thread that
+/// carries it).
+pub fn install(hooks: Option<ExitHooks>) -> std::io::Result<()> {
     let mut result = Ok(());
     INSTALLED.call_once(|| {
         result = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP]).and_then(
@@ -49,7 +65,7 @@ pub fn install(announce: bool) -> std::io::Result<()> {
                     .name("tendril-signals".into())
                     .spawn(move || {
                         for signal in signals.forever() {
-                            on_signal(signal, announce);
+                            on_signal(signal, hooks);
                         }
                     })
                     .map(drop)
@@ -59,16 +75,18 @@ pub fn install(announce: bool) -> std::io::Result<()> {
     result
 }
 
-fn on_signal(signal: i32, announce: bool) {
+fn on_signal(signal: i32, hooks: Option<ExitHooks>) {
     let _ = SIGNAL.compare_exchange(0, signal, Ordering::SeqCst, Ordering::SeqCst);
-    if STOP.swap(true, Ordering::SeqCst) {
-        if !crate::fsutil::Publishing::active() {
-            crate::fsutil::remove_temporaries();
+    let again = STOP.swap(true, Ordering::SeqCst);
+    let Some(hooks) = hooks else { return };
+    if again {
+        if !(hooks.deferring)() {
+            (hooks.cleanup)();
             std::process::exit(i32::from(EXIT_INTERRUPTED));
         }
         return;
     }
-    if announce {
+    {
         eprintln!(
             "\n{}: stopping; existing outputs are left as they were",
             signal_name(signal)

@@ -8,10 +8,11 @@ use clap::Parser;
 fn main() -> ExitCode {
     quiet_broken_pipe();
     let cli = tendril::cli::Cli::parse();
-    // One line of its own on a signal, unless a sim supervises this
-    // process (its launcher speaks for it).
+    // A line of its own on a signal and a forced exit on a second, unless
+    // a sim supervises this process (its launcher speaks and stops it).
     let supervised = std::env::var_os(tendril::ipc::SUPERVISED_ENV).is_some();
-    if let Err(e) = tendril::interrupt::install(!supervised) {
+    let hooks = (!supervised).then(tendril::fsutil::exit_hooks);
+    if let Err(e) = tendril::interrupt::install(hooks) {
         eprintln!("tendril: error: signal handling: {e}");
         return ExitCode::FAILURE;
     }

@@ -537,3 +537,29 @@ fn dynamics_with_its_run_log_on_a_full_device_exits_non_zero_and_keeps_the_devic
         .file_type()
         .is_symlink());
 }
+
+#[test]
+fn fk_reads_its_rows_from_stdin_for_input_dash() {
+    use std::io::Write;
+    let mut child = Command::new(tendril_bin())
+        .args(["fk", "--robot"])
+        .arg(robot("seed-4t.toml"))
+        .args(["--input", "-", "--output", "-"])
+        .current_dir(workspace_root())
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(b"t0,t1,t2,t3\n0,0,0,0\n1,0,0,0\n")
+        .unwrap();
+    let o = child.wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8(o.stdout).unwrap();
+    assert_eq!(text.lines().count(), 3, "{text}");
+    assert!(text.starts_with("t0,t1,t2,t3,px"), "{text}");
+}

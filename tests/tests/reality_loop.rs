@@ -195,7 +195,7 @@ fn a_plant_robot_file_moves_the_plant_like_the_calibration_truth_reality() {
         .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
-        !o.status.success() && err.contains("--plant-robot has 1 tendons"),
+        !o.status.success() && err.contains("--plant-robot has 1 tendon but --robot has 4"),
         "{err}"
     );
 }

@@ -194,10 +194,16 @@ fn an_interrupted_run_leaves_exactly_the_previous_outputs() {
     ];
     for (samples, signal, when, what) in cases {
         let (code, log) = interrupted_run(&dir, samples, signal, when);
-        // The handler cannot tell the signals apart: 130 for each (interrupt.rs).
+        // 130 for each signal (interrupt.rs); the message names it.
         assert_eq!(code, Some(130), "{what}: exit status\n{log}");
+        let name = match signal {
+            libc::SIGINT => "SIGINT",
+            libc::SIGTERM => "SIGTERM",
+            _ => "SIGHUP",
+        };
         assert!(
-            log.contains("interrupted; no output was written or changed"),
+            log.contains(&format!("interrupted by {name}"))
+                && log.contains("no output was written or changed"),
             "{what}: no truthful message\n{log}"
         );
         assert_unchanged(&dir, &before, what, &log);

@@ -76,7 +76,7 @@ const IGNORED: [&str; 1] = ["converged"];
 
 /// Read and check a measured CSV for `robot` (see [`parse_measurements`]).
 pub fn read_measurements(path: &Path, robot: &Robot) -> Result<Measurements, DataError> {
-    let file = std::fs::File::open(path).map_err(|e| DataError {
+    let file = crate::fsutil::open_input(path).map_err(|e| DataError {
         file: path.to_path_buf(),
         problem: format!("cannot read: {e}"),
     })?;

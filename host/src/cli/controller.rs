@@ -213,9 +213,11 @@ pub struct ControllerArgs {
     /// Robot description file (tension limits).
     #[arg(long, default_value = "robots/seed-4t.toml")]
     pub robot: PathBuf,
-    /// Trained IK net (`tendril train` output).
-    #[arg(long, default_value = "out/model.tnet")]
-    pub model: PathBuf,
+    /// Trained IK net (`tendril train` output) [default: out/model.tnet if it
+    /// exists, else the firmware's built-in net for the default robot, as
+    /// `tendril sim` does].
+    #[arg(long)]
+    pub model: Option<PathBuf>,
     /// Run a net trained for another robot than --robot (with a warning) instead of refusing it.
     #[arg(long)]
     pub allow_robot_mismatch: bool,
@@ -274,7 +276,14 @@ impl ControllerArgs {
         if let Some(d) = self.duration {
             check("--duration", d, d > 0.0, "a number of seconds > 0")?;
         }
-        let mut cfg = ControllerConfig::new(self.robot, self.model);
+        let model = match crate::ipc::sim::ModelSource::resolve(
+            self.model,
+            std::path::Path::new("out/model.tnet"),
+        ) {
+            crate::ipc::sim::ModelSource::File(path) => path,
+            _ => built_in_net_file()?,
+        };
+        let mut cfg = ControllerConfig::new(self.robot, model);
         cfg.allow_robot_mismatch = self.allow_robot_mismatch;
         cfg.prefix = self.prefix;
         self.tuning.apply(&mut cfg);
@@ -286,6 +295,7 @@ impl ControllerArgs {
         cfg.cpu = self.cpu;
         if self.mcu {
             cfg.rate_hz = self.tuning.mcu_rate_hz();
+            crate::mcu::bridge::check_chip_rate(cfg.rate_hz).map_err(anyhow::Error::msg)?;
             if let Some(ms) = self.link_garbage_every_ms {
                 check(
                     "--link-garbage-every-ms",
@@ -304,9 +314,34 @@ impl ControllerArgs {
     }
 }
 
+/// The firmware's built-in net, in a temporary file while the process
+/// runs (the controller reads its net from a file; the file is removed at
+/// the end, and by the signal handler's clean-up on a forced exit).
+fn built_in_net_file() -> anyhow::Result<PathBuf> {
+    let tmp = crate::fsutil::Temporary::new_in(&std::env::temp_dir())?;
+    std::io::Write::write_all(&mut tmp.as_file(), crate::ipc::sim::BUILT_IN_NET)?;
+    let path = tmp.path().to_path_buf();
+    BUILT_IN_FILE
+        .lock()
+        .map_err(|_| anyhow::anyhow!("the built-in net's file"))?
+        .replace(tmp);
+    Ok(path)
+}
+
+/// The file [`built_in_net_file`] wrote, held (and removed) by [`run`].
+static BUILT_IN_FILE: std::sync::Mutex<Option<crate::fsutil::Temporary>> =
+    std::sync::Mutex::new(None);
+
 /// Run `tendril controller`.
 pub fn run(args: ControllerArgs) -> anyhow::Result<()> {
-    let stats = crate::ipc::controller::run(&args.config()?)?;
+    let result = args
+        .config()
+        .and_then(|cfg| Ok(crate::ipc::controller::run(&cfg)?));
+    // The built-in net's temporary file, if one was written, goes now.
+    if let Ok(mut file) = BUILT_IN_FILE.lock() {
+        file.take();
+    }
+    let stats = result?;
     log::info!(
         "controller: {} cycles, {} overruns, lateness p50 {:.1} µs p99 {:.1} µs",
         stats.cycles,

@@ -328,8 +328,8 @@ impl Columns {
 
 fn batch(statics: &Statics, input: &Path, output: &Path) -> anyhow::Result<()> {
     let n = statics.robot().n_tendons();
-    let file =
-        std::fs::File::open(input).with_context(|| format!("{}: cannot open", input.display()))?;
+    let file = crate::fsutil::open_input(input)
+        .with_context(|| format!("{}: cannot open", input.display()))?;
     let mut reader = csv::Reader::from_reader(crate::fsutil::LineCapped::new(file));
     let header = reader
         .headers()

@@ -13,15 +13,17 @@ use crate::ipc::plant::{
 /// Plant model and fault options (shared with `tendril sim`).
 #[derive(Args, Clone, Debug)]
 pub struct PlantOpts {
-    /// Motor time constant, ms.
-    #[arg(long, default_value_t = 20.0)]
-    pub motor_tau_ms: f64,
+    /// Motor time constant, ms [default: 20; a --reality with [motors] sets
+    /// its own, and giving both is refused].
+    #[arg(long)]
+    pub motor_tau_ms: Option<f64>,
     /// Series tendon compliance as a second lag, ms (0 = rigid).
     #[arg(long, default_value_t = 0.0)]
     pub compliance_tau_ms: f64,
-    /// Tip position sensor noise (standard deviation), mm.
-    #[arg(long, default_value_t = 0.02)]
-    pub noise_mm: f64,
+    /// Tip position sensor noise (standard deviation), mm [default: 0.02; a
+    /// --reality with a [tracker] sets its own, and giving both is refused].
+    #[arg(long)]
+    pub noise_mm: Option<f64>,
     /// Seed of the sensor noise and message drops.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -64,10 +66,23 @@ fn window(spec: &str, what: &str) -> anyhow::Result<(f64, f64, f64)> {
 }
 
 impl PlantOpts {
+    /// The motor time constant asked for, ms (the plant's default when
+    /// not given: [`PlantParams`]'s `Default` is its one home).
+    pub fn motor_tau_ms(&self) -> f64 {
+        self.motor_tau_ms
+            .unwrap_or(PlantParams::default().motor_tau_s * 1e3)
+    }
+
+    /// The tip sensor's noise asked for, mm (default as above).
+    pub fn noise_mm(&self) -> f64 {
+        self.noise_mm
+            .unwrap_or(PlantParams::default().noise_m * 1e3)
+    }
+
     /// Model parameters in SI units (each refused with its flag's name when
     /// out of range).
     pub fn params(&self) -> anyhow::Result<PlantParams> {
-        let (tau, comp, noise) = (self.motor_tau_ms, self.compliance_tau_ms, self.noise_mm);
+        let (tau, comp, noise) = (self.motor_tau_ms(), self.compliance_tau_ms, self.noise_mm());
         check("--motor-tau-ms", tau, tau > 0.0, "a time constant > 0 ms")?;
         check(
             "--compliance-tau-ms",
@@ -130,18 +145,46 @@ impl PlantOpts {
                 "a delay ≥ 0 ms",
             )?;
         }
+        let reality = self
+            .reality
+            .as_deref()
+            .map(crate::reality::Reality::load)
+            .transpose()?;
+        if let Some(r) = &reality {
+            // Either the flag or the reality's section: silently dropping
+            // one of them would run another plant than the user asked for.
+            for (flag, given, section, has) in [
+                (
+                    "--motor-tau-ms",
+                    self.motor_tau_ms,
+                    "[motors]",
+                    r.motors.is_some(),
+                ),
+                (
+                    "--noise-mm",
+                    self.noise_mm,
+                    "[tracker]",
+                    r.tracker.is_some(),
+                ),
+            ] {
+                if let (Some(x), true) = (given, has) {
+                    bail!(
+                        "{flag} {} and reality {}'s {section} both set it: give one (edit the \
+                         reality file to change it)",
+                        crate::units::given(x),
+                        r.name
+                    );
+                }
+            }
+        }
         Ok(PlantParams {
-            motor_tau_s: self.motor_tau_ms * 1e-3,
+            motor_tau_s: tau * 1e-3,
             compliance_tau_s: self.compliance_tau_ms * 1e-3,
-            noise_m: self.noise_mm * 1e-3,
+            noise_m: noise * 1e-3,
             seed: self.seed,
             statics_steps: self.statics_steps,
             faults: PlantFaults { stuck, drop, delay },
-            reality: self
-                .reality
-                .as_deref()
-                .map(crate::reality::Reality::load)
-                .transpose()?,
+            reality,
             ..PlantParams::default()
         })
     }

@@ -147,7 +147,11 @@ impl SimArgs {
         cfg.planner.shape = self.traj.shape()?;
         let rate = match self.controller {
             ControllerKind::Host => self.tuning.rate_hz(),
-            ControllerKind::Mcu => self.tuning.mcu_rate_hz(),
+            ControllerKind::Mcu => {
+                let rate = self.tuning.mcu_rate_hz();
+                crate::mcu::bridge::check_chip_rate(rate).map_err(anyhow::Error::msg)?;
+                rate
+            }
         };
         cfg.planner.rate_hz = self.traj.planner_rate.unwrap_or(rate);
         cfg.planner.settle_s = self.traj.settle;
@@ -180,8 +184,8 @@ impl SimArgs {
         };
         if model.n_tendons() != robot.n_tendons() {
             anyhow::bail!(
-                "--plant-robot has {} tendons but --robot has {}",
-                robot.n_tendons(),
+                "--plant-robot has {} but --robot has {}",
+                crate::robot::count(robot.n_tendons(), "tendon"),
                 model.n_tendons()
             );
         }
@@ -226,7 +230,8 @@ impl SimArgs {
             || {
                 format!(
                     "motor τ {} ms, noise {} mm",
-                    self.plant.motor_tau_ms, self.plant.noise_mm
+                    self.plant.motor_tau_ms(),
+                    self.plant.noise_mm()
                 )
             },
             |r| format!("reality {} ({})", r.name, r.summary()),

@@ -364,6 +364,12 @@ pub fn run(a: TrainArgs) -> anyhow::Result<()> {
     if let Some(plot) = &a.plot {
         super::common::refuse_stdout("--plot", plot, "a PNG is drawn into a file")?;
     }
+    if !(a.target_rmse.is_finite() && a.target_rmse >= 0.0) {
+        anyhow::bail!(
+            "--target-rmse must be a finite number ≥ 0 (normalised ×100), got {}",
+            crate::units::given(a.target_rmse)
+        );
+    }
     let mut data = Dataset::read_csv(&a.data)?;
     let r = job::robot_for_data(&data, &a.data, a.robot.as_deref(), a.allow_robot_mismatch)?;
     crate::dataset::measured::check_rows(&data, &r.robot, &a.data)?;

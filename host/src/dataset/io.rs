@@ -103,7 +103,7 @@ impl Dataset {
             path: path.to_path_buf(),
             source,
         };
-        let file = std::fs::File::open(path).map_err(io)?;
+        let file = crate::fsutil::open_input(path).map_err(io)?;
         let mut reader = csv::ReaderBuilder::new()
             .has_headers(true)
             // Row lengths are checked below, with a message naming the line.
@@ -291,6 +291,12 @@ pub struct Sidecar {
     pub robot_file: String,
     /// SHA-256 of the robot file's bytes.
     pub robot_sha256: String,
+    /// The robot's fingerprint ([`crate::robot::Robot::fingerprint`], hex):
+    /// what it is, not how its file is written, so a file that differs only
+    /// by a comment is the same robot. Empty in sidecars written before it
+    /// was recorded.
+    #[serde(default)]
+    pub robot_fingerprint: String,
     /// Robot name.
     pub robot_name: String,
     /// Sampler name (`adjacent` or `uniform`).

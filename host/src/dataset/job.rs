@@ -327,6 +327,7 @@ pub fn generate(
     let sidecar = Sidecar {
         robot_file: req.robot_path.display().to_string(),
         robot_sha256: hex(&Sha256::digest(source.as_bytes())),
+        robot_fingerprint: hex(&robot.fingerprint()),
         robot_name: robot.name.clone(),
         sampler: sampler.name().into(),
         sampler_groups: sampler_groups(sampler, &robot),

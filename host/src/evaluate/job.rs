@@ -365,15 +365,15 @@ pub fn evaluate_net(
 ) -> Result<SplitMetrics, EvaluateError> {
     if net.shape().outputs != data.n_tendons {
         return Err(EvaluateError::BadInput(format!(
-            "the model predicts {} tensions but the data has {} tendons",
-            net.shape().outputs,
-            data.n_tendons
+            "the model predicts {} but the data has {}",
+            crate::robot::count(net.shape().outputs, "tension"),
+            crate::robot::count(data.n_tendons, "tendon")
         )));
     }
     if statics.robot().n_tendons() != data.n_tendons {
         return Err(EvaluateError::BadInput(format!(
-            "the robot has {} tendons but the data has {}",
-            statics.robot().n_tendons(),
+            "the robot has {} but the data has {}",
+            crate::robot::count(statics.robot().n_tendons(), "tendon"),
             data.n_tendons
         )));
     }

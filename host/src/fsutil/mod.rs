@@ -120,6 +120,16 @@ pub fn unregister_temporary_dir(dir: &Path) {
     }
 }
 
+/// What a second signal does before its forced exit
+/// ([`crate::interrupt::install`]): remove the temporaries, unless a run
+/// is being published.
+pub fn exit_hooks() -> crate::interrupt::ExitHooks {
+    crate::interrupt::ExitHooks {
+        cleanup: remove_temporaries,
+        deferring: Publishing::active,
+    }
+}
+
 /// Whether a [`Publishing`] guard is alive.
 static PUBLISHING: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
 
@@ -396,6 +406,16 @@ where
     tmp.persist(&target)
 }
 
+/// Open a line-oriented input (a CSV) for reading: `-` is stdin (what a
+/// pipe gives: `… | tendril fk --input - --output -`), anything else the
+/// file at `path`.
+pub fn open_input(path: &Path) -> io::Result<Box<dyn Read + Send>> {
+    if is_stdout(path) {
+        return Ok(Box::new(io::stdin()));
+    }
+    Ok(Box::new(File::open(path)?))
+}
+
 /// Read a small input file whole, refusing what cannot be one: a path that
 /// is not a regular file (after symlinks: `/dev/zero`, a FIFO, a directory)
 /// and a file of more than `max` bytes, checked before reading and again
@@ -527,6 +547,16 @@ impl DirLock {
             let path = path.to_path_buf();
             move |source| LockError::Io { path, source }
         };
+        if std::fs::metadata(dir).is_ok_and(|m| !m.is_dir()) {
+            // Not "File exists (os error 17)": say what is wrong.
+            return Err(LockError::Io {
+                path: dir.to_path_buf(),
+                source: io::Error::new(
+                    io::ErrorKind::NotADirectory,
+                    "is a file, not a directory (this output is a directory)",
+                ),
+            });
+        }
         std::fs::create_dir_all(dir).map_err(io_err(dir))?;
         let path = dir.join(Self::FILE);
         let mut file = OpenOptions::new()

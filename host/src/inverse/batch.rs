@@ -259,7 +259,7 @@ fn row(n: usize, input: &Path, line: usize, result: &RowResult, summary: &mut Su
 /// The input's poses, read a chunk at a time.
 struct PoseReader {
     path: PathBuf,
-    records: csv::StringRecordsIntoIter<crate::fsutil::LineCapped<std::fs::File>>,
+    records: csv::StringRecordsIntoIter<crate::fsutil::LineCapped<Box<dyn std::io::Read + Send>>>,
     cols: Vec<usize>,
     line: usize,
 }

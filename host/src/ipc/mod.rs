@@ -96,7 +96,7 @@ pub fn die_with_parent(supervised: bool) -> Result<bool, IpcError> {
     }
     // Catch SIGTERM before asking for it (no signal can have arrived yet:
     // the default action would have ended the process).
-    crate::interrupt::install(false)
+    crate::interrupt::install(None)
         .map_err(|e| IpcError::Config(format!("signal handling: {e}")))?;
     // SAFETY: PR_SET_PDEATHSIG takes a signal number and touches no memory.
     let rc = unsafe {

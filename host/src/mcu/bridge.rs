@@ -47,6 +47,28 @@ use crate::robot::Robot;
 /// rule fired on stale feedback). A real board at 2 Mbaud carries 1 kHz.
 pub const MCU_RATE_HZ: f64 = 100.0;
 
+/// The chip's tick, Hz: its period is a whole number of ticks.
+pub const CHIP_TICK_HZ: f64 = 1000.0;
+
+/// Check that the chip can run its period at `rate_hz`: a whole number of
+/// its 1 ms ticks (1000, 500, 333.33…, 250, … Hz). Otherwise the chip would
+/// silently run the nearest slower whole period (`--rate 300` ran at
+/// 333 Hz, `--rate 20000` at 1 kHz); the error names the rates near it.
+pub fn check_chip_rate(rate_hz: f64) -> Result<(), String> {
+    let ticks = CHIP_TICK_HZ / rate_hz;
+    if rate_hz.is_finite() && ticks >= 1.0 - 1e-9 && (ticks - ticks.round()).abs() < 1e-6 {
+        return Ok(());
+    }
+    let k = ticks.floor().clamp(1.0, 1e6);
+    Err(format!(
+        "--rate {}: the chip's period is a whole number of its 1 ms ticks, so its rate is \
+         1000/k Hz (the nearest: {:.4} and {:.4} Hz)",
+        crate::units::given(rate_hz),
+        CHIP_TICK_HZ / (k + 1.0),
+        CHIP_TICK_HZ / k
+    ))
+}
+
 /// How long the bridge holds the planner's setpoints back while the chip
 /// installs the run's net at the start, ns (the upload takes ~1 s idle,
 /// ~3.5 s behind a loaded loop's traffic).
@@ -560,10 +582,17 @@ pub fn run(
         let backlog = chip.backlog();
         if backlog > BACKLOG_WARN_BYTES && !backlog_warned {
             backlog_warned = true;
+            let cause = match mcu.garbage_every_ms {
+                // The garbage is the test's own load, not the rate's fault.
+                Some(ms) => format!(
+                    "garbage injected every {ms} ms (--link-garbage-every-ms) shares the link"
+                ),
+                None => "lower --rate".to_string(),
+            };
             log::warn!(
                 "controller: the link to the chip is falling behind ({backlog} bytes waiting): \
                  at {:.0} Hz the loop needs ~{:.0} kB/s, the emulated link carries ~10 kB/s \
-                 (lower --rate)",
+                 ({cause})",
                 1e9 / period_ns as f64,
                 70.0 * 1e9 / period_ns as f64 / 1e3
             );

@@ -42,6 +42,30 @@ fn check_qemu() -> Result<()> {
     Ok(())
 }
 
+/// Remove the link sockets (and their `.log` files) that runs killed by
+/// SIGKILL left in `dir`: names `tendril-…<pid>…` with `.sock` in them
+/// whose pid (the first number in the name) is no live process.
+pub fn remove_stale_sockets(dir: &Path) {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.filter_map(std::result::Result::ok) {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if !(name.starts_with("tendril-") && name.contains(".sock")) {
+            continue;
+        }
+        let pid = name
+            .split(|c: char| !c.is_ascii_digit())
+            .find(|s| !s.is_empty())
+            .and_then(|s| s.parse::<u32>().ok());
+        if let Some(pid) = pid {
+            if !Path::new(&format!("/proc/{pid}")).exists() {
+                let _ = fs::remove_file(entry.path());
+            }
+        }
+    }
+}
+
 impl Chip {
     /// Start `qemu-system-arm -M netduinoplus2 -nographic -kernel IMAGE`
     /// with USART1 on a listening Unix socket at `socket` (a stale file
@@ -55,6 +79,9 @@ impl Chip {
             bail!("chip image {} not found", image.display());
         }
         check_arm_elf(image)?;
+        if let Some(dir) = socket.parent() {
+            remove_stale_sockets(dir);
+        }
         if fs::symlink_metadata(socket).is_ok() {
             fs::remove_file(socket)
                 .with_context(|| format!("removing stale socket {}", socket.display()))?;
@@ -309,4 +336,41 @@ pub fn build_image(bin: &str) -> Result<PathBuf> {
         bail!("cargo built no {}", image.display());
     }
     Ok(image)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_the_sockets_of_dead_runs_are_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        let me = std::process::id();
+        // A pid above any kernel's pid_max (at most 2^22) is never alive.
+        let dead = 4_000_000_000u32;
+        let names = [
+            format!("tendril-sim-{dead}-123.chip.sock"),
+            format!("tendril-sim-{dead}-123.chip.sock.log"),
+            format!("tendril-chip-{me}.sock"),
+            "other-9.sock".to_string(),
+        ];
+        for n in &names {
+            fs::write(dir.path().join(n), b"").unwrap();
+        }
+        remove_stale_sockets(dir.path());
+        let left: Vec<bool> = names.iter().map(|n| dir.path().join(n).exists()).collect();
+        assert_eq!(left, [false, false, true, true]);
+    }
+
+    #[test]
+    fn the_chip_runs_only_whole_tick_periods_and_says_which_rates_are_near() {
+        use crate::mcu::bridge::check_chip_rate;
+        for ok in [1000.0, 500.0, 100.0, 1000.0 / 3.0, 1.0] {
+            assert_eq!(check_chip_rate(ok), Ok(()), "{ok}");
+        }
+        let err = check_chip_rate(300.0).unwrap_err();
+        assert!(err.contains("250.0000 and 333.3333 Hz"), "{err}");
+        assert!(check_chip_rate(20_000.0).is_err());
+        assert!(check_chip_rate(f64::NAN).is_err());
+    }
 }

@@ -29,16 +29,43 @@ impl McuLink {
     /// Connect to the chip's socket, retrying until `timeout`.
     pub fn connect(socket: &Path, timeout: Duration) -> Result<McuLink> {
         let t0 = Instant::now();
+        // A chip being started has not made its socket yet: wait for it (up
+        // to `timeout`). A socket that is there but refuses is a chip that
+        // is gone (a stale socket): said after a second, not after the
+        // whole timeout; a path that is not a socket, at once.
+        const REFUSED_FOR: Duration = Duration::from_secs(1);
+        let mut refused_since: Option<Instant> = None;
         let stream = loop {
+            use std::os::unix::fs::FileTypeExt;
+            match std::fs::metadata(socket) {
+                Ok(m) if !m.file_type().is_socket() => anyhow::bail!(
+                    "{} is not a socket (--mcu-socket names the chip's link socket)",
+                    socket.display()
+                ),
+                _ => {}
+            }
             match UnixStream::connect(socket) {
                 Ok(s) => break s,
+                Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => {
+                    let since = *refused_since.get_or_insert_with(Instant::now);
+                    if since.elapsed() >= REFUSED_FOR {
+                        anyhow::bail!(
+                            "nothing listens on {} (a socket left by a chip that is gone?): {e}",
+                            socket.display()
+                        );
+                    }
+                }
                 Err(e) if t0.elapsed() >= timeout => {
                     return Err(e).with_context(|| {
-                        format!("connecting to {} for {timeout:?}", socket.display())
+                        format!(
+                            "no chip made {} within {timeout:?} (is it running?)",
+                            socket.display()
+                        )
                     })
                 }
-                Err(_) => std::thread::sleep(Duration::from_millis(5)),
+                Err(_) => {}
             }
+            std::thread::sleep(Duration::from_millis(5));
         };
         let mut reading = stream.try_clone().context("cloning the link socket")?;
         let received = Arc::new(AtomicU64::new(0));

@@ -261,7 +261,7 @@ pub struct BatchSummary {
 /// input such as `/dev/zero` fails at once) and where its pose columns
 /// (px, py, pz, qw, qx, qy, qz) are. Shared by the net's and the exact IK's
 /// batch readers.
-pub(crate) type PoseCsv = csv::Reader<crate::fsutil::LineCapped<std::fs::File>>;
+pub(crate) type PoseCsv = csv::Reader<crate::fsutil::LineCapped<Box<dyn std::io::Read + Send>>>;
 
 /// Open `input` and find its pose columns.
 pub(crate) fn open_pose_csv(input: &Path) -> Result<(PoseCsv, Vec<usize>), IkError> {
@@ -273,7 +273,7 @@ pub(crate) fn open_pose_csv(input: &Path) -> Result<(PoseCsv, Vec<usize>), IkErr
         csv::ReaderBuilder::new()
             .has_headers(true)
             .from_reader(crate::fsutil::LineCapped::new(
-                std::fs::File::open(input).map_err(|e| file_error(e.to_string()))?,
+                crate::fsutil::open_input(input).map_err(|e| file_error(e.to_string()))?,
             ));
     let header: Vec<String> = reader
         .headers()

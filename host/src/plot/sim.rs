@@ -29,8 +29,13 @@ pub struct TensionSample<'a> {
     pub actual: &'a [f64],
 }
 
-/// Draw `figure` into a PNG at `path`.
+/// Draw `figure` into a PNG at `path`, by the output policy
+/// ([`super::draw_atomically`]).
 pub fn draw(path: &Path, figure: &SimFigure<'_>) -> Result<(), Box<dyn std::error::Error>> {
+    super::draw_atomically(path, |tmp| draw_into(tmp, figure))
+}
+
+fn draw_into(path: &Path, figure: &SimFigure<'_>) -> Result<(), Box<dyn std::error::Error>> {
     super::init_fonts();
     let tensions = &figure.tensions;
 

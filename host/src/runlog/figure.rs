@@ -44,7 +44,10 @@ pub enum FigureError {
 /// Draw the top view of the desired and true tip paths and the tensions of
 /// the log at `mcap` into `png`.
 pub fn redraw(mcap: &Path, png: &Path) -> Result<Redrawn, FigureError> {
-    let log = RunLogFile::open(mcap)?;
+    let log = RunLogFile::open_topics(
+        mcap,
+        &[super::channels::TRACKING, super::channels::TENSIONS],
+    )?;
     let tracking = log.tracking()?;
     let tensions = log.tensions()?;
     if tracking.is_empty() && tensions.is_empty() {

@@ -159,10 +159,19 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
         r.log.line(
             now_ns(),
             foxglove::messages::log::Level::Info,
-            format!("plant: {} tendons, robot {}", n, cfg.robot.display()),
+            format!(
+                "plant: {}, robot {}",
+                crate::robot::count(n, "tendon"),
+                cfg.robot.display()
+            ),
         );
         if let Some(port) = r.log.live_port() {
-            log::info!("plant: live view on ws://{}", live_host(&cfg.runlog, port));
+            // Always said (not a log line a sim's quiet children filter):
+            // with port 0 nobody else can know where to connect.
+            eprintln!(
+                "live view on ws://{} (Foxglove: Open connection)",
+                live_host(&cfg.runlog, port)
+            );
         }
     }
     super::clock::tighten_timer_slack();

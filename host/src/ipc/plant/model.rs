@@ -126,6 +126,10 @@ pub struct PlantModel {
     statics: Statics,
     params: PlantParams,
     max_tension: Vec<f64>,
+    /// Each tendon's floor: the drive keeps its pretension whatever it is
+    /// commanded (`min_tension` of the plant's robot, which may differ from
+    /// the controller's model: `--plant-robot`).
+    min_tension: Vec<f64>,
     /// Motor output tension (N).
     motor: Vec<f64>,
     /// Tension in the tendon at the tip (N); equals `motor` for rigid tendons.
@@ -233,6 +237,7 @@ impl PlantModel {
         };
         Ok(PlantModel {
             max_tension: robot.max_tensions(),
+            min_tension: robot.min_tensions(),
             motor: zero.clone(),
             tendon: zero.clone(),
             target: zero.clone(),
@@ -288,7 +293,7 @@ impl PlantModel {
             }
             *target = drive(
                 &mut self.drive[i],
-                t.clamp(0.0, self.max_tension[i]),
+                t.clamp(0.0, self.max_tension[i]).max(self.min_tension[i]),
                 self.backlash_n,
                 self.dead_band_n,
             );
@@ -498,6 +503,33 @@ mod tests {
 
     fn robot() -> Robot {
         Robot::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml")).unwrap()
+    }
+
+    #[test]
+    fn the_drive_keeps_the_plant_robots_floors_whatever_is_commanded() {
+        let text = std::fs::read_to_string(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-paper.toml"),
+        )
+        .unwrap();
+        let paper = Robot::from_toml(&text, Path::new("seed-paper.toml")).unwrap();
+        let params = PlantParams {
+            noise_m: 0.0,
+            noise_quat: 0.0,
+            ..PlantParams::default()
+        };
+        let mut m = PlantModel::new(&paper, params).unwrap();
+        // A controller whose model has no floor commands 0 N: the drive
+        // holds the 5 N pretension, and that is no out-of-range command.
+        assert!(!m.command(&[7.0, 0.0, 0.0, 0.0]));
+        for _ in 0..500 {
+            m.step(0.001);
+        }
+        for (k, t) in m.tensions().iter().enumerate() {
+            assert!(
+                *t >= paper.tendons[k].min_tension - 1e-6,
+                "tendon {k}: {t} N"
+            );
+        }
     }
 
     #[test]

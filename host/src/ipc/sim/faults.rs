@@ -47,6 +47,28 @@ pub enum Action {
     },
 }
 
+impl std::fmt::Display for Action {
+    /// What the launcher did, in words (the console and the report).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Action::Kill(Role::Controller) => {
+                write!(f, "cut the link: killed the bridge to the chip (SIGKILL)")
+            }
+            Action::Kill(role) => write!(f, "killed the {} (SIGKILL)", role.name()),
+            Action::Restart(Role::Controller) => {
+                write!(f, "restored the link: started a new bridge to the chip")
+            }
+            Action::Restart(role) => write!(f, "started a new {}", role.name()),
+            Action::Weights { corrupt: true } => {
+                write!(f, "published a weight update with one bit flipped")
+            }
+            Action::Weights { corrupt: false } => {
+                write!(f, "published the net again as a weight update (hot swap)")
+            }
+        }
+    }
+}
+
 impl SimFaults {
     /// Check every time: finite and ≥ 0; a restart only after a kill.
     pub fn validate(&self) -> Result<(), SimError> {
@@ -87,6 +109,16 @@ impl SimFaults {
         if self.restore_link_after.is_some() && self.cut_link_at.is_none() {
             return Err(SimError::Config(
                 "--restore-link-after needs --cut-link-at".into(),
+            ));
+        }
+        // The chip's hold is read back by the bridge that reconnects: with
+        // no restore nothing reads the chip after the cut, and the fault
+        // could only ever be reported as not detected.
+        if self.cut_link_at.is_some() && self.restore_link_after.is_none() {
+            return Err(SimError::Config(
+                "--cut-link-at needs --restore-link-after: the chip's hold during the cut is \
+                 read back by the bridge that reconnects"
+                    .into(),
             ));
         }
         Ok(())

@@ -124,7 +124,7 @@ impl ModelSource {
             None if fallback.exists() => ModelSource::File(fallback.to_path_buf()),
             None => {
                 log::info!(
-                    "sim: no --model and no {}: using the firmware's built-in net \
+                    "no --model and no {}: using the firmware's built-in net \
                      (firmware/vectors/default.tnet)",
                     fallback.display()
                 );
@@ -632,7 +632,7 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
                 None
             }
         };
-        log::info!("sim: {action:?} at {t:.3} s");
+        log::info!("sim: {action} at {t:.3} s");
         events.push(Event {
             t_ns: now_ns(),
             action,

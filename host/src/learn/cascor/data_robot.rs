@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 
 use sha2::{Digest, Sha256};
 
-use super::job::TrainError;
+use super::error::TrainError;
 use crate::dataset::{Dataset, Sidecar};
 use crate::learn::targets::Targets;
 use crate::robot::{Robot, DEFAULT_ROBOT};
@@ -33,10 +33,7 @@ fn bad(why: String) -> TrainError {
 }
 
 fn sha256_hex(text: &str) -> String {
-    Sha256::digest(text.as_bytes())
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
+    hex_of(&Sha256::digest(text.as_bytes()))
 }
 
 /// First 12 hex digits, for messages.
@@ -89,7 +86,7 @@ fn recorded_robot(
         let (robot, text) =
             Robot::load_with_source(place).map_err(|e| bad(format!("the dataset's robot: {e}")))?;
         let sha = sha256_hex(&text);
-        if sha == side.robot_sha256 {
+        if same_robot(side, &robot, &sha) {
             return Ok((robot, place.clone()));
         }
         changed.get_or_insert((robot, place.clone(), sha));
@@ -123,6 +120,19 @@ fn recorded_robot(
     Ok((robot, place))
 }
 
+/// Whether `robot` (its file hashing to `sha`) is the robot `side` records:
+/// the same file, or a file that describes the same robot (its
+/// fingerprint; a comment or the layout may differ).
+fn same_robot(side: &Sidecar, robot: &Robot, sha: &str) -> bool {
+    sha == side.robot_sha256
+        || (!side.robot_fingerprint.is_empty()
+            && side.robot_fingerprint == hex_of(&robot.fingerprint()))
+}
+
+fn hex_of(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
 /// See [`DataRobot`]; the robot's tendon count must be the dataset's, and
 /// a `--robot` (`given`) must be the one the sidecar records (module docs).
 pub fn robot_for_data(
@@ -138,7 +148,7 @@ pub fn robot_for_data(
                 .map_err(|e| bad(format!("robot for the targets: {e}")))?;
             if let Some((side_path, side)) = side {
                 let sha = sha256_hex(&text);
-                if sha != side.robot_sha256 {
+                if !same_robot(side, &robot, &sha) {
                     let what = format!(
                         "--robot {} (robot {}, SHA-256 {}…) is not the robot the dataset was \
                          generated with: {} records {} (robot {}, SHA-256 {}…)",
