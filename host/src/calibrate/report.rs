@@ -84,6 +84,15 @@ impl ResidualStats {
     }
 }
 
+/// The judgement on a fit ([`super::verdict::judge`]).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Verdict {
+    /// The robot file is a calibration: none of the problems below.
+    pub calibrated: bool,
+    /// One line per reason it is not.
+    pub problems: Vec<String>,
+}
+
 /// The calibration report.
 #[derive(Clone, Debug, Serialize)]
 pub struct Report {
@@ -125,8 +134,9 @@ pub struct Report {
     pub solves: usize,
     /// Wall time, s.
     pub seconds: f64,
-    /// Whether the fit is a calibration, and why not.
-    pub verdict: super::verdict::Verdict,
+    /// Whether the fit is a calibration, and why not
+    /// ([`super::verdict::judge`]).
+    pub verdict: Verdict,
 }
 
 impl Report {

@@ -4,9 +4,7 @@
 //! `tendril calibrate` then writes its report and no robot file, and exits
 //! non-zero (issue 47: each of these used to write a "calibrated" file).
 
-use serde::Serialize;
-
-use super::report::Report;
+use super::report::{Report, Verdict};
 
 /// Residual noise per axis above which no tracker explains the rows, m:
 /// EM trackers jitter ≈ 0.14 mm and are ≈ 1 mm off near metal, optical
@@ -20,15 +18,6 @@ pub const MAX_RESIDUAL_OF_SPREAD: f64 = 0.25;
 /// Held-out rows may judge the fit this much worse than the nominal file
 /// (median) before it counts as worse: noise on a file that was right.
 const HELD_OUT_TOLERANCE: f64 = 1.05;
-
-/// The judgement on a fit.
-#[derive(Clone, Debug, Default, Serialize)]
-pub struct Verdict {
-    /// The robot file is a calibration: none of the problems below.
-    pub calibrated: bool,
-    /// One line per reason it is not.
-    pub problems: Vec<String>,
-}
 
 /// What [`judge`] needs besides the report.
 pub struct Evidence {

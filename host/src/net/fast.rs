@@ -29,6 +29,7 @@
 
 use tendril_shared::{Activation, McuNet, MAX_HIDDEN, MAX_TENDONS, POSE_DIM};
 
+use super::ranges::Ranges;
 use super::relaxed::RelaxedNet;
 
 /// Queries pushed through each unit together. Eight `f32` lanes are two SSE
@@ -45,36 +46,6 @@ pub const WIDE_LANES: usize = 16;
 
 /// Most features a unit reads: the bias, the inputs, the hidden units.
 const MAX_FEATURES: usize = 1 + POSE_DIM + MAX_HIDDEN;
-
-/// A net's input and output ranges as `lo` and width (inputs the net does
-/// not have: 0 and 1, so they stay 0 as in the firmware's padding).
-#[derive(Clone, Copy, Debug)]
-pub(super) struct Ranges {
-    pub(super) in_lo: [f32; POSE_DIM],
-    pub(super) in_width: [f32; POSE_DIM],
-    pub(super) out_lo: [f32; MAX_TENDONS],
-    pub(super) out_width: [f32; MAX_TENDONS],
-}
-
-impl Ranges {
-    pub(super) fn of(net: &McuNet) -> Ranges {
-        let mut r = Ranges {
-            in_lo: [0.0; POSE_DIM],
-            in_width: [1.0; POSE_DIM],
-            out_lo: [0.0; MAX_TENDONS],
-            out_width: [0.0; MAX_TENDONS],
-        };
-        for (i, (&lo, &hi)) in net.input_lo().iter().zip(net.input_hi()).enumerate() {
-            r.in_lo[i] = lo;
-            r.in_width[i] = hi - lo;
-        }
-        for (o, (&lo, &hi)) in net.output_lo().iter().zip(net.output_hi()).enumerate() {
-            r.out_lo[o] = lo;
-            r.out_width[o] = hi - lo;
-        }
-        r
-    }
-}
 
 /// A decoded net ready for fast host inference: its rows packed without the
 /// firmware's padding, its ranges as `lo` and width. Built once per net.

@@ -26,6 +26,7 @@
 pub mod fast;
 pub mod guarded;
 pub mod infer;
+mod ranges;
 pub mod read;
 mod relaxed;
 pub mod robot_check;

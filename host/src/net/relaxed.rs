@@ -39,7 +39,7 @@
 
 use tendril_shared::{Activation, McuNet, MAX_HIDDEN, POSE_DIM};
 
-use super::fast::Ranges;
+use super::ranges::Ranges;
 
 /// Most features a unit reads: the bias, the inputs, the hidden units.
 const MAX_FEATURES: usize = 1 + POSE_DIM + MAX_HIDDEN;

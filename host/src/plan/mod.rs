@@ -20,6 +20,7 @@
 //! `ipc`.
 
 pub mod bend;
+mod build;
 pub mod family;
 pub mod lift;
 pub mod path;

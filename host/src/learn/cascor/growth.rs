@@ -15,7 +15,7 @@ use super::candidates::{
 use super::net::{hidden_activation, OutputKind};
 use super::options::{ObjectiveChoice, OutputSolver};
 use super::outputs::{rmse, Data, State};
-use super::train::UnitLog;
+use super::unit_log::UnitLog;
 use crate::learn::LearnError;
 
 impl State {

@@ -14,13 +14,14 @@ use serde::Serialize;
 use tendril_shared::{max_hidden_for, MAX_HIDDEN};
 
 pub use super::data_robot::{robot_for_data, DataRobot};
-use super::export::{write_tnet_with, ExportError, Ranges};
+pub use super::error::TrainError;
+use super::export::{write_tnet_with, Ranges};
 use super::polish::{PolishLoss, RowMetrics};
 use super::tip_metric::tip_metrics;
 use super::{train_with_stop, CascorOptions, GrowingNet, Metrics, TrainReport};
 use crate::dataset::split::{SPLIT_SEED, TEST_FRACTION, VALID_FRACTION};
 use crate::dataset::{prepare_excluding, Dataset};
-use crate::fsutil::{check_distinct, write_atomic, write_atomic_with, PathCollision};
+use crate::fsutil::{check_distinct, write_atomic, write_atomic_with};
 use crate::learn::targets::{Targets, TargetsSummary};
 use crate::learn::LearnError;
 
@@ -189,49 +190,6 @@ pub struct MeasuredReport {
     pub outlier_lines: Vec<usize>,
     /// The net's held-out error against the noise floor.
     pub noise_floor: crate::dataset::measured::NoiseFloorReport,
-}
-
-/// Why a training run failed; nothing was written.
-#[derive(Debug, thiserror::Error)]
-pub enum TrainError {
-    /// The request is invalid (too few rows, a fraction out of range, a cap too large).
-    #[error("{0}")]
-    BadInput(String),
-    /// Two of the job's files are the same file.
-    #[error(transparent)]
-    Paths(#[from] PathCollision),
-    /// Training failed or was interrupted.
-    // The cause is part of the message and deliberately not a `source`
-    // (hence no `#[from]`): `{:#}` would print it twice (issue 31).
-    #[error("training: {0}")]
-    Learn(LearnError),
-    /// The worker pool could not be built.
-    #[error("worker threads: {0}")]
-    Threads(String),
-    /// The weight file could not be written.
-    #[error("writing the weight file: {0}")]
-    Export(#[from] ExportError),
-    /// Another output could not be written.
-    #[error("writing {}: {why}", path.display())]
-    Write {
-        /// The file.
-        path: PathBuf,
-        /// What went wrong.
-        why: String,
-    },
-}
-
-impl From<LearnError> for TrainError {
-    fn from(e: LearnError) -> Self {
-        TrainError::Learn(e)
-    }
-}
-
-impl TrainError {
-    /// Whether the run ended because a stop was requested (Ctrl-C).
-    pub fn is_interrupted(&self) -> bool {
-        matches!(self, TrainError::Learn(LearnError::Interrupted))
-    }
 }
 
 /// The report JSON written beside the weight file.

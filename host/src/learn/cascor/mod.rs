@@ -17,6 +17,7 @@
 
 pub mod candidates;
 mod data_robot;
+mod error;
 pub mod export;
 mod growth;
 pub mod job;
@@ -27,6 +28,7 @@ pub mod polish;
 pub mod quickprop;
 pub mod tip_metric;
 pub mod train;
+mod unit_log;
 
 use nalgebra::DMatrix;
 

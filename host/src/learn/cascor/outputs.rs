@@ -10,7 +10,7 @@ use nalgebra::{DMatrix, SymmetricEigen};
 use super::net::{logistic, OutputKind};
 use super::options::{CascorOptions, OutputSolver};
 use super::quickprop::{Patience, Quickprop};
-use super::train::UnitLog;
+use super::unit_log::UnitLog;
 
 /// Working state of one output configuration.
 #[derive(Clone)]
