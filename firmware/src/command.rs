@@ -10,7 +10,8 @@
 
 use tendril_shared::{CoContraction, TendonLimits, MAX_TENDONS};
 
-use crate::control::Tensions;
+/// One tension per tendon slot (N); slots past the tendon count are 0.
+pub type Tensions = [f32; MAX_TENDONS];
 
 /// Shift each co-contraction set of `target` (finite entries) along its
 /// weights so the set fits in `[min, max]`; when the set's spread is wider

@@ -38,8 +38,7 @@ use crate::infer::infer;
 
 pub use tendril_shared::POSE_DIM;
 
-/// One tension per tendon slot (N); slots past the tendon count are 0.
-pub type Tensions = [f32; MAX_TENDONS];
+pub use crate::command::Tensions;
 
 /// What the control step did this period, as bits. The summary bits are
 /// `tendril_shared::messages::command_status`'s (defined there, taken from

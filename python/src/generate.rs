@@ -15,9 +15,9 @@ use tendril::dataset::job::{self, GenerateError, GenerateRequest};
 use tendril::dataset::{Dataset, Sampler};
 use tendril::robot::DEFAULT_ROBOT;
 
+use crate::classes::Robot;
 use crate::detach::detached;
 use crate::errors::{invalid, one_line, os_error, value_error};
-use crate::robot::Robot;
 
 /// `(tensions, poses)` as numpy arrays.
 type Rows<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>);

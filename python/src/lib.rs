@@ -3,6 +3,7 @@
 //! Python; this crate only converts arrays and errors and releases the GIL.
 
 mod arrays;
+mod classes;
 mod detach;
 mod errors;
 mod generate;
@@ -13,8 +14,8 @@ use pyo3::prelude::*;
 
 #[pymodule]
 fn _tendril(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_class::<robot::Robot>()?;
-    m.add_class::<net::Net>()?;
+    m.add_class::<classes::Robot>()?;
+    m.add_class::<classes::Net>()?;
     m.add_function(wrap_pyfunction!(generate::generate, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

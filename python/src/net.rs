@@ -11,15 +11,9 @@ use pyo3::types::PyTuple;
 use tendril::net::{check_model_robot, read_model, GuardedNet, ReadError};
 
 use crate::arrays::rows;
+use crate::classes::{Net, Robot, BUILTIN_ORIGIN};
 use crate::detach::detached;
 use crate::errors::{invalid, os_error, value_error};
-use crate::robot::Robot;
-
-/// A trained inverse-kinematics net (a ``.tnet`` file) for one robot.
-#[pyclass(frozen, module = "tendril._tendril")]
-pub struct Net {
-    pub(crate) ik: GuardedNet,
-}
 
 #[pymethods]
 impl Net {
@@ -39,10 +33,14 @@ impl Net {
         allow_robot_mismatch: bool,
     ) -> PyResult<Net> {
         let fallback;
-        let robot = match robot {
-            Some(r) => r,
+        let model = match robot {
+            Some(r) => &r.model,
             None => {
-                fallback = Robot::default()?;
+                fallback = tendril::robot::Robot::from_toml(
+                    tendril::robot::BUILTIN_DEFAULT_TOML,
+                    std::path::Path::new(BUILTIN_ORIGIN),
+                )
+                .map_err(|e| invalid(&e))?;
                 &fallback
             }
         };
@@ -53,13 +51,12 @@ impl Net {
         check_model_robot(
             &path,
             provenance.as_ref(),
-            &robot.model,
+            model,
             allow_robot_mismatch,
             "allow_robot_mismatch=True",
         )
         .map_err(|e| invalid(&e))?;
-        let ik =
-            GuardedNet::new(net, &robot.model, allow_extrapolation).map_err(|e| invalid(&e))?;
+        let ik = GuardedNet::new(net, model, allow_extrapolation).map_err(|e| invalid(&e))?;
         Ok(Net { ik })
     }
 

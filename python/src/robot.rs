@@ -10,38 +10,22 @@ use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArrayLikeDyn};
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 use rayon::prelude::*;
-use tendril::inverse::batch::answer;
 use tendril::inverse::{ExactIk, IkSettings};
+use tendril::jobs::ik_batch::answer;
 use tendril::robot::{Robot as RobotModel, BUILTIN_DEFAULT_TOML};
 use tendril::statics::batch::{solve_all, Load};
 use tendril::statics::{SolverSettings, Statics, MAX_STEPS};
 
 use crate::arrays::{check_finite, rows, Rows};
+use crate::classes::{Net, Robot};
 use crate::detach::detached;
 use crate::errors::{invalid, os_error, runtime_error, value_error};
-use crate::net::Net;
 
-/// Where the built-in default robot says it came from, in errors and reprs.
-pub const BUILTIN_ORIGIN: &str = "<built-in robots/seed-4t.toml>";
+use crate::classes::BUILTIN_ORIGIN;
 /// Backbone points `shape` accepts at most (as `tendril fk --shape`).
 const MAX_SHAPE_POINTS: usize = 100_000;
 const FORCE_COLUMNS: [&str; 3] = ["fx", "fy", "fz"];
 const MOMENT_COLUMNS: [&str; 3] = ["mx", "my", "mz"];
-
-/// A tendon-driven continuum robot (the TOML schema of docs/design.md §2).
-///
-/// Make one with ``Robot.load(path)``, ``Robot.from_toml(text)`` or
-/// ``Robot.default()``. Units: m, N, Pa.
-#[pyclass(frozen, module = "tendril._tendril")]
-pub struct Robot {
-    pub model: RobotModel,
-    /// The exact TOML text it was made from.
-    pub source: String,
-    /// The file it was loaded from, if any.
-    pub file: Option<PathBuf>,
-    /// Whether this is the built-in default robot.
-    pub builtin: bool,
-}
 
 fn settings(steps: usize) -> PyResult<SolverSettings> {
     if !(1..=MAX_STEPS).contains(&steps) {

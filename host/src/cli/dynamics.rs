@@ -4,8 +4,8 @@
 use std::path::PathBuf;
 
 use super::common::{stop_flag, RobotArg};
-use crate::dynamics::offline::{run as run_offline, OfflineRun, TensionStep};
 use crate::dynamics::{Damping, DynamicsSettings};
+use crate::jobs::dynamics::{run as run_offline, OfflineRun, TensionStep};
 
 /// Step the tendon tensions and record how the robot's tip moves and rings.
 #[derive(clap::Args, Debug)]

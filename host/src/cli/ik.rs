@@ -7,7 +7,8 @@ use std::path::PathBuf;
 use anyhow::bail;
 
 use super::common::{parse_list, RobotArg};
-use crate::inverse::{self, ExactIk, IkSettings};
+use crate::inverse::{ExactIk, IkSettings};
+use crate::jobs;
 use crate::net::{solve_csv, GuardedNet};
 use crate::robot::count;
 
@@ -75,7 +76,7 @@ fn run_exact(a: &IkArgs, robot: &crate::robot::Robot) -> anyhow::Result<()> {
     let ik = ExactIk::new(robot, IkSettings::default());
     if let Some(text) = &a.pose {
         let answer =
-            inverse::batch::answer(&ik, net.as_ref(), &parse_pose(text)?, a.position_only)?;
+            jobs::ik_batch::answer(&ik, net.as_ref(), &parse_pose(text)?, a.position_only)?;
         if a.json {
             println!("{}", answer.to_json());
         } else {
@@ -99,7 +100,7 @@ fn run_exact(a: &IkArgs, robot: &crate::robot::Robot) -> anyhow::Result<()> {
     let (Some(input), Some(output)) = (&a.input, &a.output) else {
         bail!("give --pose px,py,pz,qw,qx,qy,qz or --input poses.csv --output tensions.csv");
     };
-    let s = inverse::batch::solve_csv(&ik, net.as_ref(), a.position_only, input, output)?;
+    let s = jobs::ik_batch::solve_csv(&ik, net.as_ref(), a.position_only, input, output)?;
     eprintln!(
         "wrote {} ({}: {} reached, {} out of reach, {} failed; worst reached error {:.2e} m)",
         output.display(),

@@ -148,7 +148,7 @@ impl PlantOpts {
         let reality = self
             .reality
             .as_deref()
-            .map(crate::reality::Reality::load)
+            .map(crate::plant::reality::Reality::load)
             .transpose()?;
         if let Some(r) = &reality {
             // Either the flag or the reality's section: silently dropping

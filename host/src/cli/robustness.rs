@@ -8,7 +8,7 @@ use anyhow::Context;
 use clap::Args;
 
 use crate::ipc::sim::ModelSource;
-use crate::reality::{Reality, BUILTIN};
+use crate::plant::reality::{Reality, BUILTIN};
 use crate::robustness::{self, RobustnessConfig};
 
 /// Run the circle, the steps (and the helix on a robot that reaches a

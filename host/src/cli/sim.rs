@@ -11,8 +11,8 @@ use super::controller::{LoopOpts, OnOff};
 use super::planner::TrajectoryOpts;
 use super::plant::PlantOpts;
 use crate::ipc::planner::Injections;
-use crate::ipc::plant::RobotModel;
 use crate::ipc::sim::{ModelSource, SimConfig, SimFaults};
+use crate::plant::RobotModel;
 
 /// The model `tendril train` writes by default.
 const TRAINED_MODEL: &str = "out/model.tnet";

@@ -14,8 +14,6 @@
 //! `solver` the grid of histories and the Newton shooting per step,
 //! `offline` and `figure` the step response `tendril dynamics` writes.
 
-pub mod figure;
-pub mod offline;
 pub mod params;
 pub mod section;
 pub mod solver;

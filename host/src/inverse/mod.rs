@@ -10,7 +10,6 @@
 //! reach the target (so a closest pose is the closest, not a local one),
 //! `batch` streams a CSV of targets, every row answered.
 
-pub mod batch;
 mod global;
 pub mod jacobian;
 pub mod solve;

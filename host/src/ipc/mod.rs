@@ -56,6 +56,9 @@ pub enum IpcError {
     /// A trajectory the robot cannot follow, or a point it cannot take.
     #[error(transparent)]
     Plan(#[from] crate::plan::PlanError),
+    /// The plant's physics could not be made (its parameters, its reality).
+    #[error(transparent)]
+    Plant(#[from] crate::plant::PlantError),
     /// Anything from the layers below (robot file, statics, model file).
     #[error("{0}")]
     Other(String),

@@ -6,26 +6,11 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use crate::ipc::sim::{ModelSource, SimConfig, SimError};
+pub use crate::plan::runs::run_dir;
 use crate::plan::Family;
 use crate::plan::{default_loop_runs, LoopRun};
 use crate::statics::Statics;
 use crate::units::length_mm_or_dash;
-
-/// The sub-directory of a run: `sim` for the circle (the name the main
-/// job has always used), else `sim-<name>`; `-ik-only` is appended for the
-/// run without the correction.
-pub fn run_dir(run: &LoopRun, correction: bool) -> String {
-    let base = if run.name == "circle" {
-        "sim".to_string()
-    } else {
-        format!("sim-{}", run.name)
-    };
-    if correction {
-        base
-    } else {
-        format!("{base}-ik-only")
-    }
-}
 
 /// Where the runs are written (`dir`, a staging directory) and where the
 /// user will find them once it is published: what the reports record.

@@ -160,6 +160,22 @@ pub fn default_loop_runs(statics: &Statics) -> Result<Vec<LoopRun>, PlanError> {
     })
 }
 
+/// The sub-directory of a run: `sim` for the circle (the name the main
+/// job has always used), else `sim-<name>`; `-ik-only` is appended for the
+/// run without the correction.
+pub fn run_dir(run: &LoopRun, correction: bool) -> String {
+    let base = if run.name == "circle" {
+        "sim".to_string()
+    } else {
+        format!("sim-{}", run.name)
+    };
+    if correction {
+        base
+    } else {
+        format!("{base}-ik-only")
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -139,7 +139,9 @@ impl Trajectory {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::plan::{Lifter, PathShape};
     use crate::statics::repo_statics as statics_of;
+    use crate::statics::Statics;
 
     fn statics() -> Statics {
         statics_of("seed-4t.toml")

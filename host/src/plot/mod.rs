@@ -6,6 +6,7 @@ pub mod calibration;
 pub mod compare;
 pub mod learning_curve;
 pub mod sim;
+pub mod step_response;
 pub mod workspace;
 
 use std::path::Path;

@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::ipc::sim::{ModelSource, SimConfig, SimError};
 use crate::plan::default_loop_runs;
-use crate::reality::Reality;
+use crate::plant::reality::Reality;
 use crate::statics::{SolverSettings, Statics};
 
 /// What to run.
@@ -92,7 +92,7 @@ pub fn run(cfg: &RobustnessConfig) -> Result<Vec<Row>, SimError> {
                 let dir = format!(
                     "{}/{}",
                     reality.name,
-                    crate::pipeline::closed_loop::run_dir(run, correction)
+                    crate::plan::runs::run_dir(run, correction)
                 );
                 eprintln!(
                     "robustness {}/{total}: {} · {} · {}",

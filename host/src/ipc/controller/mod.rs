@@ -67,7 +67,7 @@ pub mod correction {
     /// less than its model says.
     pub const MAP_LIMIT: f64 = 0.5;
     /// The first bending mode the gains are set for, Hz (the default
-    /// robot's, from its robot file: [`crate::reality::first_bending_mode_rad_s`]).
+    /// robot's, from its robot file: [`crate::robot::first_bending_mode_rad_s`]).
     pub const REFERENCE_MODE_HZ: f64 = 3.6;
 
     /// The factor on the loop's bandwidth for `robot`: its first bending
@@ -75,7 +75,7 @@ pub mod correction {
     /// default gains: above the mode, the motor lag and the tracker's delay
     /// bound the loop, and they do not scale).
     pub fn mode_scale(robot: &crate::robot::Robot) -> f64 {
-        let f1 = crate::reality::first_bending_mode_rad_s(robot) / std::f64::consts::TAU;
+        let f1 = crate::robot::first_bending_mode_rad_s(robot) / std::f64::consts::TAU;
         (f1 / REFERENCE_MODE_HZ).min(1.0)
     }
 }

@@ -14,8 +14,6 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use iceoryx2::port::listener::ListenerWaitError;
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use tendril_shared::messages::{plant_status, Header, PlantState, TensionCommand, MAX_TENDONS};
 
@@ -25,11 +23,8 @@ use super::transport::{self, Services};
 use super::{IpcError, StopWatch};
 use crate::robot::Robot;
 use crate::runlog::{RunLog, RunLogConfig, RunLogStats, SceneRecord, StepRecord};
-use crate::statics::{SolverSettings, Statics, WarmStart};
 
-mod model;
-
-pub use model::{
+pub use crate::plant::{
     DelayFault, DropFault, PlantFaults, PlantModel, PlantParams, RobotModel, StuckFault,
 };
 
@@ -378,7 +373,7 @@ impl Recorder {
         t_ns: u64,
         cmd: Option<&TensionCommand>,
         plant_status: u32,
-        frame: Option<&crate::reality::Frame>,
+        frame: Option<&crate::plant::reality::Frame>,
     ) -> Result<(), IpcError> {
         use foxglove::messages::log::Level;
         self.received.clear();

@@ -11,6 +11,7 @@ use std::path::Path;
 use tendril_shared::messages::{command_status, plant_status, setpoint_flags};
 
 use super::report::SteadyState;
+pub use super::sample::Sample;
 use super::supervisor::Role;
 use super::SimError;
 use crate::ipc::planner::LOG_INJECTED;
@@ -257,29 +258,6 @@ impl Logs {
             previous_injected = injected;
         }
         bursts
-    }
-}
-
-/// One plant step joined with the setpoint in force.
-#[derive(Clone, Copy, Debug)]
-pub struct Sample {
-    /// Seconds since the run's start.
-    pub t: f64,
-    /// Desired tip position (m).
-    pub desired: [f64; 3],
-    /// True tip position (m).
-    pub actual: [f64; 3],
-    /// Whether the planner was in a hold (settle, restart) or injecting.
-    pub hold: bool,
-}
-
-impl Sample {
-    /// Distance between desired and true tip, mm.
-    pub fn error_mm(&self) -> f64 {
-        let d: f64 = (0..3)
-            .map(|k| (self.desired[k] - self.actual[k]).powi(2))
-            .sum();
-        d.sqrt() * 1e3
     }
 }
 

@@ -18,6 +18,7 @@ pub mod budget;
 pub mod faults;
 pub mod oscillation;
 pub mod report;
+mod sample;
 pub mod supervisor;
 pub mod workdir;
 

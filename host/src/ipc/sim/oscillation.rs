@@ -17,7 +17,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::analysis::Sample;
+use super::sample::Sample;
 
 /// Resampling rate of the error, Hz (the band of interest ends far below 125 Hz).
 const FS_HZ: f64 = 250.0;

@@ -5,18 +5,23 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
-use super::offline::Sample;
-use crate::plot::{draw_atomically, init_fonts, linear_bounds, DrawResult};
+use super::{draw_atomically, init_fonts, linear_bounds, DrawResult};
 
 /// Draw the tip's x, y, z (mm, each relative to its value at t = 0) against
 /// time, with the step time marked, into a PNG at `out`.
-pub fn draw_step_response(samples: &[Sample], step_s: f64, title: &str, out: &Path) -> DrawResult {
+/// `samples` are (time s, tip position m) pairs.
+pub fn draw_step_response(
+    samples: &[(f64, [f64; 3])],
+    step_s: f64,
+    title: &str,
+    out: &Path,
+) -> DrawResult {
     init_fonts();
     let Some(first) = samples.first() else {
         return Err("step response: no samples to plot".into());
     };
-    let t_end = samples.last().map_or(1.0, |s| s.t_s).max(1e-6);
-    let mm = |s: &Sample, axis: usize| (s.position[axis] - first.position[axis]) * 1e3;
+    let t_end = samples.last().map_or(1.0, |s| s.0).max(1e-6);
+    let mm = |s: &(f64, [f64; 3]), axis: usize| (s.1[axis] - first.1[axis]) * 1e3;
     let (lo, hi) = linear_bounds(
         samples.iter().flat_map(|s| [mm(s, 0), mm(s, 1), mm(s, 2)]),
         0.05,
@@ -44,7 +49,7 @@ pub fn draw_step_response(samples: &[Sample], step_s: f64, title: &str, out: &Pa
         for (axis, label, color) in [(0, "x", BLUE), (1, "y", GREEN), (2, "z", RED)] {
             chart
                 .draw_series(LineSeries::new(
-                    samples.iter().map(|s| (s.t_s, mm(s, axis))),
+                    samples.iter().map(|s| (s.0, mm(s, axis))),
                     color.stroke_width(2),
                 ))?
                 .label(label)

@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use nalgebra::Vector3;
 
-use super::{Damping, Dynamics, DynamicsError, DynamicsSettings};
+use crate::dynamics::{Damping, Dynamics, DynamicsError, DynamicsSettings};
 use crate::fsutil::write_atomic_with;
 use crate::robot::Robot;
 
@@ -406,12 +406,13 @@ pub fn run(job: &OfflineRun, stop: &AtomicBool) -> Result<PathBuf, OfflineError>
         "{}: tip after a tension step at {} s",
         job.robot.name, job.step.at_s
     );
-    super::figure::draw_step_response(&figure, job.step.at_s, &title, &png).map_err(|e| {
-        OfflineError::Write {
+    let points: Vec<(f64, [f64; 3])> = figure.iter().map(|s| (s.t_s, s.position.into())).collect();
+    crate::plot::step_response::draw_step_response(&points, job.step.at_s, &title, &png).map_err(
+        |e| OfflineError::Write {
             path: png.clone(),
             message: e.to_string(),
-        }
-    })?;
+        },
+    )?;
     log::info!("wrote {} and {}", csv.display(), png.display());
     Ok(csv)
 }
@@ -438,7 +439,8 @@ fn log_step(log: &mut crate::runlog::RunLog, step: &TensionStep, s: &Sample, dyn
         desired: None,
     });
     if log.scene_due(t_ns) {
-        let backbone = crate::runlog::resample(dynamics.backbone(), log.backbone_points());
+        let backbone =
+            crate::numerics::polyline::resample(dynamics.backbone(), log.backbone_points());
         log.scene(crate::runlog::SceneRecord {
             t_ns,
             backbone: backbone.iter().map(|v| [v.x, v.y, v.z]).collect(),

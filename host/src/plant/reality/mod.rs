@@ -48,39 +48,39 @@ pub struct RealityError {
 pub const BUILTIN: &[(&str, &str)] = &[
     (
         "ideal",
-        include_str!("../../../robots/realities/ideal.toml"),
+        include_str!("../../../../robots/realities/ideal.toml"),
     ),
     (
         "em-tracker",
-        include_str!("../../../robots/realities/em-tracker.toml"),
+        include_str!("../../../../robots/realities/em-tracker.toml"),
     ),
     (
         "optical-tracker",
-        include_str!("../../../robots/realities/optical-tracker.toml"),
+        include_str!("../../../../robots/realities/optical-tracker.toml"),
     ),
     (
         "stiffer-10pct",
-        include_str!("../../../robots/realities/stiffer-10pct.toml"),
+        include_str!("../../../../robots/realities/stiffer-10pct.toml"),
     ),
     (
         "softer-10pct",
-        include_str!("../../../robots/realities/softer-10pct.toml"),
+        include_str!("../../../../robots/realities/softer-10pct.toml"),
     ),
     (
         "geometry",
-        include_str!("../../../robots/realities/geometry.toml"),
+        include_str!("../../../../robots/realities/geometry.toml"),
     ),
     (
         "friction",
-        include_str!("../../../robots/realities/friction.toml"),
+        include_str!("../../../../robots/realities/friction.toml"),
     ),
     (
         "dynamic-light-damping",
-        include_str!("../../../robots/realities/dynamic-light-damping.toml"),
+        include_str!("../../../../robots/realities/dynamic-light-damping.toml"),
     ),
     (
         "everything",
-        include_str!("../../../robots/realities/everything.toml"),
+        include_str!("../../../../robots/realities/everything.toml"),
     ),
 ];
 
@@ -143,7 +143,7 @@ pub struct MotorSpec {
 #[serde(deny_unknown_fields)]
 pub struct DynamicsSpec {
     /// `quasi-static` or `dynamic`.
-    pub model: crate::ipc::plant::RobotModel,
+    pub model: crate::plant::RobotModel,
     /// Damping ratio of the first bending mode ζ₁ (dynamic only; absent:
     /// the robot file's damping or the default).
     pub damping_ratio: Option<f64>,
@@ -451,17 +451,6 @@ impl Reality {
             parts.join(", ")
         }
     }
-}
-
-/// The first bending mode of the robot's backbone as a uniform clamped-free
-/// beam, rad/s: ω₁ = (β₁L)² √(EI / (ρA L⁴)), β₁L = 1.8751 (Euler–Bernoulli;
-/// tendon tension and spacer disks shift it by a few per cent). 3.6 Hz on
-/// the default robot.
-pub fn first_bending_mode_rad_s(robot: &Robot) -> f64 {
-    const BETA1_L: f64 = 1.875_104;
-    let ei = robot.youngs_modulus * robot.second_moment();
-    let rho_a = robot.density * robot.area();
-    BETA1_L * BETA1_L * (ei / (rho_a * robot.length.powi(4))).sqrt()
 }
 
 #[cfg(test)]

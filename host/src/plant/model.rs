@@ -5,114 +5,16 @@
 //! message faults (docs/design.md §6). With a [`Reality`] the robot it moves
 //! is not the robot file's (docs/design.md §6.2).
 
-use super::*;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::params::{PlantParams, RobotModel, StuckFault};
+use super::reality::{Frame, Tracker, TrackerSpec};
+use super::PlantError;
 use crate::dynamics::{Damping, Dynamics, DynamicsSettings};
-use crate::reality::{first_bending_mode_rad_s, Frame, Reality, Tracker, TrackerSpec};
+use crate::robot::{first_bending_mode_rad_s, Robot};
 use crate::statics::pose::{orthonormalise, quaternion_wxyz};
-use crate::statics::{Friction, FrictionState};
-
-/// How the plant moves the robot.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
-pub enum RobotModel {
-    /// Each step jumps to the statics equilibrium of the tendon tensions.
-    #[default]
-    QuasiStatic,
-    /// The Cosserat rod with inertia and damping, stepped in time
-    /// (docs/design.md §4.2): the robot swings and rings.
-    Dynamic,
-}
-
-/// Injected faults.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct PlantFaults {
-    /// A motor that freezes where it is.
-    pub stuck: Option<StuckFault>,
-    /// Commands dropped at random in a window.
-    pub drop: Option<DropFault>,
-    /// Commands delayed in a window.
-    pub delay: Option<DelayFault>,
-}
-
-/// Motor `tendon` freezes at `at_s` seconds after the plant's start.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct StuckFault {
-    /// Tendon index.
-    pub tendon: usize,
-    /// When, s.
-    pub at_s: f64,
-}
-
-/// A fraction of the commands is dropped between `from_s` and `to_s`.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct DropFault {
-    /// Fraction of commands dropped, in [0, 1].
-    pub fraction: f64,
-    /// Window start, s.
-    pub from_s: f64,
-    /// Window end, s.
-    pub to_s: f64,
-}
-
-/// Commands are delayed by `delay_s` between `from_s` and `to_s`.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct DelayFault {
-    /// Extra delay, s.
-    pub delay_s: f64,
-    /// Window start, s.
-    pub from_s: f64,
-    /// Window end, s.
-    pub to_s: f64,
-}
-
-/// Plant model parameters (units in the field names).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct PlantParams {
-    /// Motor time constant, s: tension error decays as exp(−t/τ).
-    pub motor_tau_s: f64,
-    /// Series tendon compliance as a second lag, s; 0 = rigid tendons.
-    pub compliance_tau_s: f64,
-    /// Tip position sensor noise, standard deviation, m.
-    pub noise_m: f64,
-    /// Tip orientation sensor noise, standard deviation per quaternion component.
-    pub noise_quat: f64,
-    /// Seed of the noise and drop generator.
-    pub seed: u64,
-    /// RK4 steps of the statics (speed vs accuracy; 16 ≈ 1e-7 m).
-    pub statics_steps: usize,
-    /// Faults to inject.
-    pub faults: PlantFaults,
-    /// Quasi-static or dynamic robot.
-    pub model: RobotModel,
-    /// Time step of the dynamic robot, s (the plant takes as many as the
-    /// elapsed time holds).
-    pub dynamics_dt_s: f64,
-    /// How the real robot and its tracker differ from the robot file
-    /// (None: the robot file, an ideal tracker with `noise_m`).
-    pub reality: Option<Reality>,
-}
-
-impl Default for PlantParams {
-    fn default() -> Self {
-        PlantParams {
-            motor_tau_s: 0.02,
-            compliance_tau_s: 0.0,
-            noise_m: 20e-6,
-            noise_quat: 1e-5,
-            seed: 1,
-            statics_steps: 16,
-            faults: PlantFaults::default(),
-            model: RobotModel::QuasiStatic,
-            dynamics_dt_s: 1e-3,
-            reality: None,
-        }
-    }
-}
+use crate::statics::{Friction, FrictionState, SolverSettings, Statics, WarmStart};
 
 /// Most dynamic time steps one plant step takes: after a stall longer than
 /// this many steps, the rest of the elapsed time is skipped, not simulated.
@@ -165,11 +67,11 @@ pub struct PlantModel {
 impl PlantModel {
     /// A plant at rest with all tensions zero, moving the robot `robot`
     /// changed by `params.reality` if there is one.
-    pub fn new(robot: &Robot, mut params: PlantParams) -> Result<PlantModel, IpcError> {
+    pub fn new(robot: &Robot, mut params: PlantParams) -> Result<PlantModel, PlantError> {
         let reality = params.reality.clone().unwrap_or_default();
         let real = reality
             .real_robot(robot)
-            .map_err(|e| IpcError::Config(format!("plant: reality {}: {e}", reality.name)))?;
+            .map_err(|e| PlantError::Config(format!("plant: reality {}: {e}", reality.name)))?;
         let robot = &real;
         if let Some(tau) = reality.motors.and_then(|m| m.time_constant_ms) {
             params.motor_tau_s = tau * 1e-3;
@@ -193,15 +95,15 @@ impl PlantModel {
         });
         tracker
             .validate()
-            .map_err(|(f, p)| IpcError::Config(format!("plant: tracker {f}: {p}")))?;
+            .map_err(|(f, p)| PlantError::Config(format!("plant: tracker {f}: {p}")))?;
         if !(params.motor_tau_s > 0.0 && params.compliance_tau_s >= 0.0 && params.noise_m >= 0.0) {
-            return Err(IpcError::Config(
+            return Err(PlantError::Config(
                 "plant: motor time constant must be > 0, compliance and noise ≥ 0".into(),
             ));
         }
         if let Some(StuckFault { tendon: k, .. }) = params.faults.stuck {
             if k >= robot.n_tendons() {
-                return Err(IpcError::Config(format!(
+                return Err(PlantError::Config(format!(
                     "plant: stuck motor {k} but the robot has {} tendons",
                     robot.n_tendons()
                 )));
@@ -216,7 +118,7 @@ impl PlantModel {
         let zero = vec![0.0; n];
         let sol = statics
             .solve(&zero, None)
-            .map_err(|e| IpcError::Other(format!("plant: statics at rest: {e}")))?;
+            .map_err(|e| PlantError::Solve(format!("plant: statics at rest: {e}")))?;
         let dynamics = match params.model {
             RobotModel::QuasiStatic => None,
             RobotModel::Dynamic => Some(Box::new(
@@ -232,7 +134,7 @@ impl PlantModel {
                     nalgebra::Vector3::zeros(),
                     nalgebra::Vector3::zeros(),
                 )
-                .map_err(|e| IpcError::Config(format!("plant: dynamic robot: {e}")))?,
+                .map_err(|e| PlantError::Config(format!("plant: dynamic robot: {e}")))?,
             )),
         };
         Ok(PlantModel {
@@ -436,7 +338,7 @@ impl PlantModel {
     pub fn shape(&self, points: usize) -> Option<crate::statics::RodShape> {
         if let Some(d) = &self.dynamics {
             return Some(crate::statics::RodShape {
-                backbone: crate::runlog::resample(d.backbone(), points),
+                backbone: crate::numerics::polyline::resample(d.backbone(), points),
                 tendons: vec![],
             });
         }
@@ -499,6 +401,8 @@ fn drive(state: &mut (f64, f64), cmd: f64, backlash: f64, dead_band: f64) -> f64
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::plant::reality::Reality;
+    use crate::plant::PlantFaults;
     use std::path::Path;
 
     fn robot() -> Robot {
@@ -664,13 +568,16 @@ mod tests {
     fn resampling_keeps_the_ends_and_spaces_by_length() {
         let v = |x: f64| nalgebra::Vector3::new(x, 0.0, 0.0);
         let line = [v(0.0), v(0.1), v(0.4), v(1.0)];
-        let r = crate::runlog::resample(&line, 5);
+        let r = crate::numerics::polyline::resample(&line, 5);
         let xs: Vec<f64> = r.iter().map(|p| p.x).collect();
         for (got, want) in xs.iter().zip([0.0, 0.25, 0.5, 0.75, 1.0]) {
             assert!((got - want).abs() < 1e-12, "{xs:?}");
         }
-        assert_eq!(crate::runlog::resample(&[v(2.0)], 3), vec![v(2.0); 3]);
-        assert!(crate::runlog::resample(&[], 3).is_empty());
+        assert_eq!(
+            crate::numerics::polyline::resample(&[v(2.0)], 3),
+            vec![v(2.0); 3]
+        );
+        assert!(crate::numerics::polyline::resample(&[], 3).is_empty());
     }
 
     #[test]

@@ -10,8 +10,8 @@ use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 
-use super::{ExactIk, IkSolution, InverseError, Target};
 use crate::dataset::POSE_COLUMNS;
+use crate::inverse::{ExactIk, IkSolution, InverseError, Target};
 use crate::net::{GuardedNet, IkError};
 
 /// One target's answer: reached, or the closest reachable pose.
