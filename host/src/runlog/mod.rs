@@ -13,6 +13,7 @@
 //! ([`read`]), which is also what `tendril plot run.mcap` uses.
 
 pub mod channels;
+mod config;
 pub mod figure;
 pub mod finalize;
 pub mod read;

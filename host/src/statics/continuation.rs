@@ -20,10 +20,9 @@
 
 use nalgebra::{Vector3, Vector6};
 
-use super::shoot::{
-    base_state, NewtonOk, Shooting, Solution, SolveError, Statics, WarmStart, SENSITIVITY_PASS_COST,
-};
+use super::shoot::{base_state, NewtonOk, Shooting, SENSITIVITY_PASS_COST};
 use super::stability::{stability_pass, StabilityPass};
+use super::{Solution, SolveError, Statics, WarmStart};
 
 /// The first load step, as a fraction of the tip load; also the largest.
 const FIRST_STEP: f64 = 0.25;

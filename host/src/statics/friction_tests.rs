@@ -7,7 +7,8 @@ use std::sync::Arc;
 
 use nalgebra::Vector3;
 
-use super::friction::{tendon_angles, PROFILE_INTERVALS};
+use super::friction::tendon_angles;
+use super::profile::PROFILE_INTERVALS;
 use super::*;
 use crate::robot::{repo_robot as load, Robot};
 

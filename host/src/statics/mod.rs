@@ -14,20 +14,28 @@
 
 pub mod batch;
 pub mod continuation;
+mod error;
+mod facade;
 pub mod friction;
 pub mod integrate;
 pub mod pose;
+pub mod profile;
 pub mod rod;
+mod settings;
 pub mod shoot;
+mod solution;
 pub mod stability;
+mod state;
 pub mod tangent;
 
-pub use friction::{Friction, FrictionError, FrictionState, TensionProfile};
+pub use error::SolveError;
+pub use facade::Statics;
+pub use friction::{Friction, FrictionState};
+pub use profile::{FrictionError, TensionProfile};
 pub use rod::SingularSystem;
-pub use shoot::{
-    RodShape, Solution, SolveError, SolverSettings, Statics, TensionSensitivity, TipSensitivity,
-    WarmStart, MAX_STEPS,
-};
+pub use settings::{SolverSettings, MAX_STEPS};
+pub use shoot::RodShape;
+pub use solution::{Solution, TensionSensitivity, TipSensitivity, WarmStart};
 
 #[cfg(test)]
 mod friction_tests;

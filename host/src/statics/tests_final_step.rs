@@ -5,7 +5,8 @@
 
 use nalgebra::{Vector3, Vector6};
 
-use super::shoot::{base_state, jacobian_steps, pose_vector, Shooting, TipSensitivity};
+use super::shoot::{base_state, jacobian_steps, Shooting};
+use super::solution::{pose_vector, TipSensitivity};
 use super::*;
 use crate::robot::repo_robot;
 

@@ -133,41 +133,6 @@ fn real_time_problems(c: &ControllerStats, rate_hz: f64, steal_ms: Option<u64>) 
     out
 }
 
-#[cfg(test)]
-mod real_time_tests {
-    use super::*;
-
-    fn stats(cycles: u64, skipped: u64, overruns: u64, longest: u64) -> ControllerStats {
-        ControllerStats {
-            cycles,
-            skipped,
-            overruns,
-            stalls: 3,
-            longest_stall_periods: longest,
-            ..ControllerStats::default()
-        }
-    }
-
-    #[test]
-    fn misses_beyond_the_bounds_make_problems_unless_the_machine_took_them() {
-        // The careless user's run: 567 overruns, 115 skipped, a 53-period stall.
-        let c = stats(7000, 115, 567, 53);
-        let found = real_time_problems(&c, 1000.0, Some(0));
-        assert_eq!(found.len(), 2, "{found:?}");
-        assert!(found
-            .iter()
-            .any(|p| p.contains("567 of 7000 periods overran")));
-        assert!(found.iter().any(|p| p.contains("53 periods at once")));
-        // The same, with 600 ms stolen by the hypervisor: the machine's.
-        assert!(real_time_problems(&c, 1000.0, Some(600)).is_empty());
-        // Skipping 3 % of the periods.
-        let skipped = real_time_problems(&stats(7000, 210, 10, 5), 1000.0, None);
-        assert_eq!(skipped.len(), 1, "{skipped:?}");
-        assert!(skipped[0].contains("skipped 210 of 7000"));
-        assert!(real_time_problems(&stats(7000, 100, 10, 5), 1000.0, None).is_empty());
-    }
-}
-
 /// The report of a finished run.
 #[allow(clippy::too_many_arguments)]
 pub fn build_report(
@@ -780,4 +745,39 @@ fn first_detection(
         .filter(|d| d.t_ns as f64 >= from_ns && matches(d))
         .map(|d| d.t_ns as f64)
         .reduce(f64::min)
+}
+
+#[cfg(test)]
+mod real_time_tests {
+    use super::*;
+
+    fn stats(cycles: u64, skipped: u64, overruns: u64, longest: u64) -> ControllerStats {
+        ControllerStats {
+            cycles,
+            skipped,
+            overruns,
+            stalls: 3,
+            longest_stall_periods: longest,
+            ..ControllerStats::default()
+        }
+    }
+
+    #[test]
+    fn misses_beyond_the_bounds_make_problems_unless_the_machine_took_them() {
+        // The careless user's run: 567 overruns, 115 skipped, a 53-period stall.
+        let c = stats(7000, 115, 567, 53);
+        let found = real_time_problems(&c, 1000.0, Some(0));
+        assert_eq!(found.len(), 2, "{found:?}");
+        assert!(found
+            .iter()
+            .any(|p| p.contains("567 of 7000 periods overran")));
+        assert!(found.iter().any(|p| p.contains("53 periods at once")));
+        // The same, with 600 ms stolen by the hypervisor: the machine's.
+        assert!(real_time_problems(&c, 1000.0, Some(600)).is_empty());
+        // Skipping 3 % of the periods.
+        let skipped = real_time_problems(&stats(7000, 210, 10, 5), 1000.0, None);
+        assert_eq!(skipped.len(), 1, "{skipped:?}");
+        assert!(skipped[0].contains("skipped 210 of 7000"));
+        assert!(real_time_problems(&stats(7000, 100, 10, 5), 1000.0, None).is_empty());
+    }
 }

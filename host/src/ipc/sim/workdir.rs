@@ -386,7 +386,7 @@ mod tests {
         std::fs::write(dir.file("report.json"), "new").unwrap();
         std::fs::write(dir.file("sim.png"), "new").unwrap();
         std::fs::write(dir.file(super::super::RUN_MCAP), vec![7u8; 100_000]).unwrap();
-        let err = dir.publish().err().expect("a full device fails");
+        let err = dir.publish().expect_err("a full device fails");
         let msg = err.to_string();
         assert!(msg.contains("No space left on device"), "{msg}");
         assert_eq!(msg.matches("No space left").count(), 1, "{msg}");
