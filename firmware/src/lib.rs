@@ -57,6 +57,7 @@ pub mod node;
 pub mod period;
 #[cfg(target_os = "none")]
 pub mod rt;
+pub mod status;
 pub mod swap;
 #[cfg(any(test, feature = "harness"))]
 pub mod swap_demo;

@@ -191,7 +191,7 @@ fn the_chip_rejects_bad_inputs_and_swaps_nets_over_a_noisy_link() {
     // (~200 B: 1.5–2 periods of the loaded link, measured p99 2.3–3.0
     // periods); the 2-period target is the nominal loop's (the circle and
     // steps tests), and past 5 the sim itself calls the link saturated.
-    assert_link_kept_up(&r, tendril::ipc::sim::assess::LINK_P99_MAX_PERIODS);
+    assert_link_kept_up(&r, tendril::ipc::sim::realtime::LINK_P99_MAX_PERIODS);
     // Garbage: injected, dropped and counted by the chip's frame decoder.
     let link = &r["controller"]["link"];
     assert!(f(&link["garbage_bytes_sent"]) > 100.0, "{link}");

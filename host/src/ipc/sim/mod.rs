@@ -18,6 +18,7 @@ pub mod budget;
 mod config;
 pub mod faults;
 pub mod oscillation;
+pub mod realtime;
 pub mod report;
 mod sample;
 pub mod supervisor;
