@@ -334,9 +334,13 @@ static BUILT_IN_FILE: std::sync::Mutex<Option<crate::fsutil::Temporary>> =
 
 /// Run `tendril controller`.
 pub fn run(args: ControllerArgs) -> anyhow::Result<()> {
-    let result = args
-        .config()
-        .and_then(|cfg| Ok(crate::ipc::controller::run(&cfg)?));
+    let result = args.config().and_then(|cfg| {
+        // The backend: the period on the host, or the chip over its link.
+        Ok(match cfg.mcu {
+            Some(_) => crate::mcu::bridge::run(&cfg)?,
+            None => crate::ipc::controller::run(&cfg)?,
+        })
+    });
     // The built-in net's temporary file, if one was written, goes now.
     if let Ok(mut file) = BUILT_IN_FILE.lock() {
         file.take();

@@ -12,30 +12,21 @@
 //! rule runs on the chip, and the report's counts are the chip's own
 //! (telemetry), its fault list built from the events each command carries.
 
-use std::path::PathBuf;
 use std::time::Duration;
 
-use anyhow::{anyhow, bail, Result};
-use serde::{Deserialize, Serialize};
-use tendril_firmware::period::{event, Counters, Events, PeriodConfig};
-use tendril_shared::link::messages::{
-    units, Command, Down, Feedback, Hello, Setpoint as LinkSetpoint, Setup, Tangent as LinkTangent,
-    Telemetry, Up, WirePose, MAX_CHUNK, MAX_UP_PAYLOAD, PROTOCOL_VERSION,
-};
-use tendril_shared::link::{encode, max_frame_len, FrameCounters, FrameDecoder};
+use anyhow::Result;
+use tendril_firmware::period::{event, Counters, Events};
+use tendril_shared::link::messages::{Command, Down, Telemetry, Up, MAX_CHUNK};
 use tendril_shared::messages::{
-    setpoint_flags, Header, PlantState, Setpoint, TensionCommand, WeightUpdate, MAX_TENDONS,
+    Header, PlantState, Setpoint, TensionCommand, WeightUpdate, MAX_TENDONS,
 };
 
 use super::{locate_image, Chip, McuLink};
 use crate::ipc::clock::now_ns;
-use crate::ipc::controller::{
-    log_header, period_config, ControllerConfig, ControllerStats, FaultLog,
-};
-use crate::ipc::stats::{CsvLog, Histogram, Summary};
+use crate::ipc::controller::{log_header, ControllerConfig, ControllerStats, FaultLog};
+use crate::ipc::stats::{CsvLog, Histogram};
 use crate::ipc::transport::{self, Services};
 use crate::ipc::{IpcError, PeerWatch, StopWatch};
-use crate::robot::Robot;
 
 /// The loop's rate with the chip in the loop unless told otherwise, Hz:
 /// QEMU 7.2's STM32 USART takes one received byte at a time (12.6 kB/s
@@ -98,298 +89,21 @@ pub const SEND_MAX_BACKLOG: usize = 192;
 /// How often the bridge looks for messages, µs.
 pub const POLL_US: u64 = 100;
 
-/// Where the chip is: started by the bridge (an image) or already running
-/// (a socket some launcher owns).
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct McuOptions {
-    /// A running chip's link socket; None: start QEMU with `image`.
-    pub socket: Option<PathBuf>,
-    /// The controller image (None: built by [`locate_image`]).
-    pub image: Option<PathBuf>,
-    /// Inject a garbage burst on the link every this many ms (fault test).
-    pub garbage_every_ms: Option<u64>,
-}
+pub use crate::ipc::controller::{LinkStats, McuOptions};
 
-/// The link's statistics in the controller's report.
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
-#[serde(default)]
-pub struct LinkStats {
-    /// Commands the chip sent and the bridge published.
-    pub commands: u64,
-    /// Gaps in the chip's command sequence (periods whose command was lost
-    /// on the link).
-    pub commands_lost: u64,
-    /// Setpoint forwarded → the first command that used it, µs (host clock,
-    /// both ends).
-    pub setpoint_to_command_us: Summary,
-    /// The same in periods (p50, p99).
-    pub setpoint_to_command_periods: (f64, f64),
-    /// The bridge's receive-side frame counters.
-    pub frames_up: FrameCounters,
-    /// The chip's receive-side frame counters (its last telemetry).
-    pub frames_down: FrameCounters,
-    /// Bytes sent to / received from the chip.
-    pub bytes_down: u64,
-    /// Bytes received from the chip.
-    pub bytes_up: u64,
-    /// Garbage bytes injected (fault test).
-    pub garbage_bytes_sent: u64,
-    /// Weight updates sent / chunks sent.
-    pub updates_sent: u64,
-    /// Chunks sent.
-    pub chunks_sent: u64,
-    /// The chip's last telemetry.
-    pub chip: Option<Telemetry>,
-    /// The chip's telemetry when the bridge connected (a chip that ran
-    /// before: its counts before this bridge).
-    pub chip_at_connect: Option<Telemetry>,
-}
+pub use super::chip_link::{link_feedback, link_setpoint, setup_for, setup_of, ChipLink};
 
-/// The chip's configuration for `cfg` and the robot: the host controller's
-/// own period configuration, flattened for the link.
-pub fn setup_for(cfg: &ControllerConfig, robot: &Robot) -> Result<Setup, IpcError> {
-    let p = period_config(cfg, robot)?;
-    Ok(setup_of(&p))
-}
-
-/// Flatten a period configuration for the link.
-pub fn setup_of(p: &PeriodConfig) -> Setup {
-    let l = &p.control.limits;
-    let n = l.n_tendons();
-    let pad = |a: &[f32]| {
-        let mut out = [0.0f32; MAX_TENDONS];
-        for (d, v) in out.iter_mut().zip(a) {
-            *d = *v;
-        }
-        out
+/// Run the controller process with the chip in the loop until stopped:
+/// the same checks as the host's ([`crate::ipc::controller::load`]), then
+/// the bridge.
+pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
+    let Some(mcu) = &cfg.mcu else {
+        return Err(IpcError::Config(
+            "the bridge needs the chip's options (controller --mcu)".into(),
+        ));
     };
-    let mut sets = [0u8; MAX_TENDONS];
-    sets[..n].copy_from_slice(&l.cocontraction().sets()[..n]);
-    let ns = |v: u64| v.min(u64::from(u32::MAX)) as u32;
-    let ic = p.control.integral;
-    Setup {
-        n_tendons: n as u8,
-        max_tension: pad(l.max_tension()),
-        min_tension: pad(l.min_tension()),
-        slew_rate: pad(l.slew_rate()),
-        cocontraction_sets: sets,
-        cocontraction_weights: *l.cocontraction().weights(),
-        period_ns: ns(p.period_ns),
-        watchdog_ns: ns(p.control.watchdog_ns),
-        max_dt_ns: ns(p.control.max_dt_ns),
-        quaternion_tolerance: p.control.quaternion_tolerance,
-        box_margin: p.control.box_margin,
-        ki: ic.ki,
-        correction_limit: ic.limit,
-        feedback_timeout_ns: ns(ic.feedback_timeout_ns),
-        correction_window: ic.window,
-        correction_filter_tau_s: ic.filter_tau_s,
-        correction_map_gain: ic.map_gain,
-        correction_map_scale: ic.map_scale,
-        correction_map_limit: ic.map_limit,
-        jump_m: p.jump_m,
-        settle_after_jump_ns: ns(p.settle_after_jump_ns),
-        lead_s: p.lead_s,
-        plant_stale_ns: ns(p.plant_stale_ns),
-        stuck_enabled: p.stuck.enabled,
-        stuck_model_gain: p.stuck.model_gain,
-        stuck_error_n: p.stuck.tension_error_n,
-        stuck_persist_ns: ns(p.stuck.persist_ns),
-    }
-}
-
-/// The planner's setpoint as a link message; the tangent only when it
-/// differs from `last` (the chip keeps the last one).
-pub fn link_setpoint(
-    s: &Setpoint,
-    count: usize,
-    superseded_nonfinite: usize,
-    last: &mut Option<LinkTangent>,
-) -> LinkSetpoint {
-    let tangent = (s.flags & setpoint_flags::HAS_TANGENT != 0).then_some(LinkTangent {
-        dim: s.tangent_dim.min(3) as u8,
-        columns: s.tangent,
-        axes: s.tangent_axes,
-    });
-    let send_tangent = match (tangent, *last) {
-        (Some(t), Some(l)) => !close(&t, &l),
-        (Some(_), None) => true,
-        _ => false,
-    };
-    if send_tangent {
-        *last = tangent;
-    }
-    LinkSetpoint {
-        seq: s.header.seq as u32,
-        count: count.min(u16::MAX as usize) as u16,
-        superseded_nonfinite: superseded_nonfinite.min(u16::MAX as usize) as u16,
-        pose: WirePose::from_pose(&s.pose),
-        velocity: (s.flags & setpoint_flags::HAS_VELOCITY != 0)
-            .then(|| LinkSetpoint::wire_velocity(&s.velocity)),
-        tangent: if send_tangent { tangent } else { None },
-    }
-}
-
-/// Whether two tangents agree to 1 % (the tangent is a first-order model
-/// of the reachable poses: a 1 % change moves a correction of at most 3 mm
-/// by at most 30 µm, and sending it on every setpoint would take 120 of the
-/// ~130 bytes the emulated link carries per period).
-fn close(a: &LinkTangent, b: &LinkTangent) -> bool {
-    a.dim == b.dim
-        && a.columns
-            .iter()
-            .flatten()
-            .chain(a.axes.iter().flatten())
-            .zip(b.columns.iter().flatten().chain(b.axes.iter().flatten()))
-            .all(|(x, y)| (x - y).abs() <= 1e-2 * (1.0 + x.abs().max(y.abs())))
-}
-
-/// The plant's state as a link message, sent at `now_ns` (the tracker
-/// frame's age is measured to it: the chip's clock is not the host's).
-pub fn link_feedback(f: &PlantState, count: usize, n: usize, now_ns: u64) -> Feedback {
-    let mut tensions = heapless::Vec::new();
-    for &t in f.tensions.iter().take(n) {
-        let _ = tensions.push(units::to_i32(t, units::TENSION_N));
-    }
-    Feedback {
-        seq: f.header.seq as u32,
-        count: count.min(u16::MAX as usize) as u16,
-        command_seq: f.command_seq as u32,
-        tensions,
-        tip: [0, 1, 2].map(|i| units::to_i32(f.tip_pose[i], units::POSITION_M)),
-        tip_seq: f.tip_seq,
-        tip_age_us: (now_ns.saturating_sub(f.tip_stamp_ns) / 1000).min(u64::from(u32::MAX)) as u32,
-    }
-}
-
-/// The link to a configured chip: frames out, messages in.
-pub struct ChipLink {
-    link: McuLink,
-    rx: FrameDecoder<{ max_frame_len(MAX_UP_PAYLOAD) }>,
-    inbox: Vec<Up>,
-    buf: Vec<u8>,
-    /// The chip's Hello after configuration.
-    pub hello: Hello,
-}
-
-impl ChipLink {
-    /// Connect, check the protocol, and configure the chip with `setup`
-    /// (kept if it already runs it). Then send `model` if it is not the
-    /// chip's built-in net.
-    pub fn open(link: McuLink, setup: &Setup) -> Result<ChipLink> {
-        let mut me = ChipLink {
-            link,
-            rx: FrameDecoder::new(),
-            inbox: Vec::new(),
-            buf: vec![0; 1024],
-            hello: Hello {
-                protocol: 0,
-                net_hash: 0,
-                setup_hash: 0,
-                setup_error: 0,
-            },
-        };
-        // A 0x00 first: whatever the chip's decoder holds from an earlier
-        // host is dropped, not merged with the first frame.
-        me.link.send(&[0])?;
-        me.send(&Down::Hello {
-            protocol: PROTOCOL_VERSION,
-        })?;
-        let hello = me.wait_hello(Duration::from_secs(10), |_| true)?;
-        if hello.protocol != PROTOCOL_VERSION {
-            bail!(
-                "the chip speaks link protocol {}, this tendril {}: rebuild the image (it is built by `tendril controller --mcu` from this checkout)",
-                hello.protocol,
-                PROTOCOL_VERSION
-            );
-        }
-        let want = setup.hash();
-        if hello.setup_hash != want {
-            me.send(&Down::Setup(*setup))?;
-            let h = me.wait_hello(Duration::from_secs(5), |h| {
-                h.setup_hash == want || h.setup_error != 0
-            })?;
-            if h.setup_error != 0 {
-                bail!(
-                    "the chip refused the controller's configuration (error {})",
-                    h.setup_error
-                );
-            }
-            me.hello = h;
-        } else {
-            me.hello = hello;
-        }
-        Ok(me)
-    }
-
-    fn wait_hello(&mut self, timeout: Duration, ok: impl Fn(&Hello) -> bool) -> Result<Hello> {
-        let t0 = std::time::Instant::now();
-        while t0.elapsed() < timeout {
-            self.poll(Duration::from_millis(20));
-            let found = self.inbox.iter().rev().find_map(|m| match m {
-                Up::Hello(h) if ok(h) => Some(*h),
-                _ => None,
-            });
-            self.inbox.clear();
-            if let Some(h) = found {
-                return Ok(h);
-            }
-        }
-        Err(anyhow!("no answer from the chip in {timeout:?}"))
-    }
-
-    /// Send one message.
-    pub fn send(&mut self, msg: &Down<'_>) -> Result<()> {
-        let frame = encode(msg, &mut self.buf).map_err(|e| anyhow!("link frame: {e}"))?;
-        self.link.send(frame)
-    }
-
-    /// Send raw bytes (garbage injection).
-    pub fn send_raw(&mut self, bytes: &[u8]) -> Result<()> {
-        self.link.send(bytes)
-    }
-
-    /// Decode what arrived within `timeout` into the inbox.
-    pub fn poll(&mut self, timeout: Duration) {
-        let mut first = self.link.recv(timeout);
-        while let Some(bytes) = first.take().or_else(|| self.link.try_recv()) {
-            for b in bytes {
-                if let Some(Ok(msg)) = self.rx.push::<Up>(b) {
-                    self.inbox.push(msg);
-                }
-            }
-        }
-    }
-
-    /// Messages decoded so far (drained).
-    pub fn drain(&mut self) -> std::vec::Drain<'_, Up> {
-        self.inbox.drain(..)
-    }
-
-    /// The bridge's frame counters.
-    pub fn counters(&self) -> FrameCounters {
-        self.rx.counters()
-    }
-
-    /// Bytes sent but not yet read by the chip.
-    pub fn backlog(&self) -> usize {
-        self.link.backlog()
-    }
-
-    /// Bytes sent and received.
-    pub fn bytes(&self) -> (u64, u64) {
-        (self.link.bytes_sent(), self.link.bytes_received())
-    }
-}
-
-/// Run the controller with the chip in the loop until stopped.
-pub fn run(
-    cfg: &ControllerConfig,
-    robot: &Robot,
-    model: &[u8],
-    mcu: &McuOptions,
-) -> Result<ControllerStats, IpcError> {
+    let (robot, model) = crate::ipc::controller::load(cfg)?;
+    let (robot, model) = (&robot, model.as_slice());
     let other = |e: anyhow::Error| IpcError::Other(format!("{e:#}"));
     let setup = setup_for(cfg, robot)?;
     // The chip: started here, or already running behind a socket.

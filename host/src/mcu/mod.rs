@@ -11,6 +11,7 @@
 
 pub mod bridge;
 mod chip;
+mod chip_link;
 mod link;
 pub mod trace;
 #[cfg(test)]

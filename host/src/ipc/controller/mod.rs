@@ -81,13 +81,26 @@ pub mod correction {
 }
 
 pub use report::{
-    ControllerStats, DetectedFault, FaultKind, FaultLog, FAULT_CAPACITY, FAULT_REPEAT_S,
+    ControllerStats, DetectedFault, FaultKind, FaultLog, LinkStats, FAULT_CAPACITY, FAULT_REPEAT_S,
 };
 pub use task::{feedback_in, period_config, setpoint_in, Controller, HostPeriod, Inbox};
 
 /// The double-buffered net the controller runs, of the one capacity in
 /// `tendril_shared` (the trainer's cap, so every exported net fits).
 pub type Slots = NetSlots<POSE_DIM, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS>;
+
+/// Where the chip is: started by the bridge (an image) or already running
+/// (a socket some launcher owns).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct McuOptions {
+    /// A running chip's link socket; None: start QEMU with `image`.
+    pub socket: Option<PathBuf>,
+    /// The controller image (None: built by [`crate::mcu::locate_image`]).
+    pub image: Option<PathBuf>,
+    /// Inject a garbage burst on the link every this many ms (fault test).
+    pub garbage_every_ms: Option<u64>,
+}
 
 /// Everything the controller process needs: written by a launcher as JSON
 /// (`tendril controller --config FILE`) or built from the flags. Units are
@@ -161,7 +174,7 @@ pub struct ControllerConfig {
     pub stats: Option<PathBuf>,
     /// The chip in the loop: the bridge runs instead of the host period
     /// ([`crate::mcu::bridge`]).
-    pub mcu: Option<crate::mcu::bridge::McuOptions>,
+    pub mcu: Option<McuOptions>,
 }
 
 /// When a motor counts as stuck: its measured tension leaves the tension a
@@ -258,8 +271,12 @@ pub fn load_net(slots: &mut Slots, bytes: &[u8], tendons: usize) -> Result<(), I
         .map_err(|e| IpcError::Other(e.to_string()))
 }
 
-/// Run the controller process until stopped (or its peers are lost).
-pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
+/// Everything a controller process checks before it touches shared
+/// memory, whichever backend runs the period (the host here, the chip
+/// through [`crate::mcu::bridge`]): its launcher's death, the robot, the
+/// net (read capped, decoded, made for this robot) and the whole
+/// configuration. Returns the robot and the net's bytes.
+pub fn load(cfg: &ControllerConfig) -> Result<(Robot, Vec<u8>), IpcError> {
     super::die_with_parent(cfg.supervised)?;
     let robot = Robot::load(&cfg.robot).map_err(|e| IpcError::Other(e.to_string()))?;
     let bytes =
@@ -279,11 +296,22 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
         crate::net::CLI_OVERRIDE,
     )
     .map_err(|e| IpcError::Other(e.to_string()))?;
-    // Validate everything before touching shared memory.
     Controller::new(cfg, &robot, &bytes, 0)?;
-    if let Some(mcu) = &cfg.mcu {
-        return crate::mcu::bridge::run(cfg, &robot, &bytes, mcu);
+    Ok((robot, bytes))
+}
+
+/// Run the controller process with the period on the host until stopped
+/// (or its peers are lost). With the chip in the loop the command line runs
+/// [`crate::mcu::bridge::run`] instead: the controller knows no backend but
+/// its own.
+pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
+    if cfg.mcu.is_some() {
+        return Err(IpcError::Config(
+            "the chip's controller is the bridge (tendril controller --mcu), not the host period"
+                .into(),
+        ));
     }
+    let (robot, bytes) = load(cfg)?;
 
     let node = transport::node("tendril-controller")?;
     let _orphan = transport::ReleaseIfOrphaned(&node);

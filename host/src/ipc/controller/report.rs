@@ -2,6 +2,8 @@
 //! (`controller.json`).
 
 use super::*;
+use tendril_shared::link::messages::Telemetry;
+use tendril_shared::link::FrameCounters;
 
 /// What the controller reports at exit (`controller.json`). Counts are
 /// integers; every count says what it covers.
@@ -89,7 +91,7 @@ pub struct ControllerStats {
     pub faults_not_listed: u64,
     /// With the chip in the loop (`--mcu`): the link's statistics and the
     /// chip's own telemetry.
-    pub link: Option<crate::mcu::bridge::LinkStats>,
+    pub link: Option<LinkStats>,
 }
 
 /// Room for detected faults (preallocated: the loop never allocates).
@@ -396,6 +398,41 @@ impl ControllerStats {
         self.plant_stale_cycles = u(c.plant_stale_periods);
         self.plant_recoveries = u(c.plant_recoveries);
     }
+}
+
+/// The link's statistics in the controller's report.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[serde(default)]
+pub struct LinkStats {
+    /// Commands the chip sent and the bridge published.
+    pub commands: u64,
+    /// Gaps in the chip's command sequence (periods whose command was lost
+    /// on the link).
+    pub commands_lost: u64,
+    /// Setpoint forwarded → the first command that used it, µs (host clock,
+    /// both ends).
+    pub setpoint_to_command_us: Summary,
+    /// The same in periods (p50, p99).
+    pub setpoint_to_command_periods: (f64, f64),
+    /// The bridge's receive-side frame counters.
+    pub frames_up: FrameCounters,
+    /// The chip's receive-side frame counters (its last telemetry).
+    pub frames_down: FrameCounters,
+    /// Bytes sent to / received from the chip.
+    pub bytes_down: u64,
+    /// Bytes received from the chip.
+    pub bytes_up: u64,
+    /// Garbage bytes injected (fault test).
+    pub garbage_bytes_sent: u64,
+    /// Weight updates sent / chunks sent.
+    pub updates_sent: u64,
+    /// Chunks sent.
+    pub chunks_sent: u64,
+    /// The chip's last telemetry.
+    pub chip: Option<Telemetry>,
+    /// The chip's telemetry when the bridge connected (a chip that ran
+    /// before: its counts before this bridge).
+    pub chip_at_connect: Option<Telemetry>,
 }
 
 #[cfg(test)]
