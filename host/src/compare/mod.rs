@@ -51,6 +51,9 @@ pub enum CompareError {
     /// Two of the job's files are the same file.
     #[error(transparent)]
     Paths(#[from] crate::fsutil::PathCollision),
+    /// A stop was requested (Ctrl-C, SIGTERM, SIGHUP) between learners.
+    #[error("interrupted; nothing was written")]
+    Interrupted,
     /// Writing an output failed.
     #[error("writing {path}: {why}")]
     Write {

@@ -220,6 +220,12 @@ pub fn compare(
     bar.set_prefix("compare");
     let mut entries = Vec::new();
     for l in learners.iter_mut() {
+        // A stop ends the comparison between learners (each one's fit is
+        // seconds at most): nothing half-compared is reported.
+        if crate::interrupt::stop_requested() {
+            bar.finish_and_clear();
+            return Err(CompareError::Interrupted);
+        }
         let name = l.name().to_string();
         bar.set_message(format!("training {name}"));
         log::debug!("compare: training {name}");
