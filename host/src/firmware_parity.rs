@@ -78,29 +78,8 @@ pub fn prerequisites() -> Result<(), ParityError> {
     if !cfg!(feature = "parity") {
         return Err(without_harness());
     }
-    let qemu = Command::new("qemu-system-arm")
-        .arg("--version")
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success());
-    if !qemu {
-        return Err(ParityError::Unavailable(
-            "qemu-system-arm not found (apt-get install qemu-system-arm)".into(),
-        ));
-    }
-    let sysroot = Command::new("rustc")
-        .args(["--print", "sysroot"])
-        .output()
-        .ok()
-        .filter(|o| o.status.success())
-        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string());
-    match sysroot {
-        Some(s) if Path::new(&s).join("lib/rustlib").join(TARGET).exists() => Ok(()),
-        _ => Err(ParityError::Unavailable(format!(
-            "Rust target {TARGET} not installed (rustup target add {TARGET})"
-        ))),
-    }
+    // The one check, shared with the chip in the loop.
+    crate::mcu::check_tools().map_err(|e| ParityError::Unavailable(e.to_string()))
 }
 
 /// Build the MCU binary with `net` in flash (the committed default net if

@@ -17,8 +17,10 @@ pub enum OnOff {
     Off,
 }
 
+use crate::ipc::controller::defaults;
+
 /// The control rate without `--rate`, Hz.
-pub const DEFAULT_RATE_HZ: f64 = 1000.0;
+pub const DEFAULT_RATE_HZ: f64 = defaults::RATE_HZ;
 
 /// Loop and tuning options (shared with `tendril sim`).
 #[derive(Args, Clone, Debug)]
@@ -28,14 +30,14 @@ pub struct LoopOpts {
     #[arg(long)]
     pub rate: Option<f64>,
     /// Spin this long before each deadline instead of sleeping, µs (0 = pure sleep).
-    #[arg(long, default_value_t = 50.0)]
+    #[arg(long, default_value_t = defaults::SPIN_US)]
     pub spin_us: f64,
     /// Run under SCHED_FIFO (needs privileges; falls back with a warning).
     /// Default: off for `controller`, on for `sim` (all three processes).
     #[arg(long, value_enum)]
     pub realtime: Option<OnOff>,
     /// Setpoint silence, in periods, that trips the safe hold.
-    #[arg(long, default_value_t = 2.5)]
+    #[arg(long, default_value_t = defaults::WATCHDOG_PERIODS)]
     pub watchdog_periods: f64,
     /// Integral correction of the measured tip error: the firmware control
     /// step's own integral loop (along the planner's statics tangent when the
@@ -80,10 +82,10 @@ pub struct LoopOpts {
     pub tracker_timeout_ms: f64,
     /// Motor-lag lead: setpoints are advanced by velocity × lead, ms
     /// (≈ motor time constant + half a period; 0 = off).
-    #[arg(long, default_value_t = 20.5)]
+    #[arg(long, default_value_t = defaults::LEAD_S * 1e3)]
     pub lead_ms: f64,
     /// Tension slew-rate limit, N/s.
-    #[arg(long, default_value_t = 200.0)]
+    #[arg(long, default_value_t = defaults::SLEW_N_PER_S)]
     pub slew: f64,
 }
 
@@ -354,4 +356,34 @@ pub fn run(args: ControllerArgs) -> anyhow::Result<()> {
         stats.lateness_us.p99
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: ControllerArgs,
+    }
+
+    /// Every default the command line shows is the configuration's own: a
+    /// `tendril controller` without flags runs `ControllerConfig::new`'s
+    /// loop (issue 44: the lead was 20.5 ms here and 21 ms there).
+    #[test]
+    fn a_command_line_without_flags_is_the_configurations_defaults() {
+        let given = Cli::parse_from(["controller", "--model", "m.tnet"])
+            .args
+            .config()
+            .unwrap();
+        let mut expected = ControllerConfig::new("robots/seed-4t.toml".into(), "m.tnet".into());
+        // The command line's own choices, said in its help: the correction
+        // on at its gain (the library's config starts with it off).
+        expected.ki_per_s = crate::ipc::controller::correction::KI_PER_S;
+        expected.peer_timeout_s = given.peer_timeout_s;
+        expected.peer_start_grace_s = given.peer_start_grace_s;
+        assert_eq!(given, expected);
+    }
 }

@@ -261,7 +261,7 @@ mod tests {
     fn process_configs_round_trip_through_json_with_named_units() {
         let ctl = controller::ControllerConfig::new("r.toml".into(), "m.tnet".into());
         let text = serde_json::to_string(&ctl).unwrap();
-        assert!(text.contains("\"lead_s\":0.021") && text.contains("\"ki_per_s\""));
+        assert!(text.contains("\"lead_s\":0.0205") && text.contains("\"ki_per_s\""));
         assert_eq!(
             serde_json::from_str::<controller::ControllerConfig>(&text).unwrap(),
             ctl

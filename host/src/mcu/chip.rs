@@ -42,6 +42,24 @@ fn check_qemu() -> Result<()> {
     Ok(())
 }
 
+/// The one check that this machine can build and run the firmware under
+/// QEMU (the parity stage, the chip in the loop): `qemu-system-arm` on the
+/// `PATH` and the Rust target installed; otherwise one line saying what to
+/// install.
+pub fn check_tools() -> Result<()> {
+    check_qemu()?;
+    let rustc = std::env::var_os("RUSTC").unwrap_or_else(|| "rustc".into());
+    let sysroot = Command::new(&rustc)
+        .args(["--print", "sysroot"])
+        .output()
+        .context("running rustc --print sysroot")?;
+    let sysroot = PathBuf::from(String::from_utf8_lossy(&sysroot.stdout).trim());
+    if !sysroot.join("lib/rustlib").join(TARGET).is_dir() {
+        bail!("Rust target {TARGET} not installed: install it with `rustup target add {TARGET}`");
+    }
+    Ok(())
+}
+
 /// Remove the link sockets (and their `.log` files) that runs killed by
 /// SIGKILL left in `dir`: names `tendril-…<pid>…` with `.sock` in them
 /// whose pid (the first number in the name) is no live process.
@@ -265,20 +283,11 @@ pub fn locate_bringup_image() -> Result<PathBuf> {
 /// one line naming what to install when QEMU or the Rust target is
 /// missing.
 pub fn build_image(bin: &str) -> Result<PathBuf> {
-    check_qemu()?;
+    check_tools()?;
     let workspace = Path::new(env!("CARGO_MANIFEST_DIR"))
         .parent()
         .context("host crate has no parent directory")?
         .to_path_buf();
-    let rustc = std::env::var_os("RUSTC").unwrap_or_else(|| "rustc".into());
-    let sysroot = Command::new(&rustc)
-        .args(["--print", "sysroot"])
-        .output()
-        .context("running rustc --print sysroot")?;
-    let sysroot = PathBuf::from(String::from_utf8_lossy(&sysroot.stdout).trim());
-    if !sysroot.join("lib/rustlib").join(TARGET).is_dir() {
-        bail!("Rust target {TARGET} not installed: install it with `rustup target add {TARGET}`");
-    }
     let base = std::env::var_os("CARGO_TARGET_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| workspace.join("target"));

@@ -17,5 +17,5 @@ pub mod trace;
 #[cfg(test)]
 mod units_tests;
 
-pub use chip::{build_image, locate_bringup_image, locate_image, Chip, QEMU, TARGET};
+pub use chip::{build_image, check_tools, locate_bringup_image, locate_image, Chip, QEMU, TARGET};
 pub use link::McuLink;

@@ -129,12 +129,13 @@ impl SimConfig {
     }
 
     /// The defaults of `tendril sim`: the 30 mm circle at 0.2 Hz after a
-    /// 2 s settle, 10 s, the firmware's integral correction on (ki 10/s),
-    /// 20.5 ms motor-lag lead, the default plant, real-time and pinned.
+    /// 2 s settle, 10 s, the firmware's integral correction on
+    /// ([`DEFAULT_KI_PER_S`]), the controller's other defaults
+    /// ([`crate::ipc::controller::defaults`]), the default plant, real-time
+    /// and pinned.
     pub fn new(exe: PathBuf, robot: PathBuf, model: ModelSource, out: PathBuf) -> SimConfig {
         let mut controller = ControllerConfig::new(robot.clone(), PathBuf::new());
         controller.ki_per_s = DEFAULT_KI_PER_S;
-        controller.lead_s = 0.0205;
         SimConfig {
             exe,
             robot: robot.clone(),
