@@ -7,7 +7,6 @@ use std::path::{Path, PathBuf};
 use super::{all_learners_for, compare, CompareError, CompareOptions, Comparison};
 use crate::dataset::Dataset;
 use crate::fsutil::check_distinct;
-use crate::learn::cascor::job::MAX_HELD_OUT_FRACTION;
 use crate::learn::targets::Targets;
 use crate::robot::Robot;
 
@@ -43,16 +42,16 @@ pub struct CompareResult {
 /// Check `job`, compare every learner and write the results.
 pub fn run(job: &CompareJob) -> Result<CompareResult, CompareError> {
     let o = &job.options;
-    for (name, v) in [
-        ("--test-fraction", o.test_fraction),
-        ("--valid-fraction", o.valid_fraction),
-    ] {
-        if !(v > 0.0 && v <= MAX_HELD_OUT_FRACTION) {
-            return Err(CompareError::BadInput(format!(
-                "{name} must be in (0, {MAX_HELD_OUT_FRACTION}], got {v}"
-            )));
-        }
+    crate::dataset::split::check_test_fraction(o.test_fraction).map_err(CompareError::BadInput)?;
+    // Every baseline stops early on its validation rows: none is refused too.
+    if o.valid_fraction == 0.0 {
+        return Err(CompareError::BadInput(
+            "--valid-fraction must be > 0: the baselines stop early on their validation rows"
+                .into(),
+        ));
     }
+    crate::dataset::split::check_valid_fraction(o.valid_fraction)
+        .map_err(CompareError::BadInput)?;
     let files = output_files(&job.out_dir, o.dump_splits.as_deref());
     let outputs: Vec<(&str, &Path)> = files.iter().map(|(r, p)| (*r, p.as_path())).collect();
     let mut inputs: Vec<(&str, &Path)> = vec![("--data", &job.data), ("--robot", &job.robot)];

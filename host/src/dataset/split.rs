@@ -33,6 +33,18 @@ pub fn check_test_fraction(t: f64) -> Result<(), String> {
     }
 }
 
+/// The one check of a `--valid-fraction` (the validation rows carved from
+/// the training rows): in [0, [`MAX_TEST_FRACTION`]].
+pub fn check_valid_fraction(v: f64) -> Result<(), String> {
+    if (0.0..=MAX_TEST_FRACTION).contains(&v) {
+        Ok(())
+    } else {
+        Err(format!(
+            "--valid-fraction must be in [0, {MAX_TEST_FRACTION}], got {v}"
+        ))
+    }
+}
+
 /// Seeded shuffle of `0..n` into (train, test), `round(n · test_fraction)`
 /// test rows (at least one when n ≥ 2 and the fraction is positive).
 /// Both lists come back sorted, so row order within a split is the file's.

@@ -13,7 +13,6 @@ use super::{ErrorStats, EvalError, SplitMetrics};
 use crate::dataset::{split_indices, Dataset, DatasetError, Sidecar};
 use crate::fsutil::{check_distinct, write_atomic, PathCollision};
 use crate::inverse::{ExactIk, IkSettings, InverseError, Target};
-use crate::learn::cascor::job::MAX_HELD_OUT_FRACTION;
 use crate::net::{
     check_model_robot, infer, infer_batch, pose_rows, read_model, HostNet, ReadError,
     RobotMismatch, CLI_OVERRIDE,
@@ -195,11 +194,8 @@ pub fn run(job: &EvaluateJob) -> Result<Evaluation, EvaluateError> {
         ..
     } = job.rows
     {
-        if !(test_fraction > 0.0 && test_fraction <= MAX_HELD_OUT_FRACTION) {
-            return Err(EvaluateError::BadInput(format!(
-                "--test-fraction must be in (0, {MAX_HELD_OUT_FRACTION}], got {test_fraction}"
-            )));
-        }
+        crate::dataset::split::check_test_fraction(test_fraction)
+            .map_err(EvaluateError::BadInput)?;
     }
     let (net, provenance) = read_model(&job.model)?;
     let robot = Robot::load(&job.robot)?;

@@ -83,13 +83,8 @@ impl SplitSpec {
                 )));
             }
         }
-        let v = self.valid_fraction;
-        if !(0.0..=MAX_HELD_OUT_FRACTION).contains(&v) {
-            return Err(TrainError::BadInput(format!(
-                "--valid-fraction must be in [0, {MAX_HELD_OUT_FRACTION}], got {v}"
-            )));
-        }
-        Ok(())
+        crate::dataset::split::check_valid_fraction(self.valid_fraction)
+            .map_err(TrainError::BadInput)
     }
 }
 
