@@ -13,6 +13,7 @@ pub mod evaluate;
 mod fk;
 pub mod generate;
 pub mod ik;
+mod modes;
 mod planner;
 mod plant;
 mod plot;
@@ -82,6 +83,8 @@ enum Command {
     Evaluate(evaluate::EvaluateArgs),
     /// Dynamic step response: tip trajectory (CSV) and figure after a tension step.
     Dynamics(dynamics::DynamicsArgs),
+    /// The rod's first two bending modes (frequency, damping ratio) over its workspace.
+    Modes(modes::ModesArgs),
     /// The closed loop against every reality (a plant unlike its model): table and figure.
     Robustness(robustness::RobustnessArgs),
     /// Redraw a run's figure from its run.mcap (the Foxglove run log) alone.
@@ -106,6 +109,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Some(Command::Ik(a)) => ik::run(a),
         Some(Command::Evaluate(a)) => evaluate::run(a),
         Some(Command::Dynamics(a)) => dynamics::run(a),
+        Some(Command::Modes(a)) => modes::run(a),
         Some(Command::Robustness(a)) => robustness::run(a),
         Some(Command::Plot(a)) => plot::run(a),
     }

@@ -14,10 +14,12 @@
 //! `solver` the grid of histories and the Newton shooting per step,
 //! `offline` and `figure` the step response `tendril dynamics` writes.
 
+pub mod modes;
 pub mod params;
 pub mod section;
 pub mod solver;
 
+pub use modes::{Mode, ModeSearch, ModesError};
 pub use params::{BdfAlpha, Damping, DynamicsSettings};
 pub use section::{DynState, TimeVars};
 pub use solver::{Dynamics, DynamicsError, TipState};

@@ -7,3 +7,4 @@
 
 pub mod dynamics;
 pub mod ik_batch;
+pub mod modes;

@@ -22,3 +22,6 @@ pub enum PlantError {
     #[error("{0}")]
     Solve(String),
 }
+
+#[cfg(test)]
+mod tests;

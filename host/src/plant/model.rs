@@ -11,8 +11,8 @@ use rand_chacha::ChaCha8Rng;
 use super::params::{PlantParams, RobotModel, StuckFault};
 use super::reality::{Frame, Tracker, TrackerSpec};
 use super::PlantError;
-use crate::dynamics::{Damping, Dynamics, DynamicsSettings};
-use crate::robot::{first_bending_mode_rad_s, Robot};
+use crate::dynamics::{Dynamics, DynamicsSettings};
+use crate::robot::Robot;
 use crate::statics::pose::{orthonormalise, quaternion_wxyz};
 use crate::statics::{Friction, FrictionState, SolverSettings, Statics, WarmStart};
 
@@ -76,15 +76,9 @@ impl PlantModel {
         if let Some(tau) = reality.motors.and_then(|m| m.time_constant_ms) {
             params.motor_tau_s = tau * 1e-3;
         }
-        let mut damping = Damping::of_robot(robot);
+        let damping = reality.damping(robot);
         if let Some(d) = reality.dynamics {
             params.model = d.model;
-            if let Some(zeta) = d.damping_ratio {
-                // Stiffness-proportional damping gives mode k the ratio
-                // ζ_k = ω_k t_r / 2: t_r from the first mode's.
-                damping =
-                    Damping::proportional(robot, 2.0 * zeta / first_bending_mode_rad_s(robot));
-            }
         }
         let tracker = reality.tracker.unwrap_or(TrackerSpec {
             position_jitter_mm: params.noise_m * 1e3,

@@ -353,6 +353,22 @@ impl Reality {
         Ok(())
     }
 
+    /// The material damping of the real robot `real` (from
+    /// [`Reality::real_robot`]): stiffness-proportional with the first
+    /// mode's ζ₁ when `[dynamics] damping_ratio` says so (B = t_r K gives
+    /// mode k the ratio ζ_k = ω_k t_r / 2, so t_r = 2ζ₁/ω₁ with the
+    /// Euler–Bernoulli ω₁), else the robot file's.
+    pub fn damping(&self, real: &Robot) -> crate::dynamics::Damping {
+        use crate::dynamics::Damping;
+        match self.dynamics.and_then(|d| d.damping_ratio) {
+            Some(zeta) => Damping::proportional(
+                real,
+                2.0 * zeta / crate::robot::first_bending_mode_rad_s(real),
+            ),
+            None => Damping::of_robot(real),
+        }
+    }
+
     /// The real robot: `nominal` changed as this reality says. Errors when a
     /// per-tendon list does not have one entry per tendon, or when the
     /// changed robot is not a valid robot (an offset past the backbone).
