@@ -80,6 +80,21 @@ pub struct TrajectoryOpts {
     /// Initial hold at the first pose, s.
     #[arg(long, default_value_t = 2.0)]
     pub settle: f64,
+    /// Move between step targets by a minimum-jerk move through a ZVD input
+    /// shaper on the robot file's first bending mode (`tendril modes`), so
+    /// the rod does not ring; off: steps jump.
+    #[arg(long, value_enum, default_value_t = super::controller::OnOff::On)]
+    pub shape_steps: super::controller::OnOff,
+}
+
+impl TrajectoryOpts {
+    /// The planner's step shaping these options ask for.
+    pub fn step_shaping(&self) -> crate::plan::ShapingChoice {
+        match self.shape_steps {
+            super::controller::OnOff::On => crate::plan::ShapingChoice::Auto,
+            super::controller::OnOff::Off => crate::plan::ShapingChoice::Off,
+        }
+    }
 }
 
 /// Comma-separated finite numbers in mm, as metres.
@@ -273,6 +288,7 @@ impl PlannerArgs {
             robot: self.robot,
             prefix: self.prefix,
             shape: self.traj.shape()?,
+            step_shaping: self.traj.step_shaping(),
             rate_hz: self.traj.planner_rate.unwrap_or(1000.0),
             settle_s: self.traj.settle,
             duration_s: self.duration,

@@ -145,6 +145,7 @@ impl SimArgs {
         cfg.max_rms_mm = self.max_rms_mm;
         cfg.max_log_gb = self.max_log_gb;
         cfg.planner.shape = self.traj.shape()?;
+        cfg.planner.step_shaping = self.traj.step_shaping();
         let rate = match self.controller {
             ControllerKind::Host => self.tuning.rate_hz(),
             ControllerKind::Mcu => {

@@ -275,6 +275,11 @@ mod tests {
                 freq_hz: 0.2,
                 height_m: Some(0.3),
             },
+            step_shaping: crate::plan::ShapingChoice::Designed(crate::plan::StepShaping {
+                mode_hz: 3.6,
+                damping_ratio: 0.05,
+                move_s: 0.14,
+            }),
             rate_hz: 1000.0,
             settle_s: 2.0,
             duration_s: None,

@@ -12,7 +12,7 @@ use super::clock::{now_ns, tighten_timer_slack, Ticker};
 use super::stats::CsvLog;
 use super::transport::{self, Services};
 use super::{IpcError, StopWatch};
-use crate::plan::{PathShape, Trajectory};
+use crate::plan::{PathShape, ShapingChoice, Trajectory};
 use crate::robot::Robot;
 use crate::statics::{SolverSettings, Statics};
 
@@ -46,6 +46,9 @@ pub struct PlannerConfig {
     pub settle_s: f64,
     /// Stop after this many seconds (None: until told).
     pub duration_s: Option<f64>,
+    /// How steps move from target to target (`docs/design.md` §6.4).
+    #[serde(default)]
+    pub step_shaping: ShapingChoice,
     /// Bad setpoints to inject.
     #[serde(default)]
     pub inject: Injections,
@@ -104,7 +107,19 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
     }
     let robot = Robot::load(&cfg.robot).map_err(|e| IpcError::Other(e.to_string()))?;
     let statics = Statics::new(&robot, SolverSettings::default());
-    let traj = Trajectory::new(&cfg.shape, &statics)?;
+    let shaping = cfg
+        .step_shaping
+        .resolve(&robot, &cfg.shape)
+        .map_err(|e| IpcError::Config(e.to_string()))?;
+    if let Some(s) = shaping {
+        log::info!(
+            "planner: steps shaped for the first mode at {:.3} Hz (ζ {:.3}): {:.0} ms each",
+            s.mode_hz,
+            s.damping_ratio,
+            s.length_s() * 1e3
+        );
+    }
+    let traj = Trajectory::new(&cfg.shape, &statics)?.with_step_shaping(shaping);
 
     let node = transport::node("tendril-planner")?;
     let _orphan = transport::ReleaseIfOrphaned(&node);

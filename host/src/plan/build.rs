@@ -38,6 +38,7 @@ impl LiftedPath {
             feedforward: self.tensions,
             periodic,
             stepwise,
+            shaping: None,
         }
     }
 }

@@ -7,6 +7,8 @@
 //! - [`path`]: pure path geometry (points on the family over time);
 //! - [`lift`]: lifting tip coordinates on the family to a reachable pose with
 //!   its tangent on the exact IK ([`Lifter`], [`FamilyTangent`]);
+//! - [`shaping`]: steps that excite no mode (minimum-jerk move and ZVD
+//!   shaper on the rod's first mode, [`StepShaping`]);
 //! - [`trajectory`]: the lifted path tabulated once with its feed-forward
 //!   tensions ([`Trajectory`]);
 //! - [`table`]: pose tables (feed-forward by the exact IK, the CSV reader);
@@ -26,6 +28,7 @@ pub mod lift;
 pub mod path;
 pub mod runs;
 pub mod shape;
+pub mod shaping;
 pub mod stand_in;
 pub mod table;
 pub mod trajectory;
@@ -35,6 +38,7 @@ pub use family::Family;
 pub use lift::{FamilyTangent, Lifted, Lifter};
 pub use runs::{default_loop_runs, LoopRun};
 pub use shape::{PathShape, PoseRow};
+pub use shaping::{ShapingChoice, StepShaping};
 pub use table::read_pose_csv;
 pub use trajectory::{PosePoint, Trajectory};
 

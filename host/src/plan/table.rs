@@ -43,6 +43,7 @@ pub(super) fn table(lifter: &mut Lifter, rows: &[PoseRow]) -> Result<Trajectory,
         feedforward_miss,
         periodic: false,
         stepwise: false,
+        shaping: None,
     })
 }
 

@@ -10,7 +10,7 @@
 //! ([`super::table`]). Building one from a shape is [`super::build`]'s job;
 //! this module samples it.
 
-use super::FamilyTangent;
+use super::{FamilyTangent, StepShaping};
 
 /// A desired tip pose and its time derivative at one instant.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -43,9 +43,42 @@ pub struct Trajectory {
     pub(super) periodic: bool,
     /// Piecewise-constant targets (steps, hold): no interpolation, zero velocity.
     pub(super) stepwise: bool,
+    /// How a stepwise trajectory moves from one target to the next (None:
+    /// it jumps).
+    pub(super) shaping: Option<StepShaping>,
 }
 
 impl Trajectory {
+    /// Move between the targets of a stepwise trajectory as `shaping` says
+    /// (a minimum-jerk move through a ZVD shaper, [`StepShaping`]) instead
+    /// of jumping; a path is left as it is (the shaper would delay it and
+    /// shrink it at its own frequency).
+    pub fn with_step_shaping(mut self, shaping: Option<StepShaping>) -> Trajectory {
+        self.shaping = shaping.filter(|_| self.stepwise && self.poses.len() > 1);
+        self
+    }
+
+    /// The shaping in force (only a stepwise trajectory has one).
+    pub fn step_shaping(&self) -> Option<StepShaping> {
+        self.shaping
+    }
+
+    /// The steps still under way at `t` (s): (index i of the target, the
+    /// fraction of the step from target i−1 still to make, its rate) for
+    /// each target asked for less than the shaping's length before.
+    fn steps_under_way(&self, t: f64) -> impl Iterator<Item = (usize, f64, f64)> + '_ {
+        let shaping = self.shaping;
+        (1..self.times.len()).filter_map(move |i| {
+            let s = shaping?;
+            let since = t - self.times[i];
+            if since < 0.0 || since >= s.length_s() {
+                return None;
+            }
+            let (done, rate) = s.progress(since);
+            Some((i, 1.0 - done, rate))
+        })
+    }
+
     pub fn tendons(&self) -> usize {
         self.feedforward.first().map_or(0, Vec::len)
     }
@@ -55,11 +88,7 @@ impl Trajectory {
     /// past the end).
     fn segment(&self, t: f64) -> (usize, f64) {
         let n = self.poses.len();
-        let t = if self.periodic && self.duration() > 0.0 {
-            t.rem_euclid(self.duration())
-        } else {
-            t
-        };
+        let t = self.local_time(t);
         let i = self
             .times
             .iter()
@@ -81,11 +110,28 @@ impl Trajectory {
         out.clear();
         if f == 0.0 {
             out.extend_from_slice(a);
-            return self.feedforward_miss[i];
+            let mut miss = self.feedforward_miss[i];
+            for (j, left, _) in self.steps_under_way(self.local_time(t)) {
+                let (to, from) = (&self.feedforward[j], &self.feedforward[j - 1]);
+                for (o, (b, a)) in out.iter_mut().zip(to.iter().zip(from)) {
+                    *o -= left * (b - a);
+                }
+                miss = miss.max(self.feedforward_miss[j - 1]);
+            }
+            return miss;
         }
         let b = &self.feedforward[i + 1];
         out.extend(a.iter().zip(b).map(|(a, b)| a + f * (b - a)));
         self.feedforward_miss[i].max(self.feedforward_miss[i + 1])
+    }
+
+    /// `t` within one pass of a periodic trajectory.
+    fn local_time(&self, t: f64) -> f64 {
+        if self.periodic && self.duration() > 0.0 {
+            t.rem_euclid(self.duration())
+        } else {
+            t
+        }
     }
 
     /// Duration of one pass (s); 0 for a hold.
@@ -97,11 +143,7 @@ impl Trajectory {
     pub fn sample(&self, t: f64) -> PosePoint {
         let (i, f) = self.segment(t);
         if self.stepwise || i + 1 >= self.poses.len() {
-            return PosePoint {
-                pose: self.poses[i],
-                velocity: [0.0; 7],
-                tangent: self.tangents.get(i).copied(),
-            };
+            return self.shaped_point(i, t);
         }
         let (t0, t1) = (self.times[i], self.times[i + 1]);
         let mut pose = [0.0; 7];
@@ -128,6 +170,50 @@ impl Trajectory {
             }
             _ => None,
         };
+        PosePoint {
+            pose,
+            velocity,
+            tangent,
+        }
+    }
+}
+
+impl Trajectory {
+    /// Target `i`'s point at `t`, less what the steps still under way have
+    /// not yet made ([`Trajectory::steps_under_way`]; none without a
+    /// shaping): pose(t) = pose_i − Σ_j (1 − g(t − t_j)) (pose_j − pose_{j−1}),
+    /// velocity Σ_j g'(t − t_j) (pose_j − pose_{j−1}), the tangent likewise.
+    fn shaped_point(&self, i: usize, t: f64) -> PosePoint {
+        let mut pose = self.poses[i];
+        let mut velocity = [0.0; 7];
+        let mut tangent = self.tangents.get(i).copied();
+        let mut moving = false;
+        for (j, left, rate) in self.steps_under_way(self.local_time(t)) {
+            moving = true;
+            let (to, from) = (&self.poses[j], &self.poses[j - 1]);
+            for k in 0..7 {
+                pose[k] -= left * (to[k] - from[k]);
+                velocity[k] += rate * (to[k] - from[k]);
+            }
+            if let (Some(d), Some(b), Some(a)) = (
+                tangent.as_mut(),
+                self.tangents.get(j),
+                self.tangents.get(j - 1),
+            ) {
+                for (column, (cb, ca)) in d.columns.iter_mut().zip(b.columns.iter().zip(&a.columns))
+                {
+                    for (v, (y, x)) in column.iter_mut().zip(cb.iter().zip(ca)) {
+                        *v -= left * (y - x);
+                    }
+                }
+            }
+        }
+        if moving {
+            let qn = (pose[3..].iter().map(|v| v * v).sum::<f64>()).sqrt();
+            for v in &mut pose[3..] {
+                *v /= qn;
+            }
+        }
         PosePoint {
             pose,
             velocity,
@@ -226,6 +312,73 @@ mod tests {
                 assert!((a - b).abs() < 1e-6, "target {i}: {:?}", p.pose);
             }
         }
+    }
+
+    /// Shaped steps on the default robot: the pose moves from one target to
+    /// the next along the shaping's progress (its velocity the derivative
+    /// of its position), reaches the target when the shaping ends, and a
+    /// hold stays a hold.
+    #[test]
+    fn shaped_steps_move_smoothly_and_arrive() {
+        let s = statics();
+        let shape = PathShape::Steps {
+            targets_m: vec![vec![0.0, 0.0], vec![0.01, 0.0]],
+            dwell_s: 2.0,
+            height_m: None,
+        };
+        let shaping = StepShaping::for_mode(3.6, 0.05).unwrap();
+        let traj = Trajectory::new(&shape, &s)
+            .unwrap()
+            .with_step_shaping(Some(shaping));
+        assert_eq!(traj.step_shaping(), Some(shaping));
+        let end = 2.0 + shaping.length_s();
+        let (a, b) = (traj.sample(1.9).pose, traj.sample(end + 0.01).pose);
+        assert!(
+            a[0].abs() < 1e-6 && (b[0] - 0.01).abs() < 1e-6,
+            "{a:?} {b:?}"
+        );
+        let dt = 1e-5;
+        let mut last_x = a[0];
+        for k in 0..=100 {
+            let t = 2.0 + shaping.length_s() * k as f64 / 100.0;
+            let p = traj.sample(t);
+            let (before, after) = (traj.sample(t - dt).pose, traj.sample(t + dt).pose);
+            for i in 0..3 {
+                let rate = (after[i] - before[i]) / (2.0 * dt);
+                assert!(
+                    (p.velocity[i] - rate).abs() < 1e-4 * 0.05 + 1e-6,
+                    "t {t}: velocity {} vs {rate}",
+                    p.velocity[i]
+                );
+            }
+            let (progress, _) = shaping.progress(t - 2.0);
+            assert!(
+                (p.pose[0] - 0.01 * progress).abs() < 1e-4,
+                "t {t}: x {}",
+                p.pose[0]
+            );
+            assert!(p.pose[0] >= last_x - 1e-12, "t {t}: went back");
+            last_x = p.pose[0];
+            let q: f64 = p.pose[3..].iter().map(|v| v * v).sum();
+            assert!((q - 1.0).abs() < 1e-12);
+        }
+        let mut ff = Vec::new();
+        traj.feedforward(2.0 + shaping.length_s() / 2.0, &mut ff);
+        let (mut first, mut second) = (Vec::new(), Vec::new());
+        traj.feedforward(1.0, &mut first);
+        traj.feedforward(end + 1.0, &mut second);
+        let (progress, _) = shaping.progress(shaping.length_s() / 2.0);
+        for ((m, a), b) in ff.iter().zip(&first).zip(&second) {
+            assert!((m - (a + progress * (b - a))).abs() < 1e-12);
+        }
+        let hold = PathShape::Hold {
+            center_m: vec![0.005, 0.0],
+            height_m: None,
+        };
+        let held = Trajectory::new(&hold, &s)
+            .unwrap()
+            .with_step_shaping(Some(shaping));
+        assert_eq!(held.step_shaping(), None);
     }
 
     /// A sweep on the one-tendon robot: the tip's coordinate along the

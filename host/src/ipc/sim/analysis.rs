@@ -418,17 +418,68 @@ pub fn steady_states(samples: &[Sample]) -> Vec<SteadyState> {
                 .map(Sample::error_mm)
                 .collect();
             if !tail.is_empty() {
+                let (settle_s, vibration_mm) = settling(samples, k, e);
                 steady.push(SteadyState {
                     t_s: samples[k].t,
                     target_mm: [samples[k].desired[0] * 1e3, samples[k].desired[1] * 1e3],
                     error_mm: tail.iter().sum::<f64>() / tail.len() as f64,
                     samples: tail.len(),
+                    settle_s,
+                    vibration_mm,
                 });
             }
         }
         k = e + 1;
     }
     steady
+}
+
+/// A step's tolerance for "settled", mm (`docs/design.md` §6.4).
+pub const SETTLED_MM: f64 = 0.1;
+
+/// For the constant stretch `k..=e`: how long after the desired position
+/// began to move towards it (a shaped step moves before the stretch; a jump
+/// moves at its start) the error came within [`SETTLED_MM`] for good, and
+/// the RMS of the error vector's deviation from its mean from then to the
+/// stretch's end (mm): the ringing left. `None` for both if it never settled
+/// (or the stretch is the first, with nothing before it).
+fn settling(samples: &[Sample], k: usize, e: usize) -> (Option<f64>, Option<f64>) {
+    if k == 0 {
+        return (None, None);
+    }
+    // Back over the move: samples whose desired position still changed.
+    let mut start = k;
+    while start >= 2 && samples[start - 1].desired != samples[start - 2].desired {
+        start -= 1;
+    }
+    let last_out = (k..=e).rev().find(|&i| samples[i].error_mm() > SETTLED_MM);
+    let settled = match last_out {
+        None => k,
+        Some(i) if i < e => i + 1,
+        Some(_) => return (None, None),
+    };
+    let after = &samples[settled..=e];
+    let n = after.len() as f64;
+    let mean: [f64; 3] = std::array::from_fn(|a| {
+        after
+            .iter()
+            .map(|s| s.actual[a] - s.desired[a])
+            .sum::<f64>()
+            / n
+    });
+    let var = after
+        .iter()
+        .map(|s| {
+            (0..3)
+                .map(|a| (s.actual[a] - s.desired[a] - mean[a]).powi(2))
+                .sum::<f64>()
+        })
+        .sum::<f64>()
+        / n;
+    (
+        Some(samples[settled].t - samples[start].t),
+        Some(var.sqrt() * 1e3),
+    )
 }
 
 /// Bits that mark a setpoint the controller would not use.
@@ -563,5 +614,59 @@ mod tests {
         assert_eq!(st.len(), 1);
         assert!((st[0].error_mm - 1.0).abs() < 1e-9);
         assert_eq!(st[0].samples, 51);
+    }
+
+    /// A move from 0 to 10 mm over 0.2 s, then an error ringing down as
+    /// 1 mm e^{−t/0.1 s} cos(2π 5 t) about 0.02 mm: it comes within 0.1 mm
+    /// for good when the envelope (plus the offset) does, about
+    /// 0.1 s · ln(1 / 0.08) after the move; what rings after is a few µm.
+    #[test]
+    fn a_step_settles_when_its_ringing_stays_under_the_tolerance() {
+        let dt = 0.001;
+        let s: Vec<Sample> = (0..3000)
+            .map(|i| {
+                let t = i as f64 * dt;
+                let desired = if t < 1.0 {
+                    0.0
+                } else if t < 1.2 {
+                    0.01 * (t - 1.0) / 0.2
+                } else {
+                    0.01
+                };
+                let ring = if t >= 1.2 {
+                    1e-3 * (-(t - 1.2) / 0.1).exp()
+                        * (std::f64::consts::TAU * 5.0 * (t - 1.2)).cos()
+                        + 2e-5
+                } else {
+                    0.0
+                };
+                sample(t, desired, desired + ring, false)
+            })
+            .collect();
+        let st = steady_states(&s);
+        assert_eq!(st.len(), 2, "{st:?}");
+        assert_eq!((st[0].settle_s, st[0].vibration_mm), (None, None));
+        let settle = st[1].settle_s.unwrap();
+        // The last excursion above 0.1 mm is a peak of the cosine before the
+        // envelope 0.02 + e^{-t/0.1} mm falls under it at t ≈ 0.253 s.
+        assert!(
+            settle > 0.2 + 0.15 && settle < 0.2 + 0.26,
+            "settle {settle}"
+        );
+        let ringing = st[1].vibration_mm.unwrap();
+        assert!(ringing > 0.001 && ringing < 0.05, "ringing {ringing}");
+        // The same step never settling within 0.1 mm: an offset of 0.2 mm.
+        let off: Vec<Sample> = s
+            .iter()
+            .map(|x| Sample {
+                actual: [
+                    x.actual[0] + if x.t >= 1.0 { 2e-4 } else { 0.0 },
+                    x.actual[1],
+                    x.actual[2],
+                ],
+                ..*x
+            })
+            .collect();
+        assert_eq!(steady_states(&off)[1].settle_s, None);
     }
 }

@@ -276,6 +276,10 @@ pub fn build_report(
         model,
         duration_s: cfg.duration_s,
         settle_s: cfg.planner.settle_s,
+        step_shaping: match cfg.planner.step_shaping {
+            crate::plan::ShapingChoice::Designed(s) => Some(s),
+            _ => None,
+        },
         tendons: logs.tendons,
         verdict: Verdict {
             clean: problems.is_empty(),

@@ -155,6 +155,7 @@ impl SimConfig {
                     freq_hz: 0.2,
                     height_m: None,
                 },
+                step_shaping: crate::plan::ShapingChoice::Auto,
                 rate_hz: 1000.0,
                 settle_s: 2.0,
                 duration_s: None,

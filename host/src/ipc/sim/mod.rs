@@ -158,6 +158,19 @@ pub fn run(cfg: &SimConfig) -> Result<SimReport, SimError> {
     let statics = Statics::new(&robot, crate::statics::SolverSettings::default());
     let family = crate::plan::Family::of(&statics).map_err(IpcError::from)?;
     cfg.planner.shape.check(&family).map_err(IpcError::from)?;
+    // The step shaping is designed once, here, so the report can say what
+    // the planner used (`docs/design.md` §6.4).
+    let shaping = cfg
+        .planner
+        .step_shaping
+        .resolve(&robot, &cfg.planner.shape)
+        .map_err(|e| SimError::Config(e.to_string()))?;
+    let mut resolved = cfg.clone();
+    resolved.planner.step_shaping = match shaping {
+        Some(s) => crate::plan::ShapingChoice::Designed(s),
+        None => crate::plan::ShapingChoice::Off,
+    };
+    let cfg = &resolved;
     budget::check(
         cfg,
         robot.max_tensions().len(),

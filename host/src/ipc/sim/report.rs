@@ -28,6 +28,10 @@ pub struct SimReport {
     pub duration_s: f64,
     /// Initial hold, s.
     pub settle_s: f64,
+    /// How the planner moved between step targets: the mode its shaper was
+    /// designed for (`null`: steps jumped, or the path has none).
+    #[serde(default)]
+    pub step_shaping: Option<crate::plan::StepShaping>,
     /// Tendons of the robot (from the plant log).
     pub tendons: usize,
     /// Whether every process finished cleanly (or died by an injected fault)
@@ -123,6 +127,15 @@ pub struct SteadyState {
     pub error_mm: f64,
     /// Plant steps averaged.
     pub samples: usize,
+    /// From the start of the move to this target until the true error
+    /// stayed within 0.1 mm, s (`null`: it never did, or this is the first
+    /// target).
+    #[serde(default)]
+    pub settle_s: Option<f64>,
+    /// RMS of the error's deviation from its mean after it settled, mm:
+    /// the ringing left.
+    #[serde(default)]
+    pub vibration_mm: Option<f64>,
 }
 
 /// The plant side of the report.
@@ -315,6 +328,17 @@ impl SimReport {
         if let Some([a, b]) = self.tracking_window_s {
             row("tracking window (s)", format!("{a:.2} – {b:.2}"));
         }
+        if let Some(sh) = &self.step_shaping {
+            row(
+                "steps shaped for the first mode (Hz, ζ; each step's length in s)",
+                format!(
+                    "{:.3}, {:.3}; {:.3}",
+                    sh.mode_hz,
+                    sh.damping_ratio,
+                    sh.length_s()
+                ),
+            );
+        }
         row("RMS tracking error (mm)", mm(self.rms_tracking_error_mm));
         row(
             "RMS path error: tracking less the delay along the path (mm)",
@@ -443,13 +467,21 @@ impl SimReport {
         );
         if !self.steady_state.is_empty() {
             s.push_str(
-                "\n## Steady state\n\n| from (s) | target x, y (mm) | error (mm) | samples |\n|---|---|---|---|\n",
+                "\n## Steady state\n\n| from (s) | target x, y (mm) | error (mm) | samples | settled within 0.1 mm after (s) | ringing after (mm RMS) |\n|---|---|---|---|---|---|\n",
             );
+            let opt =
+                |v: Option<f64>, digits: usize| v.map_or("–".into(), |v| format!("{v:.digits$}"));
             for st in &self.steady_state {
                 let _ = writeln!(
                     s,
-                    "| {:.3} | {:.3}, {:.3} | {:.3} | {} |",
-                    st.t_s, st.target_mm[0], st.target_mm[1], st.error_mm, st.samples
+                    "| {:.3} | {:.3}, {:.3} | {:.3} | {} | {} | {} |",
+                    st.t_s,
+                    st.target_mm[0],
+                    st.target_mm[1],
+                    st.error_mm,
+                    st.samples,
+                    opt(st.settle_s, 3),
+                    opt(st.vibration_mm, 4)
                 );
             }
         }
