@@ -567,6 +567,8 @@ impl<const U: usize> Core<U> {
             pose: s.pose.pose(),
             velocity: s.velocity(),
             tangent: self.last_tangent,
+            moving: s.moving,
+            dynamic_offset: s.dynamic_offset(),
         });
     }
 

@@ -134,6 +134,7 @@ fn child(prefix: &str, mode: Mode) {
                 seq: sp.header.seq,
                 pose: sp.pose,
                 tangent: None,
+                dynamic_offset: [0.0; 7],
             }),
             feedback: None,
         };
@@ -205,6 +206,8 @@ fn latency(samples: usize, mode: Mode) -> (Summary, Summary) {
                 tangent_axes: [[0.0; 3]; 3],
                 tangent_dim: 0,
                 flags,
+                dynamic_offset: [0.0; 7],
+                reserved: 0,
             },
         )
         .unwrap();

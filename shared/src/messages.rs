@@ -34,7 +34,8 @@ pub struct Header {
 
 /// Bits of [`Setpoint::flags`].
 pub mod setpoint_flags {
-    /// The planner holds this pose (no motion intended).
+    /// The planner's settle hold before the path (it holds the first pose,
+    /// or approaches it from rest): not part of the path.
     pub const HOLD: u32 = 1 << 0;
     /// `velocity` is valid and may be used for feed-forward.
     pub const HAS_VELOCITY: u32 = 1 << 1;
@@ -43,6 +44,15 @@ pub mod setpoint_flags {
     /// `tangent` is valid: the controller may move the setpoint along the
     /// robot's reachable poses instead of guessing how they bend.
     pub const HAS_TANGENT: u32 = 1 << 3;
+    /// The setpoint is part of a shaped move between targets (a step, the
+    /// approach to a path's first pose): the tip is still on its way, so
+    /// the controller treats it as it treats a jump and integrates no
+    /// tracker frame sampled before the settle time after the move's last
+    /// setpoint (`docs/design.md` §6.4).
+    pub const MOVING: u32 = 1 << 4;
+    /// `dynamic_offset` is valid: the net is to be asked for the pose plus
+    /// it.
+    pub const HAS_DYNAMIC_OFFSET: u32 = 1 << 5;
 }
 
 /// Desired tip pose, planner → controller.
@@ -72,6 +82,15 @@ pub struct Setpoint {
     pub tangent_dim: u32,
     /// [`setpoint_flags`] bits.
     pub flags: u32,
+    /// What the rod's dynamics ask of the command on top of the pose (per
+    /// pose coordinate): the net is asked for `pose + dynamic_offset`, so
+    /// that the rod, which lags an accelerating command by its first mode,
+    /// ends up at `pose` — the modal model's inverse along the path
+    /// (`docs/design.md` §6.4). `pose` stays the reference the tip is
+    /// measured against. Valid with `HAS_DYNAMIC_OFFSET`.
+    pub dynamic_offset: [f32; 7],
+    /// Explicit padding to the header's 8-byte alignment; zero.
+    pub reserved: u32,
 }
 
 /// Bits of [`TensionCommand::status`]: what the controller did this period.
@@ -272,7 +291,7 @@ mod tests {
         assert_eq!(size_of::<Header>(), 16);
         assert_eq!(
             size_of::<Setpoint>(),
-            16 + 7 * 4 * 2 + 7 * 4 * 3 + 3 * 4 * 3 + 4 + 4
+            16 + 7 * 4 * 2 + 7 * 4 * 3 + 3 * 4 * 3 + 4 + 4 + 7 * 4 + 4
         );
         assert_eq!(
             size_of::<TensionCommand>(),
@@ -293,6 +312,7 @@ mod tests {
         assert_eq!(offset_of!(Setpoint, tangent_axes), 16 + 7 * 4 * 5);
         assert_eq!(offset_of!(Setpoint, tangent_dim), 16 + 7 * 4 * 5 + 36);
         assert_eq!(offset_of!(Setpoint, flags), 16 + 7 * 4 * 5 + 40);
+        assert_eq!(offset_of!(Setpoint, dynamic_offset), 16 + 7 * 4 * 5 + 44);
         assert_eq!(offset_of!(TensionCommand, tensions), 24);
         assert_eq!(
             offset_of!(PlantState, tip_pose),

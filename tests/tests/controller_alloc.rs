@@ -154,7 +154,12 @@ fn two_hundred_seconds_of_controller_periods_allocate_nothing() {
                 d.family.axes_padded().map(|a| a.map(|v| v as f32))
             }),
             tangent_dim: point.tangent.map_or(0, |d| d.family.dim() as u32),
-            flags: setpoint_flags::HAS_VELOCITY | setpoint_flags::HAS_TANGENT,
+            flags: setpoint_flags::HAS_VELOCITY
+                | setpoint_flags::HAS_TANGENT
+                | setpoint_flags::HAS_DYNAMIC_OFFSET,
+            // The modal inverse's size on the circle: tens of µm.
+            dynamic_offset: point.velocity.map(|v| (v * 0.005) as f32),
+            reserved: 0,
         };
         // A plant: healthy 20 ms motors, the tip 0.3 mm off the setpoint
         // (the IK error the integral removes), silent for 30 periods now and then.

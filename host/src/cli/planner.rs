@@ -85,6 +85,11 @@ pub struct TrajectoryOpts {
     /// the rod does not ring; off: steps jump.
     #[arg(long, value_enum, default_value_t = super::controller::OnOff::On)]
     pub shape_steps: super::controller::OnOff,
+    /// Send the offset the rod's first mode needs on top of each pose (the
+    /// modal inverse: what the planner's acceleration asks of a rod with
+    /// mass), with --shape-steps on.
+    #[arg(long, value_enum, default_value_t = super::controller::OnOff::On)]
+    pub dynamic_offset: super::controller::OnOff,
 }
 
 impl TrajectoryOpts {
@@ -270,6 +275,10 @@ pub struct PlannerArgs {
     /// Pin to this CPU.
     #[arg(long)]
     pub cpu: Option<usize>,
+    /// The robot is at rest when the planner starts: approach the first
+    /// pose by a shaped move during the settle hold (with --shape-steps on).
+    #[arg(long)]
+    pub from_rest: bool,
 }
 
 impl PlannerArgs {
@@ -289,6 +298,8 @@ impl PlannerArgs {
             prefix: self.prefix,
             shape: self.traj.shape()?,
             step_shaping: self.traj.step_shaping(),
+            start_from_rest: self.from_rest,
+            dynamic_offset: self.traj.dynamic_offset == super::controller::OnOff::On,
             rate_hz: self.traj.planner_rate.unwrap_or(1000.0),
             settle_s: self.traj.settle,
             duration_s: self.duration,

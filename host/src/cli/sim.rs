@@ -146,6 +146,7 @@ impl SimArgs {
         cfg.max_log_gb = self.max_log_gb;
         cfg.planner.shape = self.traj.shape()?;
         cfg.planner.step_shaping = self.traj.step_shaping();
+        cfg.planner.dynamic_offset = self.traj.dynamic_offset == super::controller::OnOff::On;
         let rate = match self.controller {
             ControllerKind::Host => self.tuning.rate_hz(),
             ControllerKind::Mcu => {

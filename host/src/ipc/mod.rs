@@ -280,6 +280,8 @@ mod tests {
                 damping_ratio: 0.05,
                 move_s: 0.14,
             }),
+            start_from_rest: true,
+            dynamic_offset: true,
             rate_hz: 1000.0,
             settle_s: 2.0,
             duration_s: None,

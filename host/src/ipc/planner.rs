@@ -12,7 +12,7 @@ use super::clock::{now_ns, tighten_timer_slack, Ticker};
 use super::stats::CsvLog;
 use super::transport::{self, Services};
 use super::{IpcError, StopWatch};
-use crate::plan::{PathShape, ShapingChoice, Trajectory};
+use crate::plan::{Motion, PathShape, ShapingChoice, Trajectory};
 use crate::robot::Robot;
 use crate::statics::{SolverSettings, Statics};
 
@@ -49,6 +49,17 @@ pub struct PlannerConfig {
     /// How steps move from target to target (`docs/design.md` §6.4).
     #[serde(default)]
     pub step_shaping: ShapingChoice,
+    /// The robot starts at rest (its pose at the lowest tensions): the
+    /// settle hold begins with a shaped move from there to the first pose,
+    /// so the rod does not ring when the path starts. Off: the first pose
+    /// from the first setpoint (a planner restarted on a moving robot).
+    #[serde(default)]
+    pub start_from_rest: bool,
+    /// Send the offset the rod's first mode needs on top of each pose (the
+    /// modal inverse of the shaping's mode, `docs/design.md` §6.4); only
+    /// with a shaping.
+    #[serde(default)]
+    pub dynamic_offset: bool,
     /// Bad setpoints to inject.
     #[serde(default)]
     pub inject: Injections,
@@ -113,13 +124,34 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
         .map_err(|e| IpcError::Config(e.to_string()))?;
     if let Some(s) = shaping {
         log::info!(
-            "planner: steps shaped for the first mode at {:.3} Hz (ζ {:.3}): {:.0} ms each",
+            "planner: steps and the path's start shaped for the first mode at {:.3} Hz (ζ {:.3}): {:.0} ms",
             s.mode_hz,
             s.damping_ratio,
             s.length_s() * 1e3
         );
     }
-    let traj = Trajectory::new(&cfg.shape, &statics)?.with_step_shaping(shaping);
+    let traj = Trajectory::new(&cfg.shape, &statics)?.with_shaping(shaping);
+    let rest = match shaping {
+        Some(s) if cfg.start_from_rest => {
+            if s.length_s() > cfg.settle_s {
+                log::warn!(
+                    "planner: the approach from rest takes {:.2} s, longer than the {:.2} s settle",
+                    s.length_s(),
+                    cfg.settle_s
+                );
+            }
+            let at_rest = statics
+                .solve(&robot.min_tensions(), None)
+                .map_err(|e| IpcError::Other(format!("planner: the robot at rest: {e}")))?;
+            Some(at_rest.pose())
+        }
+        _ => None,
+    };
+    let inverse = shaping
+        .filter(|_| cfg.dynamic_offset)
+        .map(|s| s.modal_inverse());
+    let motion = Motion::new(traj, cfg.settle_s, rest, inverse);
+    let traj = motion.trajectory();
 
     let node = transport::node("tendril-planner")?;
     let _orphan = transport::ReleaseIfOrphaned(&node);
@@ -147,13 +179,26 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
     loop {
         let tick = ticker.wait(0);
         let t = (tick.deadline_ns - start) as f64 * 1e-9;
-        let (t_path, mut flags) = if t < cfg.settle_s {
-            (0.0, setpoint_flags::HOLD)
-        } else {
-            (t - cfg.settle_s, setpoint_flags::HAS_VELOCITY)
+        let desired = motion.at(t);
+        let point = desired.point;
+        let miss = traj.feedforward(desired.t_path, &mut feedforward);
+        let mut flags = 0;
+        for (on, bit) in [
+            (desired.holding, setpoint_flags::HOLD),
+            (desired.moving, setpoint_flags::MOVING),
+            (desired.has_velocity, setpoint_flags::HAS_VELOCITY),
+        ] {
+            if on {
+                flags |= bit;
+            }
+        }
+        let dynamic_offset = match motion.dynamic_offset(t) {
+            Some(d) => {
+                flags |= setpoint_flags::HAS_DYNAMIC_OFFSET;
+                d.map(|v| v as f32)
+            }
+            None => [0.0; 7],
         };
-        let point = traj.sample(t_path);
-        let miss = traj.feedforward(t_path, &mut feedforward);
         let mut pose = point.pose.map(|v| v as f32);
         let mut velocity = point.velocity.map(|v| v as f32);
         let (tangent, tangent_axes, tangent_dim) = match point.tangent {
@@ -189,7 +234,9 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
             pose[0] += 1.0;
             injected = true;
             velocity = [0.0; 7];
-            flags &= !(setpoint_flags::HAS_VELOCITY | setpoint_flags::HAS_TANGENT);
+            flags &= !(setpoint_flags::HAS_VELOCITY
+                | setpoint_flags::HAS_TANGENT
+                | setpoint_flags::HAS_DYNAMIC_OFFSET);
         }
         seq += 1;
         let stamp = now_ns();
@@ -204,6 +251,8 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
             tangent_axes,
             tangent_dim,
             flags,
+            dynamic_offset,
+            reserved: 0,
         };
         transport::send(&publisher, msg)?;
         // The log keeps the trajectory's pose (what the robot should do)

@@ -37,7 +37,7 @@ pub unsafe trait Message: Copy + Debug + Default + 'static {
 // SAFETY: all five are #[repr(C)] structs of integers, floats and arrays
 // thereof with explicit padding (layout tests in `shared::messages`).
 unsafe impl Message for Setpoint {
-    const NAME: &'static str = "tendril::Setpoint/v1";
+    const NAME: &'static str = "tendril::Setpoint/v2";
 }
 unsafe impl Message for TensionCommand {
     const NAME: &'static str = "tendril::TensionCommand/v1";
@@ -461,6 +461,8 @@ mod tests {
             tangent_axes: [[0.0; 3]; 3],
             tangent_dim: 0,
             flags: 0,
+            dynamic_offset: [0.0; 7],
+            reserved: 0,
         }
     }
 

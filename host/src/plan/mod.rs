@@ -9,6 +9,9 @@
 //!   its tangent on the exact IK ([`Lifter`], [`FamilyTangent`]);
 //! - [`shaping`]: steps that excite no mode (minimum-jerk move and ZVD
 //!   shaper on the rod's first mode, [`StepShaping`]);
+//! - [`motion`]: what the planner asks for at each instant: the settle
+//!   hold or the approach from rest, the trajectory on its eased clock, the
+//!   dynamic offset ([`Motion`]);
 //! - [`trajectory`]: the lifted path tabulated once with its feed-forward
 //!   tensions ([`Trajectory`]);
 //! - [`table`]: pose tables (feed-forward by the exact IK, the CSV reader);
@@ -25,6 +28,7 @@ pub mod bend;
 mod build;
 pub mod family;
 pub mod lift;
+pub mod motion;
 pub mod path;
 pub mod runs;
 pub mod shape;
@@ -36,9 +40,10 @@ pub mod trajectory;
 pub use bend::bend_tensions;
 pub use family::Family;
 pub use lift::{FamilyTangent, Lifted, Lifter};
+pub use motion::{Desired, Motion};
 pub use runs::{default_loop_runs, LoopRun};
 pub use shape::{PathShape, PoseRow};
-pub use shaping::{ShapingChoice, StepShaping};
+pub use shaping::{ModalInverse, ShapingChoice, StepShaping};
 pub use table::read_pose_csv;
 pub use trajectory::{PosePoint, Trajectory};
 

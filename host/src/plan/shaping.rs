@@ -52,7 +52,7 @@ pub struct StepShaping {
 #[serde(rename_all = "kebab-case", deny_unknown_fields)]
 pub enum ShapingChoice {
     /// Designed for the robot file's first mode ([`StepShaping::for_robot`])
-    /// when the path has steps.
+    /// unless the planner only holds.
     #[default]
     Auto,
     /// Steps jump.
@@ -63,13 +63,13 @@ pub enum ShapingChoice {
 
 impl ShapingChoice {
     /// The shaping a planner following `shape` on `robot` uses: none for a
-    /// path without steps, or when off.
+    /// hold, or when off.
     pub fn resolve(
         self,
         robot: &Robot,
         shape: &crate::plan::PathShape,
     ) -> Result<Option<StepShaping>, ShapingError> {
-        if !matches!(shape, crate::plan::PathShape::Steps { .. }) {
+        if matches!(shape, crate::plan::PathShape::Hold { .. }) {
             return Ok(None);
         }
         match self {
@@ -77,6 +77,29 @@ impl ShapingChoice {
             ShapingChoice::Auto => StepShaping::for_robot(robot).map(Some),
             ShapingChoice::Designed(s) => s.check().map(|()| Some(s)),
         }
+    }
+}
+
+/// The first mode's inverse (`docs/design.md` §6.4): a rod whose tip
+/// follows its command x through ẍ/ω² + 2ζẋ/ω + x = u lags an
+/// accelerating command, and asking for u = r + 2ζṙ/ω + r̈/ω² puts it on r.
+/// The offset u − r is what the planner sends beside the pose.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModalInverse {
+    /// The mode: undamped natural frequency, Hz.
+    pub mode_hz: f64,
+    /// Its damping ratio.
+    pub damping_ratio: f64,
+}
+
+impl ModalInverse {
+    /// u − r = 2ζ/ω · ṙ + r̈/ω² for each coordinate.
+    pub fn offset(&self, velocity: &[f64; 7], acceleration: &[f64; 7]) -> [f64; 7] {
+        let w = std::f64::consts::TAU * self.mode_hz;
+        std::array::from_fn(|k| {
+            2.0 * self.damping_ratio / w * velocity[k] + acceleration[k] / (w * w)
+        })
     }
 }
 
@@ -129,6 +152,14 @@ impl StepShaping {
         StepShaping::for_mode(first.freq_hz, first.damping_ratio)
     }
 
+    /// The inverse of the mode this shaping was designed for.
+    pub fn modal_inverse(&self) -> ModalInverse {
+        ModalInverse {
+            mode_hz: self.mode_hz,
+            damping_ratio: self.damping_ratio,
+        }
+    }
+
     /// Check the numbers (a configuration file may hold anything).
     pub fn check(&self) -> Result<(), ShapingError> {
         let ok = self.mode_hz > 0.0
@@ -173,6 +204,19 @@ impl StepShaping {
             let (p, dp) = minimum_jerk(t - at, self.move_s);
             (f + a * p, r + a * dp)
         })
+    }
+
+    /// The path time at time `t` (s) after a path starts from rest: the
+    /// path's clock runs at the rate [`StepShaping::progress`] gives, so its
+    /// speed rises from 0 to the path's own as a shaped step does, and the
+    /// start excites the mode no more than such a step would. Once the
+    /// shaping's length has passed it runs at the path's pace, behind by
+    /// a constant lag; before the start (t ≤ 0) it is 0.
+    pub fn eased_time(&self, t: f64) -> f64 {
+        self.impulses()
+            .iter()
+            .map(|&(at, a)| a * minimum_jerk_integral(t - at, self.move_s))
+            .sum()
     }
 
     /// The ringing a shaped step leaves on a mode of natural frequency
@@ -236,6 +280,23 @@ fn minimum_jerk(t: f64, duration: f64) -> (f64, f64) {
     let p = s * s * s * (10.0 - 15.0 * s + 6.0 * s * s);
     let dp = 30.0 * s * s * (1.0 - s) * (1.0 - s) / duration;
     (p, dp)
+}
+
+/// ∫₀ᵗ of the minimum-jerk move's position: T (2.5s⁴ − 3s⁵ + s⁶) within
+/// the move, then T/2 + (t − T) after it (its mean position over the move
+/// is ½); t for a step.
+fn minimum_jerk_integral(t: f64, duration: f64) -> f64 {
+    if t <= 0.0 {
+        return 0.0;
+    }
+    if duration <= 0.0 {
+        return t;
+    }
+    if t >= duration {
+        return 0.5 * duration + (t - duration);
+    }
+    let s = t / duration;
+    duration * s.powi(4) * (2.5 - 3.0 * s + s * s)
 }
 
 #[cfg(test)]
@@ -329,6 +390,29 @@ mod tests {
         assert_eq!(shaping.progress(-1.0), (0.0, 0.0));
         let (end, rate) = shaping.progress(1e3);
         assert!((end - 1.0).abs() < 1e-12 && rate == 0.0);
+    }
+
+    /// The eased clock's rate is the shaped step's progress (its derivative
+    /// by central differences), and after the shaping it runs at pace,
+    /// behind by the shaping's mean delay.
+    #[test]
+    fn the_eased_clock_speeds_up_as_a_shaped_step_moves() {
+        let shaping = StepShaping::for_mode(1.07, 0.05).unwrap();
+        let h = 1e-6;
+        for k in 0..=50 {
+            let t = 1.2 * shaping.length_s() * k as f64 / 50.0;
+            let rate = (shaping.eased_time(t + h) - shaping.eased_time(t - h)) / (2.0 * h);
+            let (p, _) = shaping.progress(t);
+            assert!((rate - p).abs() < 1e-6, "t {t}: rate {rate} vs {p}");
+        }
+        let lag: f64 = shaping
+            .impulses()
+            .iter()
+            .map(|(at, a)| a * (at + 0.5 * shaping.move_s))
+            .sum();
+        let t = 3.0 * shaping.length_s();
+        assert!((t - shaping.eased_time(t) - lag).abs() < 1e-12);
+        assert_eq!(shaping.eased_time(-0.5), 0.0);
     }
 
     #[test]

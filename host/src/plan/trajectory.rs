@@ -49,25 +49,43 @@ pub struct Trajectory {
 }
 
 impl Trajectory {
-    /// Move between the targets of a stepwise trajectory as `shaping` says
-    /// (a minimum-jerk move through a ZVD shaper, [`StepShaping`]) instead
-    /// of jumping; a path is left as it is (the shaper would delay it and
-    /// shrink it at its own frequency).
-    pub fn with_step_shaping(mut self, shaping: Option<StepShaping>) -> Trajectory {
-        self.shaping = shaping.filter(|_| self.stepwise && self.poses.len() > 1);
+    /// Shape this trajectory's motion as `shaping` says ([`StepShaping`]):
+    /// a stepwise trajectory moves between its targets by a minimum-jerk
+    /// move through a ZVD shaper instead of jumping; a path starts from
+    /// rest on an eased clock ([`Trajectory::path_clock`]) and is then
+    /// followed as it is (shaping the path itself would delay it and shrink
+    /// it at its own frequency). A hold has nothing to shape.
+    pub fn with_shaping(mut self, shaping: Option<StepShaping>) -> Trajectory {
+        self.shaping = shaping.filter(|_| self.poses.len() > 1);
         self
     }
 
-    /// The shaping in force (only a stepwise trajectory has one).
-    pub fn step_shaping(&self) -> Option<StepShaping> {
+    /// The shaping in force.
+    pub fn shaping(&self) -> Option<StepShaping> {
         self.shaping
+    }
+
+    /// Whether a shaped step is under way at path time `t` (s): the tip is
+    /// on its way to a target, not following a path.
+    pub fn moving(&self, t: f64) -> bool {
+        self.steps_under_way(self.local_time(t)).next().is_some()
+    }
+
+    /// The path time to sample at `t` s after the motion starts, and how
+    /// fast it runs (the factor on [`PosePoint::velocity`]): a shaped path
+    /// eases in ([`StepShaping::eased_time`]); otherwise (t, 1).
+    pub fn path_clock(&self, t: f64) -> (f64, f64) {
+        match self.shaping {
+            Some(s) if !self.stepwise => (s.eased_time(t), s.progress(t).0),
+            _ => (t, 1.0),
+        }
     }
 
     /// The steps still under way at `t` (s): (index i of the target, the
     /// fraction of the step from target i−1 still to make, its rate) for
     /// each target asked for less than the shaping's length before.
     fn steps_under_way(&self, t: f64) -> impl Iterator<Item = (usize, f64, f64)> + '_ {
-        let shaping = self.shaping;
+        let shaping = self.shaping.filter(|_| self.stepwise);
         (1..self.times.len()).filter_map(move |i| {
             let s = shaping?;
             let since = t - self.times[i];
@@ -329,8 +347,8 @@ mod tests {
         let shaping = StepShaping::for_mode(3.6, 0.05).unwrap();
         let traj = Trajectory::new(&shape, &s)
             .unwrap()
-            .with_step_shaping(Some(shaping));
-        assert_eq!(traj.step_shaping(), Some(shaping));
+            .with_shaping(Some(shaping));
+        assert_eq!(traj.shaping(), Some(shaping));
         let end = 2.0 + shaping.length_s();
         let (a, b) = (traj.sample(1.9).pose, traj.sample(end + 0.01).pose);
         assert!(
@@ -377,8 +395,8 @@ mod tests {
         };
         let held = Trajectory::new(&hold, &s)
             .unwrap()
-            .with_step_shaping(Some(shaping));
-        assert_eq!(held.step_shaping(), None);
+            .with_shaping(Some(shaping));
+        assert_eq!(held.shaping(), None);
     }
 
     /// A sweep on the one-tendon robot: the tip's coordinate along the

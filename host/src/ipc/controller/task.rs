@@ -51,6 +51,9 @@ pub fn setpoint_in(s: &Setpoint) -> SetpointIn {
             columns: s.tangent,
             axes: s.tangent_axes,
         }),
+        moving: s.flags & setpoint_flags::MOVING != 0,
+        dynamic_offset: (s.flags & setpoint_flags::HAS_DYNAMIC_OFFSET != 0)
+            .then_some(s.dynamic_offset),
     }
 }
 

@@ -280,6 +280,11 @@ pub fn build_report(
             crate::plan::ShapingChoice::Designed(s) => Some(s),
             _ => None,
         },
+        dynamic_offset: cfg.planner.dynamic_offset
+            && matches!(
+                cfg.planner.step_shaping,
+                crate::plan::ShapingChoice::Designed(_)
+            ),
         tendons: logs.tendons,
         verdict: Verdict {
             clean: problems.is_empty(),

@@ -156,6 +156,8 @@ impl SimConfig {
                     height_m: None,
                 },
                 step_shaping: crate::plan::ShapingChoice::Auto,
+                start_from_rest: true,
+                dynamic_offset: true,
                 rate_hz: 1000.0,
                 settle_s: 2.0,
                 duration_s: None,

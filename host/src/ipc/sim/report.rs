@@ -32,6 +32,10 @@ pub struct SimReport {
     /// designed for (`null`: steps jumped, or the path has none).
     #[serde(default)]
     pub step_shaping: Option<crate::plan::StepShaping>,
+    /// Whether the planner sent the modal inverse's dynamic offset (only
+    /// with a shaping).
+    #[serde(default)]
+    pub dynamic_offset: bool,
     /// Tendons of the robot (from the plant log).
     pub tendons: usize,
     /// Whether every process finished cleanly (or died by an injected fault)
@@ -330,13 +334,17 @@ impl SimReport {
         }
         if let Some(sh) = &self.step_shaping {
             row(
-                "steps shaped for the first mode (Hz, ζ; each step's length in s)",
+                "steps and the path's start shaped for the first mode (Hz, ζ; a step's length in s)",
                 format!(
                     "{:.3}, {:.3}; {:.3}",
                     sh.mode_hz,
                     sh.damping_ratio,
                     sh.length_s()
                 ),
+            );
+            row(
+                "dynamic offset (the mode's inverse) sent",
+                if self.dynamic_offset { "yes" } else { "no" }.into(),
             );
         }
         row("RMS tracking error (mm)", mm(self.rms_tracking_error_mm));

@@ -277,8 +277,10 @@ impl Configs<'_> {
                 c.supervised = true;
                 c.duration_s = None;
                 if generation > 0 {
-                    // A restarted planner holds briefly where the robot is going.
+                    // A restarted planner holds briefly where the robot is
+                    // going; the robot is not at rest then.
                     c.settle_s = 0.5;
+                    c.start_from_rest = false;
                 }
                 write_json(&path, &c)?;
             }

@@ -1,0 +1,230 @@
+//! What the planner asks for at each instant of its clock
+//! (`docs/design.md` §6.4): the settle hold (or the shaped approach from
+//! rest to the first pose), then the trajectory on its eased clock, and the
+//! offset the rod's dynamics need on top of it (the modal inverse).
+
+use super::shaping::{ModalInverse, StepShaping};
+use super::{PosePoint, Trajectory};
+
+/// The desired point at one instant of the planner's clock.
+#[derive(Clone, Copy, Debug)]
+pub struct Desired {
+    /// Pose, velocity (on the planner's clock) and tangent.
+    pub point: PosePoint,
+    /// The trajectory's own time (for its feed-forward tensions), s.
+    pub t_path: f64,
+    /// In the settle hold (or the approach): not part of the path.
+    pub holding: bool,
+    /// On a shaped move between targets (a step, the approach).
+    pub moving: bool,
+    /// `point.velocity` is the motion's (false in a plain hold).
+    pub has_velocity: bool,
+}
+
+/// The largest dynamic offset sent, per coordinate (m, or quaternion
+/// component): a path with corners (a pose table) has accelerations the
+/// modal inverse would turn into kicks; an offset this size is a
+/// 0.5 s⁻² · 4 m/s² path, far beyond the loop runs (tens of µm).
+pub const MAX_DYNAMIC_OFFSET: f64 = 2e-3;
+
+/// Time step of the offset's central differences, s: short against the
+/// shaped moves (≥ 70 ms), long against the trajectory table's 10 ms rows.
+const DIFFERENCE_S: f64 = 0.01;
+
+/// The planner's motion: the trajectory with its settle hold, the optional
+/// approach from rest and the optional modal inverse.
+#[derive(Clone, Debug)]
+pub struct Motion {
+    trajectory: Trajectory,
+    settle_s: f64,
+    approach: Option<(StepShaping, [f64; 7])>,
+    inverse: Option<ModalInverse>,
+}
+
+impl Motion {
+    /// `trajectory` after a settle hold of `settle_s`; approached from the
+    /// pose `rest` by the trajectory's shaping when both are given; with
+    /// the dynamic offset of `inverse` when given.
+    pub fn new(
+        trajectory: Trajectory,
+        settle_s: f64,
+        rest: Option<[f64; 7]>,
+        inverse: Option<ModalInverse>,
+    ) -> Motion {
+        let approach = trajectory.shaping().zip(rest);
+        Motion {
+            trajectory,
+            settle_s,
+            approach,
+            inverse,
+        }
+    }
+
+    /// The trajectory followed.
+    pub fn trajectory(&self) -> &Trajectory {
+        &self.trajectory
+    }
+
+    /// What is asked for `t` s after the planner started.
+    pub fn at(&self, t: f64) -> Desired {
+        if t < self.settle_s {
+            let mut point = self.trajectory.sample(0.0);
+            point.velocity = [0.0; 7];
+            let moving = match &self.approach {
+                Some((shaping, rest)) => approach(shaping, rest, t.max(0.0), &mut point),
+                None => false,
+            };
+            return Desired {
+                point,
+                t_path: 0.0,
+                holding: true,
+                moving,
+                has_velocity: moving,
+            };
+        }
+        let (t_path, pace) = self.trajectory.path_clock(t - self.settle_s);
+        let mut point = self.trajectory.sample(t_path);
+        for v in &mut point.velocity {
+            *v *= pace;
+        }
+        Desired {
+            point,
+            t_path,
+            holding: false,
+            moving: self.trajectory.moving(t_path),
+            has_velocity: true,
+        }
+    }
+
+    /// The offset the rod's dynamics need at `t` (none without an
+    /// inverse): the modal inverse of the motion's velocity and
+    /// acceleration by central differences over ±10 ms, each coordinate
+    /// clamped to ±[`MAX_DYNAMIC_OFFSET`].
+    pub fn dynamic_offset(&self, t: f64) -> Option<[f64; 7]> {
+        let inverse = self.inverse?;
+        let h = DIFFERENCE_S;
+        let (a, b, c) = (
+            self.at(t - h).point.pose,
+            self.at(t).point.pose,
+            self.at(t + h).point.pose,
+        );
+        let velocity: [f64; 7] = std::array::from_fn(|k| (c[k] - a[k]) / (2.0 * h));
+        let acceleration: [f64; 7] = std::array::from_fn(|k| (c[k] - 2.0 * b[k] + a[k]) / (h * h));
+        Some(
+            inverse
+                .offset(&velocity, &acceleration)
+                .map(|v| v.clamp(-MAX_DYNAMIC_OFFSET, MAX_DYNAMIC_OFFSET)),
+        )
+    }
+}
+
+/// Move `point` (the first pose) back towards `rest` by what the shaped
+/// move has not yet made at `t` s, with the move's velocity and no
+/// tangent; whether the move is still under way.
+fn approach(shaping: &StepShaping, rest: &[f64; 7], t: f64, point: &mut PosePoint) -> bool {
+    if t >= shaping.length_s() {
+        return false;
+    }
+    let (done, rate) = shaping.progress(t);
+    for ((p, v), r) in point
+        .pose
+        .iter_mut()
+        .zip(point.velocity.iter_mut())
+        .zip(rest)
+    {
+        let span = *p - r;
+        *p -= (1.0 - done) * span;
+        *v = rate * span;
+    }
+    let qn = point.pose[3..].iter().map(|v| v * v).sum::<f64>().sqrt();
+    for v in &mut point.pose[3..] {
+        *v /= qn;
+    }
+    point.tangent = None;
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plan::PathShape;
+    use crate::statics::repo_statics;
+
+    fn circle_motion(inverse: Option<ModalInverse>) -> Motion {
+        let s = repo_statics("seed-4t.toml");
+        let shape = PathShape::Circle {
+            center_m: [0.0, 0.0],
+            radius_m: 0.015,
+            freq_hz: 0.2,
+            height_m: None,
+        };
+        let shaping = StepShaping::for_mode(3.6, 0.05).unwrap();
+        let traj = Trajectory::new(&shape, &s)
+            .unwrap()
+            .with_shaping(Some(shaping));
+        let rest = s.solve(&[0.0; 4], None).unwrap().pose();
+        Motion::new(traj, 2.0, Some(rest), inverse)
+    }
+
+    /// The approach starts at rest and arrives at the first pose within the
+    /// shaping's length, flagged as a move; the path then eases in from
+    /// rest (its speed rises from 0 to the circle's 2π · 0.2 · 15 mm/s).
+    #[test]
+    fn the_approach_and_the_eased_start_go_from_rest_to_the_circle() {
+        let m = circle_motion(None);
+        let first = m.at(0.0);
+        assert!(first.holding && first.moving);
+        // At rest the seed robot sags under gravity: 29 mm along x.
+        let rest = repo_statics("seed-4t.toml")
+            .solve(&[0.0; 4], None)
+            .unwrap()
+            .pose();
+        for (a, b) in first.point.pose.iter().zip(&rest) {
+            assert!(
+                (a - b).abs() < 1e-9,
+                "starts at rest: {:?}",
+                first.point.pose
+            );
+        }
+        let arrived = m.at(1.9);
+        assert!(arrived.holding && !arrived.moving);
+        assert!((arrived.point.pose[0] - 0.015).abs() < 1e-6);
+        let speed = |d: &Desired| d.point.velocity[0].hypot(d.point.velocity[1]);
+        assert!(speed(&m.at(2.0)) < 1e-9);
+        let cruise = speed(&m.at(4.0));
+        let want = std::f64::consts::TAU * 0.2 * 0.015;
+        assert!(
+            (cruise - want).abs() < 1e-3 * want,
+            "speed {cruise} vs {want}"
+        );
+        assert!(!m.at(4.0).moving && !m.at(4.0).holding);
+        assert!(m.dynamic_offset(3.0).is_none());
+    }
+
+    /// On the circle at cruise the modal inverse's offset is the closed
+    /// form: a = −Ω² r radially, so the offset is −(Ω/ω)² r plus the
+    /// damping's lead 2ζ/ω · v.
+    #[test]
+    fn the_dynamic_offset_on_a_circle_is_the_modal_inverse() {
+        let inverse = ModalInverse {
+            mode_hz: 3.6,
+            damping_ratio: 0.05,
+        };
+        let m = circle_motion(Some(inverse));
+        let t = 5.0;
+        let d = m.at(t);
+        let offset = m.dynamic_offset(t).unwrap();
+        let (w, big_w) = (std::f64::consts::TAU * 3.6, std::f64::consts::TAU * 0.2);
+        for (k, (&got, (&p, &v))) in offset
+            .iter()
+            .zip(d.point.pose.iter().zip(&d.point.velocity))
+            .take(2)
+            .enumerate()
+        {
+            let want = -(big_w / w).powi(2) * p + 2.0 * 0.05 / w * v;
+            // The offsets are ~50–80 µm; the table's 10 ms rows and the
+            // differences: within 2 µm.
+            assert!((got - want).abs() < 2e-6, "axis {k}: {got} vs {want}");
+        }
+    }
+}
