@@ -99,13 +99,21 @@ impl Motion {
     /// The offset the rod's dynamics need at `t` (none without an
     /// inverse): the modal inverse of the motion's velocity and
     /// acceleration by central differences over ±10 ms, each coordinate
-    /// clamped to ±[`MAX_DYNAMIC_OFFSET`].
+    /// clamped to ±[`MAX_DYNAMIC_OFFSET`]. Zero on a shaped move (a step,
+    /// the approach) and in a hold: the shaper already leaves the mode
+    /// alone there, and its moves, half a mode's period long, would ask for
+    /// offsets of millimetres (a 10 mm step: 3 mm), past the clamp — a
+    /// clamped inverse rang 1.3 mm where the shaped step alone left 0.03.
     pub fn dynamic_offset(&self, t: f64) -> Option<[f64; 7]> {
         let inverse = self.inverse?;
+        let now = self.at(t);
+        if now.moving || now.holding {
+            return Some([0.0; 7]);
+        }
         let h = DIFFERENCE_S;
         let (a, b, c) = (
             self.at(t - h).point.pose,
-            self.at(t).point.pose,
+            now.point.pose,
             self.at(t + h).point.pose,
         );
         let velocity: [f64; 7] = std::array::from_fn(|k| (c[k] - a[k]) / (2.0 * h));

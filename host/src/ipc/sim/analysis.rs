@@ -280,6 +280,7 @@ pub fn join(logs: &Logs, t0_ns: u64) -> Vec<Sample> {
             desired: s.position,
             actual: row.position,
             hold: s.flags & (setpoint_flags::HOLD | LOG_INJECTED) != 0,
+            moving: s.flags & setpoint_flags::MOVING != 0,
         });
     }
     samples
@@ -501,6 +502,7 @@ mod tests {
             desired: [desired, 0.0, 0.2],
             actual: [actual, 0.0, 0.2],
             hold,
+            moving: false,
         }
     }
 
@@ -532,6 +534,7 @@ mod tests {
                     desired: [v * t_sp, 0.0, 0.2],
                     actual: [v * (t - lag_s).max(0.0), offset_m, 0.2],
                     hold: t < 0.5,
+                    moving: false,
                 }
             })
             .collect()
@@ -590,6 +593,7 @@ mod tests {
                     desired: at((t / 0.01).floor() * 0.01),
                     actual: at(t - 0.03),
                     hold: t < 0.05,
+                    moving: false,
                 }
             })
             .collect();

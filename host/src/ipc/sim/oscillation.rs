@@ -226,7 +226,8 @@ pub fn detect(samples: &[Sample], band_from_hz: f64) -> Oscillation {
             .map(|k| (w[1].desired[k] - w[0].desired[k]).powi(2))
             .sum::<f64>()
             .sqrt();
-        if d > JUMP_M {
+        // A shaped move is a step's transient too, though it never jumps.
+        if d > JUMP_M || w[1].moving {
             jumps.push(w[1].t);
         }
         if w[1].t - w[0].t > MAX_GAP_S {
@@ -314,6 +315,7 @@ mod tests {
                     desired,
                     actual: [0, 1, 2].map(|k| desired[k] - e[k]),
                     hold: false,
+                    moving: false,
                 }
             })
             .collect()

@@ -13,6 +13,9 @@ pub struct Sample {
     pub actual: [f64; 3],
     /// Whether the planner was in a hold (settle, restart) or injecting.
     pub hold: bool,
+    /// Whether the setpoint was part of a shaped move between targets
+    /// (`MOVING`): a step's transient, like a jump.
+    pub moving: bool,
 }
 
 impl Sample {
