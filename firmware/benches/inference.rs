@@ -58,7 +58,6 @@ fn bench(c: &mut Criterion) {
                     seq,
                     pose: poses[seq as usize % poses.len()],
                     tangent: None,
-                    dynamic_offset: [0.0; 7],
                 }),
                 feedback: None,
             };

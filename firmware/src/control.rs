@@ -203,11 +203,6 @@ pub struct Setpoint {
     /// them: lets the integral loop move the setpoint the way the robot can
     /// move ([`IntegralConfig`]). Ignored unless [`Tangent::is_valid`].
     pub tangent: Option<Tangent>,
-    /// Added to the pose the net is asked for, not to the reference the
-    /// tip is compared with: the rod's dynamics along the path
-    /// (`docs/design.md` §6.4). Zero when the planner sends none; a
-    /// non-finite entry rejects the setpoint like a non-finite pose.
-    pub dynamic_offset: [f32; POSE_DIM],
 }
 
 /// One tracker sample of the tip, as the integral loop takes it.
@@ -251,8 +246,6 @@ pub struct ControlState {
     pub last_setpoint_seq: u64,
     /// Pose of the last accepted setpoint (valid when `has_setpoint`).
     pub pose: [f32; POSE_DIM],
-    /// Its dynamic offset (added to the net's pose only).
-    pub dynamic_offset: [f32; POSE_DIM],
     /// Its tangent along the reachable poses, if it came with a valid one.
     pub tangent: Option<Tangent>,
     /// The last command was held back by the slew limit (the tip is still
@@ -304,7 +297,6 @@ impl ControlState {
             last_setpoint_ns: now_ns,
             last_setpoint_seq: 0,
             pose: [0.0; POSE_DIM],
-            dynamic_offset: [0.0; POSE_DIM],
             tangent: None,
             slew_limited: false,
             has_setpoint: false,
@@ -398,12 +390,7 @@ pub fn control_step<const H: usize, const OUT: usize, const W: usize>(
     if let Some(sp) = input.setpoint {
         if st.has_setpoint && sp.seq <= st.last_setpoint_seq {
             status |= Status::STALE_SETPOINT;
-        } else if sp
-            .pose
-            .iter()
-            .chain(&sp.dynamic_offset)
-            .any(|v| !v.is_finite())
-        {
+        } else if sp.pose.iter().any(|v| !v.is_finite()) {
             st.last_setpoint_seq = sp.seq;
             status |= Status::SETPOINT_REJECTED | Status::NONFINITE_SETPOINT;
         } else if !quaternion_ok(&sp.pose, cfg.quaternion_tolerance) {
@@ -422,7 +409,6 @@ pub fn control_step<const H: usize, const OUT: usize, const W: usize>(
                 st.map_origin = [sp.pose[0], sp.pose[1], sp.pose[2]];
             }
             st.pose = sp.pose;
-            st.dynamic_offset = sp.dynamic_offset;
             st.tangent = sp.tangent.filter(Tangent::is_valid);
             st.has_setpoint = true;
             st.watchdog = false;
@@ -455,12 +441,6 @@ pub fn control_step<const H: usize, const OUT: usize, const W: usize>(
             SafeHold::Ramp(t) => t,
         };
     } else if tracking {
-        // The rod's dynamics on top of the (corrected) pose: what the net is
-        // asked for, never what the tip is measured against.
-        let mut pose = pose;
-        for (p, d) in pose.iter_mut().zip(&st.dynamic_offset) {
-            *p += d;
-        }
         let y = infer(net, &pose);
         if y.iter().take(n).all(|v| v.is_finite()) {
             st.target = [0.0; MAX_TENDONS];

@@ -567,8 +567,6 @@ impl<const U: usize> Core<U> {
             pose: s.pose.pose(),
             velocity: s.velocity(),
             tangent: self.last_tangent,
-            moving: s.moving,
-            dynamic_offset: s.dynamic_offset(),
         });
     }
 

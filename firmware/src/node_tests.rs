@@ -175,8 +175,6 @@ fn setpoint(seq: u32) -> Down<'static> {
         pose: WirePose::from_pose(&pose()),
         velocity: None,
         tangent: None,
-        moving: false,
-        dynamic_offset: None,
     })
 }
 

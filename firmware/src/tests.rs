@@ -207,7 +207,6 @@ fn sp(seq: u64, pose: [f32; 7]) -> Option<Setpoint> {
         seq,
         pose,
         tangent: None,
-        dynamic_offset: [0.0; 7],
     })
 }
 
@@ -240,46 +239,6 @@ fn tracking_converges_to_the_clamped_net_output_at_the_slew_rate() {
         assert!((st.command[i] - y[i].clamp(0.0, 10.0)).abs() < 1e-6, "{i}");
     }
     assert!(st.command[4..].iter().all(|&t| t == 0.0));
-}
-
-/// The dynamic offset moves what the net is asked for and nothing else:
-/// the target is the net at pose + offset, the reference the loop keeps is
-/// the pose; a non-finite offset rejects the setpoint like a non-finite pose.
-#[test]
-fn the_dynamic_offset_moves_the_nets_input_not_the_reference() {
-    let cfg = cfg4();
-    let net = Net::decode(&blob(3, 12, 4)).unwrap();
-    let pose = mid_pose();
-    let offset = [2e-4, -1e-4, 0.0, 0.0, 1e-4, 0.0, 0.0];
-    let asked: [f32; 7] = core::array::from_fn(|k| pose[k] + offset[k]);
-    let st0 = ControlState::new(&cfg.limits, &[0.0; MAX_TENDONS], 0);
-    let with = Some(Setpoint {
-        dynamic_offset: offset,
-        ..sp(1, pose).unwrap()
-    });
-    let (st, o) = control_step(&cfg, &net, &st0, &input(1_000_000, with));
-    assert!(o.status.contains(Status::NEW_SETPOINT));
-    let y = infer(&net, &asked);
-    let plain = infer(&net, &pose);
-    assert!(
-        (0..4).any(|i| (y[i] - plain[i]).abs() > 1e-6),
-        "the offset changed nothing"
-    );
-    for i in 0..4 {
-        assert_eq!(st.target[i], y[i], "tendon {i}");
-    }
-    assert_eq!(st.pose, pose);
-    let mut bad = offset;
-    bad[1] = f32::INFINITY;
-    let rejected = Some(Setpoint {
-        dynamic_offset: bad,
-        ..sp(2, pose).unwrap()
-    });
-    let (s, o) = control_step(&cfg, &net, &st, &input(2_000_000, rejected));
-    assert!(o
-        .status
-        .contains(Status::SETPOINT_REJECTED | Status::NONFINITE_SETPOINT));
-    assert_eq!(s.target, st.target);
 }
 
 #[test]
@@ -408,7 +367,6 @@ fn run_biased(
                 seq: k,
                 pose,
                 tangent,
-                dynamic_offset: [0.0; 7],
             }),
             feedback: Some(Feedback {
                 seq: k,
@@ -932,7 +890,6 @@ proptest! {
                     seq,
                     pose,
                     tangent: None,
-                    dynamic_offset: [0.0; 7],
                 }),
                 feedback: ev.feedback.map(|tip| Feedback { seq: now, tip_position: tip, interval_s: 1e-3 }),
             };

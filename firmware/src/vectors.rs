@@ -389,7 +389,6 @@ where
                 seq: u64::from(rec.seq),
                 pose: rec.pose,
                 tangent: None,
-                dynamic_offset: [0.0; 7],
             }),
             feedback: (rec.flags & HAS_FEEDBACK != 0).then_some(Feedback {
                 seq: i as u64 + 1,

@@ -134,7 +134,6 @@ fn child(prefix: &str, mode: Mode) {
                 seq: sp.header.seq,
                 pose: sp.pose,
                 tangent: None,
-                dynamic_offset: [0.0; 7],
             }),
             feedback: None,
         };
@@ -206,7 +205,7 @@ fn latency(samples: usize, mode: Mode) -> (Summary, Summary) {
                 tangent_axes: [[0.0; 3]; 3],
                 tangent_dim: 0,
                 flags,
-                dynamic_offset: [0.0; 7],
+                dynamic_offset: [0.0; 3],
                 reserved: 0,
             },
         )

@@ -45,13 +45,13 @@ pub mod setpoint_flags {
     /// robot's reachable poses instead of guessing how they bend.
     pub const HAS_TANGENT: u32 = 1 << 3;
     /// The setpoint is part of a shaped move between targets (a step, the
-    /// approach to a path's first pose): the tip is still on its way, so
-    /// the controller treats it as it treats a jump and integrates no
-    /// tracker frame sampled before the settle time after the move's last
-    /// setpoint (`docs/design.md` §6.4).
+    /// approach to a path's first pose): the tip is still on its way. The
+    /// sim's analysis treats such setpoints as a step's transient; the
+    /// period does not read the bit yet (`docs/design.md` §6.4: the chip's
+    /// worst period has no room for it).
     pub const MOVING: u32 = 1 << 4;
-    /// `dynamic_offset` is valid: the net is to be asked for the pose plus
-    /// it.
+    /// `dynamic_offset` is valid: the controller asks the net for the pose
+    /// moved by it.
     pub const HAS_DYNAMIC_OFFSET: u32 = 1 << 5;
 }
 
@@ -82,13 +82,15 @@ pub struct Setpoint {
     pub tangent_dim: u32,
     /// [`setpoint_flags`] bits.
     pub flags: u32,
-    /// What the rod's dynamics ask of the command on top of the pose (per
-    /// pose coordinate): the net is asked for `pose + dynamic_offset`, so
-    /// that the rod, which lags an accelerating command by its first mode,
-    /// ends up at `pose` — the modal model's inverse along the path
-    /// (`docs/design.md` §6.4). `pose` stays the reference the tip is
-    /// measured against. Valid with `HAS_DYNAMIC_OFFSET`.
-    pub dynamic_offset: [f32; 7],
+    /// What the rod's dynamics ask of the command on top of the pose, m
+    /// along the tangent's axes (`tangent_axes`; the position's x, y, z
+    /// without a tangent), as the correction moves it: the net is asked for
+    /// `pose + Σ_j d_j tangent_j`, so that the rod, which lags an
+    /// accelerating command by its first mode, ends up at `pose` — the
+    /// modal model's inverse along the path (`docs/design.md` §6.4). `pose`
+    /// stays the reference the tip is measured against. Valid with
+    /// `HAS_DYNAMIC_OFFSET`.
+    pub dynamic_offset: [f32; 3],
     /// Explicit padding to the header's 8-byte alignment; zero.
     pub reserved: u32,
 }
@@ -291,7 +293,7 @@ mod tests {
         assert_eq!(size_of::<Header>(), 16);
         assert_eq!(
             size_of::<Setpoint>(),
-            16 + 7 * 4 * 2 + 7 * 4 * 3 + 3 * 4 * 3 + 4 + 4 + 7 * 4 + 4
+            16 + 7 * 4 * 2 + 7 * 4 * 3 + 3 * 4 * 3 + 4 + 4 + 3 * 4 + 4
         );
         assert_eq!(
             size_of::<TensionCommand>(),

@@ -158,7 +158,11 @@ fn two_hundred_seconds_of_controller_periods_allocate_nothing() {
                 | setpoint_flags::HAS_TANGENT
                 | setpoint_flags::HAS_DYNAMIC_OFFSET,
             // The modal inverse's size on the circle: tens of µm.
-            dynamic_offset: point.velocity.map(|v| (v * 0.005) as f32),
+            dynamic_offset: [
+                (point.velocity[0] * 0.005) as f32,
+                (point.velocity[1] * 0.005) as f32,
+                0.0,
+            ],
             reserved: 0,
         };
         // A plant: healthy 20 ms motors, the tip 0.3 mm off the setpoint

@@ -107,6 +107,23 @@ fn the_pipeline_runs_end_to_end_on_the_one_tendon_robot() {
         Value::Bool(true),
         "{chip_dir}: {sim}"
     );
+    // The run on the rod with mass: the planner designed its shaping for
+    // the robot's first mode, sent the dynamic offset, and the loop is
+    // clean and within half a millimetre.
+    let mass_dir = format!("{}-mass", run_dir(&runs[0], true));
+    let mass = json(&dir.join(&mass_dir).join("report.json"));
+    assert_eq!(
+        mass["verdict"]["clean"],
+        Value::Bool(true),
+        "{mass_dir}: {mass}"
+    );
+    assert!(
+        number(&mass, &["step_shaping", "mode_hz"]) > 0.0,
+        "{mass_dir}: no shaping"
+    );
+    assert_eq!(mass["dynamic_offset"], Value::Bool(true), "{mass_dir}");
+    let rms = number(&mass, &["rms_tracking_error_mm"]);
+    assert!(rms <= 0.5, "{mass_dir}: RMS {rms} mm");
     for run in runs {
         let sub = run_dir(&run, true);
         let sim = json(&dir.join(&sub).join("report.json"));

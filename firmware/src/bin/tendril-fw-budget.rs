@@ -479,10 +479,6 @@ mod mcu {
                 pose: WirePose::from_pose(&pose),
                 velocity: Some(Setpoint::wire_velocity(&vel)),
                 tangent: Some(tangent),
-                moving: false,
-                // The modal inverse's offset on every setpoint: the
-                // largest message and the longest path through the period.
-                dynamic_offset: Some(Setpoint::wire_offset(&vel.map(|v| v * 4e-3))),
             });
             // The motors follow the last command with τ = 20 ms; the tip
             // lags the setpoint by 0.5 mm (inside the correction window).

@@ -120,7 +120,6 @@ mod mcu {
                     seq: u64::from(k),
                     pose,
                     tangent: None,
-                    dynamic_offset: [0.0; 7],
                 }),
                 feedback: None,
             };

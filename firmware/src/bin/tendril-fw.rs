@@ -165,7 +165,6 @@ mod mcu {
                                     seq: 1,
                                     pose: *p,
                                     tangent: None,
-                                    dynamic_offset: [0.0; 7],
                                 }),
                                 feedback: None,
                             };

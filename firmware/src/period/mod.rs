@@ -90,12 +90,6 @@ pub struct SetpointIn {
     pub velocity: Option<[f32; POSE_DIM]>,
     /// The reachable poses about it (for the integral loop), if sent.
     pub tangent: Option<Tangent>,
-    /// Part of a shaped move between targets: like a jump, no frame
-    /// sampled before the settle time after it is integrated.
-    pub moving: bool,
-    /// What the rod's dynamics add to the net's pose (the reference stays
-    /// `pose`), if sent.
-    pub dynamic_offset: Option<[f32; POSE_DIM]>,
 }
 
 /// Plant feedback as the period takes it.
@@ -437,7 +431,7 @@ impl Period {
                 .zip(&before)
                 .fold(0.0f32, |sum, (a, b)| sum + (a - b) * (a - b));
             // NaN positions compare false: not a jump (they are refused).
-            if s.moving || d2 > self.cfg.jump_m * self.cfg.jump_m {
+            if d2 > self.cfg.jump_m * self.cfg.jump_m {
                 self.quiet_until_ns = now.saturating_add(self.cfg.settle_after_jump_ns);
             }
         }
@@ -478,7 +472,6 @@ impl Period {
             seq: self.local_sp_seq,
             pose,
             tangent: s.tangent,
-            dynamic_offset: s.dynamic_offset.unwrap_or([0.0; POSE_DIM]),
         }
     }
 

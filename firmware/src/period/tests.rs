@@ -97,8 +97,6 @@ fn sp(seq: u64) -> SetpointIn {
         pose: pose(),
         velocity: None,
         tangent: None,
-        moving: false,
-        dynamic_offset: None,
     }
 }
 
@@ -566,41 +564,6 @@ fn a_tracker_frame_is_integrated_once_over_the_time_since_the_last() {
     assert_eq!(changes, 3);
     let c = p.period.correction().0[0];
     assert!((c - 0.75e-3).abs() < 1e-7, "correction {c}");
-}
-
-/// Setpoints of a shaped move (`moving`) pause the loop as a jump does:
-/// no frame sampled before the settle time after the move's last setpoint
-/// is integrated, then integration resumes — though the setpoint never
-/// moved a millimetre in a period.
-#[test]
-fn a_shaped_move_pauses_the_integral_until_it_has_settled() {
-    let mut st = store(1);
-    let cfg = integral_config();
-    let settle_periods = cfg.settle_after_jump_ns / T;
-    let mut p = P::new(cfg, 0);
-    let move_periods = 1001..1050u64;
-    let mut first_change = None;
-    let mut before = p.period.correction().0;
-    for k in 1001..=1300u64 {
-        let mut f = fb(k, k.saturating_sub(1), [0.0; MAX_TENDONS]);
-        f.tip = [pose()[0] - 1e-3, pose()[1], pose()[2]];
-        let mut s = sp(k);
-        s.moving = move_periods.contains(&k);
-        let input = Inputs {
-            feedback: Some(f),
-            feedbacks: 1,
-            ..with_sp(k, s)
-        };
-        p.run(&mut *st, &input);
-        let now = p.period.correction().0;
-        if now != before && first_change.is_none() {
-            first_change = Some(k);
-        }
-        before = now;
-    }
-    // The last moving setpoint came at 1049: frames up to 1049 + settle
-    // are not integrated, the next one is.
-    assert_eq!(first_change, Some(1049 + settle_periods));
 }
 
 #[test]

@@ -197,7 +197,7 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
                 flags |= setpoint_flags::HAS_DYNAMIC_OFFSET;
                 d.map(|v| v as f32)
             }
-            None => [0.0; 7],
+            None => [0.0; 3],
         };
         let mut pose = point.pose.map(|v| v as f32);
         let mut velocity = point.velocity.map(|v| v as f32);

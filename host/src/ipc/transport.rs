@@ -461,7 +461,7 @@ mod tests {
             tangent_axes: [[0.0; 3]; 3],
             tangent_dim: 0,
             flags: 0,
-            dynamic_offset: [0.0; 7],
+            dynamic_offset: [0.0; 3],
             reserved: 0,
         }
     }

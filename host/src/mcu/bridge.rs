@@ -157,6 +157,10 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
     let mut latency = Histogram::default();
     let mut peers = PeerWatch::new(cfg.peer_timeout_s, cfg.peer_start_grace_s, start);
     let mut last_tangent = None;
+    let mut tip_shift = [0.0f32; 3];
+    let mut quiet = crate::ipc::controller::MoveQuiet::new(
+        crate::ipc::controller::correction::SETTLE_AFTER_JUMP_S,
+    );
     // Setpoints forwarded and not yet seen in a command: (seq, sent at).
     let mut in_flight: std::collections::VecDeque<(u32, u64)> = Default::default();
     let mut last_cmd_seq = 0u32;
@@ -182,6 +186,7 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
             }
         })?;
         if let Some(s) = &sp {
+            quiet.setpoint(s, now_ns());
             // A setpoint that cannot go now is superseded by a newer one:
             // what it superseded is counted with it.
             let mut count = n_sp;
@@ -212,6 +217,9 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
         {
             // The newest is forwarded (its own NaN is the chip's to find);
             // `superseded` counted only the ones it superseded.
+            // The dynamic offset applied here, as the host controller does.
+            let (s, shift) = crate::ipc::controller::with_dynamic_offset(&s);
+            tip_shift = shift;
             let msg = link_setpoint(&s, count, superseded, &mut last_tangent);
             chip.send(&Down::Setpoint(msg)).map_err(other)?;
             in_flight.push_back((msg.seq, now));
@@ -233,7 +241,8 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
         let feedback_due = link_free && now.saturating_sub(last_feedback) >= period_ns * 3 / 4;
         if let (Some(f), true) = (&pending_state, feedback_due) {
             let t = now_ns();
-            chip.send(&Down::Feedback(link_feedback(f, pending_count, n, t)))
+            let f = crate::ipc::controller::tip_shifted(&quiet.state(f, t), tip_shift);
+            chip.send(&Down::Feedback(link_feedback(&f, pending_count, n, t)))
                 .map_err(other)?;
             last_feedback = t;
             pending_state = None;

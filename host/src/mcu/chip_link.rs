@@ -101,9 +101,6 @@ pub fn link_setpoint(
         velocity: (s.flags & setpoint_flags::HAS_VELOCITY != 0)
             .then(|| LinkSetpoint::wire_velocity(&s.velocity)),
         tangent: if send_tangent { tangent } else { None },
-        moving: s.flags & setpoint_flags::MOVING != 0,
-        dynamic_offset: (s.flags & setpoint_flags::HAS_DYNAMIC_OFFSET != 0)
-            .then(|| LinkSetpoint::wire_offset(&s.dynamic_offset)),
     }
 }
 

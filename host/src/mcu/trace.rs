@@ -560,12 +560,6 @@ pub fn synthetic(setup: &Setup, update: &[u8], periods: usize, seed: u64) -> Res
                     pose: WirePose::from_pose(&pose),
                     velocity: Some(Setpoint::wire_velocity(&vel)),
                     tangent,
-                    // A shaped move's setpoints: the integral pauses.
-                    moving: (at(0.40)..at(0.42)).contains(&k),
-                    // The modal inverse's offset, tens of µm (none now
-                    // and then: the planner may send none).
-                    dynamic_offset: (k % 7 != 0)
-                        .then(|| Setpoint::wire_offset(&vel.map(|v| v * 4e-3))),
                 }));
             }
             // Feedback: the plant follows the last command with the

@@ -21,8 +21,7 @@ pub struct Desired {
     pub has_velocity: bool,
 }
 
-/// The largest dynamic offset sent, per coordinate (m, or quaternion
-/// component): a path with corners (a pose table) has accelerations the
+/// The largest dynamic offset sent, per axis (m): a path with corners (a pose table) has accelerations the
 /// modal inverse would turn into kicks; an offset this size is a
 /// 0.5 s⁻² · 4 m/s² path, far beyond the loop runs (tens of µm).
 pub const MAX_DYNAMIC_OFFSET: f64 = 2e-3;
@@ -97,18 +96,21 @@ impl Motion {
     }
 
     /// The offset the rod's dynamics need at `t` (none without an
-    /// inverse): the modal inverse of the motion's velocity and
-    /// acceleration by central differences over ±10 ms, each coordinate
-    /// clamped to ±[`MAX_DYNAMIC_OFFSET`]. Zero on a shaped move (a step,
+    /// inverse), m along the point's tangent axes (the position's x, y, z
+    /// without a tangent), as the controller's correction moves a pose: the
+    /// modal inverse of the motion's velocity and acceleration by central
+    /// differences over ±10 ms, projected on the axes and clamped to
+    /// ±[`MAX_DYNAMIC_OFFSET`]. The tangent carries it to the orientation
+    /// and the rest of the pose as the robot's own statics do. Zero on a shaped move (a step,
     /// the approach) and in a hold: the shaper already leaves the mode
     /// alone there, and its moves, half a mode's period long, would ask for
     /// offsets of millimetres (a 10 mm step: 3 mm), past the clamp — a
     /// clamped inverse rang 1.3 mm where the shaped step alone left 0.03.
-    pub fn dynamic_offset(&self, t: f64) -> Option<[f64; 7]> {
+    pub fn dynamic_offset(&self, t: f64) -> Option<[f64; 3]> {
         let inverse = self.inverse?;
         let now = self.at(t);
         if now.moving || now.holding {
-            return Some([0.0; 7]);
+            return Some([0.0; 3]);
         }
         let h = DIFFERENCE_S;
         let (a, b, c) = (
@@ -118,11 +120,23 @@ impl Motion {
         );
         let velocity: [f64; 7] = std::array::from_fn(|k| (c[k] - a[k]) / (2.0 * h));
         let acceleration: [f64; 7] = std::array::from_fn(|k| (c[k] - 2.0 * b[k] + a[k]) / (h * h));
-        Some(
-            inverse
-                .offset(&velocity, &acceleration)
-                .map(|v| v.clamp(-MAX_DYNAMIC_OFFSET, MAX_DYNAMIC_OFFSET)),
-        )
+        let full = inverse.offset(&velocity, &acceleration);
+        let position = [full[0], full[1], full[2]];
+        let along = match now.point.tangent {
+            Some(tangent) => {
+                let k = tangent.family.dim();
+                let axes = tangent.family.axes_padded();
+                std::array::from_fn(|j| {
+                    if j < k {
+                        (0..3).map(|i| axes[j][i] * position[i]).sum()
+                    } else {
+                        0.0
+                    }
+                })
+            }
+            None => position,
+        };
+        Some(along.map(|v| v.clamp(-MAX_DYNAMIC_OFFSET, MAX_DYNAMIC_OFFSET)))
     }
 }
 

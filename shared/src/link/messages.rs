@@ -149,8 +149,6 @@ pub mod units {
     pub const QUATERNION: f32 = 1e-6;
     /// Pose derivative per unit: 1e-4 m/s (or 1/s for the quaternion).
     pub const VELOCITY: f32 = 1e-4;
-    /// Dynamic offset per unit: 1 µm (or 1e-6 of a quaternion component).
-    pub const OFFSET: f32 = 1e-6;
     /// Newtons per tension unit: 1 mN.
     pub const TENSION_N: f32 = 1e-3;
 
@@ -245,11 +243,6 @@ pub struct Setpoint {
     /// for the setpoints that come without: it changes slowly along a path
     /// and costs 120 of the link's bytes).
     pub tangent: Option<Tangent>,
-    /// Part of a shaped move between targets (the planner's `MOVING` bit).
-    pub moving: bool,
-    /// The rod's dynamics on top of the pose (the planner's
-    /// `dynamic_offset`), 1e-6 per coordinate (1 µm, ±32 mm).
-    pub dynamic_offset: Option<[i16; 7]>,
 }
 
 impl Setpoint {
@@ -262,17 +255,6 @@ impl Setpoint {
     /// Quantise a velocity (per s).
     pub fn wire_velocity(v: &[f32; 7]) -> [i16; 7] {
         v.map(|x| units::to_i16(x, units::VELOCITY))
-    }
-
-    /// The dynamic offset in `f32` (m, quaternion components).
-    pub fn dynamic_offset(&self) -> Option<[f32; 7]> {
-        self.dynamic_offset
-            .map(|v| v.map(|q| units::from_i16(q, units::OFFSET)))
-    }
-
-    /// Quantise a dynamic offset.
-    pub fn wire_offset(v: &[f32; 7]) -> [i16; 7] {
-        v.map(|x| units::to_i16(x, units::OFFSET))
     }
 }
 
@@ -462,8 +444,6 @@ mod tests {
                 columns: [[f32::MAX; 7]; 3],
                 axes: [[f32::MAX; 3]; 3],
             }),
-            moving: true,
-            dynamic_offset: Some([i16::MAX; 7]),
         }
     }
 
@@ -598,10 +578,6 @@ mod tests {
                 0.019, 0.004, -0.001, -0.01, 0.03, 0.02, 0.0,
             ])),
             tangent: None,
-            moving: false,
-            dynamic_offset: Some(Setpoint::wire_offset(&[
-                4e-5, -1e-5, 0.0, 0.0, 2e-6, -1e-6, 0.0,
-            ])),
         });
         let fb = Down::Feedback(Feedback {
             seq: 123_400,
@@ -615,10 +591,9 @@ mod tests {
         let mut buf = [0u8; 512];
         let a = crate::link::encode(&sp, &mut buf).unwrap().len();
         let b = crate::link::encode(&fb, &mut buf).unwrap().len();
-        // 13 kB/s at 100 Hz is 130 B per period: leave a third for bursts,
-        // chunks and tangents (it was half before the dynamic offset's
-        // 8–11 bytes, `docs/design.md` §6.4).
-        assert!(a + b <= 90, "setpoint {a} B + feedback {b} B per period");
+        // 13 kB/s at 100 Hz is 130 B per period: leave half for bursts,
+        // chunks and tangents.
+        assert!(a + b <= 80, "setpoint {a} B + feedback {b} B per period");
     }
 
     #[test]

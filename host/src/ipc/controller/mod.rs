@@ -83,7 +83,10 @@ pub mod correction {
 pub use report::{
     ControllerStats, DetectedFault, FaultKind, FaultLog, LinkStats, FAULT_CAPACITY, FAULT_REPEAT_S,
 };
-pub use task::{feedback_in, period_config, setpoint_in, Controller, HostPeriod, Inbox};
+pub use task::{
+    feedback_in, period_config, setpoint_in, tip_shifted, with_dynamic_offset, Controller,
+    HostPeriod, Inbox, MoveQuiet,
+};
 
 /// The double-buffered net the controller runs, of the one capacity in
 /// `tendril_shared` (the trainer's cap, so every exported net fits).

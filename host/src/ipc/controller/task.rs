@@ -51,10 +51,98 @@ pub fn setpoint_in(s: &Setpoint) -> SetpointIn {
             columns: s.tangent,
             axes: s.tangent_axes,
         }),
-        moving: s.flags & setpoint_flags::MOVING != 0,
-        dynamic_offset: (s.flags & setpoint_flags::HAS_DYNAMIC_OFFSET != 0)
-            .then_some(s.dynamic_offset),
     }
+}
+
+/// The planner's setpoint with its dynamic offset applied, and the shift
+/// every measured tip gets until the next setpoint (`docs/design.md` §6.4).
+/// The pose moves by Σ_j d_j T_j along its tangent (its position by d
+/// without one), as the period's correction moves a pose, so the net is
+/// asked for the pose plus the offset; the tip moves by the same position
+/// shift, so the period's error — setpoint less tip — is still the error
+/// against the planner's pose. Done here, outside the period, for the host
+/// controller and the chip's bridge alike: the chip's RAM and its worst
+/// period had no room for it (BENCHMARKS.md). A non-finite offset makes a
+/// non-finite pose, which the period refuses.
+pub fn with_dynamic_offset(s: &Setpoint) -> (Setpoint, [f32; 3]) {
+    if s.flags & setpoint_flags::HAS_DYNAMIC_OFFSET == 0 {
+        return (*s, [0.0; 3]);
+    }
+    let d = s.dynamic_offset;
+    let mut shift = [0.0f32; 7];
+    let k = s.tangent_dim.min(3) as usize;
+    if s.flags & setpoint_flags::HAS_TANGENT != 0 && k > 0 {
+        for (column, dj) in s.tangent.iter().zip(d).take(k) {
+            for (v, c) in shift.iter_mut().zip(column) {
+                *v += c * dj;
+            }
+        }
+    } else {
+        shift[..3].copy_from_slice(&d);
+    }
+    let mut out = *s;
+    for (p, v) in out.pose.iter_mut().zip(shift) {
+        *p += v;
+    }
+    (out, [shift[0], shift[1], shift[2]])
+}
+
+/// Tracker frames held back while the robot is on a shaped move
+/// (`docs/design.md` §6.4): the planner flags a shaped move's setpoints
+/// `MOVING`, and until the settle time after the last of them every plant
+/// state goes to the period with the last frame from before the move, so
+/// the period integrates no frame of the move's transient — what its jump
+/// rule does for a jump, which a shaped move never makes. Done here, beside
+/// the period, for the host controller and the chip's bridge alike: in the
+/// period the rule cost the chip 960 instructions a period it did not have
+/// (BENCHMARKS.md). The first frame after gets the time since the held one
+/// as its interval, which the control law caps at the tracker timeout.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct MoveQuiet {
+    settle_ns: u64,
+    until_ns: u64,
+    held: Option<([f32; 7], u32, u64)>,
+}
+
+impl MoveQuiet {
+    /// Quiet for `settle_s` after a move's last setpoint.
+    pub fn new(settle_s: f64) -> MoveQuiet {
+        MoveQuiet {
+            settle_ns: (settle_s * 1e9) as u64,
+            ..MoveQuiet::default()
+        }
+    }
+
+    /// A setpoint arrived at `now_ns`.
+    pub fn setpoint(&mut self, s: &Setpoint, now_ns: u64) {
+        if s.flags & setpoint_flags::MOVING != 0 {
+            self.until_ns = now_ns.saturating_add(self.settle_ns);
+        }
+    }
+
+    /// The plant state as the period is to see it at `now_ns`.
+    pub fn state(&mut self, f: &PlantState, now_ns: u64) -> PlantState {
+        let mut out = *f;
+        match self.held {
+            Some((tip, seq, stamp)) if now_ns < self.until_ns => {
+                out.tip_pose = tip;
+                out.tip_seq = seq;
+                out.tip_stamp_ns = stamp;
+            }
+            _ => self.held = Some((f.tip_pose, f.tip_seq, f.tip_stamp_ns)),
+        }
+        out
+    }
+}
+
+/// The plant's state with its tip moved by `shift` (m): see
+/// [`with_dynamic_offset`].
+pub fn tip_shifted(f: &PlantState, shift: [f32; 3]) -> PlantState {
+    let mut out = *f;
+    for (p, s) in out.tip_pose.iter_mut().zip(shift) {
+        *p += s;
+    }
+    out
 }
 
 /// The firmware's feedback from the plant's message, for a period at
@@ -166,6 +254,11 @@ pub struct Controller {
     /// Sequence number of the newest weight update offered.
     update_seq: u64,
     last_state_seq: u64,
+    /// The newest setpoint's dynamic offset, m: every measured tip moves
+    /// by it ([`with_dynamic_offset`]).
+    tip_shift: [f32; 3],
+    /// Frames held back over shaped moves.
+    quiet: MoveQuiet,
     cmd: TensionCommand,
     row: [f64; LOG_FIXED + MAX_TENDONS],
 }
@@ -199,6 +292,8 @@ impl Controller {
             hold_warned: false,
             update_seq: 0,
             last_state_seq: 0,
+            tip_shift: [0.0; 3],
+            quiet: MoveQuiet::new(correction::SETTLE_AFTER_JUMP_S),
             cmd: TensionCommand::default(),
             row: [0.0; LOG_FIXED + MAX_TENDONS],
         })
@@ -247,6 +342,16 @@ impl Controller {
         if let Some(s) = &inbox.setpoint {
             self.sp_age.record(t_wake.saturating_sub(s.header.stamp_ns));
         }
+        let shifted = inbox.setpoint.as_ref().map(|s| {
+            self.quiet.setpoint(s, tick.deadline_ns);
+            let (s, shift) = with_dynamic_offset(s);
+            self.tip_shift = shift;
+            s
+        });
+        let state = inbox
+            .state
+            .as_ref()
+            .map(|f| tip_shifted(&self.quiet.state(f, tick.deadline_ns), self.tip_shift));
         let input = Inputs {
             now_ns: tick.deadline_ns,
             missed_ticks: if late || tick.skipped > 0 {
@@ -254,13 +359,10 @@ impl Controller {
             } else {
                 0
             },
-            setpoint: inbox.setpoint.as_ref().map(setpoint_in),
+            setpoint: shifted.as_ref().map(setpoint_in),
             setpoints: inbox.setpoints as u32,
             superseded_nonfinite: inbox.superseded_nonfinite as u32,
-            feedback: inbox
-                .state
-                .as_ref()
-                .map(|f| feedback_in(f, tick.deadline_ns)),
+            feedback: state.as_ref().map(|f| feedback_in(f, tick.deadline_ns)),
             feedbacks: inbox.states as u32,
         };
         if let Some(f) = &inbox.state {
@@ -356,5 +458,106 @@ impl Controller {
         stats.step_us = self.work.summary();
         stats.setpoint_age_us = self.sp_age.summary();
         stats
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn setpoint(flags: u32, offset: [f32; 3]) -> Setpoint {
+        Setpoint {
+            pose: [0.01, 0.0, 0.39, 1.0, 0.0, 0.0, 0.0],
+            // A tangent of two columns: x moves qy, y moves qx.
+            tangent: [
+                [1.0, 0.0, -0.1, 0.0, 0.0, 2.0, 0.0],
+                [0.0, 1.0, 0.0, 0.0, -2.0, 0.0, 0.0],
+                [0.0; 7],
+            ],
+            tangent_axes: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0; 3]],
+            tangent_dim: 2,
+            flags,
+            dynamic_offset: offset,
+            ..Setpoint::default()
+        }
+    }
+
+    /// The offset moves the pose along the tangent (orientation included)
+    /// and the tip by the same position shift, so setpoint less tip is the
+    /// error against the planner's pose; without the flag nothing moves; a
+    /// NaN offset makes a NaN pose, which the period refuses.
+    #[test]
+    fn the_dynamic_offset_moves_the_pose_along_the_tangent_and_the_tip_alike() {
+        let flags = setpoint_flags::HAS_TANGENT | setpoint_flags::HAS_DYNAMIC_OFFSET;
+        let s = setpoint(flags, [2e-4, -1e-4, 5.0]);
+        let (moved, shift) = with_dynamic_offset(&s);
+        let want = [0.01 + 2e-4, -1e-4, 0.39 - 2e-5, 1.0, 2e-4, 4e-4, 0.0];
+        for (k, (a, b)) in moved.pose.iter().zip(want).enumerate() {
+            assert!((a - b).abs() < 1e-7, "pose[{k}] {a} vs {b}");
+        }
+        for k in 0..3 {
+            assert!(
+                (shift[k] - (moved.pose[k] - s.pose[k])).abs() < 1e-7,
+                "shift {shift:?}"
+            );
+        }
+        let tip = PlantState {
+            tip_pose: [0.0101, 0.0002, 0.3899, 1.0, 0.0, 0.0, 0.0],
+            ..PlantState::default()
+        };
+        let shifted = tip_shifted(&tip, shift);
+        for k in 0..3 {
+            let before = s.pose[k] - tip.tip_pose[k];
+            let after = moved.pose[k] - shifted.tip_pose[k];
+            assert!(
+                (before - after).abs() < 1e-7,
+                "axis {k}: {before} vs {after}"
+            );
+        }
+        let (plain, none) = with_dynamic_offset(&setpoint(setpoint_flags::HAS_TANGENT, [1.0; 3]));
+        assert_eq!((plain.pose, none), (s.pose, [0.0; 3]));
+        let (no_tangent, shift) = with_dynamic_offset(&setpoint(
+            setpoint_flags::HAS_DYNAMIC_OFFSET,
+            [1e-4, 0.0, 2e-4],
+        ));
+        assert_eq!(shift, [1e-4, 0.0, 2e-4]);
+        assert_eq!(no_tangent.pose[3..], s.pose[3..]);
+        let (nan, _) = with_dynamic_offset(&setpoint(flags, [f32::NAN, 0.0, 0.0]));
+        assert!(nan.pose.iter().any(|v| v.is_nan()));
+    }
+
+    /// Frames pass until a shaped move's setpoint; from then until the
+    /// settle time after its last one the period gets the frame from
+    /// before the move (no new frame to integrate); then frames pass again.
+    #[test]
+    fn frames_are_held_over_a_shaped_move_and_its_settle() {
+        let ms = 1_000_000u64;
+        let mut quiet = MoveQuiet::new(0.3);
+        let frame = |seq: u32| PlantState {
+            tip_pose: [seq as f32 * 1e-3, 0.0, 0.4, 1.0, 0.0, 0.0, 0.0],
+            tip_seq: seq,
+            tip_stamp_ns: u64::from(seq) * ms,
+            ..PlantState::default()
+        };
+        assert_eq!(quiet.state(&frame(1), ms).tip_seq, 1);
+        let moving = Setpoint {
+            flags: setpoint_flags::MOVING,
+            ..Setpoint::default()
+        };
+        for k in 2..=100u32 {
+            let now = u64::from(k) * ms;
+            if k <= 50 {
+                quiet.setpoint(&moving, now);
+            } else {
+                quiet.setpoint(&Setpoint::default(), now);
+            }
+            let seen = quiet.state(&frame(k), now);
+            assert_eq!(seen.tip_seq, 1, "period {k}");
+            assert_eq!(seen.tip_pose, frame(1).tip_pose);
+        }
+        // 50 ms + 300 ms: held until 350 ms, passed from then.
+        assert_eq!(quiet.state(&frame(349), 349 * ms).tip_seq, 1);
+        assert_eq!(quiet.state(&frame(350), 350 * ms).tip_seq, 350);
+        assert_eq!(quiet.state(&frame(351), 351 * ms).tip_seq, 351);
     }
 }
