@@ -147,8 +147,11 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
         }
         _ => None,
     };
+    // Only where the path has an acceleration everywhere: at a corner the
+    // inverse asks for a kick (a helix's height turning back: the
+    // three-segment robot's helix went from 3.4 to 8 mm RMS with it).
     let inverse = shaping
-        .filter(|_| cfg.dynamic_offset)
+        .filter(|_| cfg.dynamic_offset && cfg.shape.is_smooth())
         .map(|s| s.modal_inverse());
     let motion = Motion::new(traj, cfg.settle_s, rest, inverse);
     let traj = motion.trajectory();

@@ -91,6 +91,16 @@ pub enum PathShape {
 }
 
 impl PathShape {
+    /// Whether the path has a second derivative everywhere (a circle, a
+    /// figure eight, a sweep): what the dynamic offset needs, r̈ (a helix's
+    /// height turns back with a corner, steps and pose tables jump or turn).
+    pub fn is_smooth(&self) -> bool {
+        matches!(
+            self,
+            PathShape::Circle { .. } | PathShape::FigureEight { .. } | PathShape::Sweep { .. }
+        )
+    }
+
     /// The shape's name as in its `kind` tag.
     pub fn name(&self) -> &'static str {
         match self {
