@@ -291,16 +291,8 @@ impl PoseReader {
                 })
             };
             let record = record.map_err(|e| row_error(e.to_string()))?;
-            let mut pose = [0.0; 7];
-            for (k, &c) in self.cols.iter().enumerate() {
-                let text = record.get(c).unwrap_or("").trim();
-                pose[k] = text.parse::<f64>().map_err(|_| {
-                    row_error(format!(
-                        "column {}: {text:?} is not a number",
-                        POSE_COLUMNS[k]
-                    ))
-                })?;
-            }
+            let pose =
+                crate::net::guarded::pose_of_record(&record, &self.cols).map_err(row_error)?;
             chunk.push((self.line, pose));
         }
         Ok(chunk)

@@ -305,19 +305,23 @@ pub fn read_poses(input: &Path) -> Result<Vec<[f64; 7]>, IkError> {
             why,
         };
         let record = record.map_err(|e| row_error(e.to_string()))?;
-        let mut pose = [0.0; 7];
-        for (k, &c) in cols.iter().enumerate() {
-            let text = record.get(c).unwrap_or("").trim();
-            pose[k] = text.parse::<f64>().map_err(|_| {
-                row_error(format!(
-                    "column {}: {text:?} is not a number",
-                    POSE_COLUMNS[k]
-                ))
-            })?;
-        }
-        poses.push(pose);
+        poses.push(pose_of_record(&record, &cols).map_err(row_error)?);
     }
     Ok(poses)
+}
+
+/// The pose in a CSV `record` whose px, py, pz, qw, qx, qy, qz sit at
+/// `cols` ([`open_pose_csv`]); the error names the column that is not a
+/// number.
+pub fn pose_of_record(record: &csv::StringRecord, cols: &[usize]) -> Result<[f64; 7], String> {
+    let mut pose = [0.0; 7];
+    for ((p, &c), name) in pose.iter_mut().zip(cols).zip(POSE_COLUMNS) {
+        let text = record.get(c).unwrap_or("").trim();
+        *p = text
+            .parse::<f64>()
+            .map_err(|_| format!("column {name}: {text:?} is not a number"))?;
+    }
+    Ok(pose)
 }
 
 /// Answer every pose of the CSV at `input` ([`read_poses`]) and write
