@@ -195,7 +195,7 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
                 flags |= bit;
             }
         }
-        let dynamic_offset = match motion.dynamic_offset(t) {
+        let dynamic_offset = match motion.dynamic_offset(t, &desired) {
             Some(d) => {
                 flags |= setpoint_flags::HAS_DYNAMIC_OFFSET;
                 d.map(|v| v as f32)

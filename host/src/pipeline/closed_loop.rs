@@ -22,9 +22,32 @@ pub struct LoopOut<'a> {
     pub published: &'a Path,
 }
 
-impl LoopOut<'_> {
-    fn sim(&self, mut sim: SimConfig) -> SimConfig {
-        sim.staged_as = Some((self.dir.to_path_buf(), self.published.to_path_buf()));
+/// What every loop run of the stage shares.
+struct LoopInputs<'a> {
+    exe: &'a Path,
+    robot_file: &'a Path,
+    model: &'a Path,
+    out: LoopOut<'a>,
+    quick_s: Option<f64>,
+}
+
+impl LoopInputs<'_> {
+    /// The sim of `run` with or without the correction, written into `dir`
+    /// under the stage's directory, its length capped by `--quick`.
+    fn sim(&self, run: &LoopRun, dir: &str, correction: bool) -> SimConfig {
+        let mut sim = SimConfig::new(
+            self.exe.to_path_buf(),
+            self.robot_file.to_path_buf(),
+            ModelSource::File(self.model.to_path_buf()),
+            self.out.dir.join(dir),
+        );
+        sim.staged_as = Some((self.out.dir.to_path_buf(), self.out.published.to_path_buf()));
+        sim.duration_s = self
+            .quick_s
+            .map_or(run.duration_s, |q| q.min(run.duration_s));
+        sim.smoke = self.quick_s.is_some();
+        sim.planner.shape = run.shape.clone();
+        sim.set_correction(correction);
         sim
     }
 }
@@ -44,6 +67,13 @@ pub fn closed_loop_section(
 ) -> anyhow::Result<(String, LoopTally)> {
     let exe = std::env::current_exe()
         .map_err(|e| anyhow::anyhow!("locating the tendril executable: {e}"))?;
+    let inputs = LoopInputs {
+        exe: &exe,
+        robot_file,
+        model,
+        out,
+        quick_s,
+    };
     let runs = default_loop_runs(statics)?;
     let family = Family::of(statics)?;
     let mut summary = String::from(
@@ -82,58 +112,30 @@ pub fn closed_loop_section(
                     "IK net alone"
                 }
             );
-            let mut sim = out.sim(SimConfig::new(
-                exe.clone(),
-                robot_file.to_path_buf(),
-                ModelSource::File(model.to_path_buf()),
-                out.dir.join(&dir),
-            ));
-            sim.duration_s = quick_s.map_or(run.duration_s, |q| q.min(run.duration_s));
-            sim.smoke = quick_s.is_some();
-            sim.planner.shape = run.shape.clone();
-            sim.set_correction(correction);
+            let mut sim = inputs.sim(run, &dir, correction);
             sim.label = what.clone();
             let letter = letters.chars().nth(k).unwrap_or('z');
             k += 1;
             let title = format!("### 5{letter}. {what}");
             let on_off = if correction { "on" } else { "off" };
-            match crate::ipc::sim::run(&sim) {
-                Ok(r) => {
-                    let num = length_mm_or_dash;
-                    tally.count(&r.verdict.problems);
-                    let verdict = if r.verdict.clean {
-                        String::new()
-                    } else {
-                        format!(" (failed: {})", r.verdict.problems.join("; "))
-                    };
-                    let _ = writeln!(
-                        summary,
-                        "| {} ({dir}) | {on_off} | {} | {} | {}{verdict} |",
-                        run.label,
-                        num(r.rms_tracking_error_mm),
-                        num(r.max_tracking_error_mm),
-                        num(r.max_steady_state_error_mm)
-                    );
-                    sections.push(format!(
-                        "{title}\n\n{}\n\n![sim]({dir}/sim.png)\n",
-                        r.markdown().trim()
-                    ));
-                }
-                Err(e @ SimError::Interrupted) => return Err(e.into()),
-                Err(e) => {
-                    log::error!("closed loop {dir}: {e}");
-                    tally.count(&[e.to_string()]);
-                    let _ = writeln!(summary, "| {} ({dir}) | {on_off} | failed | | |", run.label);
-                    sections.push(format!("{title}\n\nThe sim failed: {e}.\n"));
-                }
-            }
+            let (row, section) = row_and_section(
+                crate::ipc::sim::run(&sim),
+                &format!("{} ({dir})", run.label),
+                on_off,
+                &dir,
+                &title,
+                |_| String::new(),
+                &mut tally,
+            )?;
+            summary.push_str(&row);
+            sections.push(section);
         }
     }
     if let Some(run) = runs.first() {
-        let (row, section) = chip_run(&exe, robot_file, model, out, run, quick_s, &mut tally)?;
+        let (row, section) = chip_run(&inputs, run, &mut tally)?;
         summary.push_str(&row);
         sections.push(section);
-        let (row, section) = mass_run(&exe, robot_file, model, out, run, quick_s, &mut tally)?;
+        let (row, section) = mass_run(&inputs, run, &mut tally)?;
         summary.push_str(&row);
         sections.push(section);
     }
@@ -169,12 +171,8 @@ pub const MASS_REALITY: &str = "dynamic-light-damping";
 /// new user sees the realistic number beside the ideal one (`docs/design.md`
 /// §6.4: the planner shapes the start and sends the dynamic offset).
 fn mass_run(
-    exe: &Path,
-    robot_file: &Path,
-    model: &Path,
-    out: LoopOut<'_>,
+    inputs: &LoopInputs<'_>,
     run: &LoopRun,
-    quick_s: Option<f64>,
     tally: &mut LoopTally,
 ) -> anyhow::Result<(String, String)> {
     let dir = format!("{}-mass", run_dir(run, true));
@@ -183,21 +181,13 @@ fn mass_run(
         run.label
     );
     let title = format!("### 5y. {what}");
-    let mut sim = out.sim(SimConfig::new(
-        exe.to_path_buf(),
-        robot_file.to_path_buf(),
-        ModelSource::File(model.to_path_buf()),
-        out.dir.join(&dir),
-    ));
-    sim.duration_s = quick_s.map_or(run.duration_s, |q| q.min(run.duration_s));
-    sim.smoke = quick_s.is_some();
-    sim.planner.shape = run.shape.clone();
-    sim.set_correction(true);
+    let mut sim = inputs.sim(run, &dir, true);
     sim.plant.params.reality = crate::plant::reality::Reality::builtin(MASS_REALITY);
     sim.label = what;
     row_and_section(
         crate::ipc::sim::run(&sim),
         &format!("{} ({dir}), the rod with mass", run.label),
+        "on",
         &dir,
         &title,
         |_| String::new(),
@@ -210,12 +200,8 @@ fn mass_run(
 /// [`crate::mcu::bridge::MCU_RATE_HZ`] (docs/design.md §5.6). Without QEMU
 /// or the Rust target its row says what to install; the other runs stand.
 fn chip_run(
-    exe: &Path,
-    robot_file: &Path,
-    model: &Path,
-    out: LoopOut<'_>,
+    inputs: &LoopInputs<'_>,
     run: &LoopRun,
-    quick_s: Option<f64>,
     tally: &mut LoopTally,
 ) -> anyhow::Result<(String, String)> {
     let dir = format!("{}-mcu", run_dir(run, true));
@@ -232,16 +218,7 @@ fn chip_run(
             format!("{title}\n\nNot run: {why}.\n"),
         ));
     }
-    let mut sim = out.sim(SimConfig::new(
-        exe.to_path_buf(),
-        robot_file.to_path_buf(),
-        ModelSource::File(model.to_path_buf()),
-        out.dir.join(&dir),
-    ));
-    sim.duration_s = quick_s.map_or(run.duration_s, |q| q.min(run.duration_s));
-    sim.smoke = quick_s.is_some();
-    sim.planner.shape = run.shape.clone();
-    sim.set_correction(true);
+    let mut sim = inputs.sim(run, &dir, true);
     sim.controller.rate_hz = crate::mcu::bridge::MCU_RATE_HZ;
     sim.planner.rate_hz = crate::mcu::bridge::MCU_RATE_HZ;
     sim.mcu = Some(crate::ipc::sim::SimMcu::default());
@@ -253,6 +230,7 @@ fn chip_run(
             run.label,
             crate::mcu::bridge::MCU_RATE_HZ
         ),
+        "on",
         &dir,
         &title,
         |r| {
@@ -270,12 +248,14 @@ fn chip_run(
     )
 }
 
-/// The table row and the report section of one extra corrected run (its
-/// `row` label, `dir`, section `title`), with `more` appended to a row
-/// that ran; an interrupt stops the stage, a failure is a row.
+/// The table row and the report section of one loop run (its `row`
+/// label, the correction `on_off`, `dir`, section `title`), with `more`
+/// appended to a row that ran; an interrupt stops the stage, a failure is
+/// a row.
 fn row_and_section(
     result: Result<crate::ipc::sim::report::SimReport, SimError>,
     row: &str,
+    on_off: &str,
     dir: &str,
     title: &str,
     more: impl Fn(&crate::ipc::sim::report::SimReport) -> String,
@@ -292,7 +272,7 @@ fn row_and_section(
             };
             (
                 format!(
-                    "| {row} | on | {} | {} | {}{verdict}{} |\n",
+                    "| {row} | {on_off} | {} | {} | {}{verdict}{} |\n",
                     num(r.rms_tracking_error_mm),
                     num(r.max_tracking_error_mm),
                     num(r.max_steady_state_error_mm),
@@ -309,7 +289,7 @@ fn row_and_section(
             log::error!("closed loop {dir}: {e}");
             tally.count(&[e.to_string()]);
             (
-                format!("| {row} | on | failed | | |\n"),
+                format!("| {row} | {on_off} | failed | | |\n"),
                 format!("{title}\n\nThe sim failed: {e}.\n"),
             )
         }

@@ -106,9 +106,9 @@ impl Motion {
     /// alone there, and its moves, half a mode's period long, would ask for
     /// offsets of millimetres (a 10 mm step: 3 mm), past the clamp — a
     /// clamped inverse rang 1.3 mm where the shaped step alone left 0.03.
-    pub fn dynamic_offset(&self, t: f64) -> Option<[f64; 3]> {
+    /// `now` is [`Motion::at`]`(t)`, which the caller has.
+    pub fn dynamic_offset(&self, t: f64, now: &Desired) -> Option<[f64; 3]> {
         let inverse = self.inverse?;
-        let now = self.at(t);
         if now.moving || now.holding {
             return Some([0.0; 3]);
         }
@@ -158,10 +158,7 @@ fn approach(shaping: &StepShaping, rest: &[f64; 7], t: f64, point: &mut PosePoin
         *p -= (1.0 - done) * span;
         *v = rate * span;
     }
-    let qn = point.pose[3..].iter().map(|v| v * v).sum::<f64>().sqrt();
-    for v in &mut point.pose[3..] {
-        *v /= qn;
-    }
+    super::trajectory::normalise_quaternion(&mut point.pose);
     point.tangent = None;
     true
 }
@@ -220,7 +217,7 @@ mod tests {
             "speed {cruise} vs {want}"
         );
         assert!(!m.at(4.0).moving && !m.at(4.0).holding);
-        assert!(m.dynamic_offset(3.0).is_none());
+        assert!(m.dynamic_offset(3.0, &m.at(3.0)).is_none());
     }
 
     /// On the circle at cruise the modal inverse's offset is the closed
@@ -235,7 +232,7 @@ mod tests {
         let m = circle_motion(Some(inverse));
         let t = 5.0;
         let d = m.at(t);
-        let offset = m.dynamic_offset(t).unwrap();
+        let offset = m.dynamic_offset(t, &d).unwrap();
         let (w, big_w) = (std::f64::consts::TAU * 3.6, std::f64::consts::TAU * 0.2);
         for (k, (&got, (&p, &v))) in offset
             .iter()

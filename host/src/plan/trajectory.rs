@@ -171,10 +171,7 @@ impl Trajectory {
             pose[k] = a + f * (b - a);
             velocity[k] = (b - a) / (t1 - t0);
         }
-        let qn = (pose[3..].iter().map(|v| v * v).sum::<f64>()).sqrt();
-        for v in &mut pose[3..] {
-            *v /= qn;
-        }
+        normalise_quaternion(&mut pose);
         let tangent = match (self.tangents.get(i), self.tangents.get(i + 1)) {
             (Some(a), Some(b)) => {
                 let mut d = *a;
@@ -193,6 +190,15 @@ impl Trajectory {
             velocity,
             tangent,
         }
+    }
+}
+
+/// Scale a pose's quaternion (its last four numbers) back to unit length
+/// after poses were blended.
+pub(super) fn normalise_quaternion(pose: &mut [f64; 7]) {
+    let n = pose[3..].iter().map(|v| v * v).sum::<f64>().sqrt();
+    for v in &mut pose[3..] {
+        *v /= n;
     }
 }
 
@@ -227,10 +233,7 @@ impl Trajectory {
             }
         }
         if moving {
-            let qn = (pose[3..].iter().map(|v| v * v).sum::<f64>()).sqrt();
-            for v in &mut pose[3..] {
-                *v /= qn;
-            }
+            normalise_quaternion(&mut pose);
         }
         PosePoint {
             pose,
