@@ -90,9 +90,24 @@ pub struct TrajectoryOpts {
     /// mass), with --shape-steps on.
     #[arg(long, value_enum, default_value_t = super::controller::OnOff::On)]
     pub dynamic_offset: super::controller::OnOff,
+    /// Learn, pass after pass of a repeated path (circle, figure-eight,
+    /// helix, sweep), the offset that puts the tip on it from the tracker's
+    /// frames (iterative learning control on the path's harmonics below
+    /// the rod's mode, checked to converge before it starts), with
+    /// --shape-steps on.
+    #[arg(long, value_enum, default_value_t = super::controller::OnOff::Off)]
+    pub learn: super::controller::OnOff,
 }
 
 impl TrajectoryOpts {
+    /// The planner's learning these options ask for.
+    pub fn learning(&self) -> crate::plan::LearningChoice {
+        match self.learn {
+            super::controller::OnOff::On => crate::plan::LearningChoice::Auto,
+            super::controller::OnOff::Off => crate::plan::LearningChoice::Off,
+        }
+    }
+
     /// The planner's step shaping these options ask for.
     pub fn step_shaping(&self) -> crate::plan::ShapingChoice {
         match self.shape_steps {
@@ -300,6 +315,7 @@ impl PlannerArgs {
             step_shaping: self.traj.step_shaping(),
             start_from_rest: self.from_rest,
             dynamic_offset: self.traj.dynamic_offset == super::controller::OnOff::On,
+            learning: self.traj.learning(),
             rate_hz: self.traj.planner_rate.unwrap_or(1000.0),
             settle_s: self.traj.settle,
             duration_s: self.duration,

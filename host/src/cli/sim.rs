@@ -147,6 +147,7 @@ impl SimArgs {
         cfg.planner.shape = self.traj.shape()?;
         cfg.planner.step_shaping = self.traj.step_shaping();
         cfg.planner.dynamic_offset = self.traj.dynamic_offset == super::controller::OnOff::On;
+        cfg.planner.learning = self.traj.learning();
         let rate = match self.controller {
             ControllerKind::Host => self.tuning.rate_hz(),
             ControllerKind::Mcu => {

@@ -282,6 +282,7 @@ mod tests {
             }),
             start_from_rest: true,
             dynamic_offset: true,
+            learning: crate::plan::LearningChoice::Off,
             rate_hz: 1000.0,
             settle_s: 2.0,
             duration_s: None,

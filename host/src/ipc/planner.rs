@@ -6,13 +6,17 @@
 use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
-use tendril_shared::messages::{setpoint_flags, Header, Setpoint, TensionCommand};
+use tendril_shared::messages::{setpoint_flags, Header, PlantState, Setpoint, TensionCommand};
 
 use super::clock::{now_ns, tighten_timer_slack, Ticker};
 use super::stats::CsvLog;
 use super::transport::{self, Services};
 use super::{IpcError, StopWatch};
-use crate::plan::{Motion, PathShape, ShapingChoice, Trajectory};
+use crate::plan::learning::PassOutcome;
+use crate::plan::{
+    along_axes, IntegralGains, Learner, LearningChoice, Motion, PathShape, ShapingChoice,
+    Trajectory,
+};
 use crate::robot::Robot;
 use crate::statics::{SolverSettings, Statics};
 
@@ -60,6 +64,11 @@ pub struct PlannerConfig {
     /// with a shaping.
     #[serde(default)]
     pub dynamic_offset: bool,
+    /// Learn the offset that puts the tip on a repeated path, pass after
+    /// pass, from the tracker's frames (`docs/design.md` §6.4; sent with
+    /// the dynamic offset).
+    #[serde(default)]
+    pub learning: LearningChoice,
     /// Bad setpoints to inject.
     #[serde(default)]
     pub inject: Injections,
@@ -88,6 +97,13 @@ pub struct PlannerConfig {
 /// Flag bit in the planner log (not on the wire): this message was an
 /// injected bad setpoint; the logged pose is the trajectory's.
 pub const LOG_INJECTED: u32 = 1 << 31;
+
+/// Flag bit in the planner log: learning for repeated paths had stopped on
+/// a growing error (the fault event; the best pass's offset is held).
+pub const LOG_LEARNING_STOPPED: u32 = 1 << 30;
+
+/// Flag bit in the planner log: a learned offset was sent.
+pub const LOG_LEARNED: u32 = 1 << 29;
 
 /// The leading column names of the planner log (then [`log_header`]'s
 /// feed-forward columns).
@@ -155,6 +171,7 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
         .map(|s| s.modal_inverse());
     let motion = Motion::new(traj, cfg.settle_s, rest, inverse);
     let traj = motion.trajectory();
+    let mut learner = learner(cfg, &robot, shaping)?;
 
     let node = transport::node("tendril-planner")?;
     let _orphan = transport::ReleaseIfOrphaned(&node);
@@ -163,6 +180,12 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
     // The controller's commands say it is alive (the peers-lost rule).
     let commands = transport::subscriber(&services.tension_cmd)?;
     let stop = StopWatch::new(&services)?;
+    // The tracker's frames, for the learning only.
+    let states = match learner {
+        Some(_) => Some(transport::subscriber(&services.plant_state)?),
+        None => None,
+    };
+    let mut last_frame = 0u32;
     let mut log = CsvLog::create(cfg.log.as_deref(), &log_header(traj.tendons()))?;
     let mut feedforward = Vec::with_capacity(traj.tendons());
     tighten_timer_slack();
@@ -195,12 +218,34 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
                 flags |= bit;
             }
         }
-        let dynamic_offset = match motion.dynamic_offset(t, &desired) {
-            Some(d) => {
-                flags |= setpoint_flags::HAS_DYNAMIC_OFFSET;
-                d.map(|v| v as f32)
+        let mut log_flags = 0;
+        if let (Some(learner), Some(states)) = (learner.as_mut(), states.as_ref()) {
+            let (state, _): (Option<PlantState>, usize) = transport::latest(states)?;
+            if let Some(state) = state.filter(|s| s.tip_seq != 0 && s.tip_seq != last_frame) {
+                last_frame = state.tip_seq;
+                learn_from(learner, &motion, &state, start);
             }
-            None => [0.0; 3],
+            if let Some(outcome) = learner.advance(desired.t_path) {
+                say(&outcome);
+            }
+            if learner.stopped() {
+                log_flags |= LOG_LEARNING_STOPPED;
+            }
+        }
+        let learned = learner
+            .as_ref()
+            .filter(|_| !desired.holding && !desired.moving)
+            .map(|l| l.offset(desired.t_path));
+        if learned.is_some() {
+            log_flags |= LOG_LEARNED;
+        }
+        let dynamic_offset = match (motion.dynamic_offset(t, &desired), learned) {
+            (None, None) => [0.0; 3],
+            (inverse, learned) => {
+                flags |= setpoint_flags::HAS_DYNAMIC_OFFSET;
+                let (a, b) = (inverse.unwrap_or_default(), learned.unwrap_or_default());
+                std::array::from_fn(|k| (a[k] + b[k]) as f32)
+            }
         };
         let mut pose = point.pose.map(|v| v as f32);
         let mut velocity = point.velocity.map(|v| v as f32);
@@ -260,7 +305,7 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
         transport::send(&publisher, msg)?;
         // The log keeps the trajectory's pose (what the robot should do)
         // and marks injected messages.
-        let log_flags = flags | if injected { LOG_INJECTED } else { 0 };
+        let log_flags = log_flags | flags | if injected { LOG_INJECTED } else { 0 };
         let mut row = vec![stamp as f64, seq as f64, log_flags as f64];
         row.extend(clean.iter().map(|&v| v as f64));
         row.extend_from_slice(&feedforward);
@@ -286,4 +331,78 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
     }
     log.close()?;
     Ok(seq)
+}
+
+/// The learning `cfg` asks for, designed and checked (`None`: off). A
+/// learning the convergence check refuses stays off and says why; the run
+/// goes on without it.
+fn learner(
+    cfg: &PlannerConfig,
+    robot: &Robot,
+    shaping: Option<crate::plan::StepShaping>,
+) -> Result<Option<Learner>, IpcError> {
+    // The controller's defaults: a launcher that knows the controller's
+    // own gains designs with them and passes the design.
+    let scale = super::controller::correction::mode_scale(robot);
+    let gains = IntegralGains {
+        ki_per_s: super::controller::correction::KI_PER_S * scale,
+        filter_tau_s: super::controller::correction::FILTER_TAU_S / scale,
+    };
+    match cfg.learning.resolve(shaping, cfg.shape.period_s(), gains) {
+        Ok(Some(design)) => {
+            log::info!(
+                "planner: learning the {:.2} s path's harmonics up to {:.2} Hz (worst contraction {:.2} a pass)",
+                design.period_s,
+                design.harmonics() as f64 / design.period_s,
+                design.contraction
+            );
+            Ok(Some(Learner::new(design)))
+        }
+        Ok(None) => Ok(None),
+        Err(e) if matches!(cfg.learning, LearningChoice::Designed(_)) => {
+            Err(IpcError::Config(e.to_string()))
+        }
+        Err(e) => {
+            log::warn!("planner: learning off: {e}");
+            Ok(None)
+        }
+    }
+}
+
+/// One tracker frame to the learner: the error of the tip against the
+/// path where the planner was when the frame was taken, along the path's
+/// tangent axes. Frames of holds and shaped moves are not the path's.
+fn learn_from(learner: &mut Learner, motion: &Motion, state: &PlantState, start_ns: u64) {
+    let t = (state.tip_stamp_ns as i128 - start_ns as i128) as f64 * 1e-9;
+    let then = motion.at(t);
+    if then.holding || then.moving {
+        return;
+    }
+    let p = &then.point.pose;
+    let error = [0, 1, 2].map(|k| p[k] - state.tip_pose[k] as f64);
+    learner.measure(then.t_path, along_axes(&then.point, error));
+}
+
+/// A pass's outcome on the console: the stop is a fault event.
+fn say(outcome: &PassOutcome) {
+    match *outcome {
+        PassOutcome::Learned { pass, rms_m } => {
+            log::debug!("planner: pass {pass} learned, error {:.3} mm RMS", rms_m * 1e3)
+        }
+        PassOutcome::Held { pass, rms_m } => {
+            log::debug!("planner: pass {pass}, offset held, error {:.3} mm RMS", rms_m * 1e3)
+        }
+        PassOutcome::TooFewFrames { pass } => {
+            log::warn!("planner: pass {pass}: too few tracker frames to learn from")
+        }
+        PassOutcome::Stopped {
+            pass,
+            best_rms_m,
+            rms_m,
+        } => log::warn!(
+            "planner: learning stopped: the error grew to {:.3} mm RMS in pass {pass} (best {:.3} mm); the best pass's offset is held",
+            rms_m * 1e3,
+            best_rms_m * 1e3
+        ),
+    }
 }

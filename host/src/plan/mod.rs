@@ -9,6 +9,8 @@
 //!   its tangent on the exact IK ([`Lifter`], [`FamilyTangent`]);
 //! - [`shaping`]: steps that excite no mode (minimum-jerk move and ZVD
 //!   shaper on the rod's first mode, [`StepShaping`]);
+//! - [`learning`]: learning for repeated paths (iterative learning control
+//!   on the path's harmonics, its design and convergence check, [`Learner`]);
 //! - [`motion`]: what the planner asks for at each instant: the settle
 //!   hold or the approach from rest, the trajectory on its eased clock, the
 //!   dynamic offset ([`Motion`]);
@@ -27,6 +29,7 @@
 pub mod bend;
 mod build;
 pub mod family;
+pub mod learning;
 pub mod lift;
 pub mod motion;
 pub mod path;
@@ -39,8 +42,10 @@ pub mod trajectory;
 
 pub use bend::bend_tensions;
 pub use family::Family;
+pub use learning::IntegralGains;
+pub use learning::{Learner, LearningChoice, LearningDesign, LoopModel};
 pub use lift::{FamilyTangent, Lifted, Lifter};
-pub use motion::{Desired, Motion};
+pub use motion::{along_axes, Desired, Motion};
 pub use runs::{default_loop_runs, LoopRun};
 pub use shape::{PathShape, PoseRow};
 pub use shaping::{ModalInverse, ShapingChoice, StepShaping};

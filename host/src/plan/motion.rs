@@ -121,22 +121,29 @@ impl Motion {
         let velocity: [f64; 7] = std::array::from_fn(|k| (c[k] - a[k]) / (2.0 * h));
         let acceleration: [f64; 7] = std::array::from_fn(|k| (c[k] - 2.0 * b[k] + a[k]) / (h * h));
         let full = inverse.offset(&velocity, &acceleration);
-        let position = [full[0], full[1], full[2]];
-        let along = match now.point.tangent {
-            Some(tangent) => {
-                let k = tangent.family.dim();
-                let axes = tangent.family.axes_padded();
-                std::array::from_fn(|j| {
-                    if j < k {
-                        (0..3).map(|i| axes[j][i] * position[i]).sum()
-                    } else {
-                        0.0
-                    }
-                })
-            }
-            None => position,
-        };
+        let along = along_axes(&now.point, [full[0], full[1], full[2]]);
         Some(along.map(|v| v.clamp(-MAX_DYNAMIC_OFFSET, MAX_DYNAMIC_OFFSET)))
+    }
+}
+
+/// A position change (m) as coordinates along `point`'s tangent axes (the
+/// position's x, y, z without a tangent): how the planner sends offsets
+/// and how the controller turns them back into a pose
+/// (`ipc::controller::with_dynamic_offset`).
+pub fn along_axes(point: &PosePoint, position: [f64; 3]) -> [f64; 3] {
+    match point.tangent {
+        Some(tangent) => {
+            let k = tangent.family.dim();
+            let axes = tangent.family.axes_padded();
+            std::array::from_fn(|j| {
+                if j < k {
+                    (0..3).map(|i| axes[j][i] * position[i]).sum()
+                } else {
+                    0.0
+                }
+            })
+        }
+        None => position,
     }
 }
 

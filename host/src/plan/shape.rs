@@ -101,6 +101,20 @@ impl PathShape {
         )
     }
 
+    /// How long the path takes to come back to where it was, s: what
+    /// learning for repeated paths learns over (`docs/design.md` §6.4).
+    /// None for paths that do not repeat as drawn (a hold, steps, a table).
+    pub fn period_s(&self) -> Option<f64> {
+        match *self {
+            PathShape::Circle { freq_hz, .. }
+            | PathShape::FigureEight { freq_hz, .. }
+            | PathShape::Sweep { freq_hz, .. } => Some(1.0 / freq_hz),
+            PathShape::Helix { freq_hz, turns, .. } => Some(2.0 * turns / freq_hz),
+            _ => None,
+        }
+        .filter(|p| p.is_finite() && *p > 0.0)
+    }
+
     /// The shape's name as in its `kind` tag.
     pub fn name(&self) -> &'static str {
         match self {

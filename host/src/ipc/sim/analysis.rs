@@ -243,6 +243,14 @@ impl Logs {
         (seen, bad)
     }
 
+    /// When the planner's log first says learning stopped (monotonic ns).
+    pub fn learning_stopped_ns(&self) -> Option<f64> {
+        self.setpoints
+            .iter()
+            .find(|s| s.flags & crate::ipc::planner::LOG_LEARNING_STOPPED != 0)
+            .map(|s| s.t_ns)
+    }
+
     /// Injected planner messages: (first stamp, messages) of each burst of
     /// consecutive injected setpoints.
     pub fn injection_bursts(&self) -> Vec<(f64, usize)> {
@@ -309,6 +317,16 @@ pub fn rms_between(samples: &[Sample], from: f64, to: f64) -> Option<f64> {
         .map(Sample::error_mm)
         .collect();
     rms(&e)
+}
+
+/// The tracking error's RMS over each whole `period` (s) from `start` to
+/// `end`, mm: a repeated path's error pass after pass.
+pub fn pass_rms(samples: &[Sample], start: f64, end: f64, period: f64) -> Vec<f64> {
+    (0..)
+        .map(|k| start + k as f64 * period)
+        .take_while(|a| a + period <= end + 1e-9)
+        .filter_map(|a| rms_between(samples, a, a + period))
+        .collect()
 }
 
 fn rms(e: &[f64]) -> Option<f64> {
@@ -504,6 +522,26 @@ mod tests {
             hold,
             moving: false,
         }
+    }
+
+    /// One RMS per whole period from the start; a last partial period and
+    /// holds are left out.
+    #[test]
+    fn pass_rms_is_one_rms_per_whole_period() {
+        // 1 mm off over [1, 3), 2 mm over [3, 5), 5 mm after; a hold at 1.5.
+        let s: Vec<Sample> = (0..70)
+            .map(|i| {
+                let t = 1.0 + i as f64 * 0.1;
+                let off = if t < 3.0 { 1e-3 } else if t < 5.0 { 2e-3 } else { 5e-3 };
+                sample(t, 0.0, off, (t - 1.5).abs() < 0.01)
+            })
+            .collect();
+        let p = pass_rms(&s, 1.0, 7.9, 2.0);
+        assert_eq!(p.len(), 3, "{p:?}");
+        for (got, want) in p.iter().zip([1.0, 2.0, 5.0]) {
+            assert!((got - want).abs() < 1e-9, "{p:?}");
+        }
+        assert!(pass_rms(&s, 1.0, 2.5, 2.0).is_empty());
     }
 
     #[test]

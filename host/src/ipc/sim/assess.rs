@@ -7,7 +7,7 @@ use std::path::Path;
 use tendril_shared::messages::{command_status, plant_status};
 
 use super::analysis::{
-    self, join, path_error_rms, rms_between, steady_states, tracking, Logs, Sample,
+    self, join, pass_rms, path_error_rms, rms_between, steady_states, tracking, Logs, Sample,
 };
 use super::faults::Action;
 use super::oscillation;
@@ -155,6 +155,12 @@ pub fn build_report(
             )
         })
         .collect();
+    let learning_stopped_at_s = logs.learning_stopped_ns().map(|t| (t - t0 as f64) * 1e-9);
+    if let Some(t) = learning_stopped_at_s {
+        problems.push(format!(
+            "learning stopped at {t:.2} s: the error grew pass after pass (the best pass's offset was held)"
+        ));
+    }
     if track.samples == 0 {
         problems.push("no tracking samples: the tracking statistics measured nothing".into());
     }
@@ -285,6 +291,19 @@ pub fn build_report(
                 cfg.planner.step_shaping,
                 crate::plan::ShapingChoice::Designed(_)
             ),
+        learning: match cfg.planner.learning {
+            crate::plan::LearningChoice::Designed(d) => Some(d),
+            _ => None,
+        },
+        learning_stopped_at_s,
+        pass_rms_mm: match (cfg.planner.shape.period_s(), logs.setpoints.first()) {
+            // From the end of the first planner's settle hold.
+            (Some(period), Some(first)) => {
+                let start = (first.t_ns - t0 as f64) * 1e-9 + cfg.planner.settle_s;
+                pass_rms(&samples, start, start + cfg.duration_s, period)
+            }
+            _ => Vec::new(),
+        },
         tendons: logs.tendons,
         verdict: Verdict {
             clean: problems.is_empty(),

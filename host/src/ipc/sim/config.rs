@@ -158,6 +158,7 @@ impl SimConfig {
                 step_shaping: crate::plan::ShapingChoice::Auto,
                 start_from_rest: true,
                 dynamic_offset: true,
+                learning: crate::plan::LearningChoice::Off,
                 rate_hz: 1000.0,
                 settle_s: 2.0,
                 duration_s: None,

@@ -170,6 +170,7 @@ pub fn run(cfg: &SimConfig) -> Result<SimReport, SimError> {
         Some(s) => crate::plan::ShapingChoice::Designed(s),
         None => crate::plan::ShapingChoice::Off,
     };
+    resolved.planner.learning = learning(cfg, &robot, shaping)?;
     let cfg = &resolved;
     budget::check(
         cfg,
@@ -187,6 +188,43 @@ pub fn run(cfg: &SimConfig) -> Result<SimReport, SimError> {
         Err(e) => {
             dir.discard();
             Err(e)
+        }
+    }
+}
+
+/// The learning the planner is to use, designed here with the
+/// controller's own gains (scaled to the mode as the controller scales
+/// them) so the report can say what was learned with. A learning the
+/// convergence check refuses is off, with a warning; the run goes on.
+fn learning(
+    cfg: &SimConfig,
+    robot: &crate::robot::Robot,
+    shaping: Option<crate::plan::StepShaping>,
+) -> Result<crate::plan::LearningChoice, SimError> {
+    use crate::plan::LearningChoice;
+    let c = &cfg.controller;
+    let scale = if c.scale_gains_to_mode {
+        crate::ipc::controller::correction::mode_scale(robot)
+    } else {
+        1.0
+    };
+    let gains = crate::plan::IntegralGains {
+        ki_per_s: c.ki_per_s * scale,
+        filter_tau_s: c.correction_filter_tau_s / scale,
+    };
+    match cfg
+        .planner
+        .learning
+        .resolve(shaping, cfg.planner.shape.period_s(), gains)
+    {
+        Ok(Some(design)) => Ok(LearningChoice::Designed(design)),
+        Ok(None) => Ok(LearningChoice::Off),
+        Err(e) if matches!(cfg.planner.learning, LearningChoice::Designed(_)) => {
+            Err(SimError::Config(e.to_string()))
+        }
+        Err(e) => {
+            log::warn!("learning off: {e}");
+            Ok(LearningChoice::Off)
         }
     }
 }

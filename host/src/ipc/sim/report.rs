@@ -36,6 +36,18 @@ pub struct SimReport {
     /// with a shaping).
     #[serde(default)]
     pub dynamic_offset: bool,
+    /// Learning for repeated paths: the design the planner learned with
+    /// (`null`: off).
+    #[serde(default)]
+    pub learning: Option<crate::plan::LearningDesign>,
+    /// When learning stopped on a growing error (the fault event), s.
+    #[serde(default)]
+    pub learning_stopped_at_s: Option<f64>,
+    /// The tracking error's RMS over each whole period of a repeated path
+    /// after the settle hold, mm (empty for a path that does not repeat):
+    /// what learning lowers pass after pass.
+    #[serde(default)]
+    pub pass_rms_mm: Vec<f64>,
     /// Tendons of the robot (from the plant log).
     pub tendons: usize,
     /// Whether every process finished cleanly (or died by an injected fault)
@@ -345,6 +357,29 @@ impl SimReport {
             row(
                 "dynamic offset (the mode's inverse) sent",
                 if self.dynamic_offset { "yes" } else { "no" }.into(),
+            );
+        }
+        if let Some(l) = &self.learning {
+            row(
+                "learning for repeated paths: harmonics to (Hz); worst contraction a pass",
+                format!(
+                    "{:.2}; {:.2}",
+                    l.harmonics() as f64 / l.period_s,
+                    l.contraction
+                ),
+            );
+            if let Some(t) = self.learning_stopped_at_s {
+                row(
+                    "learning stopped (the error grew) at (s)",
+                    format!("{t:.2}"),
+                );
+            }
+        }
+        if !self.pass_rms_mm.is_empty() {
+            let passes: Vec<String> = self.pass_rms_mm.iter().map(|v| format!("{v:.3}")).collect();
+            row(
+                "RMS tracking error per period of the path (mm)",
+                passes.join(", "),
             );
         }
         row("RMS tracking error (mm)", mm(self.rms_tracking_error_mm));
