@@ -164,6 +164,7 @@ mod tests {
             reality: reality.into(),
             run: run.into(),
             correction,
+            planner: String::new(),
             rms_mm: Some(rms),
             max_mm: Some(2.0 * rms),
             steady_mm: Some(0.5 * rms),
@@ -190,5 +191,20 @@ mod tests {
         draw(&rows, "t", &out).unwrap();
         assert_eq!(&std::fs::read(&out).unwrap()[1..4], b"PNG");
         assert!(draw(&[], "t", &dir.path().join("e.png")).is_err());
+    }
+
+    /// The table says, per row, which of the planner's answers to the rod's
+    /// mass were on.
+    #[test]
+    fn the_table_names_what_the_planner_did() {
+        let mut r = row("everything", "circle", true, 0.4);
+        r.planner = "shaped for 3.62 Hz; offset; learning to 2.6 Hz".into();
+        let md = super::super::markdown(&[r], std::path::Path::new("robots/seed-4t.toml"));
+        let line = md.lines().find(|l| l.starts_with("| everything")).unwrap();
+        assert!(
+            line.contains("| shaped for 3.62 Hz; offset; learning to 2.6 Hz |"),
+            "{line}"
+        );
+        assert!(md.contains("| correction | planner | RMS |"), "{md}");
     }
 }

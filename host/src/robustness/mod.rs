@@ -48,6 +48,10 @@ pub struct Row {
     pub run: String,
     /// With the integral correction.
     pub correction: bool,
+    /// Which of the planner's answers to the rod's mass were on (the step
+    /// shaping, the dynamic offset, the learning).
+    #[serde(default)]
+    pub planner: String,
     /// RMS tracking error (true tip), mm.
     pub rms_mm: Option<f64>,
     /// Largest tracking error, mm.
@@ -130,6 +134,7 @@ pub fn run(cfg: &RobustnessConfig) -> Result<Vec<Row>, SimError> {
                     reality: reality.name.clone(),
                     run: run.name.to_string(),
                     correction,
+                    planner: String::new(),
                     rms_mm: None,
                     max_mm: None,
                     steady_mm: None,
@@ -142,6 +147,7 @@ pub fn run(cfg: &RobustnessConfig) -> Result<Vec<Row>, SimError> {
                 };
                 match crate::ipc::sim::run(&sim) {
                     Ok(r) => {
+                        row.planner = r.dynamics_summary();
                         row.rms_mm = r.rms_tracking_error_mm;
                         row.max_mm = r.max_tracking_error_mm;
                         row.steady_mm = r.max_steady_state_error_mm;
@@ -170,9 +176,11 @@ pub fn markdown(rows: &[Row], robot: &Path) -> String {
         "# Robustness: {} against every reality\n\n\
          One default set of gains for every row. Errors are the plant's true tip against the \
          planner's path, mm; steady state is the mean true error over the last 0.5 s of each \
-         step target (the worst target); jitter is the reality's tracker jitter per axis.\n\n\
-         | reality | run | correction | RMS | max | steady state | jitter | holds | faults | verdict |\n\
-         |---|---|---|---|---|---|---|---|---|---|",
+         step target (the worst target); jitter is the reality's tracker jitter per axis; \
+         planner says which of the step shaping, the dynamic offset and the learning for \
+         repeated paths were on (docs/design.md §6.4).\n\n\
+         | reality | run | correction | planner | RMS | max | steady state | jitter | holds | faults | verdict |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|",
         robot.display()
     );
     let mm = crate::units::length_mm_or_dash;
@@ -184,11 +192,12 @@ pub fn markdown(rows: &[Row], robot: &Path) -> String {
         };
         let _ = writeln!(
             s,
-            "| {} | [{}]({}/report.md) | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | [{}]({}/report.md) | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             r.reality,
             r.run,
             r.dir,
             if r.correction { "on" } else { "off" },
+            r.planner,
             mm(r.rms_mm),
             mm(r.max_mm),
             mm(r.steady_mm),

@@ -532,7 +532,13 @@ mod tests {
         let s: Vec<Sample> = (0..70)
             .map(|i| {
                 let t = 1.0 + i as f64 * 0.1;
-                let off = if t < 3.0 { 1e-3 } else if t < 5.0 { 2e-3 } else { 5e-3 };
+                let off = if t < 3.0 {
+                    1e-3
+                } else if t < 5.0 {
+                    2e-3
+                } else {
+                    5e-3
+                };
                 sample(t, 0.0, off, (t - 1.5).abs() < 0.01)
             })
             .collect();

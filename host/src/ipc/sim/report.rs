@@ -313,6 +313,26 @@ fn us(v: &Option<Summary>, pick: fn(&Summary) -> f64) -> String {
 }
 
 impl SimReport {
+    /// Which of the planner's answers to the rod's mass were on, in words
+    /// (`docs/design.md` §6.4): the step shaping, the dynamic offset, the
+    /// learning.
+    pub fn dynamics_summary(&self) -> String {
+        let shaping = match &self.step_shaping {
+            Some(s) => format!("shaped for {:.2} Hz", s.mode_hz),
+            None => "not shaped".into(),
+        };
+        let offset = if self.dynamic_offset {
+            "offset"
+        } else {
+            "no offset"
+        };
+        let learning = match &self.learning {
+            Some(l) => format!("learning to {:.1} Hz", l.harmonics() as f64 / l.period_s),
+            None => "no learning".into(),
+        };
+        format!("{shaping}; {offset}; {learning}")
+    }
+
     /// `report.md`: the headline numbers, each with what it covers.
     pub fn markdown(&self) -> String {
         let mut s = String::new();
