@@ -14,8 +14,8 @@ use std::thread::JoinHandle;
 
 use serde::{Deserialize, Serialize};
 
-use super::clock::percentile;
 use super::IpcError;
+use crate::numerics::percentile;
 
 /// Percentiles of a set of durations, in microseconds.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -46,10 +46,10 @@ impl Summary {
         let mean = ns.iter().map(|&v| v as f64).sum::<f64>() / ns.len() as f64 / 1e3;
         Summary {
             count: ns.len(),
-            p50: us(percentile(ns, 50.0)),
-            p90: us(percentile(ns, 90.0)),
-            p99: us(percentile(ns, 99.0)),
-            p999: us(percentile(ns, 99.9)),
+            p50: us(percentile::of_u64(ns, 50.0)),
+            p90: us(percentile::of_u64(ns, 90.0)),
+            p99: us(percentile::of_u64(ns, 99.0)),
+            p999: us(percentile::of_u64(ns, 99.9)),
             max: us(ns.iter().max().copied()),
             mean,
         }
@@ -122,12 +122,14 @@ impl Histogram {
     }
 
     /// Nearest-rank percentile (0–100), ns, to bucket resolution (never
-    /// above the exact maximum); `None` if empty.
+    /// above the exact maximum); `None` if empty. The rank is
+    /// [`crate::numerics::percentile::nearest_rank`], as for a sorted
+    /// slice: only the bucket's width separates the two.
     pub fn percentile(&self, p: f64) -> Option<u64> {
         if self.count == 0 {
             return None;
         }
-        let rank = ((p / 100.0) * self.count as f64).ceil().max(1.0) as u64;
+        let rank = percentile::nearest_rank(p, self.count);
         let mut seen = 0;
         for (i, &n) in self.buckets.iter().enumerate() {
             seen += n;
