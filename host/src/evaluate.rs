@@ -9,6 +9,7 @@ use nalgebra::{DMatrix, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::numerics::percentile;
 use crate::statics::Statics;
 
 pub mod job;
@@ -37,12 +38,10 @@ impl ErrorStats {
         let n = v.len() as f64;
         let mean = v.iter().sum::<f64>() / n;
         let rms = (v.iter().map(|x| x * x).sum::<f64>() / n).sqrt();
-        // Nearest-rank percentile: the smallest value with at least 95 % of the data at or below it.
-        let rank = ((0.95 * n).ceil() as usize).clamp(1, v.len());
         ErrorStats {
             mean,
             rms,
-            p95: v[rank - 1],
+            p95: percentile::of_sorted(&v, 95.0).unwrap_or(0.0),
             max: v[v.len() - 1],
         }
     }

@@ -408,9 +408,11 @@ where
     tmp.persist(&target)
 }
 
-/// A run's exclusive hold on its output directory: an `flock` on
-/// [`DirLock::FILE`] in it, released when dropped and by the kernel when the
-/// process dies (even by SIGKILL), so no stale lock outlives a run.
+/// A run's exclusive hold on its output directory: the standard library's
+/// advisory lock ([`File::try_lock`]: `flock` on Unix, `LockFileEx` on
+/// Windows) on [`DirLock::FILE`] in it, released when dropped and by the
+/// kernel when the process dies (even by SIGKILL), so no stale lock
+/// outlives a run.
 #[derive(Debug)]
 pub struct DirLock {
     _file: File,
@@ -467,43 +469,43 @@ impl DirLock {
             .truncate(false)
             .open(&path)
             .map_err(io_err(&path))?;
-        if let Err(e) = flock_exclusive(&file) {
-            if e.kind() != io::ErrorKind::WouldBlock {
+        match file.try_lock() {
+            Ok(()) => {}
+            Err(std::fs::TryLockError::WouldBlock) => {
+                // Windows locks the bytes too, so the holder's pid may be
+                // unreadable there: the message then says `unknown`.
+                let mut pid = String::new();
+                let _ = file.read_to_string(&mut pid);
+                let pid = match pid.trim() {
+                    "" => "unknown".to_string(),
+                    p => p.to_string(),
+                };
+                return Err(LockError::InUse {
+                    dir: dir.to_path_buf(),
+                    pid,
+                });
+            }
+            // A target whose std has no file lock: run unlocked, with a
+            // warning, rather than refuse every run there; the lock guards
+            // against a user's slip (two runs into one directory), not a
+            // hazard to the robot.
+            Err(std::fs::TryLockError::Error(e)) if e.kind() == io::ErrorKind::Unsupported => {
+                log::warn!(
+                    "{}: not locked (no file lock on this platform: {e}); \
+                     keep other runs out of {} yourself",
+                    path.display(),
+                    dir.display()
+                );
+            }
+            Err(std::fs::TryLockError::Error(e)) => {
                 return Err(LockError::Io { path, source: e });
             }
-            let mut pid = String::new();
-            let _ = file.read_to_string(&mut pid);
-            let pid = match pid.trim() {
-                "" => "unknown".to_string(),
-                p => p.to_string(),
-            };
-            return Err(LockError::InUse {
-                dir: dir.to_path_buf(),
-                pid,
-            });
         }
         // Only the holder writes: the pid is for the message above.
         file.set_len(0).map_err(io_err(&path))?;
         write!(file, "{}", std::process::id()).map_err(io_err(&path))?;
         Ok(DirLock { _file: file })
     }
-}
-
-#[cfg(unix)]
-fn flock_exclusive(file: &File) -> io::Result<()> {
-    use std::os::unix::io::AsRawFd;
-    // SAFETY: flock on a descriptor this File owns; no memory is passed.
-    let rc = unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) };
-    if rc == 0 {
-        Ok(())
-    } else {
-        Err(io::Error::last_os_error())
-    }
-}
-
-#[cfg(not(unix))]
-fn flock_exclusive(_file: &File) -> io::Result<()> {
-    Ok(())
 }
 
 /// Two of a command's files resolve to the same path.

@@ -335,16 +335,6 @@ impl Ticker {
     }
 }
 
-/// Percentile (0–100) of unsorted samples by nearest rank; `None` if empty.
-pub fn percentile(samples: &mut [u64], p: f64) -> Option<u64> {
-    if samples.is_empty() {
-        return None;
-    }
-    samples.sort_unstable();
-    let rank = ((p / 100.0) * samples.len() as f64).ceil() as usize;
-    Some(samples[rank.clamp(1, samples.len()) - 1])
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -425,14 +415,5 @@ mod tests {
             sleep_until(deadline, spin);
             assert!(now_ns() >= deadline);
         }
-    }
-
-    #[test]
-    fn percentile_by_nearest_rank() {
-        let mut v: Vec<u64> = (1..=100).rev().collect();
-        assert_eq!(percentile(&mut v, 50.0), Some(50));
-        assert_eq!(percentile(&mut v, 99.0), Some(99));
-        assert_eq!(percentile(&mut v, 100.0), Some(100));
-        assert_eq!(percentile(&mut [], 50.0), None);
     }
 }

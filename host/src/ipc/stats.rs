@@ -14,8 +14,8 @@ use std::thread::JoinHandle;
 
 use serde::{Deserialize, Serialize};
 
-use super::clock::percentile;
 use super::IpcError;
+use crate::numerics::percentile;
 
 /// Percentiles of a set of durations, in microseconds.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -46,10 +46,10 @@ impl Summary {
         let mean = ns.iter().map(|&v| v as f64).sum::<f64>() / ns.len() as f64 / 1e3;
         Summary {
             count: ns.len(),
-            p50: us(percentile(ns, 50.0)),
-            p90: us(percentile(ns, 90.0)),
-            p99: us(percentile(ns, 99.0)),
-            p999: us(percentile(ns, 99.9)),
+            p50: us(percentile::of_u64(ns, 50.0)),
+            p90: us(percentile::of_u64(ns, 90.0)),
+            p99: us(percentile::of_u64(ns, 99.0)),
+            p999: us(percentile::of_u64(ns, 99.9)),
             max: us(ns.iter().max().copied()),
             mean,
         }
@@ -122,12 +122,14 @@ impl Histogram {
     }
 
     /// Nearest-rank percentile (0–100), ns, to bucket resolution (never
-    /// above the exact maximum); `None` if empty.
+    /// above the exact maximum); `None` if empty. The rank is
+    /// [`crate::numerics::percentile::nearest_rank`], as for a sorted
+    /// slice: only the bucket's width separates the two.
     pub fn percentile(&self, p: f64) -> Option<u64> {
         if self.count == 0 {
             return None;
         }
-        let rank = ((p / 100.0) * self.count as f64).ceil().max(1.0) as u64;
+        let rank = percentile::nearest_rank(p, self.count);
         let mut seen = 0;
         for (i, &n) in self.buckets.iter().enumerate() {
             seen += n;
@@ -344,26 +346,62 @@ impl CsvLog {
 }
 
 /// Read a numeric CSV log written by [`CsvLog`]: header names and rows.
-/// A truncated last line (process killed mid-write) is skipped.
+/// Every complete row must hold one number per column, or the log is
+/// refused naming its line; only a truncated last line is dropped.
 pub fn read_log(path: &Path) -> Result<(Vec<String>, Vec<Vec<f64>>), IpcError> {
     let text = std::fs::read_to_string(path).map_err(|source| IpcError::Io {
         path: path.to_path_buf(),
         source,
     })?;
-    let mut lines = text.lines();
-    let header: Vec<String> = lines
-        .next()
-        .unwrap_or("")
-        .split(',')
+    // The writer ends every line with '\n' and a run's processes can be
+    // killed mid-write (the fault scenarios do it on purpose), so bytes
+    // after the last '\n' are a row cut short: drop them, whether or not
+    // they happen to parse ("1.25" cut to "1.2" would). That is the only
+    // damage a kill can do — a log has one writer, appending — so any
+    // other bad row is a real fault and an error. A log with no '\n' at
+    // all is a (perhaps cut) header and no rows: its columns are checked
+    // by [`column`].
+    let complete = text.rfind('\n').map_or(text.as_str(), |end| &text[..=end]);
+    let bad =
+        |line: u64, why: String| IpcError::Other(format!("{}: line {line}: {why}", path.display()));
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(true)
+        // Rows of the wrong width get the message below, not csv's.
+        .flexible(true)
+        .from_reader(complete.as_bytes());
+    let header: Vec<String> = reader
+        .headers()
+        .map_err(|e| bad(1, e.to_string()))?
+        .iter()
         .map(str::to_string)
         .collect();
     let mut rows = Vec::new();
-    for line in lines {
-        let row: Result<Vec<f64>, _> = line.split(',').map(str::parse::<f64>).collect();
-        match row {
-            Ok(r) if r.len() == header.len() => rows.push(r),
-            _ => continue,
+    for record in reader.records() {
+        let record = record.map_err(|e| {
+            let line = e.position().map_or(0, csv::Position::line);
+            bad(line, e.to_string())
+        })?;
+        let line = record.position().map_or(0, csv::Position::line);
+        if record.len() != header.len() {
+            return Err(bad(
+                line,
+                format!(
+                    "{}, the header has {}",
+                    crate::robot::count(record.len(), "field"),
+                    header.len()
+                ),
+            ));
         }
+        let row = record
+            .iter()
+            .zip(&header)
+            .map(|(field, name)| {
+                field
+                    .parse::<f64>()
+                    .map_err(|_| bad(line, format!("{name} = {field:?} is not a number")))
+            })
+            .collect::<Result<Vec<f64>, _>>()?;
+        rows.push(row);
     }
     Ok((header, rows))
 }
@@ -429,7 +467,7 @@ mod tests {
     }
 
     #[test]
-    fn csv_log_round_trips_and_skips_truncated_rows() {
+    fn csv_log_round_trips_and_skips_a_truncated_last_row() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("log.csv");
         let mut log = CsvLog::create(Some(&path), "a,b").unwrap();
@@ -443,6 +481,25 @@ mod tests {
         let (header, rows) = read_log(&path).unwrap();
         assert_eq!(header, vec!["a", "b"]);
         assert_eq!(rows, vec![vec![1.0, 2.5], vec![3.0, -4.0]]);
+        // A cut last row that still parses ("5,6.25" cut to "5,6.2") is
+        // dropped too: only a '\n' says a row is whole.
+        std::fs::write(&path, "a,b\n1,2.5\n5,6.2").unwrap();
+        assert_eq!(read_log(&path).unwrap().1, vec![vec![1.0, 2.5]]);
+    }
+
+    #[test]
+    fn a_malformed_row_before_the_last_is_an_error_naming_its_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("log.csv");
+        for (text, why) in [
+            ("a,b\n1,2\n3,x\n5,6\n", "b = \"x\" is not a number"),
+            ("a,b\n1,2\n3\n5,6\n", "1 field, the header has 2"),
+            ("a,b\n1,2\n3,4,5\n5,6", "3 fields, the header has 2"),
+        ] {
+            std::fs::write(&path, text).unwrap();
+            let err = read_log(&path).unwrap_err().to_string();
+            assert_eq!(err, format!("{}: line 3: {why}", path.display()));
+        }
     }
 
     #[cfg(target_os = "linux")]

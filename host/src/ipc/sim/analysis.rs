@@ -16,6 +16,7 @@ use super::supervisor::Role;
 use super::SimError;
 use crate::ipc::planner::LOG_INJECTED;
 use crate::ipc::stats::{column, read_log};
+use crate::numerics::percentile;
 
 /// A setpoint the planner logged.
 #[derive(Clone, Copy, Debug)]
@@ -333,14 +334,6 @@ fn rms(e: &[f64]) -> Option<f64> {
     (!e.is_empty()).then(|| (e.iter().map(|x| x * x).sum::<f64>() / e.len() as f64).sqrt())
 }
 
-/// Nearest-rank percentile of a non-empty slice.
-fn percentile(v: &[f64], p: f64) -> Option<f64> {
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    let rank = ((p / 100.0) * s.len() as f64).ceil() as usize;
-    s.get(rank.clamp(1, s.len().max(1)) - 1).copied()
-}
-
 /// RMS, max and p95 of the error outside holds.
 pub fn tracking(samples: &[Sample]) -> Tracking {
     let tracked: Vec<&Sample> = samples.iter().filter(|s| !s.hold).collect();
@@ -348,7 +341,8 @@ pub fn tracking(samples: &[Sample]) -> Tracking {
     Tracking {
         rms: rms(&e),
         max: e.iter().copied().reduce(f64::max),
-        p95: percentile(&e, 95.0),
+        // On a copy: sorting `e` itself would reorder the sums above.
+        p95: percentile::of_f64(&mut e.clone(), 95.0),
         samples: e.len(),
         window: tracked.first().zip(tracked.last()).map(|(a, b)| [a.t, b.t]),
     }
