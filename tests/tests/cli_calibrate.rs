@@ -314,3 +314,99 @@ fn a_plan_too_large_to_measure_and_a_plan_beside_data_are_refused_at_once() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("--out -"));
     assert!(!plan.exists());
 }
+
+/// `calibrate --step` (issue 45, item 3) on traces of tendril's own dynamic
+/// plant: the default robot with the dynamic rod at ζ₁ = 5 %
+/// (`dynamic-light-damping`), one tendon stepped to a tenth of its range
+/// through the motors, seen by each built-in reality's tracker (its rate,
+/// latency and jitter, frames lost). The independent fact is the mode the
+/// dynamic model's identification gives at the step's tensions
+/// (`dynamics::modes`, checked against Euler–Bernoulli and the plant's own
+/// ringing): the fitted 95 % intervals of f₁ and ζ₁ must cover it, ζ₁ to a
+/// few per cent, and the retardation time must be t_r = 2ζ/ω.
+#[test]
+fn a_step_trace_through_each_trackers_gives_the_rods_first_mode_with_intervals() {
+    use tendril::dynamics::modes::{identify, ModeSearch};
+    use tendril::plant::reality::Reality;
+    use tendril::plant::{PlantModel, PlantParams};
+    let robot = tendril::robot::repo_robot("seed-4t.toml");
+    let rod = Reality::builtin("dynamic-light-damping").unwrap();
+    let i = *tendril::robot::groups::anchor_groups(&robot)[0]
+        .first()
+        .unwrap();
+    let mut command = vec![0.0; robot.n_tendons()];
+    command[i] = 0.1 * robot.max_tensions()[i];
+    let real = rod.real_robot(&robot).unwrap();
+    let truth = identify(&real, rod.damping(&real), &command, &ModeSearch::default()).unwrap()[0];
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["em-tracker", "optical-tracker", "everything"] {
+        let mut reality = rod.clone();
+        reality.tracker = Reality::builtin(name).unwrap().tracker;
+        assert!(reality.tracker.is_some(), "{name} has a tracker");
+        let mut plant = PlantModel::new(
+            &robot,
+            PlantParams {
+                reality: Some(reality),
+                ..PlantParams::default()
+            },
+        )
+        .unwrap();
+        // 4 s after the step: the frames as the tracker delivers them.
+        let mut csv = String::from("t_s,x_m,y_m,z_m\n");
+        let mut last_seq = 0;
+        for k in 1..=4000u64 {
+            plant.command(&command);
+            assert!(plant.step(1e-3));
+            plant.sense(k * 1_000_000);
+            if let Some(f) = plant.frame().filter(|f| f.seq != last_seq) {
+                last_seq = f.seq;
+                csv += &format!(
+                    "{},{},{},{}\n",
+                    f.stamp_ns as f64 * 1e-9,
+                    f.pose[0],
+                    f.pose[1],
+                    f.pose[2]
+                );
+            }
+        }
+        let trace = dir.path().join(format!("{name}.csv"));
+        std::fs::write(&trace, csv).unwrap();
+        let out = tendril(&["calibrate", "--step", trace.to_str().unwrap(), "--out", "-"]);
+        ok(&out);
+        let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let fit = &r["fit"];
+        let value = |key: &str| {
+            let e = &fit[key];
+            (
+                e["value"].as_f64().unwrap(),
+                [
+                    e["interval_95"][0].as_f64().unwrap(),
+                    e["interval_95"][1].as_f64().unwrap(),
+                ],
+            )
+        };
+        let (f, f_ci) = value("freq_hz");
+        let (zeta, zeta_ci) = value("damping_ratio");
+        let (tr, _) = value("retardation_s");
+        eprintln!(
+            "{name}: f1 {f:.4} Hz {f_ci:?}, ζ {zeta:.4} {zeta_ci:?} (model: {:.4} Hz, ζ {:.4})",
+            truth.freq_hz, truth.damping_ratio
+        );
+        assert!(
+            f_ci[0] <= truth.freq_hz && truth.freq_hz <= f_ci[1],
+            "{name}: f1 {f_ci:?} misses {}",
+            truth.freq_hz
+        );
+        assert!(
+            zeta_ci[0] <= truth.damping_ratio && truth.damping_ratio <= zeta_ci[1],
+            "{name}: ζ {zeta_ci:?} misses {}",
+            truth.damping_ratio
+        );
+        assert!(
+            zeta_ci[1] - zeta_ci[0] < 0.2 * truth.damping_ratio,
+            "{name}: ζ {zeta_ci:?}"
+        );
+        let wn = std::f64::consts::TAU * f;
+        assert!((tr - 2.0 * zeta / wn).abs() < 1e-9, "{name}: t_r {tr}");
+    }
+}

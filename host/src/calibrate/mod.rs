@@ -13,6 +13,7 @@ pub mod params;
 pub mod plan;
 pub mod report;
 pub mod rows;
+pub mod step;
 pub mod verdict;
 
 #[cfg(test)]

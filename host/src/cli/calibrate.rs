@@ -21,10 +21,21 @@ pub struct CalibrateArgs {
     #[arg(
         long,
         value_name = "CSV",
-        required_unless_present = "plan",
+        required_unless_present_any = ["plan", "step"],
         conflicts_with = "plan"
     )]
     pub data: Option<PathBuf>,
+    /// A tracker's trace of the tip after a tension step (CSV: `t_s` or
+    /// `t_ns`; `x_m,y_m,z_m`, or a plant log's `mx,my,mz`, or `px,py,pz`):
+    /// fit the rod's first bending mode, its damping and the dynamic rod's
+    /// retardation time with 95 % intervals, instead of the statics. The
+    /// fit goes to --out as JSON (`-`: stdout).
+    #[arg(long, value_name = "CSV", conflicts_with_all = ["data", "plan"])]
+    pub step: Option<PathBuf>,
+    /// With --step: seconds after the trace's first frame (the step) before
+    /// the fit starts: the motors' rise and the higher modes.
+    #[arg(long, default_value_t = 0.1)]
+    pub skip_s: f64,
     /// Parameters to fit: E, G, density, length, offsets, angles, tension_scale, base
     /// (base_t, base_r; offset2 etc. for one tendon).
     #[arg(long, value_name = "LIST", default_value = DEFAULT_FIT)]
@@ -59,6 +70,9 @@ const MM_PER_DEG: std::ops::RangeInclusive<f64> = 1e-3..=1e3;
 /// Run `tendril calibrate`.
 pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
     let (robot, _) = args.robot.load()?;
+    if let Some(trace) = &args.step {
+        return step(&robot, trace, &args);
+    }
     let fit =
         calibrate::parse_fit_list(&args.fit, robot.n_tendons()).map_err(anyhow::Error::msg)?;
     if let Some(n) = args.plan {
@@ -160,6 +174,70 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
         r.unidentifiable.len(),
         r.downweighted.len(),
         args.out.display()
+    );
+    Ok(())
+}
+
+/// `tendril calibrate --step TRACE`: the first mode from a measured step,
+/// beside the robot file's own (identified from its dynamic model at rest).
+fn step(
+    robot: &crate::robot::Robot,
+    trace: &std::path::Path,
+    args: &CalibrateArgs,
+) -> anyhow::Result<()> {
+    if !(args.skip_s.is_finite() && args.skip_s >= 0.0) {
+        anyhow::bail!(
+            "--skip-s must be a number of seconds ≥ 0, got {}",
+            crate::units::given(args.skip_s)
+        );
+    }
+    crate::fsutil::check_distinct(&[("--step", trace)], &[("--out", &args.out)])?;
+    let fit = calibrate::step::fit_step(&calibrate::step::read_trace(trace)?, args.skip_s)?;
+    let zeros = vec![0.0; robot.n_tendons()];
+    let file_mode = crate::dynamics::modes::identify(
+        robot,
+        crate::dynamics::Damping::of_robot(robot),
+        &zeros,
+        &crate::dynamics::modes::ModeSearch::default(),
+    )
+    .ok()
+    .and_then(|m| m.first().copied());
+    let json = serde_json::json!({
+        "trace": trace.display().to_string(),
+        "fit": fit,
+        "robot_file_mode": file_mode,
+    });
+    let text = serde_json::to_string_pretty(&json)? + "\n";
+    if args.out.as_os_str() == "-" {
+        print!("{text}");
+    } else {
+        crate::fsutil::write_atomic(&args.out, text.as_bytes())
+            .with_context(|| format!("{}", args.out.display()))?;
+    }
+    let e = |x: &calibrate::step::Estimate, scale: f64, digits: usize| {
+        format!(
+            "{:.*} [{:.*}, {:.*}]",
+            digits,
+            x.value * scale,
+            digits,
+            x.interval_95[0] * scale,
+            digits,
+            x.interval_95[1] * scale
+        )
+    };
+    let file = file_mode.map_or(String::new(), |m| {
+        format!(
+            "; the robot file's model: {:.3} Hz, ζ {:.3}",
+            m.freq_hz, m.damping_ratio
+        )
+    });
+    log::info!(
+        "first bending mode {} Hz, ζ {}, retardation time {} ms (95 % intervals; {} frames, residual {:.3} mm){file}",
+        e(&fit.freq_hz, 1.0, 3),
+        e(&fit.damping_ratio, 1.0, 4),
+        e(&fit.retardation_s, 1e3, 2),
+        fit.frames,
+        fit.residual_mm
     );
     Ok(())
 }
