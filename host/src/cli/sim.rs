@@ -341,4 +341,59 @@ mod tests {
         assert!(!given.controller.scale_gains_to_mode);
         assert!(given.label.contains("(ki 12/s)"), "{}", given.label);
     }
+
+    /// Every default `tendril sim` shows is the library's own: the command
+    /// line without flags gives `SimConfig::new`'s run (issue 44: no default
+    /// written twice). The only differences are the command line's stated
+    /// choices, listed here with why.
+    #[test]
+    fn a_sim_without_flags_is_the_configurations_defaults() {
+        let seed = Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/seed-4t.toml");
+        let cli = Cmd::try_parse_from(["sim", "--robot", seed.to_str().unwrap()])
+            .unwrap()
+            .sim
+            .config()
+            .unwrap();
+        let lib = SimConfig::new(
+            cli.exe.clone(),
+            seed.clone(),
+            cli.model.clone(),
+            cli.out.clone(),
+        );
+        let (mut a, b) = (
+            serde_json::to_value(&cli).unwrap(),
+            serde_json::to_value(&lib).unwrap(),
+        );
+        // The label says what the command line asked for.
+        a["label"] = b["label"].clone();
+        // A run from the command line writes its run log (`--no-mcap`: none);
+        // the library's runs (the main job's, robustness) ask for one.
+        assert_eq!(a["plant"]["runlog"]["mcap"], "run.mcap");
+        a["plant"]["runlog"]["mcap"] = b["plant"]["runlog"]["mcap"].clone();
+        let mut differ = Vec::new();
+        diff("", &a, &b, &mut differ);
+        assert!(
+            differ.is_empty(),
+            "the command line's defaults differ from SimConfig::new: {differ:#?}"
+        );
+    }
+
+    /// The paths where two JSON values differ, with both values.
+    fn diff(at: &str, a: &serde_json::Value, b: &serde_json::Value, out: &mut Vec<String>) {
+        match (a, b) {
+            (serde_json::Value::Object(x), serde_json::Value::Object(y)) => {
+                for k in x.keys().chain(y.keys().filter(|k| !x.contains_key(*k))) {
+                    let null = serde_json::Value::Null;
+                    diff(
+                        &format!("{at}.{k}"),
+                        x.get(k).unwrap_or(&null),
+                        y.get(k).unwrap_or(&null),
+                        out,
+                    );
+                }
+            }
+            _ if a != b => out.push(format!("{at}: command line {a}, library {b}")),
+            _ => {}
+        }
+    }
 }
