@@ -9,7 +9,7 @@
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use tendril_firmware::control::{control_step, ControlState, Setpoint, StepInput};
+use tendril_firmware::control::{control_step, ControlSetpoint, ControlState, StepInput};
 use tendril_firmware::vectors::{self, HAS_SETPOINT};
 use tendril_firmware::{infer, McuNet, DEFAULT_NET};
 use tendril_shared::MAX_HIDDEN;
@@ -54,7 +54,7 @@ fn bench(c: &mut Criterion) {
             seq += 1;
             let input = StepInput {
                 now_ns: 1_000_000,
-                setpoint: Some(Setpoint {
+                setpoint: Some(ControlSetpoint {
                     seq,
                     pose: poses[seq as usize % poses.len()],
                     tangent: None,

@@ -43,7 +43,7 @@ pub use crate::status::Status;
 /// (docs/design.md §5, §6: removes the net's steady-state error). `ki = 0`
 /// disables it.
 ///
-/// With a setpoint tangent ([`Setpoint::tangent`], k columns T_j along unit
+/// With a setpoint tangent ([`ControlSetpoint::tangent`], k columns T_j along unit
 /// axes a_j) one law for every robot: the error along each axis
 /// `e_j = a_j · (p_setpoint − p_measured)` is integrated,
 /// `c_j += ki · e_j · dt`, and the setpoint moves along the robot's
@@ -151,14 +151,14 @@ impl ControlConfig {
     }
 }
 
-/// Most columns of a [`Tangent`]: a tip reaches at most a volume.
+/// Most columns of a [`ControlTangent`]: a tip reaches at most a volume.
 pub const MAX_TANGENT_DIM: usize = 3;
 
 /// The robot's reachable poses near a setpoint, to first order: k columns
 /// `∂pose/∂u_j` (per m), u_j = a_j · p the tip's coordinate along unit axis
 /// a_j (base frame). Entries past `dim` are ignored.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Tangent {
+pub struct ControlTangent {
     /// k: how many columns and axes are valid (1..=[`MAX_TANGENT_DIM`]).
     pub dim: usize,
     /// `∂pose/∂u_j`.
@@ -167,11 +167,11 @@ pub struct Tangent {
     pub axes: [[f32; 3]; MAX_TANGENT_DIM],
 }
 
-impl Tangent {
+impl ControlTangent {
     /// The lateral family of a one-segment robot: columns `∂pose/∂px`,
     /// `∂pose/∂py` along the axes x and y.
-    pub const fn lateral(columns: [[f32; POSE_DIM]; 2]) -> Tangent {
-        Tangent {
+    pub const fn lateral(columns: [[f32; POSE_DIM]; 2]) -> ControlTangent {
+        ControlTangent {
             dim: 2,
             columns: [columns[0], columns[1], [0.0; POSE_DIM]],
             axes: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0; 3]],
@@ -194,15 +194,15 @@ impl Tangent {
 
 /// A desired tip pose.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Setpoint {
+pub struct ControlSetpoint {
     /// Sender's sequence number; must increase for the setpoint to count.
     pub seq: u64,
     /// `px, py, pz` (m), `qw, qx, qy, qz`.
     pub pose: [f32; POSE_DIM],
     /// The robot's reachable poses about `pose`, if the planner knows
     /// them: lets the integral loop move the setpoint the way the robot can
-    /// move ([`IntegralConfig`]). Ignored unless [`Tangent::is_valid`].
-    pub tangent: Option<Tangent>,
+    /// move ([`IntegralConfig`]). Ignored unless [`ControlTangent::is_valid`].
+    pub tangent: Option<ControlTangent>,
 }
 
 /// One tracker sample of the tip, as the integral loop takes it.
@@ -226,7 +226,7 @@ pub struct StepInput {
     /// Monotonic time of this step, ns.
     pub now_ns: u64,
     /// A setpoint received since the last step, if any.
-    pub setpoint: Option<Setpoint>,
+    pub setpoint: Option<ControlSetpoint>,
     /// Plant feedback received since the last step, if any.
     pub feedback: Option<Feedback>,
 }
@@ -247,7 +247,7 @@ pub struct ControlState {
     /// Pose of the last accepted setpoint (valid when `has_setpoint`).
     pub pose: [f32; POSE_DIM],
     /// Its tangent along the reachable poses, if it came with a valid one.
-    pub tangent: Option<Tangent>,
+    pub tangent: Option<ControlTangent>,
     /// The last command was held back by the slew limit (the tip is still
     /// on its way: the integral loop waits).
     pub slew_limited: bool,
@@ -409,7 +409,7 @@ pub fn control_step<const H: usize, const OUT: usize, const W: usize>(
                 st.map_origin = [sp.pose[0], sp.pose[1], sp.pose[2]];
             }
             st.pose = sp.pose;
-            st.tangent = sp.tangent.filter(Tangent::is_valid);
+            st.tangent = sp.tangent.filter(ControlTangent::is_valid);
             st.has_setpoint = true;
             st.watchdog = false;
             status |= Status::NEW_SETPOINT;

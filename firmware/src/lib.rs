@@ -69,8 +69,8 @@ pub mod vector_gen;
 pub mod vectors;
 
 pub use control::{
-    control_step, ControlConfig, ControlState, Feedback, IntegralConfig, SafeHold, Setpoint,
-    Status, StepInput, StepOutput, Tangent, Tensions, MAX_TANGENT_DIM, POSE_DIM,
+    control_step, ControlConfig, ControlSetpoint, ControlState, ControlTangent, Feedback,
+    IntegralConfig, SafeHold, Status, StepInput, StepOutput, Tensions, MAX_TANGENT_DIM, POSE_DIM,
 };
 pub use infer::infer;
 pub use swap::{FlashSlot, IncrementalSwap, NetSlots, NetStore, SwapError, SwapEvent};

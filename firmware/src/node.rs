@@ -22,15 +22,15 @@
 //! truncated, oversized or undecodable frames are counted and dropped by
 //! the frame layer and here; none of them costs more than its bytes.
 
-use tendril_shared::link::messages::{
-    Command, Down, EventDetail, Feedback, Hello, Setpoint, Setup, Telemetry, Up, MAX_DOWN_PAYLOAD,
-    MAX_UP_PAYLOAD, PROTOCOL_VERSION, TELEMETRY_EVERY,
+use tendril_shared::link::wire::{
+    Down, EventDetail, Feedback, Hello, LinkCommand, LinkSetpoint, Setup, Telemetry, Up,
+    MAX_DOWN_PAYLOAD, MAX_UP_PAYLOAD, PROTOCOL_VERSION, TELEMETRY_EVERY,
 };
 use tendril_shared::link::{encode, max_frame_len, FrameCounters, FrameDecoder};
 use tendril_shared::{CoContraction, TendonLimits, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS, POSE_DIM};
 
 use crate::board::Board;
-use crate::control::{ControlConfig, IntegralConfig, SafeHold, Tangent};
+use crate::control::{ControlConfig, ControlTangent, IntegralConfig, SafeHold};
 use crate::period::{FeedbackIn, Inputs, Period, PeriodConfig, SetpointIn, StuckConfig, Update};
 use crate::swap::NetStore;
 use tendril_shared::counters::Counters;
@@ -184,7 +184,7 @@ struct Core<const U: usize> {
     setup_error: u8,
     net_hash: u32,
     pending: Pending,
-    last_tangent: Option<Tangent>,
+    last_tangent: Option<ControlTangent>,
     /// Events of refused chunks, for the next command.
     refused_events: u32,
     bad_messages: u32,
@@ -210,8 +210,8 @@ pub struct Node<const U: usize> {
     core: Core<U>,
 }
 
-fn tangent_in(t: &tendril_shared::link::messages::Tangent) -> Tangent {
-    Tangent {
+fn tangent_in(t: &tendril_shared::link::wire::LinkTangent) -> ControlTangent {
+    ControlTangent {
         dim: usize::from(t.dim),
         columns: t.columns,
         axes: t.axes,
@@ -436,7 +436,7 @@ impl<const U: usize> Core<U> {
         let c = out.command;
         board.set_tensions(c.tensions.get(..c.count).unwrap_or(&[]));
         // 3. The command, and now and then the counters.
-        let cmd = Up::Command(Command {
+        let cmd = Up::Command(LinkCommand {
             seq: c.seq as u32,
             setpoint_seq: c.setpoint_seq as u32,
             status: c.status,
@@ -547,7 +547,7 @@ impl<const U: usize> Core<U> {
         }
     }
 
-    fn setpoint(&mut self, s: &Setpoint) {
+    fn setpoint(&mut self, s: &LinkSetpoint) {
         if let Some(t) = &s.tangent {
             self.last_tangent = Some(tangent_in(t));
         }

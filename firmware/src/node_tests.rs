@@ -7,8 +7,8 @@ use std::boxed::Box;
 use std::collections::VecDeque;
 use std::vec::Vec;
 
-use tendril_shared::link::messages::{
-    Command, Down, Feedback, Hello, Setpoint, Setup, Telemetry, Up, WirePose, MAX_CHUNK,
+use tendril_shared::link::wire::{
+    Down, Feedback, Hello, LinkCommand, LinkSetpoint, Setup, Telemetry, Up, WirePose, MAX_CHUNK,
     MAX_UP_PAYLOAD, PROTOCOL_VERSION, TELEMETRY_EVERY,
 };
 use tendril_shared::link::{encode, encode_raw, max_frame_len, FrameDecoder};
@@ -96,7 +96,7 @@ impl Rig {
     }
 }
 
-fn commands(ups: &[Up]) -> Vec<Command> {
+fn commands(ups: &[Up]) -> Vec<LinkCommand> {
     ups.iter()
         .filter_map(|u| match u {
             Up::Command(c) => Some(c.clone()),
@@ -168,7 +168,7 @@ fn pose() -> [f32; 7] {
 }
 
 fn setpoint(seq: u32) -> Down<'static> {
-    Down::Setpoint(Setpoint {
+    Down::Setpoint(LinkSetpoint {
         seq,
         count: 1,
         superseded_nonfinite: 0,
@@ -208,7 +208,7 @@ fn configured() -> Rig {
 fn a_step_runs_one_period_at_its_time_and_stops_the_timer() {
     let mut r = configured();
     // On the timer: a command every tick (1 ms period, 1 ms tick).
-    let timer: Vec<Command> = (0..5).flat_map(|_| commands(&r.tick())).collect();
+    let timer: Vec<LinkCommand> = (0..5).flat_map(|_| commands(&r.tick())).collect();
     assert_eq!(timer.len(), 5);
     assert!(!r.node.lockstep());
     // The first Step starts the period afresh: its command is the first.
@@ -279,7 +279,7 @@ fn the_same_inputs_in_lock_step_give_the_same_commands_whatever_the_board_clock(
 /// before; its tracker frame arrives `waits` ticks before the next period
 /// (9: with the setpoint; 0: in the period's own tick) with the age
 /// `age_us` the host gave it when it sent it. The commands.
-fn frames_waiting(waits: u32, age_us: u32) -> Vec<Command> {
+fn frames_waiting(waits: u32, age_us: u32) -> Vec<LinkCommand> {
     let mut r = Rig::new();
     let mut s = setup();
     s.period_ns = 10 * TICK;
@@ -290,7 +290,7 @@ fn frames_waiting(waits: u32, age_us: u32) -> Vec<Command> {
     s.ki = 10.0;
     s.slew_rate = [1e6; MAX_TENDONS];
     r.send(&Down::Setup(s));
-    let mut out: Vec<Command> = Vec::new();
+    let mut out: Vec<LinkCommand> = Vec::new();
     let mut since_period = None;
     for k in 0..600u32 {
         if since_period == Some(0) {
@@ -298,7 +298,7 @@ fn frames_waiting(waits: u32, age_us: u32) -> Vec<Command> {
             let Down::Setpoint(mut sp) = setpoint(seq + 1) else {
                 unreachable!()
             };
-            sp.velocity = Some(Setpoint::wire_velocity(&[
+            sp.velocity = Some(LinkSetpoint::wire_velocity(&[
                 0.05, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
             ]));
             r.send(&Down::Setpoint(sp));
@@ -332,13 +332,14 @@ fn a_frame_that_waits_for_the_period_ages_meanwhile() {
     // once) or on the host (sent nine ticks old, just before the period).
     let waited_here = frames_waiting(9, 0);
     let waited_on_host = frames_waiting(0, 9_000);
-    let first_difference = |a: &[Command], b: &[Command]| a.iter().zip(b).position(|(x, y)| x != y);
+    let first_difference =
+        |a: &[LinkCommand], b: &[LinkCommand]| a.iter().zip(b).position(|(x, y)| x != y);
     assert_eq!(waited_here.len(), 60);
     assert_eq!(first_difference(&waited_here, &waited_on_host), None);
     // The age matters: a frame as new as the period is another sample.
     let fresh = frames_waiting(0, 0);
     assert!(first_difference(&waited_on_host, &fresh).is_some());
-    let corrected = |cs: &[Command]| {
+    let corrected = |cs: &[LinkCommand]| {
         cs.iter()
             .filter(|c| c.status & tendril_shared::messages::command_status::CORRECTION != 0)
             .count()
@@ -444,7 +445,7 @@ fn garbage_and_truncated_frames_between_messages_are_counted_and_cost_no_period(
     assert!(seen >= 2, "{seen} telemetry messages");
 }
 
-fn send_update(r: &mut Rig, blob: &[u8], first_period: u64) -> Vec<Command> {
+fn send_update(r: &mut Rig, blob: &[u8], first_period: u64) -> Vec<LinkCommand> {
     let mut out = Vec::new();
     let total = u32::try_from(blob.len()).unwrap();
     for (i, chunk) in blob.chunks(MAX_CHUNK).enumerate() {
@@ -517,7 +518,7 @@ fn the_hello_names_the_net_that_runs() {
     r.step(0);
     let ask = |r: &mut Rig| {
         r.send(&Down::Hello {
-            protocol: tendril_shared::link::messages::PROTOCOL_VERSION,
+            protocol: tendril_shared::link::wire::PROTOCOL_VERSION,
         });
         hello(&r.tick()).unwrap().net_hash
     };

@@ -202,15 +202,15 @@ fn cfg4() -> ControlConfig {
     c
 }
 
-fn sp(seq: u64, pose: [f32; 7]) -> Option<Setpoint> {
-    Some(Setpoint {
+fn sp(seq: u64, pose: [f32; 7]) -> Option<ControlSetpoint> {
+    Some(ControlSetpoint {
         seq,
         pose,
         tangent: None,
     })
 }
 
-fn input(now_ns: u64, setpoint: Option<Setpoint>) -> StepInput {
+fn input(now_ns: u64, setpoint: Option<ControlSetpoint>) -> StepInput {
     StepInput {
         now_ns,
         setpoint,
@@ -349,21 +349,22 @@ fn lateral_law_reference(
 /// [`lateral_law_reference`].
 fn run_biased(
     cfg: &ControlConfig,
-    tangent: Option<Tangent>,
+    tangent: Option<ControlTangent>,
     bias: [f32; 3],
     steps: u64,
 ) -> ControlState {
     let net = Net::decode(&blob(3, 12, 4)).unwrap();
     let pose = mid_pose();
     let mut st = ControlState::new(&cfg.limits, &[0.0; MAX_TENDONS], 0);
-    let lateral = tangent.is_some_and(|t| t == Tangent::lateral([t.columns[0], t.columns[1]]));
+    let lateral =
+        tangent.is_some_and(|t| t == ControlTangent::lateral([t.columns[0], t.columns[1]]));
     let mut reference = [0.0f32; 3];
     for k in 1..steps {
         let p = corrected_pose(&st);
         let tip = [p[0] - bias[0], p[1] - bias[1], p[2] - bias[2]];
         let inp = StepInput {
             now_ns: k * 1_000_000,
-            setpoint: Some(Setpoint {
+            setpoint: Some(ControlSetpoint {
                 seq: k,
                 pose,
                 tangent,
@@ -427,7 +428,7 @@ fn integral_loop_moves_the_setpoint_along_the_tangent() {
     d[1][1] = 1.0;
     d[1][4] = -2.5;
     let bias = [0.002f32, -0.001, 0.0];
-    let st = run_biased(&cfg, Some(Tangent::lateral(d)), bias, 2000);
+    let st = run_biased(&cfg, Some(ControlTangent::lateral(d)), bias, 2000);
     assert!(
         (st.correction[0] - bias[0]).abs() < 1e-6,
         "{:?}",
@@ -455,7 +456,7 @@ fn integral_loop_moves_the_setpoint_along_the_tangent() {
     // A non-finite tangent is dropped: the position alone moves.
     let mut bad = d;
     bad[1][3] = f32::NAN;
-    let st = run_biased(&cfg, Some(Tangent::lateral(bad)), bias, 2000);
+    let st = run_biased(&cfg, Some(ControlTangent::lateral(bad)), bias, 2000);
     assert!(st.tangent.is_none());
     assert!((corrected_pose(&st)[5] - mid_pose()[5]).abs() < 1e-9);
     assert!((st.correction[0] - bias[0]).abs() < 1e-6);
@@ -473,7 +474,7 @@ fn integral_loop_corrects_a_volume_along_three_columns() {
     columns[1][1] = 1.0;
     columns[2][2] = 1.0;
     columns[2][4] = -1.5;
-    let tangent = Tangent {
+    let tangent = ControlTangent {
         dim: 3,
         columns,
         axes: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
@@ -503,7 +504,7 @@ fn integral_loop_on_a_curve_integrates_the_error_along_its_axis() {
     columns[0][0] = a[0];
     columns[0][1] = a[1];
     columns[0][2] = -0.1;
-    let tangent = Tangent {
+    let tangent = ControlTangent {
         dim: 1,
         columns,
         axes: [a, [0.0; 3], [0.0; 3]],
@@ -522,7 +523,7 @@ fn integral_loop_on_a_curve_integrates_the_error_along_its_axis() {
 
 #[test]
 fn tangents_of_no_dimension_or_too_many_are_ignored() {
-    let mut t = Tangent::lateral([[0.0; 7]; 2]);
+    let mut t = ControlTangent::lateral([[0.0; 7]; 2]);
     assert!(t.is_valid());
     t.dim = 0;
     assert!(!t.is_valid());
@@ -886,7 +887,7 @@ proptest! {
             now = if ev.dt_ns < 0 { now.saturating_sub(ev.dt_ns.unsigned_abs()) } else { now + ev.dt_ns as u64 };
             let inp = StepInput {
                 now_ns: now,
-                setpoint: ev.setpoint.map(|(seq, pose, _)| Setpoint {
+                setpoint: ev.setpoint.map(|(seq, pose, _)| ControlSetpoint {
                     seq,
                     pose,
                     tangent: None,

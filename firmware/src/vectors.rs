@@ -16,7 +16,7 @@ use core::fmt;
 use tendril_shared::{LimitsError, TendonLimits, MAX_TENDONS};
 
 use crate::control::{
-    control_step, ControlConfig, ControlState, Feedback, IntegralConfig, SafeHold, Setpoint,
+    control_step, ControlConfig, ControlSetpoint, ControlState, Feedback, IntegralConfig, SafeHold,
     Status, StepInput, POSE_DIM,
 };
 use crate::infer::infer;
@@ -385,7 +385,7 @@ where
         }
         let input = StepInput {
             now_ns: rec.now_ns,
-            setpoint: has_sp.then_some(Setpoint {
+            setpoint: has_sp.then_some(ControlSetpoint {
                 seq: u64::from(rec.seq),
                 pose: rec.pose,
                 tangent: None,

@@ -7,8 +7,8 @@
 
 use libfuzzer_sys::fuzz_target;
 use tendril_firmware::control::{
-    control_step, ControlConfig, ControlState, Feedback, IntegralConfig, SafeHold, Setpoint,
-    StepInput, Tangent,
+    control_step, ControlConfig, ControlSetpoint, ControlState, ControlTangent, Feedback,
+    IntegralConfig, SafeHold, StepInput,
 };
 use tendril_firmware::DEFAULT_NET;
 use tendril_shared::{TendonLimits, MAX_TENDONS};
@@ -66,11 +66,11 @@ fuzz_target!(|data: &[u8]| {
         let tip = [f32_at(rec, 40), f32_at(rec, 44), f32_at(rec, 8)];
         let input = StepInput {
             now_ns: now,
-            setpoint: (flags & 1 != 0).then_some(Setpoint {
+            setpoint: (flags & 1 != 0).then_some(ControlSetpoint {
                 seq: u64::from(word(8)),
                 pose,
                 // Arbitrary (NaN, ∞, huge) tangents and dimensions from the same bytes.
-                tangent: (flags & 4 != 0).then_some(Tangent {
+                tangent: (flags & 4 != 0).then_some(ControlTangent {
                     dim: (word(8) % 5) as usize,
                     columns: [pose, pose.map(|v| -3.0 * v), pose.map(|v| 0.5 * v)],
                     axes: [

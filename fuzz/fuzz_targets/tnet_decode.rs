@@ -13,7 +13,9 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use tendril_firmware::control::{control_step, ControlConfig, ControlState, Setpoint, StepInput};
+use tendril_firmware::control::{
+    control_step, ControlConfig, ControlSetpoint, ControlState, StepInput,
+};
 use tendril_firmware::{
     infer, McuNet, McuSlots, McuSwap, NetStore, SwapError, SwapEvent, DEFAULT_NET,
 };
@@ -52,7 +54,11 @@ fuzz_target!(|input: &[u8]| {
     };
     incremental(input, data, (7, n_out), was_ram, &one_shot);
     if store.load(data, (7, n_out)).is_err() {
-        assert_eq!(store.active(), &running, "a rejected blob changed the running net");
+        assert_eq!(
+            store.active(),
+            &running,
+            "a rejected blob changed the running net"
+        );
         assert_eq!(store.running_ram(), was_ram);
         return;
     }
@@ -64,7 +70,7 @@ fuzz_target!(|input: &[u8]| {
     let st = ControlState::new(&cfg.limits, &[0.0; MAX_TENDONS], 0);
     let input = StepInput {
         now_ns: 1_000_000,
-        setpoint: Some(Setpoint {
+        setpoint: Some(ControlSetpoint {
             seq: 1,
             pose,
             tangent: None,
@@ -114,14 +120,22 @@ fn incremental(
         match swap.slice(&mut store, budget) {
             SwapEvent::Working => assert_eq!(store.active(), &old, "the old net stopped mid-check"),
             SwapEvent::Swapped => {
-                assert_eq!(one_shot, &Ok(()), "incremental swap accepted what load refused");
+                assert_eq!(
+                    one_shot,
+                    &Ok(()),
+                    "incremental swap accepted what load refused"
+                );
                 assert_eq!(Ok(store.active()), McuNet::decode(data).as_ref());
                 assert!(store.running_ram());
                 return;
             }
             SwapEvent::Rejected(e) => {
                 assert_eq!(one_shot, &Err(e), "incremental and one-shot disagree");
-                assert_eq!(store.active(), &old, "a rejected blob changed the running net");
+                assert_eq!(
+                    store.active(),
+                    &old,
+                    "a rejected blob changed the running net"
+                );
                 assert_eq!(store.running_ram(), ram_running);
                 return;
             }

@@ -31,7 +31,7 @@ use tendril::plan::stand_in::quick_net;
 use tendril::robot::{repo_robot, Robot};
 use tendril::statics::{SolverSettings, Statics};
 use tendril_firmware::control::{
-    control_step, ControlConfig, ControlState, Setpoint as FwSetpoint, StepInput,
+    control_step, ControlConfig, ControlSetpoint, ControlState, StepInput,
 };
 use tendril_shared::messages::{setpoint_flags, Header, Setpoint, TensionCommand, MAX_TENDONS};
 use tendril_shared::TendonLimits;
@@ -130,7 +130,7 @@ fn child(prefix: &str, mode: Mode) {
         let t_recv = now_ns();
         let input = StepInput {
             now_ns: t_recv,
-            setpoint: Some(FwSetpoint {
+            setpoint: Some(ControlSetpoint {
                 seq: sp.header.seq,
                 pose: sp.pose,
                 tangent: None,

@@ -17,7 +17,7 @@ use tendril::mcu::trace::{first_difference, replay_chip, replay_host, synthetic,
 use tendril::mcu::{locate_image, Chip, McuLink};
 use tendril::robot::Robot;
 use tendril_firmware::period::event;
-use tendril_shared::link::messages::{Command, Setup};
+use tendril_shared::link::wire::{LinkCommand, Setup};
 
 const PERIODS: usize = 2400;
 
@@ -35,7 +35,7 @@ fn setup() -> (Setup, Vec<u8>) {
     (setup, std::fs::read(net_path).unwrap())
 }
 
-fn union(cmds: &[Command]) -> u32 {
+fn union(cmds: &[LinkCommand]) -> u32 {
     cmds.iter().fold(0, |a, c| a | c.events)
 }
 

@@ -15,7 +15,7 @@
 //!    turns with it, sent every period: the most bytes a setpoint has), the
 //!    feedback of a first-order motor following the last command, perhaps
 //!    one weight-update chunk, and the `Down::Step` that runs the period;
-//! 3. two weight updates in [`tendril_shared::link::messages::MAX_CHUNK`]
+//! 3. two weight updates in [`tendril_shared::link::wire::MAX_CHUNK`]
 //!    chunks, one chunk per period: the largest net the buffer takes
 //!    (7-64-8, refused at install: the robot has 4 tendons, after every
 //!    check slice) and then the largest net this robot runs (7-64-4,
@@ -63,8 +63,8 @@ mod mcu {
     use tendril_firmware::rt::{self, cycles::ticks, cycles::Calibration, Console};
     use tendril_firmware::synth::{synthetic_blob, INPUT_HI, INPUT_LO};
     use tendril_firmware::{McuNet, McuSlots, DEFAULT_NET, DEFAULT_NET_CRC};
-    use tendril_shared::link::messages::{
-        Down, Feedback, Setpoint, Setup, Tangent, Up, WirePose, MAX_CHUNK,
+    use tendril_shared::link::wire::{
+        Down, Feedback, LinkSetpoint, LinkTangent, Setup, Up, WirePose, MAX_CHUNK,
     };
     use tendril_shared::link::{encode, FrameDecoder};
     use tendril_shared::{CoContraction, MAX_TENDONS};
@@ -463,7 +463,7 @@ mod mcu {
             let (pose, vel) = circle.at(k);
             let th = k as f32 * 0.0314;
             let tilt = 0.1 * libm::cosf(th);
-            let tangent = Tangent {
+            let tangent = LinkTangent {
                 dim: 2,
                 columns: [
                     [1.0, 0.0, 0.0, 0.0, 0.0, tilt, 0.0],
@@ -472,12 +472,12 @@ mod mcu {
                 ],
                 axes: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0; 3]],
             };
-            let sp = Down::Setpoint(Setpoint {
+            let sp = Down::Setpoint(LinkSetpoint {
                 seq: k,
                 count: 1,
                 superseded_nonfinite: 0,
                 pose: WirePose::from_pose(&pose),
-                velocity: Some(Setpoint::wire_velocity(&vel)),
+                velocity: Some(LinkSetpoint::wire_velocity(&vel)),
                 tangent: Some(tangent),
             });
             // The motors follow the last command with τ = 20 ms; the tip
@@ -487,13 +487,13 @@ mod mcu {
             }
             let mut tensions = heapless::Vec::new();
             for m in host.motors.iter().take(TENDONS) {
-                let _ = tensions.push(tendril_shared::link::messages::units::to_i32(
+                let _ = tensions.push(tendril_shared::link::wire::units::to_i32(
                     *m,
-                    tendril_shared::link::messages::units::TENSION_N,
+                    tendril_shared::link::wire::units::TENSION_N,
                 ));
             }
             let tip = [pose[0] - 0.0005, pose[1], pose[2]]
-                .map(|v| tendril_shared::link::messages::units::to_i32(v, 1e-6));
+                .map(|v| tendril_shared::link::wire::units::to_i32(v, 1e-6));
             let fb = Down::Feedback(Feedback {
                 seq: k,
                 count: 1,

@@ -28,7 +28,7 @@ mod mcu {
 
     use cortex_m_rt::entry;
     use tendril_firmware::control::{
-        control_step, ControlConfig, ControlState, Setpoint, StepInput,
+        control_step, ControlConfig, ControlSetpoint, ControlState, StepInput,
     };
     use tendril_firmware::rt::{self, cycles::ticks, cycles::Calibration, Console};
     use tendril_firmware::swap_demo::{self, Offer, BLOB_LEN};
@@ -116,7 +116,7 @@ mod mcu {
             let pose = swap_demo::pose(k);
             let input = StepInput {
                 now_ns: u64::from(k) * 1_000_000,
-                setpoint: Some(Setpoint {
+                setpoint: Some(ControlSetpoint {
                     seq: u64::from(k),
                     pose,
                     tangent: None,

@@ -59,7 +59,7 @@ mod mcu {
     use core::hint::black_box;
 
     use cortex_m_rt::entry;
-    use tendril_firmware::control::{control_step, ControlState, Setpoint, StepInput};
+    use tendril_firmware::control::{control_step, ControlSetpoint, ControlState, StepInput};
     use tendril_firmware::infer::{dot8, infer};
     use tendril_firmware::rt::{self, cycles::ticks, cycles::Calibration, Console};
     use tendril_firmware::vectors::{self, HAS_SETPOINT};
@@ -161,7 +161,7 @@ mod mcu {
                         if let Some(p) = poses.get(i % k) {
                             let input = StepInput {
                                 now_ns: 1_000_000,
-                                setpoint: Some(Setpoint {
+                                setpoint: Some(ControlSetpoint {
                                     seq: 1,
                                     pose: *p,
                                     tangent: None,

@@ -39,8 +39,8 @@ use tendril_shared::messages::command_status as wire;
 use tendril_shared::{MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS, POSE_DIM};
 
 use crate::control::{
-    control_step, ControlConfig, ControlState, Feedback, Setpoint, Status, StepInput, Tangent,
-    Tensions,
+    control_step, ControlConfig, ControlSetpoint, ControlState, ControlTangent, Feedback, Status,
+    StepInput, Tensions,
 };
 use crate::swap::NetStore;
 use stuck::StuckDetector;
@@ -89,7 +89,7 @@ pub struct SetpointIn {
     /// Its time derivative (per s), when the planner sent one: the lead.
     pub velocity: Option<[f32; POSE_DIM]>,
     /// The reachable poses about it (for the integral loop), if sent.
-    pub tangent: Option<Tangent>,
+    pub tangent: Option<ControlTangent>,
 }
 
 /// Plant feedback as the period takes it.
@@ -195,7 +195,7 @@ impl Events {
 
 /// The command a period produces.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Command {
+pub struct PeriodCommand {
     /// Command sequence number (1 for the first period).
     pub seq: u64,
     /// The sender's sequence number of the last setpoint taken (0 = none).
@@ -215,7 +215,7 @@ pub struct Command {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Outputs {
     /// What the motors get.
-    pub command: Command,
+    pub command: PeriodCommand,
     /// What the report lists.
     pub events: Events,
 }
@@ -233,7 +233,7 @@ pub struct Period {
     state: ControlState,
     stuck: StuckDetector,
     counters: Counters,
-    cmd: Command,
+    cmd: PeriodCommand,
     /// The last setpoint taken: sender's sequence and velocity.
     last_sp: Option<(u64, Option<[f32; POSE_DIM]>)>,
     last_fb_seq: Option<u64>,
@@ -268,7 +268,7 @@ impl Period {
             state,
             stuck: StuckDetector::new(),
             counters: Counters::default(),
-            cmd: Command {
+            cmd: PeriodCommand {
                 seq: 0,
                 setpoint_seq: 0,
                 feedback_seq: 0,
@@ -306,7 +306,7 @@ impl Period {
     }
 
     /// The last command (the floors before the first period).
-    pub const fn last_command(&self) -> &Command {
+    pub const fn last_command(&self) -> &PeriodCommand {
         &self.cmd
     }
 
@@ -391,7 +391,7 @@ impl Period {
             tensions = self.cmd.tensions;
         }
         self.account(status, now, &mut ev);
-        self.cmd = Command {
+        self.cmd = PeriodCommand {
             seq: self.cmd.seq + 1,
             setpoint_seq: self.last_sp.map_or(0, |(seq, _)| seq),
             feedback_seq: self.last_fb_seq.unwrap_or(0),
@@ -423,7 +423,13 @@ impl Period {
         ev
     }
 
-    fn take_setpoint(&mut self, s: &SetpointIn, count: u32, now: u64, ev: &mut Events) -> Setpoint {
+    fn take_setpoint(
+        &mut self,
+        s: &SetpointIn,
+        count: u32,
+        now: u64,
+        ev: &mut Events,
+    ) -> ControlSetpoint {
         let position = [s.pose[0], s.pose[1], s.pose[2]];
         if let Some(before) = self.last_sp_position {
             let d2 = position
@@ -468,7 +474,7 @@ impl Period {
             }
         }
         self.last_sp = Some((s.seq, s.velocity));
-        Setpoint {
+        ControlSetpoint {
             seq: self.local_sp_seq,
             pose,
             tangent: s.tangent,

@@ -39,7 +39,7 @@ impl P {
     fn counters(&self) -> &Counters {
         self.period.counters()
     }
-    fn last_command(&self) -> &Command {
+    fn last_command(&self) -> &PeriodCommand {
         self.period.last_command()
     }
     fn holding(&self) -> bool {

@@ -16,7 +16,7 @@ use std::time::Duration;
 
 use anyhow::Result;
 use tendril_firmware::period::{event, Counters, Events};
-use tendril_shared::link::messages::{Command, Down, Telemetry, Up, MAX_CHUNK};
+use tendril_shared::link::wire::{Down, LinkCommand, Telemetry, Up, MAX_CHUNK};
 use tendril_shared::messages::{
     Header, PlantState, Setpoint, TensionCommand, WeightUpdate, MAX_TENDONS,
 };
@@ -465,7 +465,7 @@ fn report_past(faults: &mut FaultLog, t: &Telemetry, t_rx: u64, start: u64, peri
 
 fn publish(
     commands: &transport::Pub<TensionCommand>,
-    c: &Command,
+    c: &LinkCommand,
     n: usize,
 ) -> Result<(), IpcError> {
     let mut tensions = [0.0f32; MAX_TENDONS];

@@ -7,9 +7,9 @@ use std::time::Duration;
 
 use anyhow::{anyhow, bail, Result};
 use tendril_firmware::period::PeriodConfig;
-use tendril_shared::link::messages::{
-    units, Down, Feedback, Hello, Setpoint as LinkSetpoint, Setup, Tangent as LinkTangent, Up,
-    WirePose, MAX_UP_PAYLOAD, PROTOCOL_VERSION,
+use tendril_shared::link::wire::{
+    units, Down, Feedback, Hello, LinkSetpoint, LinkTangent, Setup, Up, WirePose, MAX_UP_PAYLOAD,
+    PROTOCOL_VERSION,
 };
 use tendril_shared::link::{encode, max_frame_len, FrameCounters, FrameDecoder};
 use tendril_shared::messages::{setpoint_flags, PlantState, Setpoint, MAX_TENDONS};

@@ -30,8 +30,8 @@ use serde::{Deserialize, Serialize};
 use tendril_firmware::board::Board;
 use tendril_firmware::node::{Node, MCU_UPDATE_CAPACITY};
 use tendril_firmware::{McuNet, McuSlots, DEFAULT_NET, DEFAULT_NET_CRC};
-use tendril_shared::link::messages::{
-    units, Command, Down, Feedback, Setpoint, Setup, Tangent, Up, WirePose, MAX_CHUNK,
+use tendril_shared::link::wire::{
+    units, Down, Feedback, LinkCommand, LinkSetpoint, LinkTangent, Setup, Up, WirePose, MAX_CHUNK,
     MAX_UP_PAYLOAD, PROTOCOL_VERSION,
 };
 use tendril_shared::link::{encode, max_frame_len, FrameDecoder};
@@ -46,7 +46,7 @@ pub enum Delivery {
     /// A Setup (the running one is kept).
     Setup(Setup),
     /// A setpoint.
-    Setpoint(Setpoint),
+    Setpoint(LinkSetpoint),
     /// Plant feedback.
     Feedback(Feedback),
     /// A weight-update chunk.
@@ -161,8 +161,8 @@ pub struct CommandBits {
     pub tensions: Vec<u32>,
 }
 
-impl From<&Command> for CommandBits {
-    fn from(c: &Command) -> Self {
+impl From<&LinkCommand> for CommandBits {
+    fn from(c: &LinkCommand) -> Self {
         CommandBits {
             seq: c.seq,
             setpoint_seq: c.setpoint_seq,
@@ -185,7 +185,7 @@ pub struct Difference {
 }
 
 /// The first period whose commands differ in any bit, if any.
-pub fn first_difference(a: &[Command], b: &[Command]) -> Option<Difference> {
+pub fn first_difference(a: &[LinkCommand], b: &[LinkCommand]) -> Option<Difference> {
     (0..a.len().max(b.len())).find_map(|i| {
         let x = a.get(i).map(CommandBits::from);
         let y = b.get(i).map(CommandBits::from);
@@ -291,13 +291,13 @@ impl HostNode {
     }
 
     /// `bytes` then one tick: the commands it sent.
-    pub fn run(&mut self, bytes: &[u8]) -> Vec<Command> {
+    pub fn run(&mut self, bytes: &[u8]) -> Vec<LinkCommand> {
         self.deliver(bytes);
         commands(self.tick())
     }
 }
 
-fn commands(ups: Vec<Up>) -> Vec<Command> {
+fn commands(ups: Vec<Up>) -> Vec<LinkCommand> {
     ups.into_iter()
         .filter_map(|u| match u {
             Up::Command(c) => Some(c),
@@ -328,7 +328,7 @@ fn period_wire(p: &TracePeriod) -> Result<Vec<u8>> {
 
 /// Replay through the host build: one command per Step (the first Step's
 /// first), or an error naming the period that sent none.
-pub fn replay_host(trace: &Trace) -> Result<Vec<Command>> {
+pub fn replay_host(trace: &Trace) -> Result<Vec<LinkCommand>> {
     let mut node = HostNode::new();
     node.open(&trace.setup)?;
     let mut out = Vec::with_capacity(trace.periods.len() + 1);
@@ -347,7 +347,7 @@ pub fn replay_host(trace: &Trace) -> Result<Vec<Command>> {
 
 /// Replay through a chip (the image under QEMU) on `link`: each period's
 /// bytes, then wait for its command (at most `timeout`).
-pub fn replay_chip(trace: &Trace, link: McuLink, timeout: Duration) -> Result<Vec<Command>> {
+pub fn replay_chip(trace: &Trace, link: McuLink, timeout: Duration) -> Result<Vec<LinkCommand>> {
     let mut chip = ChipLink::open(link, &trace.setup)?;
     if chip.hello.net_hash != DEFAULT_NET_CRC {
         bail!(
@@ -547,18 +547,18 @@ pub fn synthetic(setup: &Setup, update: &[u8], periods: usize, seed: u64) -> Res
                         let p = cc_pose(length, p0[0] + dx, p0[1] + dy);
                         std::array::from_fn(|i| (p[i] - p0[i]) / h)
                     };
-                    Tangent {
+                    LinkTangent {
                         dim: 2,
                         columns: [col(h, 0.0), col(0.0, h), [0.0; 7]],
                         axes: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0; 3]],
                     }
                 });
-                d.push(Delivery::Setpoint(Setpoint {
+                d.push(Delivery::Setpoint(LinkSetpoint {
                     seq: sp_seq,
                     count: 1,
                     superseded_nonfinite: 0,
                     pose: WirePose::from_pose(&pose),
-                    velocity: Some(Setpoint::wire_velocity(&vel)),
+                    velocity: Some(LinkSetpoint::wire_velocity(&vel)),
                     tangent,
                 }));
             }

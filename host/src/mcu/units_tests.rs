@@ -6,7 +6,7 @@
 
 use std::path::Path;
 
-use tendril_shared::link::messages::{units, WirePose};
+use tendril_shared::link::wire::{units, WirePose};
 
 use crate::net::GuardedNet;
 use crate::robot::repo_robot;

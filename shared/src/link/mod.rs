@@ -29,7 +29,7 @@
 //! outcome is a [`FrameError`] and is counted in [`FrameCounters`].
 
 mod frame;
-pub mod messages;
+pub mod wire;
 
 pub use frame::{
     encode, encode_raw, max_frame_len, FrameCounters, FrameDecoder, FrameError, CRC_LEN,

@@ -2,7 +2,7 @@
 //! (`controller.json`).
 
 use super::*;
-use tendril_shared::link::messages::Telemetry;
+use tendril_shared::link::wire::Telemetry;
 use tendril_shared::link::FrameCounters;
 
 /// What the controller reports at exit (`controller.json`). Counts are

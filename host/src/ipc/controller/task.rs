@@ -4,7 +4,7 @@
 //! motors get is there, shared with the chip). The host keeps its clock,
 //! its transport and its statistics.
 
-use tendril_firmware::control::Tangent as FwTangent;
+use tendril_firmware::control::ControlTangent;
 use tendril_firmware::period::{FeedbackIn, Inputs, Period, SetpointIn, Update, UpdateError};
 
 use super::*;
@@ -46,7 +46,7 @@ pub fn setpoint_in(s: &Setpoint) -> SetpointIn {
         velocity: (s.flags & setpoint_flags::HAS_VELOCITY != 0).then_some(s.velocity),
         // The planner's tangent, for the firmware's integral loop (which
         // checks its dimension and values).
-        tangent: (s.flags & setpoint_flags::HAS_TANGENT != 0).then_some(FwTangent {
+        tangent: (s.flags & setpoint_flags::HAS_TANGENT != 0).then_some(ControlTangent {
             dim: s.tangent_dim as usize,
             columns: s.tangent,
             axes: s.tangent_axes,

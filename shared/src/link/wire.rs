@@ -123,7 +123,7 @@ impl Setup {
 /// The robot's reachable poses about a setpoint (see
 /// [`crate::messages::Setpoint::tangent`]).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Tangent {
+pub struct LinkTangent {
     /// Valid columns (1..=3).
     pub dim: u8,
     /// `∂pose/∂u_j`.
@@ -226,7 +226,7 @@ impl WirePose {
 
 /// A setpoint, host → chip.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Setpoint {
+pub struct LinkSetpoint {
     /// The planner's sequence number.
     pub seq: u32,
     /// Setpoints the planner sent since the last one forwarded (the host
@@ -242,10 +242,10 @@ pub struct Setpoint {
     /// The tangent, when it changed (the chip keeps the last one it got
     /// for the setpoints that come without: it changes slowly along a path
     /// and costs 120 of the link's bytes).
-    pub tangent: Option<Tangent>,
+    pub tangent: Option<LinkTangent>,
 }
 
-impl Setpoint {
+impl LinkSetpoint {
     /// The velocity in `f32`, per s.
     pub fn velocity(&self) -> Option<[f32; 7]> {
         self.velocity
@@ -304,7 +304,7 @@ pub enum Down<'a> {
     /// Configure the controller.
     Setup(Setup),
     /// A setpoint.
-    Setpoint(Setpoint),
+    Setpoint(LinkSetpoint),
     /// Plant feedback.
     Feedback(Feedback),
     /// `bytes` of a `total`-byte `.tnet` update at `offset` (offset 0
@@ -359,7 +359,7 @@ pub struct EventDetail {
 
 /// A tension command, chip → host.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Command {
+pub struct LinkCommand {
     /// The period's command sequence number.
     pub seq: u32,
     /// The planner's sequence number of the last setpoint taken.
@@ -409,7 +409,7 @@ pub enum Up {
     /// Identity and configuration state.
     Hello(Hello),
     /// This period's command.
-    Command(Command),
+    Command(LinkCommand),
     /// Counters.
     Telemetry(Telemetry),
 }
@@ -429,8 +429,8 @@ pub const MAX_UP_PAYLOAD: usize = 128;
 mod tests {
     use super::*;
 
-    fn full_setpoint() -> Setpoint {
-        Setpoint {
+    fn full_setpoint() -> LinkSetpoint {
+        LinkSetpoint {
             seq: u32::MAX,
             count: u16::MAX,
             superseded_nonfinite: u16::MAX,
@@ -439,7 +439,7 @@ mod tests {
                 quaternion: [i32::MAX; 4],
             },
             velocity: Some([i16::MAX; 7]),
-            tangent: Some(Tangent {
+            tangent: Some(LinkTangent {
                 dim: 3,
                 columns: [[f32::MAX; 7]; 3],
                 axes: [[f32::MAX; 3]; 3],
@@ -524,7 +524,7 @@ mod tests {
         let n = postcard::to_slice(&t, &mut buf).unwrap().len();
         assert!(n <= MAX_UP_PAYLOAD, "telemetry {n} B");
         std::println!("telemetry {n} B");
-        let c = Up::Command(Command {
+        let c = Up::Command(LinkCommand {
             seq: u32::MAX,
             setpoint_seq: u32::MAX,
             status: u32::MAX,
@@ -569,12 +569,12 @@ mod tests {
     #[test]
     fn a_typical_setpoint_and_feedback_fit_the_emulated_link() {
         // The default robot's circle: 15 mm off the axis, 0.19 m/s tops.
-        let sp = Down::Setpoint(Setpoint {
+        let sp = Down::Setpoint(LinkSetpoint {
             seq: 123_456,
             count: 1,
             superseded_nonfinite: 0,
             pose: WirePose::from_pose(&[0.015, -0.002, 0.195, 0.99, 0.1, -0.05, 0.0]),
-            velocity: Some(Setpoint::wire_velocity(&[
+            velocity: Some(LinkSetpoint::wire_velocity(&[
                 0.019, 0.004, -0.001, -0.01, 0.03, 0.02, 0.0,
             ])),
             tangent: None,
