@@ -85,7 +85,16 @@ pub fn period_config(s: &Setup) -> Result<PeriodConfig, u8> {
     let limits = TendonLimits::new(first(&s.max_tension, n), first(&s.slew_rate, n))
         .and_then(|l| l.with_min_tension(first(&s.min_tension, n)))
         .map_err(|_| setup_error::LIMITS)?;
-    let limits = if s.cocontraction_sets.iter().take(n).any(|&c| c != 0) {
+    // No sets: every tendon outside one (NONE), or the all-zero arrays of
+    // a setup that never filled them (a set member has a weight > 0). Set 0
+    // is a set: testing `c != 0` lost a robot's only set on the link.
+    let in_a_set = s
+        .cocontraction_sets
+        .iter()
+        .zip(&s.cocontraction_weights)
+        .take(n)
+        .any(|(&c, &w)| c != CoContraction::NONE && w != 0.0);
+    let limits = if in_a_set {
         let sets = CoContraction::new(
             s.cocontraction_sets.get(..n).unwrap_or(&[]),
             s.cocontraction_weights.get(..n).unwrap_or(&[]),
@@ -160,6 +169,56 @@ pub fn period_config(s: &Setup) -> Result<PeriodConfig, u8> {
         settle_after_jump_ns: u64::from(s.settle_after_jump_ns),
         commands_in_flight: LINK_COMMANDS_IN_FLIGHT,
     })
+}
+
+/// The link's `Setup` for a period configuration: [`period_config`]'s
+/// inverse, beside it (the host's bridge and the budget image use it;
+/// round trip: `node_tests`). Times above u32::MAX ns are clamped to it.
+pub fn setup_of(p: &PeriodConfig) -> Setup {
+    let l = &p.control.limits;
+    let n = l.n_tendons();
+    let pad = |a: &[f32]| {
+        let mut out = [0.0f32; MAX_TENDONS];
+        for (d, v) in out.iter_mut().zip(a) {
+            *d = *v;
+        }
+        out
+    };
+    let mut sets = [0u8; MAX_TENDONS];
+    for (d, c) in sets.iter_mut().zip(l.cocontraction().sets()).take(n) {
+        *d = *c;
+    }
+    let ns = |v: u64| v.min(u64::from(u32::MAX)) as u32;
+    let ic = p.control.integral;
+    Setup {
+        n_tendons: n as u8,
+        max_tension: pad(l.max_tension()),
+        min_tension: pad(l.min_tension()),
+        slew_rate: pad(l.slew_rate()),
+        cocontraction_sets: sets,
+        cocontraction_weights: *l.cocontraction().weights(),
+        period_ns: ns(p.period_ns),
+        watchdog_ns: ns(p.control.watchdog_ns),
+        max_dt_ns: ns(p.control.max_dt_ns),
+        quaternion_tolerance: p.control.quaternion_tolerance,
+        box_margin: p.control.box_margin,
+        ki: ic.ki,
+        correction_limit: ic.limit,
+        feedback_timeout_ns: ns(ic.feedback_timeout_ns),
+        correction_window: ic.window,
+        correction_filter_tau_s: ic.filter_tau_s,
+        correction_map_gain: ic.map_gain,
+        correction_map_scale: ic.map_scale,
+        correction_map_limit: ic.map_limit,
+        jump_m: p.jump_m,
+        settle_after_jump_ns: ns(p.settle_after_jump_ns),
+        lead_s: p.lead_s,
+        plant_stale_ns: ns(p.plant_stale_ns),
+        stuck_enabled: p.stuck.enabled,
+        stuck_model_gain: p.stuck.model_gain,
+        stuck_error_n: p.stuck.tension_error_n,
+        stuck_persist_ns: ns(p.stuck.persist_ns),
+    }
 }
 
 /// What arrived since the last period.

@@ -542,3 +542,71 @@ fn the_hello_names_the_net_that_runs() {
     );
     assert_eq!(ask(&mut r), other_hash, "the swapped-in net's hash");
 }
+
+/// A valid `Setup` for `n` tendons: limits, antagonistic pairs or none,
+/// times and gains from the strategy's draws.
+fn setup_from(n: usize, paired: bool, f: &[f32; 16], t: &[u32; 7]) -> Setup {
+    let mut s = Setup {
+        n_tendons: n as u8,
+        max_tension: [0.0; MAX_TENDONS],
+        min_tension: [0.0; MAX_TENDONS],
+        slew_rate: [0.0; MAX_TENDONS],
+        cocontraction_sets: [0; MAX_TENDONS],
+        cocontraction_weights: [0.0; MAX_TENDONS],
+        period_ns: t[0],
+        watchdog_ns: t[1],
+        max_dt_ns: t[2],
+        quaternion_tolerance: f[0],
+        box_margin: f[1],
+        ki: f[2],
+        correction_limit: f[3],
+        feedback_timeout_ns: t[3],
+        correction_window: f[4],
+        correction_filter_tau_s: f[5],
+        correction_map_gain: f[6],
+        correction_map_scale: f[7],
+        correction_map_limit: f[8],
+        jump_m: f[9],
+        settle_after_jump_ns: t[4],
+        lead_s: f[10],
+        plant_stale_ns: t[5],
+        stuck_enabled: true,
+        stuck_model_gain: f[11],
+        stuck_error_n: f[12],
+        stuck_persist_ns: t[6],
+    };
+    for i in 0..n {
+        s.max_tension[i] = 1.0 + f[13] * (i + 1) as f32;
+        s.min_tension[i] = s.max_tension[i] * 0.001 * f[14];
+        s.slew_rate[i] = 1.0 + f[15];
+        if paired {
+            s.cocontraction_sets[i] = (i / 2) as u8;
+            s.cocontraction_weights[i] = 1.0;
+        } else {
+            s.cocontraction_sets[i] = tendril_shared::CoContraction::NONE;
+        }
+    }
+    s
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(256))]
+
+    /// `setup_of` inverts `period_config`: any valid link `Setup` becomes a
+    /// period configuration and comes back bit for bit, so the host's
+    /// bridge, the chip and the budget image speak one mapping.
+    #[test]
+    fn setup_round_trips_through_the_period_configuration(
+        half in 1usize..=MAX_TENDONS / 2,
+        odd in proptest::bool::ANY,
+        paired in proptest::bool::ANY,
+        f in proptest::array::uniform16(0.001f32..100.0),
+        t in proptest::array::uniform7(1u32..=u32::MAX),
+    ) {
+        // Pairs need an even count.
+        let n = if odd && !paired { 2 * half - 1 } else { 2 * half };
+        let s = setup_from(n, paired, &f, &t);
+        let p = crate::node::period_config(&s).expect("a valid setup");
+        proptest::prop_assert_eq!(crate::node::setup_of(&p), s);
+    }
+}

@@ -7,9 +7,9 @@
 //! have the STM32F405 board's sizes and the same per-byte queue work; the
 //! bytes are frames this image encodes with the link's own encoder:
 //!
-//! 1. a `Down::Setup` flattened by hand as the host's `setup_for` makes it
-//!    for the seed robot (4 tendons, 0–10 N, slew 200 N/s, 100 Hz, ki 10,
-//!    lead 21 ms, stuck-motor detection on);
+//! 1. a `Down::Setup` built as the host's `setup_for` makes it (`node::setup_of`)
+//!    for the seed robot (4 tendons, 0–10 N, slew 200 N/s, 100 Hz, ki 4,
+//!    lead 20.5 ms, stuck-motor detection on);
 //! 2. [`PERIODS`] periods in lock-step, each one node tick with the bytes
 //!    of that period: a setpoint on a circle (velocity and a tangent that
 //!    turns with it, sent every period: the most bytes a setpoint has), the
@@ -58,8 +58,10 @@ mod mcu {
     use cortex_m_rt::entry;
     use heapless::spsc::{Consumer, Producer, Queue};
     use tendril_firmware::board::Board;
-    use tendril_firmware::node::{Node, MCU_UPDATE_CAPACITY, RX_FRAME, TX_FRAME};
+    use tendril_firmware::control::{ControlConfig, IntegralConfig, SafeHold};
+    use tendril_firmware::node::{self, Node, MCU_UPDATE_CAPACITY, RX_FRAME, TX_FRAME};
     use tendril_firmware::period::event;
+    use tendril_firmware::period::{PeriodConfig, StuckConfig};
     use tendril_firmware::rt::{self, cycles::ticks, cycles::Calibration, Console};
     use tendril_firmware::synth::{synthetic_blob, INPUT_HI, INPUT_LO};
     use tendril_firmware::{McuNet, McuSlots, DEFAULT_NET, DEFAULT_NET_CRC};
@@ -67,7 +69,7 @@ mod mcu {
         Down, Feedback, LinkSetpoint, LinkTangent, Setup, Up, WirePose, MAX_CHUNK,
     };
     use tendril_shared::link::{encode, FrameDecoder};
-    use tendril_shared::{CoContraction, MAX_TENDONS};
+    use tendril_shared::{CoContraction, TendonLimits, MAX_TENDONS};
 
     use super::PERIODS;
 
@@ -208,61 +210,54 @@ mod mcu {
         }
     }
 
-    /// The seed robot's configuration as the host's `setup_for` flattens it
-    /// (host/src/mcu/bridge.rs with `ControllerConfig`'s defaults, 100 Hz,
-    /// ki 10): antagonistic pairs (0, 2) and (1, 3) at equal offsets.
-    fn setup() -> Setup {
-        let mut pad = [0.0f32; MAX_TENDONS];
-        let mut slew = [0.0f32; MAX_TENDONS];
-        let mut weights = [0.0f32; MAX_TENDONS];
-        let mut sets = [CoContraction::NONE; MAX_TENDONS];
-        for (i, (((m, s), w), set)) in pad
-            .iter_mut()
-            .zip(&mut slew)
-            .zip(&mut weights)
-            .zip(&mut sets)
-            .take(TENDONS)
-            .enumerate()
-        {
-            *m = MAX_TENSION;
-            *s = 200.0;
-            *w = 1.0;
-            *set = (i % 2) as u8;
-        }
-        let period = PERIOD_NS;
-        Setup {
-            n_tendons: TENDONS as u8,
-            max_tension: pad,
-            min_tension: [0.0; MAX_TENDONS],
-            slew_rate: slew,
-            cocontraction_sets: sets,
-            cocontraction_weights: weights,
-            period_ns: period,
-            // 2.5 periods.
-            watchdog_ns: period * 5 / 2,
-            max_dt_ns: 5 * period,
-            quaternion_tolerance: 1e-2,
-            box_margin: 0.05,
-            // The host's default correction (design §6.3): the filter and
-            // the error map run in every period, so their cost is counted.
+    /// The seed robot's configuration as the host's controller sets it up
+    /// (`ControllerConfig`'s defaults at 100 Hz: ki 4 /s with its filter
+    /// and error map, the stuck-motor check on), flattened for the link by
+    /// the one mapping the host's bridge uses (`node::setup_of`):
+    /// antagonistic pairs (0, 2) and (1, 3) at equal offsets.
+    /// None if the limits do not validate.
+    fn setup() -> Option<Setup> {
+        let sets: [u8; TENDONS] = core::array::from_fn(|i| (i % 2) as u8);
+        let limits = TendonLimits::new(&[MAX_TENSION; TENDONS], &[200.0; TENDONS])
+            .and_then(|l| l.with_cocontraction(CoContraction::new(&sets, &[1.0; TENDONS])?))
+            .ok()?;
+        let period = u64::from(PERIOD_NS);
+        let mut control = ControlConfig::new(limits);
+        // 2.5 periods.
+        control.watchdog_ns = period * 5 / 2;
+        control.max_dt_ns = 5 * period;
+        control.quaternion_tolerance = 1e-2;
+        control.box_margin = 0.05;
+        control.safe_hold = SafeHold::Freeze;
+        // The host's default correction (design §6.3): the filter and the
+        // error map run in every period, so their cost is counted.
+        control.integral = IntegralConfig {
             ki: 4.0,
-            correction_limit: 0.02,
+            limit: 0.02,
             feedback_timeout_ns: 25 * period,
-            correction_window: 0.02,
-            correction_filter_tau_s: 0.08,
-            correction_map_gain: 2.0,
-            correction_map_scale: 0.01,
-            correction_map_limit: 0.5,
+            window: 0.02,
+            filter_tau_s: 0.08,
+            map_gain: 2.0,
+            map_scale: 0.01,
+            map_limit: 0.5,
+        };
+        Some(node::setup_of(&PeriodConfig {
+            control,
+            period_ns: period,
+            lead_s: 0.0205,
+            plant_stale_ns: 20 * period,
+            stuck: StuckConfig {
+                enabled: true,
+                // 1 − exp(−T/τ), T = 10 ms, τ = 20 ms.
+                model_gain: 1.0 - libm::expf(-0.5),
+                tension_error_n: 0.5,
+                persist_ns: 100_000_000,
+            },
+            swap_slice_bytes: tendril_firmware::SWAP_SLICE_BYTES,
             jump_m: 1e-3,
             settle_after_jump_ns: 300_000_000,
-            lead_s: 0.021,
-            plant_stale_ns: 20 * period,
-            stuck_enabled: true,
-            // 1 − exp(−T/τ), T = 10 ms, τ = 20 ms.
-            stuck_model_gain: 1.0 - libm::expf(-0.5),
-            stuck_error_n: 0.5,
-            stuck_persist_ns: 100_000_000,
-        }
+            commands_in_flight: node::LINK_COMMANDS_IN_FLIGHT,
+        }))
     }
 
     /// The circle: centre and radius inside both nets' input boxes.
@@ -424,7 +419,10 @@ mod mcu {
         let mut store = McuSlots::new(&DEFAULT_NET, ram_net);
         let top = addr_of!(_stack_start) as usize;
         let circle = Circle::new();
-        let cfg = setup();
+        let Some(cfg) = setup() else {
+            let _ = writeln!(out, "error setup limits");
+            return false;
+        };
         let gain = cfg.stuck_model_gain;
 
         // The Setup tick (not a period: lock-step starts with the first Step).

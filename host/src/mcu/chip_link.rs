@@ -6,13 +6,13 @@
 use std::time::Duration;
 
 use anyhow::{anyhow, bail, Result};
-use tendril_firmware::period::PeriodConfig;
+pub use tendril_firmware::node::setup_of;
 use tendril_shared::link::wire::{
     units, Down, Feedback, Hello, LinkSetpoint, LinkTangent, Setup, Up, WirePose, MAX_UP_PAYLOAD,
     PROTOCOL_VERSION,
 };
 use tendril_shared::link::{encode, max_frame_len, FrameCounters, FrameDecoder};
-use tendril_shared::messages::{setpoint_flags, PlantState, Setpoint, MAX_TENDONS};
+use tendril_shared::messages::{setpoint_flags, PlantState, Setpoint};
 
 use super::McuLink;
 use crate::ipc::controller::{period_config, ControllerConfig};
@@ -24,52 +24,6 @@ use crate::robot::Robot;
 pub fn setup_for(cfg: &ControllerConfig, robot: &Robot) -> Result<Setup, IpcError> {
     let p = period_config(cfg, robot)?;
     Ok(setup_of(&p))
-}
-
-/// Flatten a period configuration for the link.
-pub fn setup_of(p: &PeriodConfig) -> Setup {
-    let l = &p.control.limits;
-    let n = l.n_tendons();
-    let pad = |a: &[f32]| {
-        let mut out = [0.0f32; MAX_TENDONS];
-        for (d, v) in out.iter_mut().zip(a) {
-            *d = *v;
-        }
-        out
-    };
-    let mut sets = [0u8; MAX_TENDONS];
-    sets[..n].copy_from_slice(&l.cocontraction().sets()[..n]);
-    let ns = |v: u64| v.min(u64::from(u32::MAX)) as u32;
-    let ic = p.control.integral;
-    Setup {
-        n_tendons: n as u8,
-        max_tension: pad(l.max_tension()),
-        min_tension: pad(l.min_tension()),
-        slew_rate: pad(l.slew_rate()),
-        cocontraction_sets: sets,
-        cocontraction_weights: *l.cocontraction().weights(),
-        period_ns: ns(p.period_ns),
-        watchdog_ns: ns(p.control.watchdog_ns),
-        max_dt_ns: ns(p.control.max_dt_ns),
-        quaternion_tolerance: p.control.quaternion_tolerance,
-        box_margin: p.control.box_margin,
-        ki: ic.ki,
-        correction_limit: ic.limit,
-        feedback_timeout_ns: ns(ic.feedback_timeout_ns),
-        correction_window: ic.window,
-        correction_filter_tau_s: ic.filter_tau_s,
-        correction_map_gain: ic.map_gain,
-        correction_map_scale: ic.map_scale,
-        correction_map_limit: ic.map_limit,
-        jump_m: p.jump_m,
-        settle_after_jump_ns: ns(p.settle_after_jump_ns),
-        lead_s: p.lead_s,
-        plant_stale_ns: ns(p.plant_stale_ns),
-        stuck_enabled: p.stuck.enabled,
-        stuck_model_gain: p.stuck.model_gain,
-        stuck_error_n: p.stuck.tension_error_n,
-        stuck_persist_ns: ns(p.stuck.persist_ns),
-    }
 }
 
 /// The planner's setpoint as a link message; the tangent only when it
