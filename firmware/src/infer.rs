@@ -313,3 +313,134 @@ unsafe fn dot8_raw(w: *const f32, a: *const f32, blocks: usize) -> f32 {
         dot8_blocks(w, a, blocks)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::needless_range_loop)] // index loops read like the formulas here
+
+    use std::vec::Vec;
+
+    use crate::infer::{dot8, infer};
+
+    use crate::synth::{SplitMix64, INPUT_HI, INPUT_LO};
+
+    use crate::test_support::*;
+
+    /// The store bounds a net by its weights: the MCU's net type takes the
+    /// nine-tendon net with the most units that fit (7-63-9), infers it as the
+    /// f64 reference says, and refuses one unit more (7-64-9).
+    #[test]
+    fn nine_outputs_fit_the_store_with_one_unit_fewer() {
+        use tendril_shared::{max_hidden_for, McuNet, TnetError};
+        let h = max_hidden_for(9);
+        assert_eq!(h, 63);
+        let net = McuNet::decode(&blob(21, h, 9)).unwrap();
+        let mut rng = SplitMix64(5);
+        for _ in 0..50 {
+            let mut x = [0.0f32; 7];
+            for i in 0..7 {
+                x[i] = rng.uniform(INPUT_LO[i], INPUT_HI[i]);
+            }
+            let y = infer(&net, &x);
+            let r = reference(21, h, 9, &x);
+            for o in 0..9 {
+                assert!(
+                    (y[o] as f64 - r[o]).abs() < 1e-4 * (1.0 + r[o].abs()),
+                    "{o}"
+                );
+            }
+        }
+        assert!(matches!(
+            McuNet::decode(&blob(21, h + 1, 9)),
+            Err(TnetError::ShapeOverCapacity { .. })
+        ));
+    }
+
+    #[test]
+    fn dot8_matches_a_plain_sum_over_whole_blocks_for_every_length() {
+        for n in 0..42 {
+            let w: Vec<f32> = (0..n).map(|i| 0.5 - 0.1 * i as f32).collect();
+            let a: Vec<f32> = (0..n).map(|i| 1.0 + 0.25 * i as f32).collect();
+            // Only the first 8 ⌊n/8⌋ products count.
+            let whole = n / 8 * 8;
+            let exact: f64 = w[..whole]
+                .iter()
+                .zip(&a[..whole])
+                .map(|(x, y)| *x as f64 * *y as f64)
+                .sum();
+            assert!((dot8(&w, &a) as f64 - exact).abs() < 1e-4, "n={n}");
+            // The longer slice's extra entries are ignored.
+            let mut longer = a.clone();
+            longer.extend([1e30; 8]);
+            assert_eq!(dot8(&w, &longer), dot8(&w, &a));
+        }
+    }
+
+    #[test]
+    fn inference_matches_an_f64_reference_of_the_documented_layout() {
+        let mut rng = SplitMix64(99);
+        let cases = [
+            (1u64, 0usize, 4usize),
+            (2, 1, 1),
+            (3, 12, 4),
+            (4, 16, 8),
+            (5, 64, 8),
+            (6, 63, 3),
+            (7, 9, 4),
+        ];
+        for &(seed, hidden, outputs) in &cases {
+            let b = blob(seed, hidden, outputs);
+            // Every case through the 64-unit MCU capacity; those that fit also
+            // through the 16-unit one (a different packing: same result).
+            let net = Net64::decode(&b).unwrap();
+            let small = Net::decode(&b).ok();
+            for _ in 0..50 {
+                let mut x = [0.0f32; 7];
+                for i in 0..7 {
+                    x[i] = rng.uniform(INPUT_LO[i], INPUT_HI[i]);
+                }
+                let y = infer(&net, &x);
+                if let Some(small) = &small {
+                    assert_eq!(infer(small, &x), y);
+                }
+                let r = reference(seed, hidden, outputs, &x);
+                for o in 0..outputs {
+                    let tol = 1e-4 * (1.0 + r[o].abs());
+                    assert!(
+                        (y[o] as f64 - r[o]).abs() < tol,
+                        "{seed} {o}: {} vs {}",
+                        y[o],
+                        r[o]
+                    );
+                }
+                assert!(y[outputs..].iter().all(|&v| v == 0.0));
+            }
+        }
+    }
+
+    #[test]
+    fn one_hidden_unit_by_hand() {
+        // 7-1-1 net with weights from the seed; check the closed form at the box
+        // centre, where every normalised input is exactly 0.5.
+        let seed = 5;
+        let net = Net::decode(&blob(seed, 1, 1)).unwrap();
+        let mut rng = SplitMix64(seed);
+        let w: Vec<f32> = (0..8 + 9).map(|_| rng.uniform(-1.0, 1.0)).collect();
+        let s_h: f64 = w[0] as f64 + 0.5 * w[1..8].iter().map(|&v| v as f64).sum::<f64>();
+        let h = 1.0 / (1.0 + (-s_h).exp()) - 0.5;
+        let s_o =
+            w[8] as f64 + 0.5 * w[9..16].iter().map(|&v| v as f64).sum::<f64>() + w[16] as f64 * h;
+        let y = infer(&net, &box_centre());
+        assert!(
+            (y[0] as f64 - 10.0 * s_o).abs() < 1e-5,
+            "{} vs {}",
+            y[0],
+            10.0 * s_o
+        );
+    }
+
+    #[test]
+    fn empty_net_infers_zeros() {
+        assert_eq!(infer(&Net::empty(), &mid_pose()), [0.0; 8]);
+    }
+}

@@ -43,11 +43,7 @@
 extern crate std;
 
 #[cfg(test)]
-mod node_tests;
-#[cfg(test)]
-mod swap_tests;
-#[cfg(test)]
-mod tests;
+mod test_support;
 
 pub mod board;
 pub mod command;

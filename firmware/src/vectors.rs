@@ -413,3 +413,51 @@ where
     writeln!(out, "done {}", sum.steps)?;
     Ok(sum)
 }
+
+#[cfg(test)]
+mod tests {
+    use std::vec::Vec;
+
+    use crate::vectors::{self, Record, VecHeader};
+
+    use crate::test_support::*;
+
+    #[test]
+    fn vector_header_and_records_round_trip() {
+        let h = VecHeader {
+            count: 2,
+            n_tendons: 4,
+            max_tension: 10.0,
+            slew_rate: 200.0,
+            watchdog_ns: 7,
+            max_dt_ns: 8,
+            ki: 0.5,
+            integral_limit: 0.01,
+            feedback_timeout_ns: 9,
+            quaternion_tolerance: 0.02,
+            box_margin: 0.03,
+        };
+        let r = Record {
+            now_ns: 123,
+            flags: vectors::HAS_SETPOINT,
+            seq: 4,
+            pose: mid_pose(),
+            tip: [1.0, 2.0, 3.0],
+        };
+        let mut bytes = std::vec![0u8; vectors::HEADER_LEN + 2 * vectors::RECORD_LEN];
+        h.write((&mut bytes[..vectors::HEADER_LEN]).try_into().unwrap());
+        for k in 0..2 {
+            let at = vectors::HEADER_LEN + k * vectors::RECORD_LEN;
+            r.write(
+                (&mut bytes[at..at + vectors::RECORD_LEN])
+                    .try_into()
+                    .unwrap(),
+            );
+        }
+        let (h2, recs) = vectors::parse(&bytes).unwrap();
+        assert_eq!(h2, h);
+        let recs: Vec<Record> = recs.collect();
+        assert_eq!(recs, std::vec![r, r]);
+        assert!(vectors::parse(&bytes[..bytes.len() - 1]).is_err());
+    }
+}

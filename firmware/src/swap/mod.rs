@@ -342,3 +342,6 @@ impl<'b, const IN: usize, const H: usize, const OUT: usize, const W: usize>
         }
     }
 }
+
+#[cfg(test)]
+mod tests;

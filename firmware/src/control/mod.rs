@@ -677,3 +677,6 @@ fn total_correction(st: &ControlState) -> [f32; 3] {
     }
     c
 }
+
+#[cfg(test)]
+mod tests;

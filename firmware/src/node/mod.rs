@@ -173,7 +173,7 @@ pub fn period_config(s: &Setup) -> Result<PeriodConfig, u8> {
 
 /// The link's `Setup` for a period configuration: [`period_config`]'s
 /// inverse, beside it (the host's bridge and the budget image use it;
-/// round trip: `node_tests`). Times above u32::MAX ns are clamped to it.
+/// round trip: `node::tests`). Times above u32::MAX ns are clamped to it.
 pub fn setup_of(p: &PeriodConfig) -> Setup {
     let l = &p.control.limits;
     let n = l.n_tendons();
@@ -696,3 +696,6 @@ fn detail_of(e: &crate::period::Events) -> EventDetail {
         hold_silence_us: sat(e.hold_silence_ns / 1000),
     }
 }
+
+#[cfg(test)]
+mod tests;

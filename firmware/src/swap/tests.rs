@@ -3,6 +3,8 @@
 //! leaves the old net running at every period, and a second blob mid-swap
 //! supersedes the first.
 
+use crate::test_support::*;
+
 use core::task::Poll;
 use std::boxed::Box;
 use std::vec::Vec;
@@ -284,4 +286,106 @@ proptest! {
         let (r, _) = run_check(&b, budget);
         prop_assert_eq!(r, Net64::validate(&b));
     }
+}
+
+#[test]
+fn a_rejected_blob_leaves_the_running_net_in_place() {
+    let good = blob(3, 12, 4);
+    let other = blob(8, 12, 4);
+    let mut slots = NetSlots::<7, 16, 8, { weight_capacity(7, 16, 8) }>::new();
+    slots.load(&good, (7, 4)).unwrap();
+    let pose = mid_pose();
+    let before = infer(slots.active(), &pose);
+    let mut bad = other.clone();
+    bad[30] ^= 1;
+    assert!(matches!(
+        slots.load(&bad, (7, 4)),
+        Err(SwapError::Decode(_))
+    ));
+    assert_eq!(infer(slots.active(), &pose), before);
+    assert!(matches!(
+        slots.load(&blob(3, 12, 3), (7, 4)),
+        Err(SwapError::ShapeMismatch { outputs: 3, .. })
+    ));
+    assert_eq!(infer(slots.active(), &pose), before);
+    assert!(matches!(
+        slots.load(&blob(3, 17, 4), (7, 4)),
+        Err(SwapError::Decode(_))
+    ));
+    assert_eq!(infer(slots.active(), &pose), before);
+    slots.load(&other, (7, 4)).unwrap();
+    let after = infer(slots.active(), &pose);
+    assert_eq!(after, infer(&Net::decode(&other).unwrap(), &pose));
+    assert_ne!(after, before);
+    // Swapping back and forth keeps working (both buffers reused).
+    slots.load(&good, (7, 4)).unwrap();
+    assert_eq!(infer(slots.active(), &pose), before);
+}
+
+/// `b` with its last weight (just before the CRC) NaN and the CRC
+/// recomputed: passes every structural check, fails only on the value.
+fn nan_blob(b: &[u8]) -> Vec<u8> {
+    let mut bad = b.to_vec();
+    let body = bad.len() - 4;
+    bad[body - 4..body].copy_from_slice(&f32::NAN.to_le_bytes());
+    let crc = tendril_shared::crc32::crc32(&bad[..body]);
+    bad[body..].copy_from_slice(&crc.to_le_bytes());
+    bad
+}
+
+#[test]
+fn flash_slot_rejections_keep_the_running_net_flash_or_ram() {
+    let flash = Net64::decode(&blob(3, 12, 4)).unwrap();
+    let update = blob(8, 40, 4);
+    let update2 = blob(9, 5, 4);
+    let mut ram = std::boxed::Box::new(Net64::empty());
+    let mut store = FlashSlot::new(&flash, &mut ram);
+    let want = (7, 4);
+    let mut crc_flip = update.clone();
+    crc_flip[40] ^= 0x10;
+    let rejects: [(&str, Vec<u8>); 5] = [
+        ("NaN weight under a valid CRC", nan_blob(&update)),
+        ("truncated", update[..update.len() - 1].to_vec()),
+        ("corrupted byte", crc_flip),
+        ("wrong output count", blob(8, 40, 3)),
+        ("over capacity", blob(8, 65, 4)),
+    ];
+    let check_rejects = |store: &mut FlashSlot<'_, 7, 64, 8, { weight_capacity(7, 64, 8) }>,
+                         running: &Net64,
+                         on_ram: bool| {
+        for (what, b) in &rejects {
+            assert!(store.load(b, want).is_err(), "{what} accepted");
+            assert_eq!(store.active(), running, "{what} changed the running net");
+            assert_eq!(store.running_ram(), on_ram, "{what}");
+        }
+    };
+    // The flash net runs; rejections leave it.
+    check_rejects(&mut store, &flash, false);
+    assert!(core::ptr::eq(store.active(), &flash));
+    // An update goes to RAM and runs.
+    let expected = Net64::decode(&update).unwrap();
+    store.load(&update, want).unwrap();
+    assert!(store.running_ram());
+    assert_eq!(store.active(), &expected);
+    // While the RAM slot runs, every rejection leaves it intact, including
+    // the NaN blob that is only refused after the whole file was read.
+    check_rejects(&mut store, &expected, true);
+    // An update over the running RAM net; a smaller one leaves no stale weights.
+    store.load(&update2, want).unwrap();
+    assert_eq!(store.active(), &Net64::decode(&update2).unwrap());
+    check_rejects(&mut store, &Net64::decode(&update2).unwrap(), true);
+    // Back to flash.
+    assert!(store.revert());
+    assert!(!store.revert());
+    assert!(core::ptr::eq(store.active(), &flash));
+}
+
+#[test]
+fn the_flash_default_net_is_its_file_decoded_at_run_time() {
+    // build.rs generated DEFAULT_NET from this file through `from_view` in
+    // const context; the run-time decoder must give the same net.
+    let file = include_bytes!(env!("TENDRIL_FW_NET_FILE"));
+    let decoded = crate::McuNet::decode(file).unwrap();
+    assert_eq!(crate::DEFAULT_NET, decoded);
+    assert!(crate::DEFAULT_NET.shape().hidden <= tendril_shared::MAX_HIDDEN);
 }

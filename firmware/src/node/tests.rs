@@ -465,7 +465,7 @@ fn send_update(r: &mut Rig, blob: &[u8], first_period: u64) -> Vec<LinkCommand> 
 
 #[test]
 fn a_chunked_update_is_swapped_in_and_a_corrupted_one_rejected() {
-    let blob: &[u8] = include_bytes!("../vectors/default.tnet");
+    let blob: &[u8] = include_bytes!("../../vectors/default.tnet");
     let mut r = configured();
     r.step(0);
     // Corrupted in the middle (weights): the check refuses it.
@@ -504,7 +504,7 @@ fn a_chunked_update_is_swapped_in_and_a_corrupted_one_rejected() {
 /// bridge that reconnects sends its net only when the chip lacks it.
 #[test]
 fn the_hello_names_the_net_that_runs() {
-    let builtin: &[u8] = include_bytes!("../vectors/default.tnet");
+    let builtin: &[u8] = include_bytes!("../../vectors/default.tnet");
     // Another valid net: one weight's lowest mantissa bit flipped, the CRC
     // field made right again.
     let mut other = builtin.to_vec();
