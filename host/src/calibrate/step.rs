@@ -185,8 +185,13 @@ fn linear_fit(t: &[f64], y: &[[f64; 3]], sigma: f64, omega: f64) -> ([[f64; 3]; 
         let x = inverse * aty[c];
         [x[0], x[1], x[2]]
     });
-    let rss = t
-        .iter()
+    let rss = rss_of(t, y, sigma, omega, &coef);
+    (coef, rss)
+}
+
+/// The residual sum of squares of the model (σ, ω, per-axis coefficients).
+fn rss_of(t: &[f64], y: &[[f64; 3]], sigma: f64, omega: f64, coef: &[[f64; 3]; 3]) -> f64 {
+    t.iter()
         .zip(y)
         .map(|(&ti, yi)| {
             let b = basis(ti, sigma, omega);
@@ -194,8 +199,7 @@ fn linear_fit(t: &[f64], y: &[[f64; 3]], sigma: f64, omega: f64) -> ([[f64; 3]; 
                 .map(|c| (yi[c] - coef[c][0] - coef[c][1] * b.e_cos - coef[c][2] * b.e_sin).powi(2))
                 .sum::<f64>()
         })
-        .sum();
-    (coef, rss)
+        .sum()
 }
 
 /// Fit the first mode to `trace` from `skip_s` after its first frame (the
@@ -279,7 +283,7 @@ pub fn fit_step(trace: &StepTrace, skip_s: f64) -> Result<StepFit, StepError> {
         let (s2, w2) = (sigma + step[0], omega + step[1]);
         let c2: [[f64; 3]; 3] =
             std::array::from_fn(|c| std::array::from_fn(|k| coef[c][k] + step[2 + 3 * c + k]));
-        let rss2: f64 = jacobian(s2, w2, &c2).1.norm_squared();
+        let rss2 = rss_of(&t, y, s2, w2, &c2);
         if rss2 < rss && w2 > 0.0 {
             let done = (rss - rss2) < 1e-12 * rss;
             (sigma, omega, coef, rss) = (s2, w2, c2, rss2);

@@ -14,8 +14,7 @@ use super::transport::{self, Services};
 use super::{IpcError, StopWatch};
 use crate::plan::learning::PassOutcome;
 use crate::plan::{
-    along_axes, IntegralGains, Learner, LearningChoice, Motion, PathShape, ShapingChoice,
-    Trajectory,
+    along_axes, Learner, LearningChoice, Motion, PathShape, ShapingChoice, Trajectory,
 };
 use crate::robot::Robot;
 use crate::statics::{SolverSettings, Statics};
@@ -343,11 +342,12 @@ fn learner(
 ) -> Result<Option<Learner>, IpcError> {
     // The controller's defaults: a launcher that knows the controller's
     // own gains designs with them and passes the design.
-    let scale = super::controller::correction::mode_scale(robot);
-    let gains = IntegralGains {
-        ki_per_s: super::controller::correction::KI_PER_S * scale,
-        filter_tau_s: super::controller::correction::FILTER_TAU_S / scale,
-    };
+    let gains = super::controller::correction::applied(
+        robot,
+        super::controller::correction::KI_PER_S,
+        super::controller::correction::FILTER_TAU_S,
+        true,
+    );
     match cfg.learning.resolve(shaping, cfg.shape.period_s(), gains) {
         Ok(Some(design)) => {
             log::info!(

@@ -525,28 +525,35 @@ impl Learner {
 
     fn finish(&mut self, pass: u64, side: usize) -> PassOutcome {
         let bins = self.bins();
-        let c = &self.counts[side];
-        let full: Vec<usize> = (0..bins).filter(|&n| c[n] > 0).collect();
-        let gap = full
-            .windows(2)
-            .map(|w| w[1] - w[0] - 1)
-            .chain(full.first().zip(full.last()).map(|(a, b)| a + bins - b - 1))
-            .max()
-            .unwrap_or(bins);
-        if gap > MAX_GAP_BINS {
-            return PassOutcome::TooFewFrames { pass };
-        }
         // Mean per bin with a frame; an empty bin (a tracker slower than
         // the bins) interpolated between its neighbours, around the pass.
-        let s = &self.sums[side];
-        for (i, &a) in full.iter().enumerate() {
-            let b = full[(i + 1) % full.len()];
+        // A run of more than MAX_GAP_BINS empty bins refuses the pass. No
+        // allocation: this runs in the planner's loop.
+        let (s, c) = (&self.sums[side], &self.counts[side]);
+        let Some(first) = (0..bins).find(|&n| c[n] > 0) else {
+            return PassOutcome::TooFewFrames { pass };
+        };
+        let mut a = first;
+        loop {
+            let b = (1..=bins)
+                .map(|j| (a + j) % bins)
+                .find(|&n| c[n] > 0)
+                .unwrap_or(a);
+            let span = match (b + bins - a) % bins {
+                0 => bins,
+                span => span,
+            };
+            if span - 1 > MAX_GAP_BINS {
+                return PassOutcome::TooFewFrames { pass };
+            }
             let (ea, eb) = (s[a].map(|v| v / c[a] as f64), s[b].map(|v| v / c[b] as f64));
-            let span = (b + bins - a) % bins;
-            let span = if span == 0 { bins } else { span };
             for j in 0..span {
                 let f = j as f64 / span as f64;
                 self.means[(a + j) % bins] = std::array::from_fn(|k| ea[k] + f * (eb[k] - ea[k]));
+            }
+            a = b;
+            if a == first {
+                break;
             }
         }
         let rms_m = (self

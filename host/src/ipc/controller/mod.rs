@@ -78,6 +78,27 @@ pub mod correction {
         let f1 = crate::robot::first_bending_mode_rad_s(robot) / std::f64::consts::TAU;
         (f1 / REFERENCE_MODE_HZ).min(1.0)
     }
+
+    /// The integral's gain and error filter as `task::period_config`
+    /// scales them on `robot` ([`mode_scale`] when `scale_to_mode`): what
+    /// the planner's learning models, for the sim's launcher and a planner
+    /// alone alike.
+    pub fn applied(
+        robot: &crate::robot::Robot,
+        ki_per_s: f64,
+        filter_tau_s: f64,
+        scale_to_mode: bool,
+    ) -> crate::plan::IntegralGains {
+        let scale = if scale_to_mode {
+            mode_scale(robot)
+        } else {
+            1.0
+        };
+        crate::plan::IntegralGains {
+            ki_per_s: ki_per_s * scale,
+            filter_tau_s: filter_tau_s / scale,
+        }
+    }
 }
 
 pub use report::{

@@ -203,15 +203,12 @@ fn learning(
 ) -> Result<crate::plan::LearningChoice, SimError> {
     use crate::plan::LearningChoice;
     let c = &cfg.controller;
-    let scale = if c.scale_gains_to_mode {
-        crate::ipc::controller::correction::mode_scale(robot)
-    } else {
-        1.0
-    };
-    let gains = crate::plan::IntegralGains {
-        ki_per_s: c.ki_per_s * scale,
-        filter_tau_s: c.correction_filter_tau_s / scale,
-    };
+    let gains = crate::ipc::controller::correction::applied(
+        robot,
+        c.ki_per_s,
+        c.correction_filter_tau_s,
+        c.scale_gains_to_mode,
+    );
     match cfg
         .planner
         .learning
