@@ -306,7 +306,7 @@ impl ControllerArgs {
                     "a number of ms > 0",
                 )?;
             }
-            cfg.mcu = Some(crate::mcu::bridge::McuOptions {
+            cfg.mcu = Some(crate::ipc::controller::McuOptions {
                 socket: self.mcu_socket,
                 image: self.mcu_image,
                 garbage_every_ms: self.link_garbage_every_ms,

@@ -277,6 +277,11 @@ impl Ticker {
         }
     }
 
+    /// Period 0's deadline (ns).
+    pub fn start_ns(&self) -> u64 {
+        self.start_ns
+    }
+
     /// Period length (ns).
     pub fn period_ns(&self) -> u64 {
         self.period_ns

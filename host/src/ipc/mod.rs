@@ -16,6 +16,7 @@ pub mod clock;
 pub mod controller;
 pub mod planner;
 pub mod plant;
+pub mod process;
 pub mod sim;
 pub mod stats;
 pub mod transport;

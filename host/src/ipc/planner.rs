@@ -8,10 +8,11 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 use tendril_shared::messages::{setpoint_flags, Header, PlantState, Setpoint, TensionCommand};
 
-use super::clock::{now_ns, tighten_timer_slack, Ticker};
+use super::clock::{now_ns, Ticker};
+use super::process::{self, Process, Scheduling, Stepped};
 use super::stats::CsvLog;
 use super::transport::{self, Services};
-use super::{IpcError, StopWatch};
+use super::IpcError;
 use crate::plan::learning::PassOutcome;
 use crate::plan::{
     along_axes, Learner, LearningChoice, Motion, PathShape, ShapingChoice, Trajectory,
@@ -122,9 +123,39 @@ pub fn log_header(tendons: usize) -> String {
     header
 }
 
-/// Run the planner process until stopped or done.
+/// Run the planner process until stopped or done; returns how many
+/// setpoints it sent.
 pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
-    super::die_with_parent(cfg.supervised)?;
+    let process = Process {
+        name: "planner",
+        prefix: &cfg.prefix,
+        supervised: cfg.supervised,
+        duration_s: cfg.duration_s,
+        peer_timeout_s: cfg.peer_timeout_s,
+        peer_start_grace_s: cfg.peer_start_grace_s,
+        log: cfg.log.as_deref(),
+        stats: None,
+        scheduling: Some(Scheduling {
+            cpu: cfg.cpu,
+            realtime: cfg.realtime,
+            priority: super::clock::PLANNER_PRIORITY,
+        }),
+    };
+    process::run(
+        &process,
+        || plan(cfg),
+        |planned, services| PlannerTask::open(cfg, planned, services),
+    )
+}
+
+/// What the planner works out before it joins the loop (the CPU-heavy
+/// part: the path lifted to reachable poses, the shaping, the learning).
+struct Planned {
+    motion: Motion,
+    learner: Option<Learner>,
+}
+
+fn plan(cfg: &PlannerConfig) -> Result<Planned, IpcError> {
     if !(cfg.rate_hz > 0.0 && cfg.rate_hz <= 20_000.0 && cfg.settle_s >= 0.0) {
         return Err(IpcError::Config(format!(
             "planner rate {} Hz / settle {} s: rate must be in (0, 20000], settle ≥ 0",
@@ -168,45 +199,109 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
     let inverse = shaping
         .filter(|_| cfg.dynamic_offset && cfg.shape.is_smooth())
         .map(|s| s.modal_inverse());
-    let motion = Motion::new(traj, cfg.settle_s, rest, inverse);
-    let traj = motion.trajectory();
-    let mut learner = learner(cfg, &robot, shaping)?;
+    Ok(Planned {
+        motion: Motion::new(traj, cfg.settle_s, rest, inverse),
+        learner: learner(cfg, &robot, shaping)?,
+    })
+}
 
-    let node = transport::node("tendril-planner")?;
-    let _orphan = transport::ReleaseIfOrphaned(&node);
-    let services = Services::open_or_create(&node, &cfg.prefix)?;
-    let publisher = transport::publisher(&services.setpoint)?;
-    // The controller's commands say it is alive (the peers-lost rule).
-    let commands = transport::subscriber(&services.tension_cmd)?;
-    let stop = StopWatch::new(&services)?;
-    // The tracker's frames, for the learning only.
-    let states = match learner {
-        Some(_) => Some(transport::subscriber(&services.plant_state)?),
-        None => None,
-    };
-    let mut last_frame = 0u32;
-    let mut log = CsvLog::create(cfg.log.as_deref(), &log_header(traj.tendons()))?;
-    let mut feedforward = Vec::with_capacity(traj.tendons());
-    tighten_timer_slack();
-    super::clock::apply_scheduling(
-        "planner",
-        cfg.cpu,
-        cfg.realtime,
-        super::clock::PLANNER_PRIORITY,
-    );
+/// The planner as a [`process::Task`]: each step sleeps to its deadline and
+/// sends the setpoint for that time (with the learned offset and any
+/// injected fault), and learns from the tracker's newest frame.
+struct PlannerTask<'a> {
+    inject: &'a Injections,
+    rate_hz: f64,
+    motion: Motion,
+    learner: Option<Learner>,
+    publisher: transport::Pub<Setpoint>,
+    /// The controller's commands say it is alive (the peers-lost rule).
+    commands: transport::Sub<TensionCommand>,
+    /// The tracker's frames, for the learning only.
+    states: Option<transport::Sub<PlantState>>,
+    last_frame: u32,
+    feedforward: Vec<f64>,
+    row: Vec<f64>,
+    ticker: Ticker,
+    start: u64,
+    seq: u64,
+}
 
-    let period_ns = (1e9 / cfg.rate_hz).round() as u64;
-    let start = now_ns();
-    let mut peers = super::PeerWatch::new(cfg.peer_timeout_s, cfg.peer_start_grace_s, start);
-    let mut ticker = Ticker::new(start, period_ns);
-    let mut seq = 0u64;
-    let mut last_flush = start;
-    loop {
-        let tick = ticker.wait(0);
-        let t = (tick.deadline_ns - start) as f64 * 1e-9;
-        let desired = motion.at(t);
+impl<'a> PlannerTask<'a> {
+    fn open(
+        cfg: &'a PlannerConfig,
+        planned: Planned,
+        services: &Services,
+    ) -> Result<PlannerTask<'a>, IpcError> {
+        let tendons = planned.motion.trajectory().tendons();
+        let period_ns = (1e9 / cfg.rate_hz).round() as u64;
+        let start = now_ns();
+        Ok(PlannerTask {
+            inject: &cfg.inject,
+            rate_hz: cfg.rate_hz,
+            states: match planned.learner {
+                Some(_) => Some(transport::subscriber(&services.plant_state)?),
+                None => None,
+            },
+            motion: planned.motion,
+            learner: planned.learner,
+            publisher: transport::publisher(&services.setpoint)?,
+            commands: transport::subscriber(&services.tension_cmd)?,
+            last_frame: 0,
+            feedforward: Vec::with_capacity(tendons),
+            row: Vec::with_capacity(10 + tendons + 1),
+            ticker: Ticker::new(start, period_ns),
+            start,
+            seq: 0,
+        })
+    }
+
+    /// Learn from the tracker's newest frame, close a pass when the path
+    /// wraps; returns the offset learned for `t_path` (s on the path) and
+    /// the log's learning flags.
+    fn learn(&mut self, t_path: f64, on_path: bool) -> Result<(Option<[f64; 3]>, u32), IpcError> {
+        let (Some(learner), Some(states)) = (self.learner.as_mut(), self.states.as_ref()) else {
+            return Ok((None, 0));
+        };
+        let mut log_flags = 0;
+        let (state, _): (Option<PlantState>, usize) = transport::latest(states)?;
+        if let Some(state) = state.filter(|s| s.tip_seq != 0 && s.tip_seq != self.last_frame) {
+            self.last_frame = state.tip_seq;
+            learn_from(learner, &self.motion, &state, self.start);
+        }
+        if let Some(outcome) = learner.advance(t_path) {
+            say(&outcome);
+        }
+        if learner.stopped() {
+            log_flags |= LOG_LEARNING_STOPPED;
+        }
+        let learned = on_path.then(|| learner.offset(t_path));
+        if learned.is_some() {
+            log_flags |= LOG_LEARNED;
+        }
+        Ok((learned, log_flags))
+    }
+}
+
+impl process::Task for PlannerTask<'_> {
+    type Stats = u64;
+
+    fn log_header(&self) -> String {
+        log_header(self.motion.trajectory().tendons())
+    }
+
+    fn start_ns(&self) -> u64 {
+        self.start
+    }
+
+    fn step(&mut self, log: &mut CsvLog) -> Result<Stepped, IpcError> {
+        let tick = self.ticker.wait(0);
+        let t = (tick.deadline_ns - self.start) as f64 * 1e-9;
+        let desired = self.motion.at(t);
         let point = desired.point;
-        let miss = traj.feedforward(desired.t_path, &mut feedforward);
+        let miss = self
+            .motion
+            .trajectory()
+            .feedforward(desired.t_path, &mut self.feedforward);
         let mut flags = 0;
         for (on, bit) in [
             (desired.holding, setpoint_flags::HOLD),
@@ -217,28 +312,9 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
                 flags |= bit;
             }
         }
-        let mut log_flags = 0;
-        if let (Some(learner), Some(states)) = (learner.as_mut(), states.as_ref()) {
-            let (state, _): (Option<PlantState>, usize) = transport::latest(states)?;
-            if let Some(state) = state.filter(|s| s.tip_seq != 0 && s.tip_seq != last_frame) {
-                last_frame = state.tip_seq;
-                learn_from(learner, &motion, &state, start);
-            }
-            if let Some(outcome) = learner.advance(desired.t_path) {
-                say(&outcome);
-            }
-            if learner.stopped() {
-                log_flags |= LOG_LEARNING_STOPPED;
-            }
-        }
-        let learned = learner
-            .as_ref()
-            .filter(|_| !desired.holding && !desired.moving)
-            .map(|l| l.offset(desired.t_path));
-        if learned.is_some() {
-            log_flags |= LOG_LEARNED;
-        }
-        let dynamic_offset = match (motion.dynamic_offset(t, &desired), learned) {
+        let (learned, log_flags) =
+            self.learn(desired.t_path, !desired.holding && !desired.moving)?;
+        let dynamic_offset = match (self.motion.dynamic_offset(t, &desired), learned) {
             (None, None) => [0.0; 3],
             (inverse, learned) => {
                 flags |= setpoint_flags::HAS_DYNAMIC_OFFSET;
@@ -261,21 +337,21 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
         };
         let clean = pose;
         let mut injected = false;
-        if cfg
+        if self
             .inject
             .nan_at_s
             .iter()
-            .any(|&a| t >= a && t < a + 1.0 / cfg.rate_hz)
+            .any(|&a| t >= a && t < a + 1.0 / self.rate_hz)
         {
             pose[0] = f32::NAN;
             injected = true;
             log::warn!("planner: injecting a NaN setpoint at {t:.3} s");
         }
-        if cfg
+        if self
             .inject
             .outside_at_s
             .iter()
-            .any(|&a| t >= a && t < a + cfg.inject.outside_for_s)
+            .any(|&a| t >= a && t < a + self.inject.outside_for_s)
         {
             // 1 m sideways: far outside any 0.4 m robot's reach.
             pose[0] += 1.0;
@@ -285,11 +361,11 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
                 | setpoint_flags::HAS_TANGENT
                 | setpoint_flags::HAS_DYNAMIC_OFFSET);
         }
-        seq += 1;
+        self.seq += 1;
         let stamp = now_ns();
         let msg = Setpoint {
             header: Header {
-                seq,
+                seq: self.seq,
                 stamp_ns: stamp,
             },
             pose,
@@ -301,35 +377,31 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
             dynamic_offset,
             reserved: 0,
         };
-        transport::send(&publisher, msg)?;
+        transport::send(&self.publisher, msg)?;
         // The log keeps the trajectory's pose (what the robot should do)
         // and marks injected messages.
         let log_flags = log_flags | flags | if injected { LOG_INJECTED } else { 0 };
-        let mut row = vec![stamp as f64, seq as f64, log_flags as f64];
+        let row = &mut self.row;
+        row.clear();
+        row.extend([stamp as f64, self.seq as f64, log_flags as f64]);
         row.extend(clean.iter().map(|&v| v as f64));
-        row.extend_from_slice(&feedforward);
+        row.extend_from_slice(&self.feedforward);
         row.push(miss);
-        log.row(&row)?;
-        if stamp - last_flush > 100_000_000 {
-            log.flush()?;
-            last_flush = stamp;
-        }
-        if stop.requested() || cfg.duration_s.is_some_and(|d| t >= d) {
-            break;
-        }
-        let (command, _): (Option<TensionCommand>, usize) = transport::latest(&commands)?;
-        if command.is_some() {
-            peers.heard(stamp);
-        } else if peers.lost(stamp) {
-            log.close()?;
-            return Err(IpcError::PeersLost(format!(
-                "planner: no tension command from a controller for {:.1} s",
-                peers.silence_s(stamp)
-            )));
-        }
+        log.row(row)?;
+        let (command, _): (Option<TensionCommand>, usize) = transport::latest(&self.commands)?;
+        Ok(Stepped {
+            t_ns: tick.deadline_ns,
+            heard: command.is_some(),
+        })
     }
-    log.close()?;
-    Ok(seq)
+
+    fn silence(&self) -> &'static str {
+        "no tension command from a controller"
+    }
+
+    fn finish(self, _: &Result<(), IpcError>) -> Result<u64, IpcError> {
+        Ok(self.seq)
+    }
 }
 
 /// The learning `cfg` asks for, designed and checked (`None`: off). A

@@ -25,10 +25,11 @@ use tendril_shared::messages::{
 };
 use tendril_shared::{MAX_HIDDEN, MAX_WEIGHTS, POSE_DIM};
 
-use super::clock::{now_ns, tighten_timer_slack, Tick, Ticker};
+use super::clock::{now_ns, Tick, Ticker};
+use super::process::{self, Process, Scheduling, Stepped};
 use super::stats::{CsvLog, Histogram, Summary};
 use super::transport::{self, Services};
-use super::{IpcError, StopWatch};
+use super::IpcError;
 use crate::robot::Robot;
 
 mod report;
@@ -342,6 +343,29 @@ pub fn load(cfg: &ControllerConfig) -> Result<(Robot, Vec<u8>), IpcError> {
     Ok((robot, bytes))
 }
 
+/// The skeleton's view of a controller's configuration (host period or
+/// bridge: the same process, the same rules).
+pub fn process(cfg: &ControllerConfig, scheduling: bool) -> Process<'_> {
+    Process {
+        name: "controller",
+        prefix: &cfg.prefix,
+        supervised: cfg.supervised,
+        duration_s: cfg.duration_s,
+        peer_timeout_s: cfg.peer_timeout_s,
+        peer_start_grace_s: cfg.peer_start_grace_s,
+        log: cfg.log.as_deref(),
+        stats: cfg.stats.as_deref(),
+        scheduling: scheduling.then_some(Scheduling {
+            cpu: cfg.cpu,
+            realtime: cfg.realtime,
+            priority: super::clock::CONTROLLER_PRIORITY,
+        }),
+    }
+}
+
+/// What a controller's peers' silence is.
+pub const SILENT_PEERS: &str = "no setpoint and no plant state";
+
 /// Run the controller process with the period on the host until stopped
 /// (or its peers are lost). With the chip in the loop the command line runs
 /// [`crate::mcu::bridge::run`] instead: the controller knows no backend but
@@ -353,50 +377,80 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
                 .into(),
         ));
     }
-    let (robot, bytes) = load(cfg)?;
+    process::run(
+        &process(cfg, true),
+        || load(cfg),
+        |(robot, bytes), services| HostTask::open(cfg, &robot, &bytes, services),
+    )
+}
 
-    let node = transport::node("tendril-controller")?;
-    let _orphan = transport::ReleaseIfOrphaned(&node);
-    let services = Services::open_or_create(&node, &cfg.prefix)?;
-    let setpoints = transport::subscriber(&services.setpoint)?;
-    let states = transport::subscriber(&services.plant_state)?;
-    let weights = transport::subscriber(&services.weights)?;
-    let commands = transport::publisher(&services.tension_cmd)?;
-    let notifier = transport::notifier(&services.tension_cmd_event)?;
-    let stop = StopWatch::new(&services)?;
-    let n = robot.n_tendons();
-    let mut log = CsvLog::create(cfg.log.as_deref(), &log_header(n))?;
+/// The host period as a [`process::Task`]: each step sleeps to its
+/// deadline, takes the newest messages, runs the control step, publishes
+/// the command and raises the plant's event.
+struct HostTask {
+    ctl: Controller,
+    ticker: Ticker,
+    spin_ns: u64,
+    overran: bool,
+    cpu_wait: super::clock::CpuWait,
+    n_tendons: usize,
+    setpoints: transport::Sub<Setpoint>,
+    states: transport::Sub<PlantState>,
+    weights: transport::Sub<WeightUpdate>,
+    commands: transport::Pub<TensionCommand>,
+    notifier: iceoryx2::port::notifier::Notifier<transport::Svc>,
+}
 
-    tighten_timer_slack();
-    super::clock::apply_scheduling(
-        "controller",
-        cfg.cpu,
-        cfg.realtime,
-        super::clock::CONTROLLER_PRIORITY,
-    );
+impl HostTask {
+    fn open(
+        cfg: &ControllerConfig,
+        robot: &Robot,
+        bytes: &[u8],
+        services: &Services,
+    ) -> Result<HostTask, IpcError> {
+        let period_ns = (1e9 / cfg.rate_hz).round() as u64;
+        let start = now_ns() + period_ns;
+        Ok(HostTask {
+            ctl: Controller::new(cfg, robot, bytes, start)?,
+            ticker: Ticker::new(start, period_ns),
+            spin_ns: (cfg.spin_us * 1e3) as u64,
+            overran: false,
+            cpu_wait: super::clock::CpuWait::for_this_thread(),
+            n_tendons: robot.n_tendons(),
+            setpoints: transport::subscriber(&services.setpoint)?,
+            states: transport::subscriber(&services.plant_state)?,
+            weights: transport::subscriber(&services.weights)?,
+            commands: transport::publisher(&services.tension_cmd)?,
+            notifier: transport::notifier(&services.tension_cmd_event)?,
+        })
+    }
+}
 
-    let period_ns = (1e9 / cfg.rate_hz).round() as u64;
-    let start = now_ns() + period_ns;
-    let mut ctl = Controller::new(cfg, &robot, &bytes, start)?;
-    let mut ticker = Ticker::new(start, period_ns);
-    let spin_ns = (cfg.spin_us * 1e3) as u64;
-    let mut overran = false;
-    let mut last_flush = start;
-    let mut peers = super::PeerWatch::new(cfg.peer_timeout_s, cfg.peer_start_grace_s, start);
-    let mut cpu_wait = super::clock::CpuWait::for_this_thread();
-    let outcome = loop {
-        let tick = ticker.wait(spin_ns);
-        cpu_wait.after_wake(tick.skipped, period_ns);
+impl process::Task for HostTask {
+    type Stats = ControllerStats;
+
+    fn log_header(&self) -> String {
+        log_header(self.n_tendons)
+    }
+
+    fn start_ns(&self) -> u64 {
+        self.ticker.start_ns()
+    }
+
+    fn step(&mut self, log: &mut CsvLog) -> Result<Stepped, IpcError> {
+        let period_ns = self.ctl.period_ns();
+        let tick = self.ticker.wait(self.spin_ns);
+        self.cpu_wait.after_wake(tick.skipped, period_ns);
         let t_wake = now_ns();
         // Newest messages since the last period.
         let mut superseded_nonfinite = 0;
-        let (setpoint, n_sp) = transport::latest_inspecting(&setpoints, |s: &Setpoint| {
+        let (setpoint, n_sp) = transport::latest_inspecting(&self.setpoints, |s: &Setpoint| {
             if s.pose.iter().any(|v| !v.is_finite()) {
                 superseded_nonfinite += 1;
             }
         })?;
-        let (state, n_st) = transport::latest(&states)?;
-        let (update, _): (Option<WeightUpdate>, usize) = transport::latest(&weights)?;
+        let (state, n_st) = transport::latest(&self.states)?;
+        let (update, _): (Option<WeightUpdate>, usize) = transport::latest(&self.weights)?;
         let inbox = Inbox {
             setpoint,
             setpoints: n_sp,
@@ -405,42 +459,29 @@ pub fn run(cfg: &ControllerConfig) -> Result<ControllerStats, IpcError> {
             states: n_st,
             weights: update.as_ref(),
         };
-        let mut cmd = ctl.period(&tick, t_wake, overran, &inbox);
+        let mut cmd = self.ctl.period(&tick, t_wake, self.overran, &inbox);
         cmd.header.stamp_ns = now_ns();
-        transport::send(&commands, cmd)?;
-        notifier
+        transport::send(&self.commands, cmd)?;
+        self.notifier
             .notify()
             .map_err(|e| IpcError::Send(format!("tension_cmd event: {e:?}")))?;
         let t_done = now_ns();
-        overran = ticker.finish(t_done);
-        log.row(ctl.finish(t_done - t_wake))?;
-        if t_done - last_flush > 100_000_000 {
-            log.flush()?;
-            last_flush = t_done;
-        }
-        if stop.requested()
-            || cfg
-                .duration_s
-                .is_some_and(|d| (t_done - start) as f64 * 1e-9 >= d)
-        {
-            break Ok(());
-        }
-        if setpoint.is_some() || state.is_some() {
-            peers.heard(t_done);
-        } else if peers.lost(t_done) {
-            break Err(IpcError::PeersLost(format!(
-                "controller: no setpoint and no plant state for {:.1} s",
-                peers.silence_s(t_done)
-            )));
-        }
-    };
-    log.close()?;
-    let mut stats = ctl.stats(&ticker);
-    stats.cpu_wait_ms = cpu_wait.total_ns().map(|ns| ns as f64 * 1e-6);
-    stats.skipped_waiting_for_cpu = cpu_wait.skipped_waiting;
-    if let Some(path) = &cfg.stats {
-        let json = serde_json::to_vec_pretty(&stats).map_err(|e| IpcError::Other(e.to_string()))?;
-        super::write_file(path, &json)?;
+        self.overran = self.ticker.finish(t_done);
+        log.row(self.ctl.finish(t_done - t_wake))?;
+        Ok(Stepped {
+            t_ns: t_done,
+            heard: setpoint.is_some() || state.is_some(),
+        })
     }
-    outcome.map(|()| stats)
+
+    fn silence(&self) -> &'static str {
+        SILENT_PEERS
+    }
+
+    fn finish(self, _: &Result<(), IpcError>) -> Result<ControllerStats, IpcError> {
+        let mut stats = self.ctl.stats(&self.ticker);
+        stats.cpu_wait_ms = self.cpu_wait.total_ns().map(|ns| ns as f64 * 1e-6);
+        stats.skipped_waiting_for_cpu = self.cpu_wait.skipped_waiting;
+        Ok(stats)
+    }
 }

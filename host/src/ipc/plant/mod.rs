@@ -18,9 +18,10 @@ use serde::{Deserialize, Serialize};
 use tendril_shared::messages::{plant_status, Header, PlantState, TensionCommand, MAX_TENDONS};
 
 use super::clock::now_ns;
+use super::process::{self, Process, Scheduling, Stepped};
 use super::stats::{CsvLog, Histogram, Summary};
 use super::transport::{self, Services};
-use super::{IpcError, StopWatch};
+use super::IpcError;
 use crate::robot::Robot;
 use crate::runlog::{RunLog, RunLogConfig, RunLogStats, SceneRecord, StepRecord};
 
@@ -125,170 +126,228 @@ pub fn log_header(n: usize) -> String {
 
 /// Run the plant process until stopped.
 pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
-    super::die_with_parent(cfg.supervised)?;
-    let robot = Robot::load(&cfg.robot).map_err(|e| IpcError::Other(e.to_string()))?;
-    let mut model = PlantModel::new(&robot, cfg.params.clone())?;
-    let n = model.n();
-    let node = transport::node("tendril-plant")?;
-    let _orphan = transport::ReleaseIfOrphaned(&node);
-    let services = Services::open_or_create(&node, &cfg.prefix)?;
-    let commands = transport::subscriber(&services.tension_cmd)?;
-    let listener = transport::listener(&services.tension_cmd_event)?;
-    let state_pub = transport::publisher(&services.plant_state)?;
-    let stop = StopWatch::new(&services)?;
-    let mut log = CsvLog::create(cfg.log.as_deref(), &log_header(n))?;
-    // The run log sees the setpoints too (the desired tip): one more
-    // subscriber, drained without waiting, so the planner never notices.
-    let mut runlog = match cfg.runlog.enabled() {
-        true => Some(Recorder {
-            log: RunLog::start(&cfg.runlog).map_err(|e| IpcError::Other(e.to_string()))?,
-            setpoints: transport::subscriber(&services.setpoint)?,
-            received: Vec::with_capacity(16),
-            desired: None,
-            controller_status: 0,
-            plant_status: 0,
+    let process = Process {
+        name: "plant",
+        prefix: &cfg.prefix,
+        supervised: cfg.supervised,
+        duration_s: cfg.duration_s,
+        peer_timeout_s: cfg.peer_timeout_s,
+        peer_start_grace_s: cfg.peer_start_grace_s,
+        log: cfg.log.as_deref(),
+        stats: cfg.stats.as_deref(),
+        scheduling: Some(Scheduling {
+            cpu: cfg.cpu,
+            realtime: cfg.realtime,
+            priority: super::clock::PLANT_PRIORITY,
         }),
-        false => None,
     };
-    if let Some(r) = &runlog {
-        r.log.line(
-            now_ns(),
-            foxglove::messages::log::Level::Info,
-            format!(
-                "plant: {}, robot {}",
-                crate::robot::count(n, "tendon"),
-                cfg.robot.display()
-            ),
-        );
-        if let Some(port) = r.log.live_port() {
-            // Always said (not a log line a sim's quiet children filter):
-            // with port 0 nobody else can know where to connect.
-            eprintln!(
-                "live view on ws://{} (Foxglove: Open connection)",
-                live_host(&cfg.runlog, port)
-            );
-        }
-    }
-    super::clock::tighten_timer_slack();
-    super::clock::apply_scheduling("plant", cfg.cpu, cfg.realtime, super::clock::PLANT_PRIORITY);
+    let load = || {
+        let robot = Robot::load(&cfg.robot).map_err(|e| IpcError::Other(e.to_string()))?;
+        Ok(PlantModel::new(&robot, cfg.params.clone())?)
+    };
+    process::run(&process, load, |model, services| {
+        PlantTask::open(cfg, model, services)
+    })
+}
 
-    let start = now_ns();
-    let secs = |t: u64| t.saturating_sub(start) as f64 * 1e-9;
-    let mut stats = PlantStats::default();
+/// The plant as a [`process::Task`]: each step waits for a command (its
+/// event) or the idle period, applies the commands due (through the fault
+/// injection), steps the model and publishes its state.
+struct PlantTask {
+    model: PlantModel,
+    n: usize,
+    spin: bool,
+    idle: Duration,
+    command_timeout_s: f64,
+    faults: PlantFaults,
+    commands: transport::Sub<TensionCommand>,
+    listener: iceoryx2::port::listener::Listener<transport::Svc>,
+    state_pub: transport::Pub<PlantState>,
+    runlog: Option<Recorder>,
+    start: u64,
+    stats: PlantStats,
     // Fixed-size histograms, not growing vectors: a plant runs as long as
     // the sim asks (issue 31: memory bounded whatever the duration).
-    let mut latencies = Histogram::default();
-    let mut step_times = Histogram::default();
-    let mut delayed: VecDeque<(u64, TensionCommand)> = VecDeque::new();
-    let mut last_cmd: Option<TensionCommand> = None;
-    let mut last_cmd_time = start;
-    let mut last_step = start;
-    let mut seq = 0u64;
-    let mut status_sticky = 0u32;
-    let mut pending = Vec::with_capacity(16);
-    let idle = Duration::from_secs_f64(cfg.idle_period_s.clamp(1e-4, 1.0));
-    let mut peers = super::PeerWatch::new(cfg.peer_timeout_s, cfg.peer_start_grace_s, start);
-    let faults = cfg.params.faults.clone();
-    let mut last_flush = start;
+    latencies: Histogram,
+    step_times: Histogram,
+    delayed: VecDeque<(u64, TensionCommand)>,
+    pending: Vec<TensionCommand>,
+    last_cmd: Option<TensionCommand>,
+    last_cmd_time: u64,
+    last_step: u64,
+    seq: u64,
+    status_sticky: u32,
+    row: Vec<f64>,
+}
 
-    loop {
-        // Wait for a command (event) or the idle period.
-        if cfg.spin {
-            let until = now_ns() + idle.as_nanos() as u64;
-            while now_ns() < until && !commands.has_samples().unwrap_or(false) {
-                std::hint::spin_loop();
-            }
-        } else {
-            // A signal cuts the wait short: the loop then sees the stop.
-            match listener.timed_wait(|_| {}, idle) {
-                Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
-                Err(e) => return Err(IpcError::Receive(format!("tension_cmd event: {e:?}"))),
+impl PlantTask {
+    fn open(
+        cfg: &PlantConfig,
+        model: PlantModel,
+        services: &Services,
+    ) -> Result<PlantTask, IpcError> {
+        let n = model.n();
+        // The run log sees the setpoints too (the desired tip): one more
+        // subscriber, drained without waiting, so the planner never notices.
+        let runlog = match cfg.runlog.enabled() {
+            true => Some(Recorder {
+                log: RunLog::start(&cfg.runlog).map_err(|e| IpcError::Other(e.to_string()))?,
+                setpoints: transport::subscriber(&services.setpoint)?,
+                received: Vec::with_capacity(16),
+                desired: None,
+                controller_status: 0,
+                plant_status: 0,
+            }),
+            false => None,
+        };
+        if let Some(r) = &runlog {
+            r.log.line(
+                now_ns(),
+                foxglove::messages::log::Level::Info,
+                format!(
+                    "plant: {}, robot {}",
+                    crate::robot::count(n, "tendon"),
+                    cfg.robot.display()
+                ),
+            );
+            if let Some(port) = r.log.live_port() {
+                // Always said (not a log line a sim's quiet children filter):
+                // with port 0 nobody else can know where to connect.
+                eprintln!(
+                    "live view on ws://{} (Foxglove: Open connection)",
+                    live_host(&cfg.runlog, port)
+                );
             }
         }
-        pending.clear();
-        transport::drain(&commands, &mut pending)?;
-        let received = pending.len();
+        let start = now_ns();
+        Ok(PlantTask {
+            faults: cfg.params.faults.clone(),
+            model,
+            n,
+            spin: cfg.spin,
+            idle: Duration::from_secs_f64(cfg.idle_period_s.clamp(1e-4, 1.0)),
+            command_timeout_s: cfg.command_timeout_s,
+            commands: transport::subscriber(&services.tension_cmd)?,
+            listener: transport::listener(&services.tension_cmd_event)?,
+            state_pub: transport::publisher(&services.plant_state)?,
+            runlog,
+            start,
+            stats: PlantStats::default(),
+            latencies: Histogram::default(),
+            step_times: Histogram::default(),
+            delayed: VecDeque::new(),
+            pending: Vec::with_capacity(16),
+            last_cmd: None,
+            last_cmd_time: start,
+            last_step: start,
+            seq: 0,
+            status_sticky: 0,
+            row: Vec::with_capacity(3 + 2 * n + 8),
+        })
+    }
+
+    fn secs(&self, t: u64) -> f64 {
+        t.saturating_sub(self.start) as f64 * 1e-9
+    }
+
+    /// Wait for a command (its event) or the idle period.
+    fn wait(&mut self) -> Result<(), IpcError> {
+        if self.spin {
+            let until = now_ns() + self.idle.as_nanos() as u64;
+            while now_ns() < until && !self.commands.has_samples().unwrap_or(false) {
+                std::hint::spin_loop();
+            }
+            return Ok(());
+        }
+        // A signal cuts the wait short: the skeleton then sees the stop.
+        match self.listener.timed_wait(|_| {}, self.idle) {
+            Ok(_) | Err(ListenerWaitError::InterruptSignal) => Ok(()),
+            Err(e) => Err(IpcError::Receive(format!("tension_cmd event: {e:?}"))),
+        }
+    }
+
+    /// Take the commands that arrived (dropped or delayed as the faults
+    /// say) and apply those that are due; returns how many arrived.
+    fn take_commands(&mut self) -> Result<usize, IpcError> {
+        self.pending.clear();
+        transport::drain(&self.commands, &mut self.pending)?;
+        let received = self.pending.len();
         let now = now_ns();
-        let t = secs(now);
-        for cmd in pending.drain(..) {
-            stats.commands += 1;
-            latencies.record(now.saturating_sub(cmd.header.stamp_ns));
-            if let Some(prev) = last_cmd {
+        let t = self.secs(now);
+        for cmd in self.pending.drain(..) {
+            self.stats.commands += 1;
+            self.latencies
+                .record(now.saturating_sub(cmd.header.stamp_ns));
+            if let Some(prev) = self.last_cmd {
                 if cmd.header.seq > prev.header.seq + 1 {
-                    stats.sequence_gaps += cmd.header.seq - prev.header.seq - 1;
+                    self.stats.sequence_gaps += cmd.header.seq - prev.header.seq - 1;
                 }
             }
             if let Some(DropFault {
                 fraction,
                 from_s,
                 to_s,
-            }) = faults.drop
+            }) = self.faults.drop
             {
-                if t >= from_s && t < to_s && model.uniform() < fraction {
-                    stats.dropped += 1;
-                    status_sticky |= plant_status::DROPPING;
+                if t >= from_s && t < to_s && self.model.uniform() < fraction {
+                    self.stats.dropped += 1;
+                    self.status_sticky |= plant_status::DROPPING;
                     continue;
                 }
             }
-            match faults.delay {
+            match self.faults.delay {
                 Some(d) if t >= d.from_s && t < d.to_s => {
-                    stats.delayed += 1;
-                    status_sticky |= plant_status::DELAYING;
-                    delayed.push_back((now + (d.delay_s * 1e9) as u64, cmd));
+                    self.stats.delayed += 1;
+                    self.status_sticky |= plant_status::DELAYING;
+                    self.delayed
+                        .push_back((now + (d.delay_s * 1e9) as u64, cmd));
                 }
-                _ => delayed.push_back((now, cmd)),
+                _ => self.delayed.push_back((now, cmd)),
             }
         }
-        while delayed.front().is_some_and(|(due, _)| *due <= now) {
-            let Some((_, cmd)) = delayed.pop_front() else {
+        while self.delayed.front().is_some_and(|(due, _)| *due <= now) {
+            let Some((_, cmd)) = self.delayed.pop_front() else {
                 break;
             };
             let count = (cmd.count as usize).min(MAX_TENDONS);
-            let tau: Vec<f64> = cmd.tensions[..count].iter().map(|&v| v as f64).collect();
-            if model.command(&tau) {
-                stats.out_of_range_commands += 1;
-                status_sticky |= plant_status::COMMAND_OUT_OF_RANGE;
+            let mut tau = [0.0f64; MAX_TENDONS];
+            for (d, &v) in tau.iter_mut().zip(&cmd.tensions[..count]) {
+                *d = f64::from(v);
             }
-            last_cmd = Some(cmd);
-            last_cmd_time = now;
+            if self.model.command(&tau[..count]) {
+                self.stats.out_of_range_commands += 1;
+                self.status_sticky |= plant_status::COMMAND_OUT_OF_RANGE;
+            }
+            self.last_cmd = Some(cmd);
+            self.last_cmd_time = now;
         }
-        if let Some(StuckFault { at_s, .. }) = faults.stuck {
+        if let Some(StuckFault { at_s, .. }) = self.faults.stuck {
             if t >= at_s {
-                model.set_stuck();
-                status_sticky |= plant_status::MOTOR_STUCK;
+                self.model.set_stuck();
+                self.status_sticky |= plant_status::MOTOR_STUCK;
             }
         }
+        Ok(received)
+    }
 
-        let t0 = now_ns();
-        let ok = model.step((t0 - last_step) as f64 * 1e-9);
-        let t1 = now_ns();
-        last_step = t0;
-        step_times.record(t1 - t0);
-        stats.steps += 1;
-
-        let mut status = status_sticky;
-        if !ok {
-            status |= plant_status::SOLVE_FAILED;
-        }
-        if secs(t1) - secs(last_cmd_time) > cfg.command_timeout_s {
-            status |= plant_status::COMMAND_STALE;
-        }
-        model.sense(t1);
-        let frame = model.frame().copied();
-        seq += 1;
+    /// The state after a step: published, recorded in the run log.
+    fn publish(&mut self, t1: u64, status: u32) -> Result<Option<[f64; 7]>, IpcError> {
+        let frame = self.model.frame().copied();
+        self.seq += 1;
+        let last_cmd = self.last_cmd;
         let mut msg = PlantState {
             header: Header {
-                seq,
+                seq: self.seq,
                 stamp_ns: now_ns(),
             },
             command_seq: last_cmd.map_or(0, |c| c.header.seq),
-            count: n as u32,
+            count: self.n as u32,
             status,
             tip_seq: frame.map_or(0, |f| f.seq),
             tip_stamp_ns: frame.map_or(0, |f| f.stamp_ns),
             ..PlantState::default()
         };
-        for (dst, src) in msg.tensions.iter_mut().zip(model.tensions()) {
+        for (dst, src) in msg.tensions.iter_mut().zip(self.model.tensions()) {
             *dst = *src as f32;
         }
         if let Some(f) = &frame {
@@ -296,63 +355,87 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
                 *dst = src as f32;
             }
         }
-        transport::send(&state_pub, msg)?;
-        if let Some(r) = runlog.as_mut() {
-            r.record(&model, t1, last_cmd.as_ref(), status, frame.as_ref())?;
+        transport::send(&self.state_pub, msg)?;
+        if let Some(r) = self.runlog.as_mut() {
+            r.record(&self.model, t1, last_cmd.as_ref(), status, frame.as_ref())?;
         }
+        Ok(frame.map(|f| f.pose))
+    }
+}
 
-        let mut row = Vec::with_capacity(3 + 2 * n + 8);
+impl process::Task for PlantTask {
+    type Stats = PlantStats;
+
+    fn log_header(&self) -> String {
+        log_header(self.n)
+    }
+
+    fn start_ns(&self) -> u64 {
+        self.start
+    }
+
+    fn step(&mut self, log: &mut CsvLog) -> Result<Stepped, IpcError> {
+        self.wait()?;
+        let received = self.take_commands()?;
+
+        let t0 = now_ns();
+        let ok = self.model.step((t0 - self.last_step) as f64 * 1e-9);
+        let t1 = now_ns();
+        self.last_step = t0;
+        self.step_times.record(t1 - t0);
+        self.stats.steps += 1;
+
+        let mut status = self.status_sticky;
+        if !ok {
+            status |= plant_status::SOLVE_FAILED;
+        }
+        if self.secs(t1) - self.secs(self.last_cmd_time) > self.command_timeout_s {
+            status |= plant_status::COMMAND_STALE;
+        }
+        self.model.sense(t1);
+        let frame = self.publish(t1, status)?;
+
+        let row = &mut self.row;
+        row.clear();
         row.push(t0 as f64);
-        row.push(last_cmd.map_or(0.0, |c| c.header.seq as f64));
-        row.push(last_cmd.map_or(0.0, |c| c.status as f64));
-        row.extend(model.targets().iter().copied());
-        row.extend(model.tensions().iter().copied());
-        let p = model.pose();
-        let m = frame.map_or([f64::NAN; 7], |f| f.pose);
+        row.push(self.last_cmd.map_or(0.0, |c| c.header.seq as f64));
+        row.push(self.last_cmd.map_or(0.0, |c| c.status as f64));
+        row.extend(self.model.targets().iter().copied());
+        row.extend(self.model.tensions().iter().copied());
+        let p = self.model.pose();
+        let m = frame.unwrap_or([f64::NAN; 7]);
         row.extend([p[0], p[1], p[2], m[0], m[1], m[2]]);
         row.push(status as f64);
         row.push((t1 - t0) as f64);
-        log.row(&row)?;
-        if t1 - last_flush > 100_000_000 {
-            log.flush()?;
-            last_flush = t1;
-        }
+        log.row(row)?;
+        Ok(Stepped {
+            t_ns: t1,
+            heard: received > 0,
+        })
+    }
 
-        if stop.requested() || cfg.duration_s.is_some_and(|d| secs(t1) >= d) {
-            break;
-        }
-        if received > 0 {
-            peers.heard(t1);
-        } else if peers.lost(t1) {
-            log.close()?;
-            let lost = format!("plant: no tension command for {:.1} s", peers.silence_s(t1));
-            // The run log is still published (the run happened); a failure
-            // to publish it is part of the error, not lost in a Drop.
-            if let Some(r) = runlog.take() {
-                if let Err(e) = r.log.finish() {
-                    return Err(IpcError::PeersLost(format!("{lost}; and {e}")));
-                }
+    fn silence(&self) -> &'static str {
+        "no tension command"
+    }
+
+    fn finish(mut self, outcome: &Result<(), IpcError>) -> Result<PlantStats, IpcError> {
+        // The run log is published however the run ended (the run
+        // happened); a failure to publish it is the skeleton's to report.
+        if let Some(r) = self.runlog.take() {
+            if outcome.is_ok() {
+                r.log.line(
+                    now_ns(),
+                    foxglove::messages::log::Level::Info,
+                    format!("plant: stopped after {} steps", self.stats.steps),
+                );
             }
-            return Err(IpcError::PeersLost(lost));
+            self.stats.runlog = Some(r.log.finish().map_err(|e| IpcError::Other(e.to_string()))?);
         }
+        self.stats.solve_failures = self.model.solve_failures;
+        self.stats.latency_us = self.latencies.summary();
+        self.stats.step_us = self.step_times.summary();
+        Ok(self.stats)
     }
-    log.close()?;
-    if let Some(r) = runlog.take() {
-        r.log.line(
-            now_ns(),
-            foxglove::messages::log::Level::Info,
-            format!("plant: stopped after {} steps", stats.steps),
-        );
-        stats.runlog = Some(r.log.finish().map_err(|e| IpcError::Other(e.to_string()))?);
-    }
-    stats.solve_failures = model.solve_failures;
-    stats.latency_us = latencies.summary();
-    stats.step_us = step_times.summary();
-    if let Some(path) = &cfg.stats {
-        let json = serde_json::to_vec_pretty(&stats).map_err(|e| IpcError::Other(e.to_string()))?;
-        super::write_file(path, &json)?;
-    }
-    Ok(stats)
 }
 
 /// The plant's side of the run log: the desired tip from the setpoints,

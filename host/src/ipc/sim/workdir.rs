@@ -259,7 +259,7 @@ impl Configs<'_> {
                 c.supervised = true;
                 c.duration_s = None;
                 if let Some(socket) = &self.chip_socket {
-                    c.mcu = Some(crate::mcu::bridge::McuOptions {
+                    c.mcu = Some(crate::ipc::controller::McuOptions {
                         socket: Some(socket.clone()),
                         image: None,
                         garbage_every_ms: self.cfg.mcu.as_ref().and_then(|m| m.garbage_every_ms),
