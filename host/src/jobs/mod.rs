@@ -6,5 +6,6 @@
 //! and below the CLI and the pipeline that call them.
 
 pub mod dynamics;
+pub mod fk_batch;
 pub mod ik_batch;
 pub mod modes;
