@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use super::common::stop_flag;
 use crate::dataset::Dataset;
-use crate::learn::cascor::job::{self, SplitSpec, TrainJob, TrainOutputs};
+use crate::jobs::train::{self as job, SplitSpec, TrainJob, TrainOutputs};
 use crate::learn::cascor::{self, CascorOptions, ObjectiveChoice, OutputKind, OutputSolver};
 use crate::learn::targets::Targets;
 use crate::robot::Robot;

@@ -739,7 +739,7 @@ mod tests {
             };
             let err = generate(&req, false, &AtomicBool::new(false)).unwrap_err();
             assert!(err.to_string().contains("(0, 0.5]"), "{t}: {err}");
-            let split = crate::learn::cascor::job::SplitSpec {
+            let split = crate::jobs::train::SplitSpec {
                 test_fraction: t,
                 ..Default::default()
             };

@@ -9,3 +9,4 @@ pub mod dynamics;
 pub mod fk_batch;
 pub mod ik_batch;
 pub mod modes;
+pub mod train;

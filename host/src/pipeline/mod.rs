@@ -27,7 +27,7 @@ use crate::evaluate::job::evaluate_net;
 use crate::fsutil::staging::{self, Staging};
 use crate::fsutil::write_atomic;
 use crate::interrupt::stop_flag;
-use crate::learn::cascor::job::{self as train_job, SplitSpec, TrainJob, TrainOutputs};
+use crate::jobs::train::{self as train_job, SplitSpec, TrainJob, TrainOutputs};
 use crate::learn::cascor::{Cascor, CascorOptions};
 use crate::learn::learner::{Learner, Prefitted, Split};
 use crate::learn::targets::Targets;

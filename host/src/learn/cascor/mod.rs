@@ -12,7 +12,8 @@
 //!   stopping and progress;
 //! - [`polish`]: every weight trained together after growth;
 //! - [`tip_metric`]: what an output error costs at the tip, the polish's weights;
-//! - [`job`]: a whole `tendril train` run — split, train, write every output;
+//! - (a whole `tendril train` run — split, train, write every output and the
+//!   learning curve — is the job [`crate::jobs::train`]);
 //! - [`export`]: the `.tnet` weight file (`docs/design.md` §5.1).
 
 pub mod candidates;
@@ -20,7 +21,6 @@ mod data_robot;
 mod error;
 pub mod export;
 mod growth;
-pub mod job;
 pub mod net;
 pub mod options;
 mod outputs;
@@ -33,6 +33,8 @@ mod unit_log;
 use nalgebra::DMatrix;
 
 pub use candidates::Objective;
+pub use data_robot::{robot_for_data, DataRobot};
+pub use error::TrainError;
 pub use net::{GrowingNet, OutputKind};
 pub use options::{CascorOptions, ObjectiveChoice, OutputSolver};
 pub use polish::{PolishLoss, PolishOptions, PolishReport};

@@ -13,15 +13,14 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use serde::Serialize;
 use tendril_shared::{max_hidden_for, MAX_HIDDEN};
 
-pub use super::data_robot::{robot_for_data, DataRobot};
-pub use super::error::TrainError;
-use super::export::{write_tnet_with, Ranges};
-use super::polish::{PolishLoss, RowMetrics};
-use super::tip_metric::tip_metrics;
-use super::{train_with_stop, CascorOptions, GrowingNet, Metrics, TrainReport};
 use crate::dataset::split::{SPLIT_SEED, TEST_FRACTION, VALID_FRACTION};
 use crate::dataset::{prepare_excluding, Dataset};
 use crate::fsutil::{check_distinct, write_atomic, write_atomic_with};
+use crate::learn::cascor::export::{write_tnet_with, Ranges};
+use crate::learn::cascor::polish::{PolishLoss, RowMetrics};
+use crate::learn::cascor::tip_metric::tip_metrics;
+pub use crate::learn::cascor::{robot_for_data, DataRobot, TrainError};
+use crate::learn::cascor::{train_with_stop, CascorOptions, GrowingNet, Metrics, TrainReport};
 use crate::learn::targets::{Targets, TargetsSummary};
 use crate::learn::LearnError;
 
