@@ -12,8 +12,6 @@ use serde::{Deserialize, Serialize};
 use crate::numerics::percentile;
 use crate::statics::Statics;
 
-pub mod job;
-
 /// Summary of a list of non-negative errors.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ErrorStats {

@@ -11,8 +11,8 @@ use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2};
 use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
-use tendril::dataset::job::{self, GenerateError, GenerateRequest};
 use tendril::dataset::{Dataset, Sampler};
+use tendril::jobs::dataset::{self as job, GenerateError, GenerateRequest};
 use tendril::robot::DEFAULT_ROBOT;
 
 use crate::classes::Robot;

@@ -8,7 +8,7 @@ use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use tendril::dataset::generate::BLOCK;
-use tendril::dataset::job::{generate, GenerateRequest};
+use tendril::jobs::dataset::{generate, GenerateRequest};
 
 struct Counting;
 

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use crate::evaluate::job::{self, EvaluateJob, RowSelection};
+use crate::jobs::evaluate::{self as job, EvaluateJob, RowSelection};
 
 /// Which rows of `--data` to evaluate.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]

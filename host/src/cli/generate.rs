@@ -3,9 +3,11 @@
 use std::path::PathBuf;
 
 use super::common::{stop_flag, RobotArg};
-use crate::dataset::job::{self, GenerateRequest, DEFAULT_MAX_FAILURE_FRACTION, DEFAULT_SAMPLES};
 use crate::dataset::split::TEST_FRACTION;
 use crate::dataset::{Resolve, Sampler};
+use crate::jobs::dataset::{
+    self as job, GenerateRequest, DEFAULT_MAX_FAILURE_FRACTION, DEFAULT_SAMPLES,
+};
 use crate::statics::SolverSettings;
 
 /// Sample tensions, solve the statics for each, write CSV + JSON sidecar.

@@ -11,7 +11,6 @@
 pub mod disk;
 pub mod generate;
 pub mod io;
-pub mod job;
 pub mod measured;
 pub mod resolve;
 pub mod sample;

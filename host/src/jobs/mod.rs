@@ -5,7 +5,9 @@
 //! Jobs sit above the physics, the learners and the run logs they combine,
 //! and below the CLI and the pipeline that call them.
 
+pub mod dataset;
 pub mod dynamics;
+pub mod evaluate;
 pub mod fk_batch;
 pub mod ik_batch;
 pub mod modes;

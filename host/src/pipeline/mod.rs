@@ -20,13 +20,13 @@ use std::time::Instant;
 use anyhow::Context;
 
 use crate::compare::{all_learners, compare, CompareOptions};
-use crate::dataset::job::{generate as generate_dataset, is_up_to_date, GenerateRequest};
 use crate::dataset::split::prepare;
 use crate::dataset::{Dataset, Sidecar};
-use crate::evaluate::job::evaluate_net;
 use crate::fsutil::staging::{self, Staging};
 use crate::fsutil::write_atomic;
 use crate::interrupt::stop_flag;
+use crate::jobs::dataset::{generate as generate_dataset, is_up_to_date, GenerateRequest};
+use crate::jobs::evaluate::evaluate_net;
 use crate::jobs::train::{self as train_job, SplitSpec, TrainJob, TrainOutputs};
 use crate::learn::cascor::{Cascor, CascorOptions};
 use crate::learn::learner::{Learner, Prefitted, Split};

@@ -9,8 +9,8 @@ use std::time::Instant;
 use serde::Serialize;
 use tendril_shared::McuNet;
 
-use super::{ErrorStats, EvalError, SplitMetrics};
 use crate::dataset::{split_indices, Dataset, DatasetError, Sidecar};
+use crate::evaluate::{ErrorStats, EvalError, SplitMetrics};
 use crate::fsutil::{check_distinct, write_atomic, PathCollision};
 use crate::inverse::{ExactIk, IkSettings, InverseError, Target};
 use crate::net::{

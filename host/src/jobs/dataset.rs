@@ -15,11 +15,11 @@ use std::time::Instant;
 
 use sha2::{Digest, Sha256};
 
-use super::disk::{free_bytes, parent_dir, same_file};
-use super::generate::{column_ranges, generate_rows, GenerateOptions, StreamError};
-use super::io::{RowWriter, MAX_VALUE_BYTES};
-use super::split::{test_mask, MinMax, Ranges, SPLIT_SEED, TEST_FRACTION};
-use super::{DatasetError, Resolve, Sampler, Sidecar};
+use crate::dataset::disk::{free_bytes, parent_dir, same_file};
+use crate::dataset::generate::{column_ranges, generate_rows, GenerateOptions, StreamError};
+use crate::dataset::io::{RowWriter, MAX_VALUE_BYTES};
+use crate::dataset::split::{test_mask, MinMax, Ranges, SPLIT_SEED, TEST_FRACTION};
+use crate::dataset::{DatasetError, Resolve, Sampler, Sidecar};
 use crate::robot::anchor_groups;
 use crate::robot::{Robot, RobotError};
 use crate::statics::{SolverSettings, Statics};
