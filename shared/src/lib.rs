@@ -30,9 +30,6 @@ pub mod messages;
 pub mod net;
 pub mod tnet;
 
-#[cfg(test)]
-mod format_tests;
-
 pub use activation::Activation;
 pub use capacity::{
     max_hidden_for, McuNet, MAX_HIDDEN, MAX_NET_FILE, MAX_TENDONS, MAX_WEIGHTS, POSE_DIM,

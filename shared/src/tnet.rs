@@ -512,3 +512,6 @@ pub(crate) fn check_trailer(all: &[u8], rest: &[u8]) -> Result<(), TnetError> {
     crc.update(body);
     crc_matches(stored, crc.finish())
 }
+
+#[cfg(test)]
+mod tests;

@@ -13,9 +13,9 @@ pub mod bridge;
 mod chip;
 mod chip_link;
 mod link;
-pub mod trace;
 #[cfg(test)]
-mod units_tests;
+mod tests;
+pub mod trace;
 
 pub use chip::{build_image, check_tools, locate_bringup_image, locate_image, Chip, QEMU, TARGET};
 pub use link::McuLink;

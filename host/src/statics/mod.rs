@@ -38,17 +38,7 @@ pub use shoot::RodShape;
 pub use solution::{Solution, TensionSensitivity, TipSensitivity, WarmStart};
 
 #[cfg(test)]
-mod friction_tests;
-#[cfg(test)]
 mod tests;
-#[cfg(test)]
-mod tests_final_step;
-#[cfg(test)]
-mod tests_general;
-#[cfg(test)]
-mod tests_stability;
-#[cfg(test)]
-mod tests_three_segment;
 
 /// One step of the fixed pseudo-random walk that chains of warm solves
 /// follow in the statics benchmarks and tests (`examples/statics_cost`

@@ -5,9 +5,9 @@
 
 use nalgebra::Vector3;
 
-use super::pose::angle_between;
-use super::*;
 use crate::robot::{repo_robot as load, Robot};
+use crate::statics::pose::angle_between;
+use crate::statics::*;
 
 /// Euler's critical load of `robot` as a clamped–free column, N.
 fn euler_load(robot: &Robot) -> f64 {

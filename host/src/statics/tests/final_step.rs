@@ -5,10 +5,10 @@
 
 use nalgebra::{Vector3, Vector6};
 
-use super::shoot::{base_state, jacobian_steps, Shooting};
-use super::solution::{pose_vector, TipSensitivity};
-use super::*;
 use crate::robot::repo_robot;
+use crate::statics::shoot::{base_state, jacobian_steps, Shooting};
+use crate::statics::solution::{pose_vector, TipSensitivity};
+use crate::statics::*;
 
 /// The settings of the comparison with the C++ reference at equal accuracy
 /// (BENCHMARKS.md, "Statics"): residual 1e-7, a final step of at most 1 µm.
@@ -46,7 +46,9 @@ fn the_tip_sensitivity_is_the_derivative_of_the_rods_tip() {
         .tip_dx
         .unwrap();
     let tip_at = |x: &Vector6<f64>| {
-        pose_vector(&super::integrate::integrate(&rod, base_state(&rod, x), steps).unwrap())
+        pose_vector(
+            &crate::statics::integrate::integrate(&rod, base_state(&rod, x), steps).unwrap(),
+        )
     };
     for j in 0..6 {
         let h = 1e-5 * x[j].abs().max(1.0);

@@ -6,8 +6,8 @@
 
 use nalgebra::Vector3;
 
-use super::{SolverSettings, Statics};
 use crate::robot::repo_robot;
+use crate::statics::{SolverSettings, Statics};
 
 fn statics(steps: usize) -> Statics {
     Statics::new(

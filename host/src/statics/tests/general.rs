@@ -7,10 +7,10 @@ use std::path::Path;
 
 use nalgebra::Vector3;
 
-use super::integrate::integrate_observed;
-use super::rod::{Rod, RodState};
-use super::*;
 use crate::robot::{repo_robot as load, Robot};
+use crate::statics::integrate::integrate_observed;
+use crate::statics::rod::{Rod, RodState};
+use crate::statics::*;
 
 fn with_steps(steps: usize) -> SolverSettings {
     SolverSettings {
@@ -206,7 +206,7 @@ fn base_wrench_balances_weight_tendon_pulls_and_tip_wrench_with_anchors() {
     let mut seed = load("seed-4t.toml");
     seed.tendons[0].end = 0.1;
     seed.tendons[1].end = 0.25;
-    super::tests::assert_global_equilibrium(
+    super::assert_global_equilibrium(
         &seed,
         &[7.0, 5.0, 0.0, 2.0],
         Vector3::new(0.1, -0.2, 0.05),

@@ -7,10 +7,10 @@ use std::sync::Arc;
 
 use nalgebra::Vector3;
 
-use super::friction::tendon_angles;
-use super::profile::PROFILE_INTERVALS;
-use super::*;
 use crate::robot::{repo_robot as load, Robot};
+use crate::statics::friction::tendon_angles;
+use crate::statics::profile::PROFILE_INTERVALS;
+use crate::statics::*;
 
 fn with_steps(steps: usize) -> SolverSettings {
     SolverSettings {
@@ -262,9 +262,9 @@ fn with_a_fixed_profile_the_shooting_jacobian_is_exact() {
     // profile (docs/design.md §2.3): against central differences of the
     // residual, on the two-segment robot (anchors inside) under gravity-free
     // load with a tip wrench, and a non-trivial profile from a real solve.
-    use super::integrate::integrate;
-    use super::rod::{Rod, RodState};
-    use super::tangent::{integrate_with_sensitivity, ShootingSensitivity};
+    use crate::statics::integrate::integrate;
+    use crate::statics::rod::{Rod, RodState};
+    use crate::statics::tangent::{integrate_with_sensitivity, ShootingSensitivity};
     use nalgebra::{Matrix6, Vector6};
     let statics = repo_statics("tdcr-2seg.toml");
     let robot = statics.robot().clone();

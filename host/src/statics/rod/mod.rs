@@ -692,5 +692,4 @@ fn arc_moments(u: &Vector3<f64>, l: f64) -> (Vector3<f64>, Vector3<f64>) {
 }
 
 #[cfg(test)]
-#[path = "rod_tests.rs"]
 mod tests;

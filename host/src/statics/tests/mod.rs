@@ -7,6 +7,12 @@ use super::shoot::jacobian_steps;
 use super::*;
 use crate::robot::Robot;
 
+mod final_step;
+mod friction;
+mod general;
+mod stability;
+mod three_segment;
+
 fn seed() -> Robot {
     crate::robot::repo_robot("seed-4t.toml")
 }
