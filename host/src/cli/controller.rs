@@ -213,7 +213,7 @@ pub struct ControllerArgs {
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Robot description file (tension limits).
-    #[arg(long, default_value = "robots/seed-4t.toml")]
+    #[arg(long, default_value = crate::robot::DEFAULT_ROBOT)]
     pub robot: PathBuf,
     /// Trained IK net (`tendril train` output) [default: out/model.tnet if it
     /// exists, else the firmware's built-in net for the default robot, as

@@ -74,11 +74,12 @@ pub struct TrajectoryOpts {
     /// Pose table for `--trajectory csv`.
     #[arg(long)]
     pub poses: Option<PathBuf>,
-    /// Setpoint rate, Hz [default: 1000; under `sim`, the controller's rate].
+    /// Setpoint rate, Hz [default: 1000 (the planner's default); under
+    /// `sim`, the controller's rate].
     #[arg(long)]
     pub planner_rate: Option<f64>,
     /// Initial hold at the first pose, s.
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = crate::ipc::planner::defaults::SETTLE_S)]
     pub settle: f64,
     /// Move between step targets by a minimum-jerk move through a ZVD input
     /// shaper on the robot file's first bending mode (`tendril modes`), so
@@ -140,7 +141,9 @@ fn pair(s: &str, what: &str) -> anyhow::Result<[f64; 2]> {
 impl TrajectoryOpts {
     /// Refuse rates, times and sizes no trajectory can have, naming the flag.
     pub fn check(&self) -> anyhow::Result<()> {
-        let r = self.planner_rate.unwrap_or(1000.0);
+        let r = self
+            .planner_rate
+            .unwrap_or(crate::ipc::planner::defaults::RATE_HZ);
         check(
             "--planner-rate",
             r,
@@ -253,7 +256,7 @@ pub struct PlannerArgs {
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Robot description file.
-    #[arg(long, default_value = "robots/seed-4t.toml")]
+    #[arg(long, default_value = crate::robot::DEFAULT_ROBOT)]
     pub robot: PathBuf,
     /// iceoryx2 service-name prefix.
     #[arg(long, default_value = crate::ipc::DEFAULT_PREFIX)]
@@ -270,7 +273,7 @@ pub struct PlannerArgs {
     #[arg(long, value_delimiter = ',')]
     pub inject_outside_at: Vec<f64>,
     /// Length of each out-of-workspace burst, s.
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, default_value_t = crate::ipc::planner::defaults::OUTSIDE_FOR_S)]
     pub outside_for: f64,
     /// Stop (non-zero exit) after this many seconds without a tension
     /// command from a controller; 0 = never [default: 2 s, after up to 10 s
@@ -309,14 +312,15 @@ impl PlannerArgs {
         check("--outside-for", of, of > 0.0, "a number of seconds > 0")?;
         let (peer_timeout_s, peer_start_grace_s) = peer_timeout(self.peer_timeout)?;
         Ok(PlannerConfig {
-            robot: self.robot,
             prefix: self.prefix,
-            shape: self.traj.shape()?,
             step_shaping: self.traj.step_shaping(),
             start_from_rest: self.from_rest,
             dynamic_offset: self.traj.dynamic_offset == super::controller::OnOff::On,
             learning: self.traj.learning(),
-            rate_hz: self.traj.planner_rate.unwrap_or(1000.0),
+            rate_hz: self
+                .traj
+                .planner_rate
+                .unwrap_or(crate::ipc::planner::defaults::RATE_HZ),
             settle_s: self.traj.settle,
             duration_s: self.duration,
             inject: Injections {
@@ -330,6 +334,7 @@ impl PlannerArgs {
             log: self.log,
             realtime: self.realtime,
             cpu: self.cpu,
+            ..PlannerConfig::new(self.robot, self.traj.shape()?)
         })
     }
 }
@@ -339,4 +344,35 @@ pub fn run(args: PlannerArgs) -> anyhow::Result<()> {
     let sent = crate::ipc::planner::run(&args.config()?)?;
     log::info!("planner: sent {sent} setpoints");
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: PlannerArgs,
+    }
+
+    /// Every default the command line shows is the configuration's own: a
+    /// `tendril planner` without flags follows `PlannerConfig::new`'s path
+    /// on the default robot, with the command line's own choices said in
+    /// its help (the dynamic offset on, the peers' timeout).
+    #[test]
+    fn a_planner_without_flags_is_the_configurations_defaults() {
+        let given = Cli::parse_from(["planner"]).args.config().unwrap();
+        let mut expected =
+            PlannerConfig::new(crate::robot::DEFAULT_ROBOT.into(), given.shape.clone());
+        expected.dynamic_offset = true;
+        expected.peer_timeout_s = given.peer_timeout_s;
+        expected.peer_start_grace_s = given.peer_start_grace_s;
+        assert_eq!(given, expected);
+        assert!(matches!(
+            given.shape,
+            PathShape::Circle { radius_m, freq_hz, .. } if radius_m == 0.015 && freq_hz == 0.2
+        ));
+    }
 }

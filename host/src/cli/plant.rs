@@ -18,17 +18,17 @@ pub struct PlantOpts {
     #[arg(long)]
     pub motor_tau_ms: Option<f64>,
     /// Series tendon compliance as a second lag, ms (0 = rigid).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = PlantParams::default().compliance_tau_s * 1e3)]
     pub compliance_tau_ms: f64,
     /// Tip position sensor noise (standard deviation), mm [default: 0.02; a
     /// --reality with a [tracker] sets its own, and giving both is refused].
     #[arg(long)]
     pub noise_mm: Option<f64>,
     /// Seed of the sensor noise and message drops.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = PlantParams::default().seed)]
     pub seed: u64,
     /// RK4 steps of the plant's statics.
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, default_value_t = PlantParams::default().statics_steps)]
     pub statics_steps: usize,
     /// Busy-poll for commands instead of sleeping on the event.
     #[arg(long)]
@@ -198,7 +198,7 @@ pub struct PlantArgs {
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Robot description file.
-    #[arg(long, default_value = "robots/seed-4t.toml")]
+    #[arg(long, default_value = crate::robot::DEFAULT_ROBOT)]
     pub robot: PathBuf,
     /// iceoryx2 service-name prefix.
     #[arg(long, default_value = crate::ipc::DEFAULT_PREFIX)]
@@ -207,7 +207,7 @@ pub struct PlantArgs {
     pub model: PlantOpts,
     /// Robot model: quasi-static (statics each step) or dynamic (inertia and
     /// damping, docs/design.md §4.2).
-    #[arg(long = "model", value_enum, default_value_t = RobotModel::QuasiStatic)]
+    #[arg(long = "model", value_enum, default_value_t = PlantParams::default().model)]
     pub robot_model: RobotModel,
     /// Stop after this many seconds (default: until SIGTERM or a stop message).
     #[arg(long)]
@@ -281,10 +281,10 @@ pub struct RunLogOpts {
     #[arg(long, num_args = 0..=1, default_missing_value = DEFAULT_LIVE, value_name = "HOST:PORT")]
     pub live: Option<String>,
     /// 3-D scenes per second in the run log.
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(long, default_value_t = crate::runlog::RunLogConfig::default().scene_hz)]
     pub scene_hz: f64,
     /// Points along the backbone (and each tendon) in a scene.
-    #[arg(long, default_value_t = 41)]
+    #[arg(long, default_value_t = crate::runlog::RunLogConfig::default().backbone_points)]
     pub backbone_points: usize,
 }
 
@@ -316,4 +316,29 @@ pub fn run(args: PlantArgs) -> anyhow::Result<()> {
         stats.latency_us.p50
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: PlantArgs,
+    }
+
+    /// Every default the command line shows is the configuration's own: a
+    /// `tendril plant` without flags runs `PlantConfig::default()`'s plant.
+    #[test]
+    fn a_plant_without_flags_is_the_configurations_defaults() {
+        let given = Cli::parse_from(["plant"]).args.config().unwrap();
+        let mut expected = PlantConfig::default();
+        // The command line's own choice, said in its help: the peers'
+        // timeout and its start grace.
+        expected.peer_timeout_s = given.peer_timeout_s;
+        expected.peer_start_grace_s = given.peer_start_grace_s;
+        assert_eq!(given, expected);
+    }
 }

@@ -16,7 +16,7 @@ use crate::robustness::{self, RobustnessConfig};
 #[derive(Args, Debug)]
 pub struct RobustnessArgs {
     /// Robot description file (the model the planner, IK and net use).
-    #[arg(long, default_value = "robots/seed-4t.toml")]
+    #[arg(long, default_value = crate::robot::DEFAULT_ROBOT)]
     pub robot: PathBuf,
     /// Trained IK net [default: out/model.tnet if it exists, else the
     /// firmware's built-in net for the default robot].

@@ -21,7 +21,7 @@ const TRAINED_MODEL: &str = "out/model.tnet";
 #[derive(Args, Debug)]
 pub struct SimArgs {
     /// Robot description file.
-    #[arg(long, default_value = "robots/seed-4t.toml")]
+    #[arg(long, default_value = crate::robot::DEFAULT_ROBOT)]
     pub robot: PathBuf,
     /// The robot the plant moves, before --reality [default: --robot]. For
     /// a model that is not the robot's file: a net trained on a calibrated

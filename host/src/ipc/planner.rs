@@ -21,7 +21,7 @@ use crate::robot::Robot;
 use crate::statics::{SolverSettings, Statics};
 
 /// Bad setpoints to send instead of the trajectory's, each for one message.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Injections {
     /// Times (s from start) at which to send a pose with a NaN.
@@ -31,6 +31,27 @@ pub struct Injections {
     pub outside_at_s: Vec<f64>,
     /// Duration of each out-of-workspace burst, s.
     pub outside_for_s: f64,
+}
+
+impl Default for Injections {
+    fn default() -> Self {
+        Injections {
+            nan_at_s: Vec::new(),
+            outside_at_s: Vec::new(),
+            outside_for_s: defaults::OUTSIDE_FOR_S,
+        }
+    }
+}
+
+/// The planner's defaults, each written once: [`PlannerConfig::new`] uses
+/// them and the command line's flags show them.
+pub mod defaults {
+    /// Setpoint rate, Hz (the controller's: one setpoint a period).
+    pub const RATE_HZ: f64 = crate::ipc::controller::defaults::RATE_HZ;
+    /// The hold at the first pose, s.
+    pub const SETTLE_S: f64 = 2.0;
+    /// Length of an injected out-of-workspace burst, s.
+    pub const OUTSIDE_FOR_S: f64 = 0.05;
 }
 
 /// Everything the planner process needs: written by a launcher as JSON
@@ -92,6 +113,33 @@ pub struct PlannerConfig {
     /// Pin to this CPU.
     #[serde(default)]
     pub cpu: Option<usize>,
+}
+
+impl PlannerConfig {
+    /// Defaults for following `shape` on `robot`: [`defaults`], steps
+    /// shaped for the rod's first mode, no dynamic offset or learning, no
+    /// injected faults, peers lost after 2 s of silence.
+    pub fn new(robot: PathBuf, shape: PathShape) -> PlannerConfig {
+        PlannerConfig {
+            robot,
+            prefix: super::DEFAULT_PREFIX.into(),
+            shape,
+            rate_hz: defaults::RATE_HZ,
+            settle_s: defaults::SETTLE_S,
+            duration_s: None,
+            step_shaping: ShapingChoice::default(),
+            start_from_rest: false,
+            dynamic_offset: false,
+            learning: LearningChoice::default(),
+            inject: Injections::default(),
+            peer_timeout_s: Some(2.0),
+            peer_start_grace_s: None,
+            supervised: false,
+            log: None,
+            realtime: false,
+            cpu: None,
+        }
+    }
 }
 
 /// Flag bit in the planner log (not on the wire): this message was an

@@ -231,7 +231,7 @@ impl Default for StuckMotorDetection {
 
 impl Default for ControllerConfig {
     fn default() -> Self {
-        ControllerConfig::new("robots/seed-4t.toml".into(), "out/model.tnet".into())
+        ControllerConfig::new(crate::robot::DEFAULT_ROBOT.into(), "out/model.tnet".into())
     }
 }
 

@@ -71,7 +71,7 @@ pub struct PlantConfig {
 impl Default for PlantConfig {
     fn default() -> Self {
         PlantConfig {
-            robot: "robots/seed-4t.toml".into(),
+            robot: crate::robot::DEFAULT_ROBOT.into(),
             prefix: super::DEFAULT_PREFIX.into(),
             params: PlantParams::default(),
             spin: false,

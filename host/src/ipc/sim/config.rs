@@ -8,7 +8,7 @@ use serde::Serialize;
 use super::{SimError, SimFaults, DEFAULT_KI_PER_S, DEFAULT_MAX_RMS_MM};
 use crate::ipc::clock::now_ns;
 use crate::ipc::controller::ControllerConfig;
-use crate::ipc::planner::{Injections, PlannerConfig};
+use crate::ipc::planner::PlannerConfig;
 use crate::ipc::plant::PlantConfig;
 use crate::plan::PathShape;
 
@@ -147,31 +147,21 @@ impl SimConfig {
             prefix: None,
             duration_s: 10.0,
             planner: PlannerConfig {
-                robot: robot.clone(),
                 prefix: String::new(),
-                shape: PathShape::Circle {
-                    center_m: [0.0, 0.0],
-                    radius_m: 0.015,
-                    freq_hz: 0.2,
-                    height_m: None,
-                },
-                step_shaping: crate::plan::ShapingChoice::Auto,
                 start_from_rest: true,
                 dynamic_offset: true,
-                learning: crate::plan::LearningChoice::Off,
-                rate_hz: 1000.0,
-                settle_s: 2.0,
-                duration_s: None,
-                inject: Injections {
-                    outside_for_s: 0.05,
-                    ..Injections::default()
-                },
                 peer_timeout_s: controller.peer_timeout_s,
-                peer_start_grace_s: None,
                 supervised: true,
-                log: None,
                 realtime: true,
-                cpu: None,
+                ..PlannerConfig::new(
+                    robot.clone(),
+                    PathShape::Circle {
+                        center_m: [0.0, 0.0],
+                        radius_m: 0.015,
+                        freq_hz: 0.2,
+                        height_m: None,
+                    },
+                )
             },
             controller,
             plant: PlantConfig {
