@@ -334,11 +334,13 @@ mod tests {
     #[test]
     fn a_plant_without_flags_is_the_configurations_defaults() {
         let given = Cli::parse_from(["plant"]).args.config().unwrap();
-        let mut expected = PlantConfig::default();
         // The command line's own choice, said in its help: the peers'
         // timeout and its start grace.
-        expected.peer_timeout_s = given.peer_timeout_s;
-        expected.peer_start_grace_s = given.peer_start_grace_s;
+        let expected = PlantConfig {
+            peer_timeout_s: given.peer_timeout_s,
+            peer_start_grace_s: given.peer_start_grace_s,
+            ..PlantConfig::default()
+        };
         assert_eq!(given, expected);
     }
 }
