@@ -105,55 +105,18 @@ pub fn build_mcu_bin(
     target_dir: &Path,
     label: &str,
 ) -> Result<PathBuf, ParityError> {
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let mut cmd = Command::new(cargo);
-    cmd.args(["build", "-p", "tendril-firmware", "--features", "harness"])
-        .args(["--bin", bin])
-        .args(["--release", "--target", TARGET])
-        .env("CARGO_TARGET_DIR", target_dir)
-        // The image is measured (instruction counts) and compared bit for
-        // bit, so plain rustc compiles it whatever wrapper the calling build
-        // uses: CI lints its test build through clippy-driver, which turns
-        // MIR optimisations off and made a swap slice 25 % longer.
-        .env_remove("RUSTC_WORKSPACE_WRAPPER")
-        .env_remove("RUSTC_WRAPPER")
-        .current_dir(root);
-    match net {
-        Some(p) => cmd.env("TENDRIL_FW_NET", p),
-        None => cmd.env_remove("TENDRIL_FW_NET"),
-    };
-    match vectors {
-        Some(p) => cmd.env("TENDRIL_FW_VECTORS", p),
-        None => cmd.env_remove("TENDRIL_FW_VECTORS"),
-    };
-    // Cargo's progress lines are not the user's business (the pipeline
-    // logs the stage); its error is, and goes into the message.
-    let out = cmd
-        .stdin(std::process::Stdio::null())
-        .output()
-        .map_err(|e| ParityError::Run(format!("starting cargo build: {e}")))?;
-    if !out.status.success() {
-        return Err(ParityError::Run(format!(
-            "cargo build of the MCU binary failed ({}): {}",
-            out.status,
-            first_error_line(&out.stderr)
-        )));
-    }
-    let elf = target_dir.join(TARGET).join("release").join(bin);
+    let elf = crate::mcu::cargo_build_firmware(
+        root,
+        bin,
+        "harness",
+        target_dir,
+        &[("TENDRIL_FW_NET", net), ("TENDRIL_FW_VECTORS", vectors)],
+    )
+    .map_err(ParityError::Run)?;
     let copy = target_dir.join(format!("{bin}-{label}"));
     std::fs::copy(&elf, &copy)
         .map_err(|e| ParityError::Run(format!("copying {}: {e}", elf.display())))?;
     Ok(copy)
-}
-
-/// The first `error` line of a cargo build's captured stderr: what a
-/// message about a failed build quotes, instead of cargo's whole output.
-pub(crate) fn first_error_line(stderr: &[u8]) -> String {
-    String::from_utf8_lossy(stderr)
-        .lines()
-        .find(|l| l.starts_with("error"))
-        .unwrap_or("(no error line)")
-        .to_string()
 }
 
 /// Run `elf` under QEMU (the `cargo fw` command line) with a time limit;

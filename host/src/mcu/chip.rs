@@ -309,42 +309,73 @@ pub fn build_image(bin: &str) -> Result<PathBuf> {
             workspace.display()
         );
     });
+    cargo_build_firmware(
+        &workspace,
+        bin,
+        "stm32f405",
+        &dir,
+        &[("TENDRIL_FW_NET", None)],
+    )
+    .map_err(|e| anyhow::anyhow!("building {bin} failed: {e}"))
+}
+
+/// The one build of a firmware binary: `cargo build --release` of `bin`
+/// from the firmware crate with `features`, for the chip's target, into
+/// `target_dir`, with `env` set (`None`: removed, so the calling build's
+/// value does not leak in). Plain rustc compiles it whatever wrapper the
+/// calling build uses: the image is measured (instruction counts) and
+/// compared bit for bit, and CI lints its test build through
+/// clippy-driver, which turns MIR optimisations off (a swap slice came out
+/// 25 % longer) and would make this a second build. Cargo's progress lines
+/// are not the user's business; its first error line is the error.
+/// Returns the ELF's path.
+pub fn cargo_build_firmware(
+    workspace: &Path,
+    bin: &str,
+    features: &str,
+    target_dir: &Path,
+    env: &[(&str, Option<&Path>)],
+) -> Result<PathBuf, String> {
     let cargo = std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into());
-    let out = Command::new(cargo)
-        .current_dir(&workspace)
-        .args([
-            "build",
-            "-p",
-            "tendril-firmware",
-            "--features",
-            "stm32f405",
-            "--bin",
-            bin,
-            "--release",
-            "--target",
-            TARGET,
-        ])
-        .env("CARGO_TARGET_DIR", &dir)
-        // Built as .ci/run prebuilds it: plain rustc (CI's test build runs
-        // through clippy-driver, which would make this a second build), and
-        // the built-in net of the checkout.
+    let mut cmd = Command::new(cargo);
+    cmd.current_dir(workspace)
+        .args(["build", "-p", "tendril-firmware", "--features", features])
+        .args(["--bin", bin, "--release", "--target", TARGET])
+        .env("CARGO_TARGET_DIR", target_dir)
         .env_remove("RUSTC_WORKSPACE_WRAPPER")
-        .env_remove("RUSTC_WRAPPER")
-        .env_remove("TENDRIL_FW_NET")
+        .env_remove("RUSTC_WRAPPER");
+    for (name, value) in env {
+        match value {
+            Some(v) => cmd.env(name, v),
+            None => cmd.env_remove(name),
+        };
+    }
+    let out = cmd
         .stdin(Stdio::null())
         .output()
-        .context("running cargo build for the chip image")?;
+        .map_err(|e| format!("starting cargo build: {e}"))?;
     if !out.status.success() {
-        bail!(
-            "building {bin} failed: {}",
-            crate::firmware_parity::first_error_line(&out.stderr)
-        );
+        return Err(format!(
+            "cargo build of {bin} failed ({}): {}",
+            out.status,
+            first_error_line(&out.stderr)
+        ));
     }
-    let image = dir.join(TARGET).join("release").join(bin);
-    if !image.is_file() {
-        bail!("cargo built no {}", image.display());
+    let elf = target_dir.join(TARGET).join("release").join(bin);
+    if !elf.is_file() {
+        return Err(format!("cargo built no {}", elf.display()));
     }
-    Ok(image)
+    Ok(elf)
+}
+
+/// The first `error` line of a cargo build's captured stderr: what a
+/// message about a failed build quotes, instead of cargo's whole output.
+fn first_error_line(stderr: &[u8]) -> String {
+    String::from_utf8_lossy(stderr)
+        .lines()
+        .find(|l| l.starts_with("error"))
+        .unwrap_or("(no error line)")
+        .to_string()
 }
 
 #[cfg(test)]

@@ -17,5 +17,8 @@ mod link;
 mod tests;
 pub mod trace;
 
-pub use chip::{build_image, check_tools, locate_bringup_image, locate_image, Chip, QEMU, TARGET};
+pub use chip::{
+    build_image, cargo_build_firmware, check_tools, locate_bringup_image, locate_image, Chip, QEMU,
+    TARGET,
+};
 pub use link::McuLink;

@@ -304,7 +304,7 @@ pub struct IntegralGains {
 }
 
 /// The motors' time constant the model assumes, s (the plant's default).
-pub const MODEL_MOTOR_TAU_S: f64 = 0.02;
+pub const MODEL_MOTOR_TAU_S: f64 = crate::plant::MOTOR_TAU_S;
 /// Planner to motors in the model, s: a controller period and transport.
 pub const MODEL_DELAY_S: f64 = 0.002;
 /// Tip to controller in the model, s: a tracker's latency.

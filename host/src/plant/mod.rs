@@ -10,7 +10,9 @@ mod params;
 pub mod reality;
 
 pub use model::PlantModel;
-pub use params::{DelayFault, DropFault, PlantFaults, PlantParams, RobotModel, StuckFault};
+pub use params::{
+    DelayFault, DropFault, PlantFaults, PlantParams, RobotModel, StuckFault, MOTOR_TAU_S,
+};
 
 /// Why a plant could not be made or stepped.
 #[derive(Debug, thiserror::Error)]

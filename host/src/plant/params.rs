@@ -91,10 +91,15 @@ pub struct PlantParams {
     pub reality: Option<Reality>,
 }
 
+/// The default motors' time constant, s: the plant's, and what the
+/// controller's stuck-motor rule and the planner's learning model assume
+/// of a robot's motors unless told otherwise.
+pub const MOTOR_TAU_S: f64 = 0.02;
+
 impl Default for PlantParams {
     fn default() -> Self {
         PlantParams {
-            motor_tau_s: 0.02,
+            motor_tau_s: MOTOR_TAU_S,
             compliance_tau_s: 0.0,
             noise_m: 20e-6,
             noise_quat: 1e-5,

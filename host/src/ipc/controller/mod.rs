@@ -222,7 +222,7 @@ impl Default for StuckMotorDetection {
     fn default() -> Self {
         StuckMotorDetection {
             enabled: true,
-            motor_tau_s: 0.02,
+            motor_tau_s: crate::plant::MOTOR_TAU_S,
             tension_error_n: 0.5,
             persist_s: 0.1,
         }
