@@ -79,6 +79,16 @@ pub struct PlantParams {
     pub seed: u64,
     /// RK4 steps of the statics (speed vs accuracy; 16 ≈ 1e-7 m).
     pub statics_steps: usize,
+    /// Residual tolerance of the plant's statics, N / N m
+    /// ([`crate::statics::SolverSettings::tol`]).
+    pub statics_tol: f64,
+    /// A warm solve may end on an unverified chord step that moves the tip
+    /// by at most this, m ([`crate::statics::SolverSettings::final_step_m`];
+    /// 0: every solve verified). The default, [`PLANT_FINAL_STEP_M`] with
+    /// [`PLANT_STATICS_TOL`], keeps the plant's tip within 0.1 µm of a
+    /// verified solve's (tested), 200 times below the quietest tracker's
+    /// noise (20 µm), at one pass a step instead of two or three.
+    pub statics_final_step_m: f64,
     /// Faults to inject.
     pub faults: PlantFaults,
     /// Quasi-static or dynamic robot.
@@ -90,6 +100,12 @@ pub struct PlantParams {
     /// (None: the robot file, an ideal tracker with `noise_m`).
     pub reality: Option<Reality>,
 }
+
+/// The plant's statics tolerance, N / N m: the one-pass warm solve's
+/// (`docs/design.md` §2, "Solve").
+pub const PLANT_STATICS_TOL: f64 = 1e-7;
+/// The plant's bound on an unverified final step, m.
+pub const PLANT_FINAL_STEP_M: f64 = 1e-6;
 
 /// The default motors' time constant, s: the plant's, and what the
 /// controller's stuck-motor rule and the planner's learning model assume
@@ -105,6 +121,8 @@ impl Default for PlantParams {
             noise_quat: 1e-5,
             seed: 1,
             statics_steps: 16,
+            statics_tol: PLANT_STATICS_TOL,
+            statics_final_step_m: PLANT_FINAL_STEP_M,
             faults: PlantFaults::default(),
             model: RobotModel::QuasiStatic,
             dynamics_dt_s: 1e-3,
