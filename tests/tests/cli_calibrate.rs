@@ -315,6 +315,71 @@ fn a_plan_too_large_to_measure_and_a_plan_beside_data_are_refused_at_once() {
     assert!(!plan.exists());
 }
 
+/// A plan with a hung mass (issue 45, item 2): the CSV carries the known
+/// tip force (the mass's weight along the robot file's gravity) on some of
+/// its rows, zero on the others; a robot file without gravity cannot say
+/// where a hung mass pulls, and a bad load is refused, naming the flag.
+#[test]
+fn a_plan_with_a_hung_mass_writes_its_tip_force_on_some_rows() {
+    let dir = tempfile::tempdir().unwrap();
+    let plan = dir.path().join("p.csv");
+    let seed = root().join("robots/seed-4t.toml");
+    ok(&tendril(&[
+        "calibrate",
+        "--plan",
+        "12",
+        "--plan-tip-mass-g",
+        "50",
+        "--robot",
+        seed.to_str().unwrap(),
+        "--fit",
+        "E,density,offsets",
+        "--out",
+        plan.to_str().unwrap(),
+    ]));
+    let text = std::fs::read_to_string(&plan).unwrap();
+    assert!(text.starts_with("t0,t1,t2,t3,fx,fy,fz\n"), "{text}");
+    // seed-4t's gravity is 9.81 m/s² along +x of its base: 50 g weighs 0.4905 N.
+    let forces: Vec<Vec<f64>> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').skip(4).map(|x| x.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(forces.len(), 12);
+    let loaded = forces
+        .iter()
+        .filter(|f| (f[0] - 0.4905).abs() < 1e-9 && f[1] == 0.0 && f[2] == 0.0)
+        .count();
+    let unloaded = forces.iter().filter(|f| f.iter().all(|&x| x == 0.0)).count();
+    assert!(loaded > 0 && loaded + unloaded == 12, "{text}");
+    let two_seg = root().join("robots/tdcr-2seg.toml");
+    let o = tendril(&[
+        "calibrate",
+        "--plan",
+        "5",
+        "--plan-tip-mass-g",
+        "50",
+        "--robot",
+        two_seg.to_str().unwrap(),
+        "--out",
+        dir.path().join("q.csv").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--plan-tip-load"));
+    let o = tendril(&[
+        "calibrate",
+        "--plan",
+        "5",
+        "--plan-tip-load",
+        "0,0",
+        "--out",
+        dir.path().join("q.csv").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--plan-tip-load \"0,0\""));
+    assert!(!dir.path().join("q.csv").exists());
+}
+
 /// `calibrate --step` (issue 45, item 3) on traces of tendril's own dynamic
 /// plant: the default robot with the dynamic rod at ζ₁ = 5 %
 /// (`dynamic-light-damping`), one tendon stepped to a tenth of its range

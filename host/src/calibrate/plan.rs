@@ -1,8 +1,11 @@
 //! The experiment planner (`tendril calibrate --plan N`, `docs/design.md`
 //! §11): a greedy D-optimal choice of tension sets among random candidates
-//! within the limits.
+//! within the limits, each candidate with and without a known tip load when
+//! one is planned (the load makes E identifiable: without it, tendons and
+//! weight bend the rod by τ·d/(E·I) and ρ·A·g/(E·I), and only the ratios
+//! show in tip positions).
 
-use nalgebra::{DMatrix, Matrix3};
+use nalgebra::{DMatrix, Matrix3, Vector3};
 
 use super::params::{scale, Param, Values};
 use super::CalibError;
@@ -35,19 +38,38 @@ pub fn plannable(robot: &Robot, params: &[Param]) -> Vec<Param> {
     params.to_vec()
 }
 
-/// `n` tension sets for `robot` that make a fit of `params` (from tip
-/// positions) well conditioned: from `n × 8` (at least 200) candidates
-/// uniform within [min_tension, max_tension] plus the zero-tension row, each
-/// step adds the candidate whose 3 × p sensitivity block S maximises
-/// det(M + SᵀS), M the information so far (det(I + S M⁻¹ Sᵀ), a 3 × 3
-/// determinant); M starts at 1e-9 I. Only the rod's parameters matter: a
-/// frame offset is seen equally in every row.
+/// One row to measure: the tensions to set and the known tip force to hang
+/// on the tip while measuring (zero: none), N, base frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlannedRow {
+    /// Tensions, N.
+    pub tensions: Vec<f64>,
+    /// The tip force, N, base frame.
+    pub tip_force: [f64; 3],
+}
+
+/// The tip force of a hung mass of `grams` on `robot`: its weight along the
+/// robot file's gravity (base frame). `None` when the file has no gravity
+/// (its direction in the base frame is then unknown: give the force).
+pub fn hung_mass_force(robot: &Robot, grams: f64) -> Option<[f64; 3]> {
+    (robot.gravity.norm() > 0.0).then(|| (robot.gravity * grams * 1e-3).into())
+}
+
+/// `n` rows for `robot` that make a fit of `params` (from tip positions)
+/// well conditioned: from `n × 8` (at least 200) tension candidates uniform
+/// within [min_tension, max_tension] plus the zero-tension row — each also
+/// with the known tip force `load` when one is given — each step adds the
+/// candidate whose 3 × p sensitivity block S maximises det(M + SᵀS), M the
+/// information so far (det(I + S M⁻¹ Sᵀ), a 3 × 3 determinant); M starts
+/// at 1e-9 I. Only the rod's parameters matter: a frame offset is seen
+/// equally in every row.
 pub fn plan(
     robot: &Robot,
     params: &[Param],
     n: usize,
     seed: u64,
-) -> Result<Vec<Vec<f64>>, CalibError> {
+    load: Option<[f64; 3]>,
+) -> Result<Vec<PlannedRow>, CalibError> {
     if n == 0 {
         return Err(CalibError::Options("--plan needs at least one row".into()));
     }
@@ -60,32 +82,45 @@ pub fn plan(
     let nv = Values::of(robot);
     let rod: Vec<Param> = params.iter().copied().filter(Param::moves_rod).collect();
     let count = (n * CANDIDATES_PER_ROW).max(200);
-    let solves = count * 2 * rod.len();
+    let loads = if load.is_some() { 2 } else { 1 };
+    let solves = count * loads * 2 * rod.len();
     let threads = rayon::current_num_threads().max(1);
     log::info!(
-        "planning {n} rows from {count} candidates: {solves} statics solves, about {:.0} s on \
+        "planning {n} rows from {} candidates: {solves} statics solves, about {:.0} s on \
          {threads} threads",
+        count * loads,
         solves as f64 * super::seconds_per_solve(robot) / threads as f64
     );
     let bar = crate::progress::bar(
-        count as u64 + n as u64,
+        (count * loads) as u64 + n as u64,
         true,
         "{spinner} planning [{bar:30}] {pos}/{len} eta {eta}",
     );
-    let mut candidates =
+    let mut tensions =
         Sampler::Uniform.draw_between(count, &robot.min_tensions(), &robot.max_tensions(), seed);
-    candidates.push(robot.min_tensions());
+    tensions.push(robot.min_tensions());
+    let forces: Vec<[f64; 3]> = std::iter::once([0.0; 3]).chain(load).collect();
+    let candidates: Vec<PlannedRow> = tensions
+        .iter()
+        .flat_map(|t| {
+            forces.iter().map(|&f| PlannedRow {
+                tensions: t.clone(),
+                tip_force: f,
+            })
+        })
+        .collect();
     // Sensitivity of each candidate's tip to each parameter (scaled).
-    let tip = |v: &Values, tau: &[f64]| -> Result<nalgebra::Vector3<f64>, CalibError> {
+    let tip = |v: &Values, row: &PlannedRow| -> Result<Vector3<f64>, CalibError> {
         let s = Statics::new(&v.solving_robot(robot), SolverSettings::default());
-        s.solve(&v.scaled_tensions(tau), None)
+        let f = Vector3::from(row.tip_force);
+        s.solve_loaded(&v.scaled_tensions(&row.tensions), f, Vector3::zeros(), None)
             .map(|sol| sol.position)
             .map_err(|error| CalibError::Solve { line: 0, error })
     };
     use rayon::prelude::*;
     let blocks: Vec<DMatrix<f64>> = candidates
         .par_iter()
-        .map(|tau| {
+        .map(|row| {
             let mut b = DMatrix::zeros(3, rod.len());
             for (j, &p) in rod.iter().enumerate() {
                 let h = super::FD_STEP * scale(p, &nv);
@@ -93,7 +128,7 @@ pub fn plan(
                 plus.set(p, nv.get(p) + h);
                 let mut minus = nv.clone();
                 minus.set(p, nv.get(p) - h);
-                let d = (tip(&plus, tau)? - tip(&minus, tau)?) / (2.0 * super::FD_STEP);
+                let d = (tip(&plus, row)? - tip(&minus, row)?) / (2.0 * super::FD_STEP);
                 b.set_column(j, &d);
             }
             bar.inc(1);

@@ -48,6 +48,25 @@ pub struct CalibrateArgs {
     /// 5,000 (rows someone measures by hand). `--out -` prints them.
     #[arg(long, value_name = "N")]
     pub plan: Option<usize>,
+    /// With --plan: a known mass hung on the tip for some rows, grams; its
+    /// weight along the robot file's gravity is each row's fx,fy,fz. Rows
+    /// with a known load make E identifiable (docs/design.md §11).
+    #[arg(
+        long,
+        value_name = "GRAMS",
+        requires = "plan",
+        conflicts_with = "plan_tip_load"
+    )]
+    pub plan_tip_mass_g: Option<f64>,
+    /// With --plan: a known tip force for some rows, N, base frame
+    /// ("fx,fy,fz"; e.g. a weight over a pulley).
+    #[arg(
+        long,
+        value_name = "FX,FY,FZ",
+        requires = "plan",
+        allow_hyphen_values = true
+    )]
+    pub plan_tip_load: Option<String>,
     /// Fraction of rows held out of the fit to judge it, in [0, 0.5].
     #[arg(long, default_value_t = 0.2)]
     pub holdout: f64,
@@ -61,6 +80,45 @@ pub struct CalibrateArgs {
     /// degree, in [0.001, 1000].
     #[arg(long, default_value_t = 0.1 * 1e3 * std::f64::consts::PI / 180.0)]
     pub mm_per_deg: f64,
+}
+
+/// The known tip load `--plan-tip-mass-g` or `--plan-tip-load` asks for.
+fn planned_load(
+    robot: &crate::robot::Robot,
+    args: &CalibrateArgs,
+) -> anyhow::Result<Option<[f64; 3]>> {
+    if let Some(g) = args.plan_tip_mass_g {
+        if !(g.is_finite() && g > 0.0) {
+            anyhow::bail!(
+                "--plan-tip-mass-g must be a mass > 0 g, got {}",
+                crate::units::given(g)
+            );
+        }
+        return calibrate::plan::hung_mass_force(robot, g)
+            .map(Some)
+            .ok_or_else(|| {
+                anyhow::anyhow!(
+                    "--plan-tip-mass-g: {} has no gravity, so a hung mass's direction in its base \
+                 frame is unknown: give the force with --plan-tip-load fx,fy,fz",
+                    args.robot.robot.display()
+                )
+            });
+    }
+    let Some(text) = &args.plan_tip_load else {
+        return Ok(None);
+    };
+    let v = super::common::parse_list(text, "--plan-tip-load")?;
+    match v[..] {
+        [x, y, z]
+            if [x, y, z].iter().all(|c| c.is_finite()) && (x != 0.0 || y != 0.0 || z != 0.0) =>
+        {
+            Ok(Some([x, y, z]))
+        }
+        _ => anyhow::bail!(
+            "--plan-tip-load {text:?}: expected three finite numbers fx,fy,fz (N, base frame), \
+             not all zero"
+        ),
+    }
 }
 
 /// The weights of an orientation error `--mm-per-deg` accepts: beyond
@@ -78,12 +136,29 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
     if let Some(n) = args.plan {
         crate::fsutil::check_distinct(&[("--robot", &args.robot.robot)], &[("--out", &args.out)])?;
         let fit = calibrate::plan::plannable(&robot, &fit);
-        let rows = calibrate::plan::plan(&robot, &fit, n, args.seed)?;
-        let header: Vec<String> = (0..robot.n_tendons()).map(|i| format!("t{i}")).collect();
+        let load = planned_load(&robot, &args)?;
+        let rows = calibrate::plan::plan(&robot, &fit, n, args.seed, load)?;
+        let mut header: Vec<String> = (0..robot.n_tendons()).map(|i| format!("t{i}")).collect();
+        if load.is_some() {
+            header.extend(["fx", "fy", "fz"].map(String::from));
+        }
         let mut text = header.join(",") + "\n";
         for r in &rows {
-            let cells: Vec<String> = r.iter().map(|x| format!("{x}")).collect();
+            let forces = load.map(|_| r.tip_force);
+            let cells: Vec<String> = r
+                .tensions
+                .iter()
+                .chain(forces.iter().flatten())
+                .map(|x| format!("{x}"))
+                .collect();
             text += &(cells.join(",") + "\n");
+        }
+        if let Some(f) = load {
+            let loaded = rows.iter().filter(|r| r.tip_force == f).count();
+            log::info!(
+                "{loaded} of {} rows carry the known tip load {f:?} N: measure them with it hung",
+                rows.len()
+            );
         }
         crate::fsutil::write_atomic(&args.out, text.as_bytes())
             .with_context(|| format!("{}", args.out.display()))?;
