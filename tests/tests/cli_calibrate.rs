@@ -350,7 +350,10 @@ fn a_plan_with_a_hung_mass_writes_its_tip_force_on_some_rows() {
         .iter()
         .filter(|f| (f[0] - 0.4905).abs() < 1e-9 && f[1] == 0.0 && f[2] == 0.0)
         .count();
-    let unloaded = forces.iter().filter(|f| f.iter().all(|&x| x == 0.0)).count();
+    let unloaded = forces
+        .iter()
+        .filter(|f| f.iter().all(|&x| x == 0.0))
+        .count();
     assert!(loaded > 0 && loaded + unloaded == 12, "{text}");
     let two_seg = root().join("robots/tdcr-2seg.toml");
     let o = tendril(&[
