@@ -25,9 +25,12 @@ pub fn resolved(path: &Path) -> PathBuf {
     }
 }
 
-/// Whether `a` and `b` name the same file once their directories are resolved.
+/// Whether `a` and `b` name the same file once their directories are
+/// resolved. `-` names no file (stdin as an input, stdout as an output,
+/// `docs/design.md` §7), so `--input - --output -` is a pipe, not one file.
 pub fn same_file(a: &Path, b: &Path) -> bool {
-    resolved(a) == resolved(b)
+    let dash = |p: &Path| p.as_os_str() == "-";
+    !dash(a) && !dash(b) && resolved(a) == resolved(b)
 }
 
 /// Bytes an unprivileged user may still write in the file system holding
@@ -65,6 +68,10 @@ mod tests {
         let plain = dir.path().join("new.csv");
         assert!(same_file(&plain, &dir.path().join("sub/../new.csv")));
         assert!(!same_file(&plain, &dir.path().join("sub/new.csv")));
+        assert!(
+            !same_file(Path::new("-"), Path::new("-")),
+            "a pipe is not a file"
+        );
         #[cfg(unix)]
         {
             let link = dir.path().join("link");
