@@ -19,6 +19,8 @@
 //! f64 throughout, like the reference: the L-BFGS line search compares
 //! losses that differ in their sixth digit late in a run.
 
+use std::ops::Range;
+
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 
@@ -126,9 +128,10 @@ pub(super) fn loss_and_gradient(
     loss_and_gradient_with(cpu_has_fma(), net, rows, with_gradient)
 }
 
-/// [`loss_and_gradient`], fused multiply-adds or not.
+/// [`loss_and_gradient`] on the fast path (AVX2 and FMA; only where the CPU
+/// has them) or the portable one.
 fn loss_and_gradient_with(
-    fma: bool,
+    fast: bool,
     net: &GrowingNet,
     rows: Batch<'_>,
     with_gradient: bool,
@@ -144,13 +147,15 @@ fn loss_and_gradient_with(
         .into_par_iter()
         .map(|b| {
             let mut tile = Tile::new(&layout);
-            let mut grad = vec![0.0; p];
-            let mut loss = 0.0;
+            let mut sums = Sums {
+                loss: 0.0,
+                grad: vec![0.0; p],
+            };
             for r0 in (b * BLOCK..((b + 1) * BLOCK).min(n)).step_by(TILE) {
-                let len = TILE.min(n - r0);
-                loss = tile_pass(fma, &layout, rows, r0, len, &mut tile, &mut grad, loss);
+                let span = r0..(r0 + TILE).min(n);
+                tile_pass(fast, &layout, rows, span, &mut tile, &mut sums);
             }
-            (loss, grad)
+            (sums.loss, sums.grad)
         })
         .collect();
     let mut grad = vec![0.0; p];
@@ -174,42 +179,42 @@ fn cpu_has_fma() -> bool {
     }
 }
 
-/// One tile, rows `r0 .. r0 + len`: `loss` plus its rows' (in row order),
-/// and its gradient added into `grad` (when not empty).
-#[allow(clippy::too_many_arguments)]
+/// A block's running sums: the loss (row by row, in order) and the
+/// gradient (empty when not wanted).
+struct Sums {
+    loss: f64,
+    grad: Vec<f64>,
+}
+
+/// One tile, the rows of `span` (at most [`TILE`]), into `sums`.
 fn tile_pass(
-    fma: bool,
+    fast: bool,
     l: &Layout<'_>,
     rows: Batch<'_>,
-    r0: usize,
-    len: usize,
+    span: Range<usize>,
     t: &mut Tile,
-    grad: &mut [f64],
-    loss: f64,
-) -> f64 {
+    sums: &mut Sums,
+) {
     #[cfg(target_arch = "x86_64")]
-    if fma {
-        // SAFETY: `fma` is true only where `cpu_has_fma()` found AVX2 and
+    if fast {
+        // SAFETY: `fast` is true only where `cpu_has_fma()` found AVX2 and
         // FMA on this CPU (the tests' `false` is always safe).
-        return unsafe { tile_pass_fma(l, rows, r0, len, t, grad, loss) };
+        return unsafe { tile_pass_fma(l, rows, span, t, sums) };
     }
-    let _ = fma;
-    tile_kernel::<false>(l, rows, r0, len, t, grad, loss)
+    let _ = fast;
+    tile_kernel::<false>(l, rows, span, t, sums)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-#[allow(clippy::too_many_arguments)]
 fn tile_pass_fma(
     l: &Layout<'_>,
     rows: Batch<'_>,
-    r0: usize,
-    len: usize,
+    span: Range<usize>,
     t: &mut Tile,
-    grad: &mut [f64],
-    loss: f64,
-) -> f64 {
-    tile_kernel::<true>(l, rows, r0, len, t, grad, loss)
+    sums: &mut Sums,
+) {
+    tile_kernel::<true>(l, rows, span, t, sums)
 }
 
 /// a·b + c, fused on the fast path (without FMA, `mul_add` would be a
@@ -244,8 +249,8 @@ fn exp(x: f64) -> f64 {
     // 1.5·2⁵²: x·log₂e + MAGIC rounds to an integer held in the low bits.
     const MAGIC: f64 = 6_755_399_441_055_744.0;
     // ln 2 in two parts (fdlibm's): k·LN2_HI is exact for |k| < 2¹¹.
-    const LN2_HI: f64 = 6.931_471_803_691_238_164_90e-1;
-    const LN2_LO: f64 = 1.908_214_929_270_587_700_02e-10;
+    const LN2_HI: f64 = 6.931_471_803_691_238e-1;
+    const LN2_LO: f64 = 1.908_214_929_270_587_7e-10;
     // 1/n!, n = 0..=13.
     const C: [f64; 14] = {
         let mut c = [1.0; 14];
@@ -283,36 +288,27 @@ fn combine<const FAST: bool>(cols: &[f64], w: &[f64]) -> [f64; TILE] {
 }
 
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
 fn tile_kernel<const FAST: bool>(
     l: &Layout<'_>,
     rows: Batch<'_>,
-    r0: usize,
-    len: usize,
+    span: Range<usize>,
     t: &mut Tile,
-    grad: &mut [f64],
-    loss: f64,
-) -> f64 {
-    forward::<FAST>(l, rows.x, r0, len, t);
-    let loss = output_errors(l, rows, r0, len, t, loss);
-    if !grad.is_empty() {
+    sums: &mut Sums,
+) {
+    forward::<FAST>(l, rows.x, span.clone(), t);
+    sums.loss = output_errors(l, rows, span, t, sums.loss);
+    if !sums.grad.is_empty() {
         backward::<FAST>(l, t);
-        gradient::<FAST>(l, t, grad);
+        gradient::<FAST>(l, t, &mut sums.grad);
     }
-    loss
 }
 
 /// The tile's features into `t.z` and outputs into `t.out`; rows past
-/// `len` are zero inputs (finite, and their δ is zero).
+/// the span are zero inputs (finite, and their δ is zero).
 #[inline(always)]
-fn forward<const FAST: bool>(
-    l: &Layout<'_>,
-    x: &DMatrix<f64>,
-    r0: usize,
-    len: usize,
-    t: &mut Tile,
-) {
+fn forward<const FAST: bool>(l: &Layout<'_>, x: &DMatrix<f64>, span: Range<usize>, t: &mut Tile) {
     let (n, xs) = (x.nrows(), x.as_slice());
+    let (r0, len) = (span.start, span.len());
     t.z[..TILE].fill(1.0);
     for c in 0..l.net.n_inputs {
         let col = &mut t.z[(1 + c) * TILE..(2 + c) * TILE];
@@ -344,12 +340,12 @@ fn forward<const FAST: bool>(
 fn output_errors(
     l: &Layout<'_>,
     rows: Batch<'_>,
-    r0: usize,
-    len: usize,
+    span: Range<usize>,
     t: &mut Tile,
     mut loss: f64,
 ) -> f64 {
     let (h, o) = (l.net.n_hidden(), l.net.n_outputs);
+    let (r0, len) = (span.start, span.len());
     for r in 0..len {
         for (k, e) in t.e.iter_mut().enumerate() {
             *e = t.out[k * TILE + r] - rows.y[(r0 + r, k)];
@@ -515,9 +511,9 @@ mod tests {
 
     #[test]
     fn the_batched_loss_and_gradient_are_the_per_row_ones() {
-        for fma in [false, cpu_has_fma()] {
+        for fast in [false, cpu_has_fma()] {
             each_case(|net, rows, case| {
-                let (loss, grad) = loss_and_gradient_with(fma, net, batch(rows), true);
+                let (loss, grad) = loss_and_gradient_with(fast, net, batch(rows), true);
                 let (reference, want) = loss_and_gradient_per_row(net, rows, true);
                 // Summed in another order (and fused): rounding apart.
                 assert!(
@@ -529,10 +525,10 @@ mod tests {
                 for (k, (g, w)) in grad.iter().zip(&want).enumerate() {
                     assert!(
                         (g - w).abs() <= 1e-12 * scale,
-                        "{case}, fma {fma}, weight {k}: {g} vs {w} (largest {scale})"
+                        "{case}, fast {fast}, weight {k}: {g} vs {w} (largest {scale})"
                     );
                 }
-                let (alone, none) = loss_and_gradient_with(fma, net, batch(rows), false);
+                let (alone, none) = loss_and_gradient_with(fast, net, batch(rows), false);
                 assert_eq!((alone.to_bits(), none.len()), (loss.to_bits(), 0));
             });
         }
