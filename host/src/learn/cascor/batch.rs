@@ -287,6 +287,8 @@ fn combine<const FAST: bool>(cols: &[f64], w: &[f64]) -> [f64; TILE] {
     acc
 }
 
+/// The tile forward, its rows' losses, and, when the gradient is wanted,
+/// backward into the gradient.
 #[inline(always)]
 fn tile_kernel<const FAST: bool>(
     l: &Layout<'_>,
