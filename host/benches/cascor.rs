@@ -1,7 +1,9 @@
 //! Cascade-correlation speed: f32 inference per query (the firmware's code
 //! path, via the host's decoded net), the host layout ([`HostNet`]: one
 //! query, and batches per row, against the per-row firmware loop it
-//! replaced) and a small training run. The full
+//! replaced), the polish's loss and gradient (issue 48 item 1: the
+//! batched kernel against the per-row reference) and a small training
+//! run. The full
 //! training figure (default dataset, 20,000 rows) is a `tendril train` wall
 //! time; BENCHMARKS.md gives the command.
 
@@ -10,6 +12,9 @@ use nalgebra::DMatrix;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tendril::learn::cascor::export::{to_bytes, Ranges};
+use tendril::learn::cascor::polish::{
+    loss_and_gradient, loss_and_gradient_per_row, RowMetrics, Rows,
+};
 use tendril::learn::cascor::{train, CascorOptions, GrowingNet, OutputKind};
 use tendril::net::{decode, infer, pose_rows, HostNet};
 
@@ -89,6 +94,45 @@ fn host_inference(c: &mut Criterion, ranges: &Ranges) {
     g.finish();
 }
 
+/// One evaluation of the polish's loss and gradient (tip metric on) on the
+/// two-segment robot's shape: a 7-64-4 net and its 17,460 fitting rows.
+fn polish(c: &mut Criterion) {
+    let net = random_net(64);
+    let mut rng = ChaCha8Rng::seed_from_u64(4);
+    let n = 17_460;
+    let x = DMatrix::from_fn(n, 7, |_, _| rng.random_range(-0.5..0.5));
+    let y = DMatrix::from_fn(n, 4, |_, _| rng.random_range(0.0..1.0));
+    // Each row's metric a symmetric positive definite 4×4, as the tip metric's.
+    let mut m = Vec::with_capacity(n * 16);
+    for _ in 0..n {
+        let a: Vec<f64> = (0..16).map(|_| rng.random_range(-1.0..1.0)).collect();
+        for i in 0..4 {
+            for j in 0..4 {
+                let aat: f64 = (0..4).map(|k| a[i * 4 + k] * a[j * 4 + k]).sum();
+                m.push(aat + if i == j { 0.1 } else { 0.0 });
+            }
+        }
+    }
+    let metric = RowMetrics { outputs: 4, m };
+    let rows = Rows {
+        metric: Some(&metric),
+        ..Rows::plain(&x, &y)
+    };
+    let mut g = c.benchmark_group("polish_loss_gradient_7_64_4_17460_rows");
+    g.sample_size(20);
+    g.throughput(Throughput::Elements(n as u64));
+    g.bench_function("per_row", |b| {
+        b.iter(|| loss_and_gradient_per_row(&net, std::hint::black_box(rows), true))
+    });
+    g.bench_function("batched", |b| {
+        b.iter(|| loss_and_gradient(&net, std::hint::black_box(rows), true))
+    });
+    g.bench_function("batched_loss_only", |b| {
+        b.iter(|| loss_and_gradient(&net, std::hint::black_box(rows), false))
+    });
+    g.finish();
+}
+
 fn training(c: &mut Criterion) {
     let mut rng = ChaCha8Rng::seed_from_u64(2);
     let n = 2000;
@@ -111,5 +155,5 @@ fn training(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, inference, training);
+criterion_group!(benches, inference, polish, training);
 criterion_main!(benches);

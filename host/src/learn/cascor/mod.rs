@@ -11,11 +11,13 @@
 //! - [`train`]: the grow-and-freeze loop, the choice of output configuration,
 //!   stopping and progress;
 //! - [`polish`]: every weight trained together after growth;
+//! - `batch`: the polish's loss and gradient over tiles of rows;
 //! - [`tip_metric`]: what an output error costs at the tip, the polish's weights;
 //! - (a whole `tendril train` run — split, train, write every output and the
 //!   learning curve — is the job [`crate::jobs::train`]);
 //! - [`export`]: the `.tnet` weight file (`docs/design.md` §5.1).
 
+mod batch;
 pub mod candidates;
 mod data_robot;
 mod error;

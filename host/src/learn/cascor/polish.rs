@@ -22,6 +22,7 @@ use nalgebra::DMatrix;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::batch::{self, Batch};
 use super::net::{hidden_prime, GrowingNet, OutputKind};
 
 /// What the polish minimises.
@@ -191,8 +192,25 @@ pub fn unflatten(net: &mut GrowingNet, theta: &[f64]) {
 
 /// Half the summed (metric-weighted) squared error of `net` over `rows`,
 /// and, when `with_gradient`, its gradient with respect to [`flatten`]'s
-/// vector (else an empty vector).
+/// vector (else an empty vector). Computed over tiles of rows
+/// (`super::batch`); [`loss_and_gradient_per_row`] is its reference.
 pub fn loss_and_gradient(net: &GrowingNet, rows: Rows<'_>, with_gradient: bool) -> (f64, Vec<f64>) {
+    let batch = Batch {
+        x: rows.x,
+        y: rows.y,
+        metric: rows.metric.map(|m| &m.m[..]),
+        delta: rows.delta,
+    };
+    batch::loss_and_gradient(net, batch, with_gradient)
+}
+
+/// [`loss_and_gradient`] one row at a time through the net's own forward
+/// pass: the reference the batched kernel is tested and benchmarked against.
+pub fn loss_and_gradient_per_row(
+    net: &GrowingNet,
+    rows: Rows<'_>,
+    with_gradient: bool,
+) -> (f64, Vec<f64>) {
     let p = if with_gradient {
         net.parameter_count()
     } else {
