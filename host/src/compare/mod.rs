@@ -140,6 +140,10 @@ pub struct Entry {
     pub infer_us: f64,
     /// Mean wall time per row of a batched prediction, microseconds.
     pub infer_batched_us: f64,
+    /// Mean wall time of one single-row prediction by the learner's fast
+    /// path, not the deployed arithmetic (cascade correlation's relaxed
+    /// kernel), microseconds; `None`: no such path (or not on this CPU).
+    pub infer_fast_us: Option<f64>,
     /// Metrics on the training split (validation rows excluded); the
     /// task-space part on a seeded subsample of `train_task_rows` rows.
     pub train: SplitMetrics,

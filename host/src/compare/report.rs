@@ -23,6 +23,9 @@ struct Column {
 enum Shown {
     /// A plain number with at least this many decimals.
     Number(usize),
+    /// A number with at least this many decimals, or "n/a" (NaN) for a
+    /// learner the column does not apply to.
+    Optional(usize),
     /// A count.
     Count,
     /// A length kept in millimetres, printed in the unit that fits it.
@@ -35,6 +38,8 @@ impl Shown {
     fn text(self, v: f64) -> String {
         match self {
             Shown::Number(d) => units::number(v, d),
+            Shown::Optional(_) if v.is_nan() => "n/a".into(),
+            Shown::Optional(d) => units::number(v, d),
             Shown::Count => format!("{v:.0}"),
             Shown::LengthMm => units::length_mm(v),
             Shown::Degrees => units::degrees(v),
@@ -44,7 +49,7 @@ impl Shown {
     /// `a` is strictly below `b` at the precision the table shows.
     fn below(self, a: f64, b: f64) -> bool {
         match self {
-            Shown::Number(d) => units::shown_below(a, b, d),
+            Shown::Number(d) | Shown::Optional(d) => units::shown_below(a, b, d),
             Shown::Count => units::shown_below(a.round(), b.round(), 0),
             // Lengths and angles keep two significant digits of the larger.
             Shown::LengthMm => units::shown_below(a, b, 0),
@@ -132,6 +137,12 @@ fn columns() -> Vec<Column> {
             csv: "infer_us_per_row_batched",
             get: |e| e.infer_batched_us,
             shown: Shown::Number(2),
+        },
+        Column {
+            header: "µs/query, fast path",
+            csv: "infer_us_per_query_fast",
+            get: |e| e.infer_fast_us.unwrap_or(f64::NAN),
+            shown: Shown::Optional(2),
         },
         Column {
             header: "parameters",
@@ -356,6 +367,7 @@ mod tests {
             train_seconds: 1.0,
             infer_us: 1.0,
             infer_batched_us: 0.5,
+            infer_fast_us: None,
             train: test.clone(),
             train_task_rows: 10,
             test,

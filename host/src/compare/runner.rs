@@ -26,6 +26,9 @@ pub struct InferenceTime {
     pub single_us: f64,
     /// Batched: `predict` on all the timed test rows at once, per row.
     pub batched_us: f64,
+    /// Single queries by the learner's fast path (`Learner::predict_fast`;
+    /// `None`: it has none).
+    pub single_fast_us: Option<f64>,
 }
 
 /// Wall time spent on timing each of the two modes (at least one pass):
@@ -54,10 +57,18 @@ pub fn time_inference(l: &dyn Learner, x: &DMatrix<f64>, count: usize) -> Infere
     };
     let single_us = per_row(&mut || rows.iter().map(|r| first(&l.predict(r))).sum());
     let batched_us = per_row(&mut || first(&l.predict(&batch)));
+    let single_fast_us = l.predict_fast(&rows[0]).is_some().then(|| {
+        per_row(&mut || {
+            rows.iter()
+                .map(|r| l.predict_fast(r).as_ref().map_or(0.0, first))
+                .sum()
+        })
+    });
     std::hint::black_box(sink);
     InferenceTime {
         single_us,
         batched_us,
+        single_fast_us,
     }
 }
 
@@ -299,6 +310,7 @@ pub fn compare(
             train_seconds,
             infer_us: time.single_us,
             infer_batched_us: time.batched_us,
+            infer_fast_us: time.single_fast_us,
             train,
             train_task_rows: task_idx.len(),
             test,
@@ -363,5 +375,43 @@ mod tests {
         assert_eq!(a, subsample(1000, 50, 3));
         assert_ne!(a, subsample(1000, 50, 4));
         assert_eq!(subsample(10, 0, 1), (0..10).collect::<Vec<_>>());
+    }
+
+    /// Cascade correlation's fast path (issue 48, item 2) is timed where
+    /// this CPU runs the relaxed kernel and nowhere else, and it answers
+    /// what the deployed arithmetic answers, to f32's rounding; a learner
+    /// without one gets no fast figure.
+    #[test]
+    fn the_fast_single_query_is_timed_where_the_relaxed_kernel_runs_and_agrees() {
+        use crate::learn::cascor::{Cascor, CascorOptions};
+        use crate::learn::learner::Split;
+        let n = 300;
+        let x = DMatrix::from_fn(n, 7, |r, c| ((r * 7 + c * 13) % 97) as f64 / 96.0);
+        let y = DMatrix::from_fn(n, 4, |r, c| 0.5 + 0.4 * (x[(r, c)] - x[(r, c + 3)]) * 0.5);
+        let mut cascor = Cascor::new(CascorOptions {
+            max_hidden: 3,
+            pool: 2,
+            progress: false,
+            ..CascorOptions::default()
+        });
+        let split = Split { x: &x, y: &y };
+        cascor.fit(split, split, 1).unwrap();
+        #[cfg(target_arch = "x86_64")]
+        let relaxed = is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma");
+        #[cfg(not(target_arch = "x86_64"))]
+        let relaxed = false;
+        let t = time_inference(&cascor, &x, 20);
+        assert_eq!(t.single_fast_us.is_some(), relaxed);
+        match cascor.predict_fast(&x) {
+            Some(fast) => {
+                let deployed = cascor.predict(&x);
+                let gap = (fast - &deployed).abs().max();
+                assert!(gap < 1e-5, "the fast path is {gap:e} off the deployed one");
+            }
+            None => assert!(!relaxed),
+        }
+        let knn =
+            crate::learn::knn::Knn::with_grid(vec![1], vec![crate::learn::knn::Weighting::Uniform]);
+        assert_eq!(knn.predict_fast(&x), None);
     }
 }

@@ -59,6 +59,15 @@ pub trait Learner: Send {
     /// Predict normalised outputs for normalised inputs (`n × inputs` → `n × outputs`).
     fn predict(&self, x: &DMatrix<f64>) -> DMatrix<f64>;
 
+    /// One row's prediction by a faster path that gives up the deployed
+    /// arithmetic (cascade correlation's relaxed kernel: fused
+    /// multiply-adds, not bit-identical to the firmware, docs/design.md
+    /// §5.1), for the comparison's timing; `None`: the learner has no such
+    /// path (its `predict` is already its fastest).
+    fn predict_fast(&self, _x: &DMatrix<f64>) -> Option<DMatrix<f64>> {
+        None
+    }
+
     /// Number of stored numbers the model needs at inference (weights, centres, tree nodes…).
     fn parameter_count(&self) -> usize;
 

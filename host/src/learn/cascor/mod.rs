@@ -139,6 +139,25 @@ impl Learner for Cascor {
         }
     }
 
+    /// Row by row through [`HostNet::infer_one_relaxed`], when this CPU
+    /// runs its relaxed kernel (AVX2 and FMA).
+    fn predict_fast(&self, x: &DMatrix<f64>) -> Option<DMatrix<f64>> {
+        let fast = self.fast.as_ref().filter(|f| f.has_relaxed_kernel())?;
+        if x.ncols() > POSE_DIM {
+            return None;
+        }
+        let no = fast.outputs();
+        let mut y = DMatrix::zeros(x.nrows(), no);
+        let mut out = vec![0.0f32; no];
+        for (r, pose) in pose_rows(x).iter().enumerate() {
+            fast.infer_one_relaxed(pose, &mut out);
+            for (c, v) in out.iter().enumerate() {
+                y[(r, c)] = f64::from(*v);
+            }
+        }
+        Some(y)
+    }
+
     fn parameter_count(&self) -> usize {
         self.net.as_ref().map_or(0, GrowingNet::parameter_count)
     }
