@@ -380,7 +380,31 @@ fn a_plan_with_a_hung_mass_writes_its_tip_force_on_some_rows() {
     ]);
     assert_eq!(o.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&o.stderr).contains("--plan-tip-load \"0,0\""));
-    assert!(!dir.path().join("q.csv").exists());
+    // A mass the rod cannot hold is refused before any candidate is solved;
+    // a load without a plan is refused (a fit reads fx,fy,fz instead).
+    let o = tendril(&[
+        "calibrate",
+        "--plan",
+        "5",
+        "--plan-tip-mass-g",
+        "1e9",
+        "--out",
+        dir.path().join("q.csv").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("more than the robot holds"));
+    let o = tendril(&[
+        "calibrate",
+        "--plan-tip-mass-g",
+        "50",
+        "--data",
+        seed.to_str().unwrap(),
+        "--out",
+        dir.path().join("q.toml").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("they need --plan N"));
+    assert!(!dir.path().join("q.csv").exists() && !dir.path().join("q.toml").exists());
 }
 
 /// `calibrate --step` (issue 45, item 3) on traces of tendril's own dynamic

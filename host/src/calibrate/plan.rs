@@ -80,6 +80,23 @@ pub fn plan(
         )));
     }
     let nv = Values::of(robot);
+    if let Some(f) = load {
+        // A load the rod cannot hold at its floors is no experiment: say so
+        // before the candidates are solved.
+        Statics::new(robot, SolverSettings::default())
+            .solve_loaded(
+                &robot.min_tensions(),
+                Vector3::from(f),
+                Vector3::zeros(),
+                None,
+            )
+            .map_err(|e| {
+                CalibError::Options(format!(
+                    "the planned tip load {f:?} N is more than the robot holds at its lowest \
+                     tensions (the statics: {e}); plan a smaller one"
+                ))
+            })?;
+    }
     let rod: Vec<Param> = params.iter().copied().filter(Param::moves_rod).collect();
     let count = (n * CANDIDATES_PER_ROW).max(200);
     let loads = if load.is_some() { 2 } else { 1 };
@@ -118,48 +135,63 @@ pub fn plan(
             .map_err(|error| CalibError::Solve { line: 0, error })
     };
     use rayon::prelude::*;
-    let blocks: Vec<DMatrix<f64>> = candidates
+    // A candidate whose statics fail (a large load on slack tendons) is no
+    // row to measure: it is left out, not the plan.
+    let blocks: Vec<Option<DMatrix<f64>>> = candidates
         .par_iter()
         .map(|row| {
-            let mut b = DMatrix::zeros(3, rod.len());
-            for (j, &p) in rod.iter().enumerate() {
-                let h = super::FD_STEP * scale(p, &nv);
-                let mut plus = nv.clone();
-                plus.set(p, nv.get(p) + h);
-                let mut minus = nv.clone();
-                minus.set(p, nv.get(p) - h);
-                let d = (tip(&plus, row)? - tip(&minus, row)?) / (2.0 * super::FD_STEP);
-                b.set_column(j, &d);
-            }
+            let block = || -> Result<DMatrix<f64>, CalibError> {
+                let mut b = DMatrix::zeros(3, rod.len());
+                for (j, &p) in rod.iter().enumerate() {
+                    let h = super::FD_STEP * scale(p, &nv);
+                    let mut plus = nv.clone();
+                    plus.set(p, nv.get(p) + h);
+                    let mut minus = nv.clone();
+                    minus.set(p, nv.get(p) - h);
+                    let d = (tip(&plus, row)? - tip(&minus, row)?) / (2.0 * super::FD_STEP);
+                    b.set_column(j, &d);
+                }
+                Ok(b)
+            };
             bar.inc(1);
             if crate::interrupt::stop_requested() {
                 return Err(CalibError::Options("interrupted".into()));
             }
-            Ok(b)
+            Ok(block().ok())
         })
         .collect::<Result<_, CalibError>>()?;
+    let usable = blocks.iter().filter(|b| b.is_some()).count();
+    if usable < candidates.len() {
+        log::warn!(
+            "--plan: {} of {} candidates left out: the statics do not solve there",
+            candidates.len() - usable,
+            candidates.len()
+        );
+    }
     let mut info = DMatrix::<f64>::identity(rod.len(), rod.len()) * 1e-9;
     let mut taken = vec![false; candidates.len()];
     let mut chosen = Vec::new();
-    for _ in 0..n.min(candidates.len()) {
+    for _ in 0..n.min(usable) {
         let inv = info
             .clone()
             .try_inverse()
             .ok_or_else(|| CalibError::Options("planner: information matrix singular".into()))?;
-        let best = (0..candidates.len())
+        let Some((best, block)) = (0..candidates.len())
             .filter(|&c| !taken[c])
-            .map(|c| {
-                let s = &blocks[c];
+            .filter_map(|c| blocks[c].as_ref().map(|s| (c, s)))
+            .map(|(c, s)| {
                 let g: DMatrix<f64> = s * &inv * s.transpose();
                 let m = Matrix3::from_fn(|i, j| g[(i, j)]) + Matrix3::identity();
-                (c, m.determinant())
+                (c, s, m.determinant())
             })
-            .max_by(|a, b| a.1.total_cmp(&b.1))
-            .map(|(c, _)| c)
-            .expect("a candidate is left");
+            .max_by(|a, b| a.2.total_cmp(&b.2))
+            .map(|(c, s, _)| (c, s))
+        else {
+            break;
+        };
         taken[best] = true;
         bar.inc(1);
-        info += blocks[best].transpose() * &blocks[best];
+        info += block.transpose() * block;
         chosen.push(candidates[best].clone());
     }
     bar.finish_and_clear();

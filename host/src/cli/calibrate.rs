@@ -131,6 +131,13 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
     if let Some(trace) = &args.step {
         return step(&robot, trace, &args);
     }
+    if args.plan.is_none() && (args.plan_tip_mass_g.is_some() || args.plan_tip_load.is_some()) {
+        // clap's `requires` gives way to the data/plan/step choice.
+        anyhow::bail!(
+            "--plan-tip-mass-g and --plan-tip-load plan rows: they need --plan N (a fit takes \
+             each row's known load from its fx,fy,fz columns)"
+        );
+    }
     let fit =
         calibrate::parse_fit_list(&args.fit, robot.n_tendons()).map_err(anyhow::Error::msg)?;
     if let Some(n) = args.plan {
