@@ -28,9 +28,31 @@ use super::net::{hidden_activation, hidden_prime, logistic, GrowingNet, OutputKi
 
 /// Rows of a tile: a feature column of a tile fills eight AVX registers.
 const TILE: usize = 32;
-/// Rows per block of the parallel sum (a whole number of tiles): fixed, so
-/// the sum's order is too.
-const BLOCK: usize = 256;
+/// Rows per block of the polish's parallel sums (a whole number of tiles):
+/// fixed, so every sum's order is too, and the result does not depend on
+/// the number of threads. The per-row reference sums in the same blocks.
+pub(super) const BLOCK: usize = 256;
+
+/// A loss and a `p`-long gradient summed over the rows `0..n`: `block`
+/// sums each block of [`BLOCK`] rows, the blocks run in parallel and are
+/// added in order.
+pub(super) fn sum_blocks(
+    n: usize,
+    p: usize,
+    block: impl Fn(Range<usize>) -> (f64, Vec<f64>) + Sync,
+) -> (f64, Vec<f64>) {
+    let blocks: Vec<(f64, Vec<f64>)> = (0..n.div_ceil(BLOCK))
+        .into_par_iter()
+        .map(|b| block(b * BLOCK..((b + 1) * BLOCK).min(n)))
+        .collect();
+    let mut grad = vec![0.0; p];
+    let mut loss = 0.0;
+    for (l, g) in blocks {
+        loss += l;
+        grad.iter_mut().zip(&g).for_each(|(a, b)| *a += b);
+    }
+    (loss, grad)
+}
 
 /// The loss's rows, as [`super::polish::Rows`] holds them.
 #[derive(Clone, Copy)]
@@ -143,28 +165,18 @@ fn loss_and_gradient_with(
         0
     };
     let n = rows.x.nrows();
-    let blocks: Vec<(f64, Vec<f64>)> = (0..n.div_ceil(BLOCK))
-        .into_par_iter()
-        .map(|b| {
-            let mut tile = Tile::new(&layout);
-            let mut sums = Sums {
-                loss: 0.0,
-                grad: vec![0.0; p],
-            };
-            for r0 in (b * BLOCK..((b + 1) * BLOCK).min(n)).step_by(TILE) {
-                let span = r0..(r0 + TILE).min(n);
-                tile_pass(fast, &layout, rows, span, &mut tile, &mut sums);
-            }
-            (sums.loss, sums.grad)
-        })
-        .collect();
-    let mut grad = vec![0.0; p];
-    let mut loss = 0.0;
-    for (l, g) in blocks {
-        loss += l;
-        grad.iter_mut().zip(&g).for_each(|(a, b)| *a += b);
-    }
-    (loss, grad)
+    sum_blocks(n, p, |block| {
+        let mut tile = Tile::new(&layout);
+        let mut sums = Sums {
+            loss: 0.0,
+            grad: vec![0.0; p],
+        };
+        for r0 in block.step_by(TILE) {
+            let span = r0..(r0 + TILE).min(n);
+            tile_pass(fast, &layout, rows, span, &mut tile, &mut sums);
+        }
+        (sums.loss, sums.grad)
+    })
 }
 
 /// Whether this CPU has the fused multiply-add the fast kernel is built for.

@@ -19,9 +19,9 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use nalgebra::DMatrix;
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::batch::sum_blocks;
 use super::batch::{self, Batch};
 use super::net::{hidden_prime, GrowingNet, OutputKind};
 
@@ -101,9 +101,6 @@ pub fn robust_delta(net: &GrowingNet, rows: Rows<'_>, scale: f64) -> Option<f64>
     let median = r[r.len() / 2];
     (median > 0.0 && median.is_finite()).then_some(scale * median)
 }
-
-/// Rows per block of the gradient sum: fixed, so the sum's order is too.
-const BLOCK: usize = 256;
 
 /// A per-row metric on the output error: row r's loss is ½ eᵀ M_r e, with
 /// M_r symmetric positive semi-definite (`O × O`). The tip metric
@@ -216,26 +213,15 @@ pub fn loss_and_gradient_per_row(
     } else {
         0
     };
-    let n = rows.x.nrows();
-    let blocks: Vec<(f64, Vec<f64>)> = (0..n.div_ceil(BLOCK))
-        .into_par_iter()
-        .map(|b| {
-            let mut grad = vec![0.0; p];
-            let mut loss = 0.0;
-            let mut scratch = Scratch::new(net);
-            for r in b * BLOCK..((b + 1) * BLOCK).min(n) {
-                loss += scratch.accumulate(net, rows, r, &mut grad);
-            }
-            (loss, grad)
-        })
-        .collect();
-    let mut grad = vec![0.0; p];
-    let mut loss = 0.0;
-    for (l, g) in blocks {
-        loss += l;
-        grad.iter_mut().zip(&g).for_each(|(a, b)| *a += b);
-    }
-    (loss, grad)
+    sum_blocks(rows.x.nrows(), p, |block| {
+        let mut grad = vec![0.0; p];
+        let mut loss = 0.0;
+        let mut scratch = Scratch::new(net);
+        for r in block {
+            loss += scratch.accumulate(net, rows, r, &mut grad);
+        }
+        (loss, grad)
+    })
 }
 
 /// Per-row buffers of the backward pass.
@@ -368,31 +354,23 @@ fn inverse_diagonal(d: &[f64]) -> Vec<f64> {
 /// output and row.
 pub fn gauss_newton_diagonal(net: &GrowingNet, rows: Rows<'_>) -> Vec<f64> {
     let p = net.parameter_count();
-    let n = rows.x.nrows();
     let o = net.n_outputs;
-    let blocks: Vec<Vec<f64>> = (0..n.div_ceil(BLOCK))
-        .into_par_iter()
-        .map(|b| {
-            let mut diag = vec![0.0; p];
-            let mut g = vec![0.0; p];
-            let mut scratch = Scratch::new(net);
-            for r in b * BLOCK..((b + 1) * BLOCK).min(n) {
-                for k in 0..o {
-                    let weight = rows.metric.map_or(1.0, |m| m.m[r * o * o + k * o + k]);
-                    g.iter_mut().for_each(|v| *v = 0.0);
-                    scratch.output_gradient(net, rows, r, k, &mut g);
-                    diag.iter_mut()
-                        .zip(&g)
-                        .for_each(|(d, gi)| *d += weight * gi * gi);
-                }
+    let (_, diag) = sum_blocks(rows.x.nrows(), p, |block| {
+        let mut diag = vec![0.0; p];
+        let mut g = vec![0.0; p];
+        let mut scratch = Scratch::new(net);
+        for r in block {
+            for k in 0..o {
+                let weight = rows.metric.map_or(1.0, |m| m.m[r * o * o + k * o + k]);
+                g.iter_mut().for_each(|v| *v = 0.0);
+                scratch.output_gradient(net, rows, r, k, &mut g);
+                diag.iter_mut()
+                    .zip(&g)
+                    .for_each(|(d, gi)| *d += weight * gi * gi);
             }
-            diag
-        })
-        .collect();
-    let mut diag = vec![0.0; p];
-    for d in blocks {
-        diag.iter_mut().zip(&d).for_each(|(a, b)| *a += b);
-    }
+        }
+        (0.0, diag)
+    });
     diag
 }
 
