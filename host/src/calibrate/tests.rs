@@ -15,38 +15,24 @@ use crate::statics::{SolverSettings, Statics};
 /// Measurements of `truth` seen from a tracker whose frame has the base at
 /// `offset`, with per-axis jitter `sigma` (m), at `rows` random tensions.
 fn measure(truth: &Robot, rows: usize, offset: [f64; 3], sigma: f64, seed: u64) -> Measurements {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let statics = Statics::new(truth, SolverSettings::default());
-    let mut m = Measurements {
-        tensions: vec![],
-        positions: vec![],
-        quaternions: None,
-        tip_forces: vec![],
-        tip_moments: vec![],
-        lines: vec![],
-    };
-    let tensions = crate::dataset::Sampler::Adjacent.draw(rows, &truth.max_tensions(), seed);
-    for (i, tau) in tensions.into_iter().enumerate() {
-        let p = statics.solve(&tau, None).unwrap().position;
-        let noise = Vector3::from_fn(|_, _| {
-            let u1: f64 = rng.random::<f64>().max(1e-300);
-            let u2: f64 = rng.random();
-            sigma * (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
-        });
-        m.positions.push((p + Vector3::from(offset) + noise).into());
-        m.tensions.push(tau);
-        m.tip_forces.push([0.0; 3]);
-        m.tip_moments.push([0.0; 3]);
-        m.lines.push(i + 2);
-    }
-    m
+    let planned: Vec<plan::PlannedRow> = crate::dataset::Sampler::Adjacent
+        .draw(rows, &truth.max_tensions(), seed)
+        .into_iter()
+        .map(|tensions| plan::PlannedRow {
+            tensions,
+            tip_force: [0.0; 3],
+        })
+        .collect();
+    measure_rows(truth, &planned, offset, sigma, seed)
 }
 
-/// Measurements of `truth` at planned rows (their tensions and known tip
-/// forces), per-axis jitter `sigma` (m).
-fn measure_planned(
+/// Measurements of `truth` at `rows` (their tensions and known tip forces)
+/// seen from a tracker whose frame has the base at `offset`, per-axis
+/// jitter `sigma` (m).
+fn measure_rows(
     truth: &Robot,
     rows: &[plan::PlannedRow],
+    offset: [f64; 3],
     sigma: f64,
     seed: u64,
 ) -> Measurements {
@@ -71,7 +57,7 @@ fn measure_planned(
             let u2: f64 = rng.random();
             sigma * (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
         });
-        m.positions.push((p + noise).into());
+        m.positions.push((p + Vector3::from(offset) + noise).into());
         m.tensions.push(r.tensions.clone());
         m.tip_forces.push(r.tip_force);
         m.tip_moments.push([0.0; 3]);
@@ -382,7 +368,7 @@ fn a_hung_mass_in_the_plan_makes_the_modulus_identifiable() {
         (5..35).contains(&loaded),
         "{loaded} of 40 rows loaded: the planner should mix both"
     );
-    let data = measure_planned(&truth, &rows, 1.4e-4, 5);
+    let data = measure_rows(&truth, &rows, [0.0; 3], 1.4e-4, 5);
     let mut opts = FitOptions::new(fit);
     opts.holdout_fraction = 0.0;
     let c = calibrate(&nominal, &data, &opts).unwrap();

@@ -231,6 +231,22 @@ impl StopWatch {
     }
 }
 
+/// Ask every process of the loop to stop: a `STOP` on its control service,
+/// what [`StopWatch::requested`] sees (the launcher's clean shutdown).
+pub fn send_stop(control: &transport::Pub<Control>) -> Result<(), IpcError> {
+    transport::send(
+        control,
+        Control {
+            header: tendril_shared::messages::Header {
+                seq: 1,
+                stamp_ns: clock::now_ns(),
+            },
+            command: control_command::STOP,
+            reserved: 0,
+        },
+    )
+}
+
 /// Write `bytes` to `path` atomically, mapping the error.
 pub(crate) fn write_file(path: &std::path::Path, bytes: &[u8]) -> Result<(), IpcError> {
     crate::fsutil::write_atomic(path, bytes)

@@ -209,6 +209,8 @@ struct Bridge {
     /// The plant state's sequence number last seen (the log's column).
     last_state_seq: u64,
     row: Vec<f64>,
+    /// The chip's messages of one poll (kept for its capacity).
+    received: Vec<Up>,
 }
 
 impl Bridge {
@@ -246,6 +248,7 @@ impl Bridge {
             last_feedback: 0,
             last_state_seq: 0,
             row: vec![0.0; 6 + c.n_tendons],
+            received: Vec::with_capacity(16),
         })
     }
 
@@ -412,8 +415,11 @@ impl Bridge {
     fn receive(&mut self, log: &mut CsvLog) -> Result<bool, IpcError> {
         let t_rx = now_ns();
         let mut published = false;
-        let received: Vec<Up> = self.chip.drain().collect();
-        for msg in received {
+        // The chip's messages move to a buffer the bridge keeps (they are
+        // handled with `&mut self`), so a poll allocates nothing.
+        let mut received = std::mem::take(&mut self.received);
+        received.extend(self.chip.drain());
+        for msg in received.drain(..) {
             match msg {
                 Up::Command(c) => {
                     self.command(&c, t_rx)?;
@@ -438,6 +444,7 @@ impl Bridge {
                 Up::Hello(_) => {}
             }
         }
+        self.received = received;
         if published {
             self.notifier
                 .notify()

@@ -2,8 +2,6 @@
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use tendril_shared::messages::{control_command, Control, Header};
-
 use super::*;
 use crate::ipc::clock::now_ns;
 
@@ -169,18 +167,7 @@ fn a_stop_on_the_control_service_ends_the_run() {
         let services = Services::open_or_create(&node, &prefix).unwrap();
         let control = transport::publisher(&services.control).unwrap();
         std::thread::sleep(std::time::Duration::from_millis(150));
-        transport::send(
-            &control,
-            Control {
-                header: Header {
-                    seq: 1,
-                    stamp_ns: now_ns(),
-                },
-                command: control_command::STOP,
-                reserved: 0,
-            },
-        )
-        .unwrap();
+        crate::ipc::send_stop(&control).unwrap();
         // Keep the publisher until the run has seen it.
         std::thread::sleep(std::time::Duration::from_millis(300));
     });

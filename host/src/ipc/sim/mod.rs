@@ -27,7 +27,7 @@ pub mod workdir;
 use std::path::PathBuf;
 use std::time::Duration;
 
-use tendril_shared::messages::{control_command, Control, Header};
+use tendril_shared::messages::Header;
 
 pub use self::config::{unique_prefix, ModelSource, SimConfig, SimMcu};
 pub use self::faults::SimFaults;
@@ -455,17 +455,7 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
             children.stop_all(Duration::from_secs(2));
         }
         Ending::Completed => {
-            transport::send(
-                &control,
-                Control {
-                    header: Header {
-                        seq: 1,
-                        stamp_ns: now_ns(),
-                    },
-                    command: control_command::STOP,
-                    reserved: 0,
-                },
-            )?;
+            super::send_stop(&control)?;
             children.reap(Duration::from_secs(10), ProcessEnd::KilledAtShutdown);
         }
     }
