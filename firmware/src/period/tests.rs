@@ -566,6 +566,63 @@ fn a_tracker_frame_is_integrated_once_over_the_time_since_the_last() {
     assert!((c - 0.75e-3).abs() < 1e-7, "correction {c}");
 }
 
+/// After a gap in the frames (a lost marker, or frames held back during a
+/// shaped move) the first frame counts twice the frame interval, not the
+/// gap: the correction grows by the same small step as before it, not by
+/// the gap's worth at once (which rang a rod with mass).
+#[test]
+fn the_first_frame_after_a_gap_counts_twice_the_frame_interval_not_the_gap() {
+    let mut st = store(1);
+    let mut p = P::new(integral_config(), 0);
+    let mut steps = Vec::new();
+    let mut before = p.period.correction().0[0];
+    // Frames every 10 ms, then none for 300 ms, then every 10 ms again.
+    let frames: Vec<u64> = (0..5).chain(35..38).map(|j| 1000 + 10 * j).collect();
+    let mut frame = 0u32;
+    for k in 1000..=1370u64 {
+        let mut f = fb(k, k.saturating_sub(1), [0.0; MAX_TENDONS]);
+        f.tip = [pose()[0] - 1e-3, pose()[1], pose()[2]];
+        if let Some(j) = frames.iter().rposition(|&t| t <= k) {
+            frame = j as u32 + 1;
+        }
+        f.tip_seq = frame;
+        f.tip_age_ns = (k - frames[frame as usize - 1]) * T;
+        let input = Inputs {
+            feedback: Some(f),
+            feedbacks: 1,
+            ..with_sp(k, sp(k))
+        };
+        p.run(&mut *st, &input);
+        let now = p.period.correction().0[0];
+        if now != before {
+            steps.push(now - before);
+        }
+        before = now;
+    }
+    // 10 /s × 1 mm × 10 ms = 0.1 mm per frame; the first frame after the
+    // gap 0.2 mm (twice), not 3 mm (the 300 ms gap).
+    assert_eq!(steps.len(), 7, "{steps:?}");
+    for (i, s) in steps.iter().enumerate() {
+        let want = if i == 4 { 0.2e-3 } else { 0.1e-3 };
+        assert!((s - want).abs() < 1e-7, "step {i}: {s} (all {steps:?})");
+    }
+}
+
+#[test]
+fn credited_intervals_follow_a_slower_tracker_within_a_few_frames() {
+    use crate::period::credited_interval;
+    assert_eq!(credited_interval(25, 0), 25);
+    assert_eq!(credited_interval(300, 10), 20);
+    // 1 kHz to 40 Hz: 2, 4, 8, 16, then the full 25 ms.
+    let mut credit = 1;
+    let mut seen = Vec::new();
+    for _ in 0..6 {
+        credit = credited_interval(25, credit);
+        seen.push(credit);
+    }
+    assert_eq!(seen, [2, 4, 8, 16, 25, 25]);
+}
+
 #[test]
 fn a_late_frame_is_compared_with_the_path_where_it_was_taken() {
     // The setpoint moves at 10 mm/s; the tracker sees the tip exactly on

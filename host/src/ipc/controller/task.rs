@@ -95,8 +95,9 @@ pub fn with_dynamic_offset(s: &Setpoint) -> (Setpoint, [f32; 3]) {
 /// rule does for a jump, which a shaped move never makes. Done here, beside
 /// the period, for the host controller and the chip's bridge alike: in the
 /// period the rule cost the chip 960 instructions a period it did not have
-/// (BENCHMARKS.md). The first frame after gets the time since the held one
-/// as its interval, which the control law caps at the tracker timeout.
+/// (BENCHMARKS.md). The period credits the first frame after with at most
+/// twice the interval of the one before it, not the gap
+/// (`tendril_firmware::period::credited_interval`).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct MoveQuiet {
     settle_ns: u64,
