@@ -363,6 +363,38 @@ pub fn control_step<const H: usize, const OUT: usize, const W: usize>(
     state: &ControlState,
     input: &StepInput,
 ) -> (ControlState, StepOutput) {
+    step(cfg, net, state, input, true)
+}
+
+/// [`control_step`] without running the net: the target the command slews
+/// toward stays the last step's, and everything else (time, setpoint
+/// acceptance, watchdog, the integral loop, limits, slew) runs as always,
+/// with the same guarantees.
+///
+/// For the one period in which a weight update is written into the net
+/// store (docs/design.md §5.3): the write of a 7-64-8 net and the net's
+/// run together took 79,600 of the chip's 80,000-instruction period budget
+/// (`tests/tests/mcu_budget.rs`), and the write cannot be cut in slices
+/// without a second net slot the chip has no RAM for. Holding the target
+/// for one period is what a refused setpoint already does; the new net
+/// runs from the next period on.
+pub fn control_step_holding_target<const H: usize, const OUT: usize, const W: usize>(
+    cfg: &ControlConfig,
+    net: &CascadeNet<POSE_DIM, H, OUT, W>,
+    state: &ControlState,
+    input: &StepInput,
+) -> (ControlState, StepOutput) {
+    step(cfg, net, state, input, false)
+}
+
+#[inline(never)]
+fn step<const H: usize, const OUT: usize, const W: usize>(
+    cfg: &ControlConfig,
+    net: &CascadeNet<POSE_DIM, H, OUT, W>,
+    state: &ControlState,
+    input: &StepInput,
+    run_net: bool,
+) -> (ControlState, StepOutput) {
     let mut st = *state;
     let mut status = Status::empty();
     let n = cfg.limits.n_tendons();
@@ -440,7 +472,7 @@ pub fn control_step<const H: usize, const OUT: usize, const W: usize>(
             SafeHold::Freeze => st.command,
             SafeHold::Ramp(t) => t,
         };
-    } else if tracking {
+    } else if tracking && run_net {
         let y = infer(net, &pose);
         if y.iter().take(n).all(|v| v.is_finite()) {
             st.target = [0.0; MAX_TENDONS];

@@ -19,7 +19,10 @@
 //!    since the previous frame as its integration interval;
 //! 5. plant-stale: no feedback for [`PeriodConfig::plant_stale_ns`];
 //! 6. the control step (watchdog → safe hold, integral correction,
-//!    inference, command stage, slew);
+//!    inference, command stage, slew); in the period that installed a
+//!    weight update without inference, the target held
+//!    ([`control_step_holding_target`]: the install and a net's run do not
+//!    both fit the chip's period);
 //! 7. the status word, the [`Counters`] and this period's [`Events`].
 //!
 //! Nothing here allocates, panics or reads a clock: time comes in
@@ -39,8 +42,8 @@ use tendril_shared::messages::command_status as wire;
 use tendril_shared::{MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS, POSE_DIM};
 
 use crate::control::{
-    control_step, ControlConfig, ControlSetpoint, ControlState, ControlTangent, Feedback, Status,
-    StepInput, Tensions,
+    control_step, control_step_holding_target, ControlConfig, ControlSetpoint, ControlState,
+    ControlTangent, Feedback, Status, StepInput, Tensions,
 };
 use crate::swap::NetStore;
 use stuck::StuckDetector;
@@ -366,9 +369,11 @@ impl Period {
                 self.counters.missed_ticks.wrapping_add(input.missed_ticks);
         }
 
+        let mut installed = false;
         match update.slice(store, (POSE_DIM, self.n), self.cfg.swap_slice_bytes) {
             SliceOutcome::Idle | SliceOutcome::Working => {}
             SliceOutcome::Swapped => {
+                installed = true;
                 self.counters.weight_swaps += 1;
                 extra |= wire::WEIGHTS_SWAPPED;
                 ev.bits |= event::WEIGHTS_SWAPPED;
@@ -403,7 +408,13 @@ impl Period {
             setpoint,
             feedback,
         };
-        let (next, out) = control_step(&self.cfg.control, store.active(), &self.state, &step);
+        // The period that wrote the new net does not also run it (the
+        // chip's period budget): the target stays one period.
+        let (next, out) = if installed {
+            control_step_holding_target(&self.cfg.control, store.active(), &self.state, &step)
+        } else {
+            control_step(&self.cfg.control, store.active(), &self.state, &step)
+        };
         self.state = next;
         let mut status = out.status;
         let mut tensions = out.command;

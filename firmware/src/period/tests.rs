@@ -428,6 +428,34 @@ fn a_whole_update_swaps_in_slices_without_a_missed_period() {
     assert_eq!(p.counters().weight_swaps, 1);
 }
 
+/// The period that writes the new net does not also run it (the chip's
+/// period budget): its command holds the old net's target, and the new
+/// net's tensions come from the next period on.
+#[test]
+fn the_period_that_installs_a_net_holds_the_target_and_the_next_runs_the_new_net() {
+    let mut st = store(1);
+    let mut cfg = swap_config();
+    cfg.control.limits = TendonLimits::uniform(4, 10.0, 1e9).unwrap();
+    let mut p = P::new(cfg, 0);
+    p.update().offer(&blob(2, 64)).unwrap();
+    let mut commands = Vec::new();
+    let mut swapped_at = None;
+    for k in 1..=20 {
+        let o = p.run(&mut *st, &with_sp(k, sp(k)));
+        if o.events.has(event::WEIGHTS_SWAPPED) {
+            swapped_at = Some(commands.len());
+        }
+        commands.push(o.command.tensions);
+    }
+    let i = swapped_at.expect("not swapped in 20 periods");
+    assert!(i >= 2 && i + 1 < commands.len());
+    // The same setpoint every period, no slew limit: the old net's
+    // tensions until the install, held through it, then the new net's.
+    assert_eq!(commands[i], commands[i - 1], "the install period held");
+    assert_ne!(commands[i + 1], commands[i], "the new net runs after it");
+    assert_eq!(commands[i + 2], commands[i + 1]);
+}
+
 #[test]
 fn a_corrupted_update_is_rejected_and_the_old_net_runs() {
     let mut st = store(1);
