@@ -39,6 +39,27 @@ pub use crate::command::Tensions;
 
 pub use crate::status::Status;
 
+/// Time constant of the running mean x̄ the error map learns about, s
+/// ([`IntegralConfig::map_gain`]): the map's update is `ē (x − x̄)ᵀ`, so
+/// the mean error is the constant correction's alone and the map learns
+/// only how the error varies with x (the slope of a regression, from
+/// centred data); the correction itself stays `c + M x`.
+///
+/// Why: with the update on x from a fixed point (where tracking began,
+/// the rest pose) a path away from it gives the regressor a large constant
+/// part, which the map and `c` both learned, and the two adaptations
+/// together were unstable on a robot 10 % off its model: the circle's
+/// error grew from 0.50 to 1.28 mm over 25 s at 0.4 Hz, and from 0.38 to
+/// 1.04 mm over 40 s at the default 0.2 Hz (`everything`), where `c`
+/// alone holds 0.9 mm flat. A linear model of the loop (first mode, motor
+/// lag, the 80 ms filter, ki 4 /s, map gain 2 /s, the plant 9 % short
+/// about its rest pose) grows the same way, and with the centred update
+/// converges on circles at 0.1–0.4 Hz for time constants of 2–10 s,
+/// fastest at 2 s (BENCHMARKS.md). Centring the correction too (`M (x −
+/// x̄)`) was worse: a sweep along one axis cannot express the running
+/// mean's phase in a scalar map.
+pub const MAP_MEAN_TAU_S: f32 = 2.0;
+
 /// Integral outer loop, applied to the setpoint before inference
 /// (docs/design.md §5, §6: removes the net's steady-state error). `ki = 0`
 /// disables it.
@@ -77,11 +98,12 @@ pub struct IntegralConfig {
     /// Adaptation gain of the *error map*, 1/s (0 = off): besides the
     /// constant correction `c`, the loop learns how the robot's error
     /// varies with where it is sent, `c(x) = c + M x` (x the setpoint's
-    /// position along the axes, from where tracking began). A robot stiffer
+    /// position along the axes, from where tracking began; the map learns
+    /// from x about its running mean, [`MAP_MEAN_TAU_S`]). A robot stiffer
     /// than its model or with its tendons off errs in proportion to how far
     /// it bends: a map, which a constant correction can only chase around a
-    /// circle, but which, once learned, holds everywhere (normalised LMS:
-    /// `M += map_gain · ē xᵀ dt / (map_scale² + |x|²)`).
+    /// circle, but which, once learned, holds everywhere (normalised LMS on
+    /// x̃ = x − x̄: `M += map_gain · ē x̃ᵀ dt / (map_scale² + |x̃|²)`).
     pub map_gain: f32,
     /// Length scale of the map's normalisation, m (> 0 when `map_gain` is).
     pub map_scale: f32,
@@ -267,6 +289,9 @@ pub struct ControlState {
     /// Where the map's x is measured from: the first accepted setpoint's
     /// position, m.
     pub map_origin: [f32; 3],
+    /// The setpoint's position averaged over the last [`MAP_MEAN_TAU_S`],
+    /// m: the map learns from x about it ([`IntegralConfig::map_gain`]).
+    pub map_mean: [f32; 3],
     /// Sequence number of the last feedback used.
     pub last_feedback_seq: u64,
     /// Time of the last fresh feedback, ns.
@@ -305,6 +330,7 @@ impl ControlState {
             filtered_error: [0.0; 3],
             error_map: [[0.0; 3]; 3],
             map_origin: [0.0; 3],
+            map_mean: [0.0; 3],
             last_feedback_seq: 0,
             last_feedback_ns: now_ns,
         }
@@ -363,39 +389,32 @@ pub fn control_step<const H: usize, const OUT: usize, const W: usize>(
     state: &ControlState,
     input: &StepInput,
 ) -> (ControlState, StepOutput) {
-    step(cfg, net, state, input, true)
+    let mut st = *state;
+    let out = control_step_in_place(cfg, net, &mut st, input, true);
+    (st, out)
 }
 
-/// [`control_step`] without running the net: the target the command slews
-/// toward stays the last step's, and everything else (time, setpoint
-/// acceptance, watchdog, the integral loop, limits, slew) runs as always,
-/// with the same guarantees.
+/// [`control_step`] on the state in place (the period's: no copy of the
+/// state on the chip's stack), and with `run_net = false` without running
+/// the net: then the target the command slews toward stays the last
+/// step's, and everything else (time, setpoint acceptance, watchdog, the
+/// integral loop, limits, slew) runs as always, with the same guarantees.
 ///
-/// For the one period in which a weight update is written into the net
-/// store (docs/design.md §5.3): the write of a 7-64-8 net and the net's
-/// run together took 79,600 of the chip's 80,000-instruction period budget
-/// (`tests/tests/mcu_budget.rs`), and the write cannot be cut in slices
-/// without a second net slot the chip has no RAM for. Holding the target
-/// for one period is what a refused setpoint already does; the new net
-/// runs from the next period on.
-pub fn control_step_holding_target<const H: usize, const OUT: usize, const W: usize>(
-    cfg: &ControlConfig,
-    net: &CascadeNet<POSE_DIM, H, OUT, W>,
-    state: &ControlState,
-    input: &StepInput,
-) -> (ControlState, StepOutput) {
-    step(cfg, net, state, input, false)
-}
-
+/// `run_net = false` is for the one period in which a weight update is
+/// written into the net store (docs/design.md §5.3): the write of a 7-64-8
+/// net and the net's run together took 79,600 of the chip's
+/// 80,000-instruction period budget (`tests/tests/mcu_budget.rs`), and the
+/// write cannot be cut in slices without a second net slot the chip has
+/// no RAM for. Holding the target for one period is what a refused
+/// setpoint already does; the new net runs from the next period on.
 #[inline(never)]
-fn step<const H: usize, const OUT: usize, const W: usize>(
+pub fn control_step_in_place<const H: usize, const OUT: usize, const W: usize>(
     cfg: &ControlConfig,
     net: &CascadeNet<POSE_DIM, H, OUT, W>,
-    state: &ControlState,
+    st: &mut ControlState,
     input: &StepInput,
     run_net: bool,
-) -> (ControlState, StepOutput) {
-    let mut st = *state;
+) -> StepOutput {
     let mut status = Status::empty();
     let n = cfg.limits.n_tendons();
     let now = input.now_ns;
@@ -439,6 +458,7 @@ fn step<const H: usize, const OUT: usize, const W: usize>(
             st.last_setpoint_ns = now;
             if !st.has_setpoint {
                 st.map_origin = [sp.pose[0], sp.pose[1], sp.pose[2]];
+                st.map_mean = st.map_origin;
             }
             st.pose = sp.pose;
             st.tangent = sp.tangent.filter(ControlTangent::is_valid);
@@ -460,7 +480,7 @@ fn step<const H: usize, const OUT: usize, const W: usize>(
 
     // 4. Integral outer loop.
     let pose = if cfg.integral.ki > 0.0 && tracking {
-        outer_loop(cfg, net, &mut st, input, &mut status)
+        outer_loop(cfg, net, st, input, &mut status)
     } else {
         st.pose
     };
@@ -528,14 +548,11 @@ fn step<const H: usize, const OUT: usize, const W: usize>(
     }
     st.command = command;
     st.slew_limited = status.contains(Status::SLEW_LIMITED);
-    (
-        st,
-        StepOutput {
-            command,
-            count: n,
-            status,
-        },
-    )
+    StepOutput {
+        command,
+        count: n,
+        status,
+    }
 }
 
 /// Step 4 of [`control_step`]: integrate a fresh frame and return the
@@ -618,6 +635,13 @@ fn integrate(st: &mut ControlState, tip: &[f32; 3], ic: IntegralConfig, dt: f32)
         .iter()
         .take(windowed)
         .fold(0.0f32, |sum, e| sum + e * e);
+    if ic.map_gain > 0.0 {
+        // Backward Euler, stable for any interval.
+        let a = dt / (MAP_MEAN_TAU_S + dt);
+        for (m, &p) in st.map_mean.iter_mut().zip(&st.pose) {
+            *m += a * (p - *m);
+        }
+    }
     if st.slew_limited || size2 > ic.window * ic.window {
         // The filter holds too: after the transient it resumes from the
         // error before it, not from the transient's tail.
@@ -635,7 +659,7 @@ fn integrate(st: &mut ControlState, tip: &[f32; 3], ic: IntegralConfig, dt: f32)
         *c = clamp(*c + ic.ki * e * dt, -ic.limit, ic.limit);
     }
     if ic.map_gain > 0.0 {
-        let x = map_coordinates(st);
+        let x = map_coordinates(st, &st.map_mean);
         let x2 = x.iter().take(axes).fold(0.0f32, |s, v| s + v * v);
         let step = ic.map_gain * dt / (ic.map_scale * ic.map_scale + x2);
         let e = st.filtered_error;
@@ -678,12 +702,13 @@ pub(crate) fn corrected_pose(st: &ControlState) -> [f32; POSE_DIM] {
 }
 
 /// The setpoint's position along the loop's axes (the tangent's, or x, y, z
-/// without one), from [`ControlState::map_origin`], m.
-fn map_coordinates(st: &ControlState) -> [f32; 3] {
+/// without one), from `from` (m): the map's origin for the correction, its
+/// running mean for the map's update.
+fn map_coordinates(st: &ControlState, from: &[f32; 3]) -> [f32; 3] {
     let d = [
-        st.pose[0] - st.map_origin[0],
-        st.pose[1] - st.map_origin[1],
-        st.pose[2] - st.map_origin[2],
+        st.pose[0] - from[0],
+        st.pose[1] - from[1],
+        st.pose[2] - from[2],
     ];
     match st.tangent {
         Some(t) => {
@@ -702,7 +727,7 @@ fn map_coordinates(st: &ControlState) -> [f32; 3] {
 fn total_correction(st: &ControlState) -> [f32; 3] {
     let mut c = st.correction;
     if st.error_map.iter().flatten().any(|&m| m != 0.0) {
-        let x = map_coordinates(st);
+        let x = map_coordinates(st, &st.map_origin);
         for (cj, row) in c.iter_mut().zip(&st.error_map) {
             *cj += row[0] * x[0] + row[1] * x[1] + row[2] * x[2];
         }

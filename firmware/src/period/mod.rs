@@ -21,7 +21,7 @@
 //! 6. the control step (watchdog → safe hold, integral correction,
 //!    inference, command stage, slew); in the period that installed a
 //!    weight update without inference, the target held
-//!    ([`control_step_holding_target`]: the install and a net's run do not
+//!    ([`control_step_in_place`]: the install and a net's run do not
 //!    both fit the chip's period);
 //! 7. the status word, the [`Counters`] and this period's [`Events`].
 //!
@@ -42,8 +42,8 @@ use tendril_shared::messages::command_status as wire;
 use tendril_shared::{MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS, POSE_DIM};
 
 use crate::control::{
-    control_step, control_step_holding_target, ControlConfig, ControlSetpoint, ControlState,
-    ControlTangent, Feedback, Status, StepInput, Tensions,
+    control_step_in_place, ControlConfig, ControlSetpoint, ControlState, ControlTangent, Feedback,
+    Status, StepInput, Tensions,
 };
 use crate::swap::NetStore;
 use stuck::StuckDetector;
@@ -410,12 +410,13 @@ impl Period {
         };
         // The period that wrote the new net does not also run it (the
         // chip's period budget): the target stays one period.
-        let (next, out) = if installed {
-            control_step_holding_target(&self.cfg.control, store.active(), &self.state, &step)
-        } else {
-            control_step(&self.cfg.control, store.active(), &self.state, &step)
-        };
-        self.state = next;
+        let out = control_step_in_place(
+            &self.cfg.control,
+            store.active(),
+            &mut self.state,
+            &step,
+            !installed,
+        );
         let mut status = out.status;
         let mut tensions = out.command;
         if self.stuck_hold {
