@@ -5,6 +5,7 @@
 use proptest::prelude::*;
 use tendril_shared::{TendonLimits, MAX_TENDONS};
 
+use crate::control::integral::corrected_pose;
 use crate::control::*;
 use crate::infer::infer;
 use crate::synth::{INPUT_HI, INPUT_LO};
