@@ -502,3 +502,69 @@ fn a_step_trace_through_each_trackers_gives_the_rods_first_mode_with_intervals()
         assert!((tr - 2.0 * zeta / wn).abs() < 1e-9, "{name}: t_r {tr}");
     }
 }
+
+/// `tendril modes --along` (issue 43, item 1): the modes at evenly spaced
+/// rows of a run's tensions. The independent facts: each row's modes are
+/// the ones `--at` gives at that row's tensions (the same identification,
+/// a different way in), and a file without the robot's tension columns is
+/// refused naming the columns it needs.
+#[test]
+fn modes_along_a_plant_log_are_the_modes_at_its_rows() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("plant-0.csv");
+    std::fs::write(
+        &log,
+        "t_ns,tau0,tau1,tau2,tau3,px\n0,0,0,0,0,0.03\n1,0.5,0,0,0,0.03\n2,1.5,0,0.2,0,0.04\n",
+    )
+    .unwrap();
+    let log_s = log.to_str().unwrap();
+    let json = |args: &[&str]| -> serde_json::Value {
+        let o = tendril(args);
+        ok(&o);
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let along = json(&[
+        "modes",
+        "--robot",
+        "robots/seed-4t.toml",
+        "--along",
+        log_s,
+        "--rows",
+        "2",
+        "--json",
+    ]);
+    let rows = along["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 2, "{along}");
+    assert_eq!(rows[0]["pose"], "line 2");
+    assert_eq!(rows[1]["pose"], "line 4");
+    let at = json(&[
+        "modes",
+        "--robot",
+        "robots/seed-4t.toml",
+        "--at",
+        "1.5,0,0.2,0",
+        "--json",
+    ]);
+    assert_eq!(
+        rows[1]["modes"], at["rows"][0]["modes"],
+        "{along} against {at}"
+    );
+    let f1 = rows[0]["modes"][0]["freq_hz"].as_f64().unwrap();
+    assert!(
+        (3.4..3.8).contains(&f1),
+        "the seed robot's first mode at rest: {f1} Hz"
+    );
+
+    let bad = dir.path().join("bad.csv");
+    std::fs::write(&bad, "t0,t1\n1,0\n").unwrap();
+    let o = tendril(&[
+        "modes",
+        "--robot",
+        "robots/seed-4t.toml",
+        "--along",
+        bad.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("tau0..tau3") && e.contains("bad.csv"), "{e}");
+}

@@ -1,12 +1,12 @@
 //! `tendril modes`: the rod's first two bending modes (frequency, damping)
-//! at rest and with each segment bent, or at given tensions
+//! at rest and with each segment bent, at given tensions, or along a run
 //! (`docs/design.md` §6.4).
 
 use anyhow::Context;
 
 use super::common::{parse_list, RobotArg};
 use crate::dynamics::modes::ModeSearch;
-use crate::jobs::modes::{poses, table, ModesTable};
+use crate::jobs::modes::{poses, poses_along, table, ModesTable};
 use crate::plant::reality::Reality;
 
 /// Identify the rod's vibration modes from its dynamic model.
@@ -16,8 +16,18 @@ pub struct ModesArgs {
     robot: RobotArg,
     /// Tensions (N), one per tendon: the modes at this pose only (default:
     /// at rest and with each segment bent by half its first tendon's range).
-    #[arg(long, value_name = "T0,T1,...")]
+    #[arg(long, value_name = "T0,T1,...", conflicts_with = "along")]
     at: Option<String>,
+    /// The modes along a run: evenly spaced rows of a CSV of tensions, a
+    /// run's plant log (`OUT/plant-0.csv`, columns tau0..) or fk's batch
+    /// input (t0..). A path can move the modes where the table at rest and
+    /// bent does not show it.
+    #[arg(long, value_name = "CSV")]
+    along: Option<std::path::PathBuf>,
+    /// How many rows of --along.
+    #[arg(long, value_name = "N", default_value_t = 16, requires = "along",
+          value_parser = clap::value_parser!(u32).range(1..=1000))]
+    rows: u32,
     /// The modes of the robot a reality makes (its stiffness, density,
     /// length and damping ratio), as the plant runs it; default: the robot
     /// file's, which is all a controller knows.
@@ -31,6 +41,7 @@ pub struct ModesArgs {
 /// Run `tendril modes`.
 pub fn run(args: ModesArgs) -> anyhow::Result<()> {
     let (nominal, _) = args.robot.load()?;
+    let nominal_tendons = nominal.n_tendons();
     let at = match &args.at {
         Some(text) => {
             let at = parse_list(text, "--at")?;
@@ -55,7 +66,10 @@ pub fn run(args: ModesArgs) -> anyhow::Result<()> {
             (nominal, damping)
         }
     };
-    let poses = poses(&robot, at.as_deref());
+    let poses = match &args.along {
+        Some(path) => poses_along(path, nominal_tendons, args.rows as usize)?,
+        None => poses(&robot, at.as_deref()),
+    };
     let t = table(&robot, damping, &poses, &ModeSearch::default())?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&t)?);
