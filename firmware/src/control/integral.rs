@@ -32,7 +32,7 @@ pub const MAP_MEAN_TAU_S: f32 = 2.0;
 /// (docs/design.md §5, §6: removes the net's steady-state error). `ki = 0`
 /// disables it.
 ///
-/// With a setpoint tangent ([`ControlSetpoint::tangent`], k columns T_j along unit
+/// With a setpoint tangent ([`super::ControlSetpoint::tangent`], k columns T_j along unit
 /// axes a_j) one law for every robot: the error along each axis
 /// `e_j = a_j · (p_setpoint − p_measured)` is integrated,
 /// `c_j += ki · e_j · dt`, and the setpoint moves along the robot's

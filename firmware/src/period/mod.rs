@@ -1,6 +1,7 @@
 //! The whole control period (docs/design.md §5.5): configured once, then one
 //! [`Period::run`] per tick, on the chip and in the host's controller
-//! process alike. Around the pure [`control_step`] it holds every rule that
+//! process alike. Around the control step
+//! ([`crate::control::control_step_in_place`]) it holds every rule that
 //! decides what the motors get:
 //!
 //! 1. the period's overrun (ticks missed before it);
