@@ -567,4 +567,18 @@ fn modes_along_a_plant_log_are_the_modes_at_its_rows() {
     assert!(!o.status.success());
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(e.contains("tau0..tau3") && e.contains("bad.csv"), "{e}");
+    // A row above the robot's maxima is refused as --at refuses it, naming
+    // its line.
+    let high = dir.path().join("high.csv");
+    std::fs::write(&high, "tau0,tau1,tau2,tau3\n0,0,0,0\n50,0,0,0\n").unwrap();
+    let o = tendril(&[
+        "modes",
+        "--robot",
+        "robots/seed-4t.toml",
+        "--along",
+        high.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("high.csv, line 3"), "{e}");
 }

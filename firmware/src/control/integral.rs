@@ -32,8 +32,9 @@ pub const MAP_MEAN_TAU_S: f32 = 2.0;
 /// (docs/design.md §5, §6: removes the net's steady-state error). `ki = 0`
 /// disables it.
 ///
-/// With a setpoint tangent ([`super::ControlSetpoint::tangent`], k columns T_j along unit
-/// axes a_j) one law for every robot: the error along each axis
+/// With a setpoint tangent ([`super::ControlSetpoint::tangent`], k columns
+/// T_j along unit axes a_j) one law for every robot: the error along each
+/// axis
 /// `e_j = a_j · (p_setpoint − p_measured)` is integrated,
 /// `c_j += ki · e_j · dt`, and the setpoint moves along the robot's
 /// reachable poses, `pose + Σ_j c_j T_j` (k = 2 with axes x, y: the lateral
@@ -154,6 +155,14 @@ pub(super) fn outer_loop<const H: usize, const OUT: usize, const W: usize>(
 /// raw error is outside the window (on its lateral part without a
 /// tangent): transients, not IK error.
 fn integrate(st: &mut ControlState, tip: &[f32; 3], ic: IntegralConfig, dt: f32) {
+    if ic.map_gain > 0.0 {
+        // The map's running mean follows the setpoint whatever the frame
+        // (backward Euler, stable for any interval).
+        let a = dt / (MAP_MEAN_TAU_S + dt);
+        for (m, &p) in st.map_mean.iter_mut().zip(&st.pose) {
+            *m += a * (p - *m);
+        }
+    }
     let mut error = [0.0f32; 3];
     for ((e, &p), &m) in error.iter_mut().zip(&st.pose).zip(tip) {
         *e = p - m;
@@ -174,13 +183,6 @@ fn integrate(st: &mut ControlState, tip: &[f32; 3], ic: IntegralConfig, dt: f32)
         .iter()
         .take(windowed)
         .fold(0.0f32, |sum, e| sum + e * e);
-    if ic.map_gain > 0.0 {
-        // Backward Euler, stable for any interval.
-        let a = dt / (MAP_MEAN_TAU_S + dt);
-        for (m, &p) in st.map_mean.iter_mut().zip(&st.pose) {
-            *m += a * (p - *m);
-        }
-    }
     if st.slew_limited || size2 > ic.window * ic.window {
         // The filter holds too: after the transient it resumes from the
         // error before it, not from the transient's tail.

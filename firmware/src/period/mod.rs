@@ -17,7 +17,8 @@
 //!    integrate it again), led along the path by the motor lag *and its
 //!    own age* (so the integral loop integrates `p_desired(t) −
 //!    p_measured(t)` for the time the frame was taken), with the time
-//!    since the previous frame as its integration interval;
+//!    since the previous frame as its integration interval, at most twice
+//!    the previous frame's ([`credited_interval`]: a gap is no jump);
 //! 5. plant-stale: no feedback for [`PeriodConfig::plant_stale_ns`];
 //! 6. the control step (watchdog → safe hold, integral correction,
 //!    inference, command stage, slew); in the period that installed a

@@ -41,7 +41,6 @@ pub struct ModesArgs {
 /// Run `tendril modes`.
 pub fn run(args: ModesArgs) -> anyhow::Result<()> {
     let (nominal, _) = args.robot.load()?;
-    let nominal_tendons = nominal.n_tendons();
     let at = match &args.at {
         Some(text) => {
             let at = parse_list(text, "--at")?;
@@ -67,7 +66,16 @@ pub fn run(args: ModesArgs) -> anyhow::Result<()> {
         }
     };
     let poses = match &args.along {
-        Some(path) => poses_along(path, nominal_tendons, args.rows as usize)?,
+        Some(path) => {
+            let rows = poses_along(path, robot.n_tendons(), args.rows as usize)?;
+            // The robot's own tension rule, as for --at (its maxima too).
+            for (line, t) in &rows {
+                robot
+                    .check_tensions(t)
+                    .with_context(|| format!("--along {}, {line}", path.display()))?;
+            }
+            rows
+        }
         None => poses(&robot, at.as_deref()),
     };
     let t = table(&robot, damping, &poses, &ModeSearch::default())?;

@@ -21,8 +21,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
-use super::batch::sum_blocks;
-use super::batch::{self, Batch};
+use super::batch::{self, sum_blocks, Batch};
 use super::net::{hidden_prime, GrowingNet, OutputKind};
 
 /// What the polish minimises.
