@@ -265,7 +265,9 @@ impl Robot {
     /// steps: RK4 steps over the length.
     ///
     /// Returns ``(poses, converged)``: poses ``(n, 7)`` = px, py, pz (m),
-    /// qw, qx, qy, qz (unit, w >= 0), NaN where the solve did not converge;
+    /// qw, qx, qy, qz (unit, w >= 0) in the tracker's frame of the robot
+    /// file's ``[base]`` (the base frame without one), NaN where the solve
+    /// did not converge;
     /// converged ``(n,)`` bool. For a ``(k,)`` input, ``(7,)`` and a bool.
     /// Rows run in parallel with the GIL released; the results are
     /// bit-identical to ``tendril fk --input`` for the same rows.
@@ -285,9 +287,10 @@ impl Robot {
             .ok_or_else(|| value_error("fk: stopped before the end"))?;
         let mut poses = Array2::from_elem((loads.len(), 7), f64::NAN);
         let mut converged = Array1::from_elem(loads.len(), false);
+        let to_tracker = self.model.base.to_tracker();
         for (r, result) in results.iter().enumerate() {
             if let Ok(sol) = result {
-                for (c, x) in sol.pose().into_iter().enumerate() {
+                for (c, x) in to_tracker.pose(sol.pose()).into_iter().enumerate() {
                     poses[(r, c)] = x;
                 }
                 converged[r] = true;
@@ -304,8 +307,8 @@ impl Robot {
     /// tensions whose statics put the tip at each target, to a micron.
     ///
     /// targets: ``(n, 7)`` (or ``(7,)``) poses px, py, pz (m), qw, qx, qy,
-    /// qz (unit quaternion). position_only: reach the position and ignore
-    /// the orientation. net: a ``Net`` whose answer starts the search
+    /// qz (unit quaternion), in the frame of ``fk`` (as are the reached
+    /// poses). position_only: reach the position and ignore the orientation. net: a ``Net`` whose answer starts the search
     /// (faster); without one the search starts from the tension floors.
     /// Among tensions that reach a target the least total tension above the
     /// floors is returned.
@@ -402,7 +405,7 @@ impl Robot {
     }
 
     /// Backbone shape for one tension vector: ``points`` (>= 2) positions,
-    /// base to tip, evenly spaced in arc length, base frame, m, shape
+    /// base to tip, evenly spaced in arc length, in the frame of ``fk``, m, shape
     /// ``(points, 3)``. tensions ``(k,)``, N; tip load as in ``fk``.
     /// Raises ``RuntimeError`` when the statics do not converge.
     #[pyo3(signature = (tensions, points=50, tip_force=None, tip_moment=None, steps=SolverSettings::default().steps))]
@@ -438,9 +441,10 @@ impl Robot {
         })?
         .map_err(|e| runtime_error(&e))?;
         let mut out = Array2::zeros((shape.len(), 3));
+        let to_tracker = self.model.base.to_tracker();
         for (r, p) in shape.iter().enumerate() {
-            for c in 0..3 {
-                out[(r, c)] = p[c];
+            for (c, x) in to_tracker.point([p.x, p.y, p.z]).into_iter().enumerate() {
+                out[(r, c)] = x;
             }
         }
         Ok(out.into_pyarray(py))

@@ -126,3 +126,42 @@ def test_poses_have_unit_quaternions_with_nonnegative_w():
     poses, _ = robot.fk(random_tensions(robot, 50, seed=5))
     assert np.allclose(np.linalg.norm(poses[:, 3:], axis=1), 1.0, atol=1e-12)
     assert (poses[:, 3] >= 0).all()
+
+
+def test_a_base_pose_puts_fk_shape_and_ik_in_the_trackers_frame(tmp_path, cli):
+    """A robot file with [base] (docs/design.md §2.4): fk, shape and ik work in
+    the tracker's frame, x_tracker = R x_base + t with R built here from the
+    rotation vector by Rodrigues' formula; fk agrees with the CLI bit for bit."""
+    plain = tendril.Robot.default()
+    t = np.array([0.2, -0.05, 0.1])
+    rv = np.array([0.3, -0.2, 0.8])
+    listed = lambda v: ", ".join(repr(float(x)) for x in v)  # noqa: E731
+    text = plain.toml + f"\n[base]\ntranslation = [{listed(t)}]\nrotation = [{listed(rv)}]\n"
+    turned = tendril.Robot.from_toml(text)
+    angle = np.linalg.norm(rv)
+    k = rv / angle
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    R = np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+    tau = [2.0, 0.5, 0.0, 0.0]
+    base_pose, ok = plain.fk(tau)
+    pose, ok_turned = turned.fk(tau)
+    assert ok and ok_turned
+    assert np.allclose(pose[:3], R @ base_pose[:3] + t, atol=1e-12)
+    assert pose[3] >= 0.0 and abs(np.linalg.norm(pose[3:]) - 1.0) < 1e-12
+    shape = turned.shape(tau, points=5)
+    assert np.allclose(shape[0], t, atol=1e-15)
+    assert np.allclose(shape[-1], pose[:3], atol=1e-12)
+    # The CLI on the same file gives the same bits.
+    robot_file = tmp_path / "turned.toml"
+    robot_file.write_text(text)
+    write_csv(tmp_path / "t.csv", [f"t{i}" for i in range(4)], [tau])
+    done = run_cli(cli, "fk", "--robot", str(robot_file), "--input", str(tmp_path / "t.csv"),
+                   "--output", str(tmp_path / "p.csv"))
+    assert done.returncode == 0, done.stderr
+    cli, _ = read_cli_poses(tmp_path / "p.csv")
+    assert np.array_equal(cli[0], pose)
+    # ik takes the target in the tracker's frame and reaches it there.
+    tensions, reached, error, reachable = turned.ik(pose, position_only=True)[:4]
+    assert reachable and error < 1e-6
+    assert np.allclose(reached[:3], pose[:3], atol=1e-6)
+    assert np.allclose(tensions, tau, atol=1e-3)

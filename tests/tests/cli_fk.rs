@@ -356,3 +356,126 @@ fn batch_rejects_ambiguous_columns_and_single_pose_flags() {
     let (ok, _, err) = run_batch(dir.path(), "t0,t1,t2\n1,0,2\n", "1");
     assert!(!ok && err.contains("(the robot has 4 tendons)"), "{err}");
 }
+
+/// A robot file with `[base]` (docs/design.md §2.4): `fk` gives the tip in
+/// the tracker's frame — the plain file's tip moved by the rotation and
+/// translation built here from the file's numbers — and `--base-frame`
+/// gives the plain file's; `ik` (net and exact) takes a target in the
+/// tracker's frame and answers with the plain file's tensions for the
+/// base-frame target, the exact IK's reached pose back in the tracker's frame.
+#[test]
+fn a_base_pose_moves_fk_and_ik_into_the_trackers_frame() {
+    use nalgebra::{Rotation3, UnitQuaternion, Vector3};
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(root().join("robots/seed-4t.toml")).unwrap();
+    let (t, r) = (Vector3::new(0.2, 0.05, -0.1), Vector3::new(-0.3, 0.4, 1.0));
+    let turned = dir.path().join("turned.toml");
+    std::fs::write(
+        &turned,
+        format!(
+            "{text}\n[base]\ntranslation = [{}, {}, {}]\nrotation = [{}, {}, {}]\n",
+            t.x, t.y, t.z, r.x, r.y, r.z
+        ),
+    )
+    .unwrap();
+    let turned = turned.to_str().unwrap();
+    let fk = |robot: &str, extra: &[&str]| -> (Vector3<f64>, UnitQuaternion<f64>) {
+        let mut args = vec!["fk", "--robot", robot, "--tensions", "2,0.5,0,0", "--json"];
+        args.extend_from_slice(extra);
+        let out = tendril(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let n = |a: &serde_json::Value, k: usize| a[k].as_f64().unwrap();
+        let (p, q) = (&v["position"], &v["quaternion"]);
+        (
+            Vector3::new(n(p, 0), n(p, 1), n(p, 2)),
+            UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                n(q, 0),
+                n(q, 1),
+                n(q, 2),
+                n(q, 3),
+            )),
+        )
+    };
+    let (p_base, q_base) = fk("robots/seed-4t.toml", &[]);
+    let (p, q) = fk(turned, &[]);
+    let rot = Rotation3::new(r);
+    assert!((p - (rot * p_base + t)).norm() < 1e-12, "{p} vs {p_base}");
+    let q_expect = UnitQuaternion::from_rotation_matrix(&rot) * q_base;
+    assert!(q.angle_to(&q_expect) < 1e-9);
+    assert!(q.quaternion().w >= 0.0);
+    let (p_flag, _) = fk(turned, &["--base-frame"]);
+    assert_eq!(p_flag, p_base);
+
+    let pose = |p: Vector3<f64>, q: UnitQuaternion<f64>| {
+        let q = q.quaternion();
+        format!("{},{},{},{},{},{},{}", p.x, p.y, p.z, q.w, q.i, q.j, q.k)
+    };
+    let tensions = |out: std::process::Output| -> Vec<f64> {
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        v["tensions"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect()
+    };
+    let net = "firmware/vectors/default.tnet";
+    let (in_tracker, in_base) = (pose(p, q), pose(p_base, q_base));
+    let by_net = tensions(tendril(&[
+        "ik",
+        "--model",
+        net,
+        "--robot",
+        turned,
+        "--pose",
+        &in_tracker,
+        "--json",
+    ]));
+    let by_net_base = tensions(tendril(&[
+        "ik",
+        "--model",
+        net,
+        "--robot",
+        "robots/seed-4t.toml",
+        "--pose",
+        &in_base,
+        "--json",
+    ]));
+    for (a, b) in by_net.iter().zip(&by_net_base) {
+        assert!((a - b).abs() < 1e-4, "{by_net:?} vs {by_net_base:?}");
+    }
+    let exact = tendril(&[
+        "ik",
+        "--exact",
+        "--position-only",
+        "--robot",
+        turned,
+        "--pose",
+        &in_tracker,
+        "--json",
+    ]);
+    assert!(
+        exact.status.success(),
+        "{}",
+        String::from_utf8_lossy(&exact.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&exact.stdout).unwrap();
+    let reached: Vec<f64> = v["reached"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    let got = Vector3::new(reached[0], reached[1], reached[2]);
+    assert!((got - p).norm() < 1e-6, "reached {got} for {p}");
+}

@@ -75,23 +75,14 @@ pub enum CalibError {
 
 impl Calibration {
     /// The calibrated robot as a robot file: the schema of `docs/design.md`
-    /// §2, with the fit's frame and tension scales (which the schema does
-    /// not hold) as comments.
+    /// §2, the fitted tracker frame as its `[base]` table (§2.4), the
+    /// tension scales (which the schema does not hold) as a comment.
     pub fn robot_file(&self) -> String {
         let v = &self.values;
         let header = vec![
             format!(
                 "Calibrated by tendril calibrate from the robot {:?}.",
                 self.report.robot
-            ),
-            format!(
-                "Tracker frame: base at ({:.6}, {:.6}, {:.6}) m, rotation vector ({:.6}, {:.6}, {:.6}) rad.",
-                v.base_translation[0],
-                v.base_translation[1],
-                v.base_translation[2],
-                v.base_rotation[0],
-                v.base_rotation[1],
-                v.base_rotation[2]
             ),
             format!(
                 "Tension scales (true = scale x recorded): {:?}.",

@@ -17,13 +17,14 @@ const FACTOR_BOUND: f64 = 5.0;
 const LENGTH_BOUND: f64 = 0.5;
 /// A tendon's angle stays within ±30° of the nominal.
 const ANGLE_BOUND_RAD: f64 = PI / 6.0;
-/// The robot's base is within 5 m of the tracker's origin: a tracker's
-/// working volume is a metre or two. (A 50 mm bound made a tracker 200 mm
+/// The robot's base is within 5 m of the tracker's origin, the bound a
+/// robot file's `[base]` has too. (A 50 mm bound made a tracker 200 mm
 /// away look like a bent rod: E at a third of its value, issue 47; the
 /// translation enters the tips linearly, so Levenberg–Marquardt reaches it
 /// from zero once nothing stops it.)
-const BASE_TRANSLATION_BOUND_M: f64 = 5.0;
-/// ... and turned by at most 0.2 rad (≈ 11°): a small rotation.
+const BASE_TRANSLATION_BOUND_M: f64 = crate::robot::base_pose::MAX_BASE_TRANSLATION_M;
+/// The base turns by at most 0.2 rad (≈ 11°) from the file's `[base]`: a
+/// small rotation.
 const BASE_ROTATION_BOUND_RAD: f64 = 0.2;
 
 /// One fitted quantity.
@@ -193,8 +194,8 @@ pub struct Values {
 }
 
 impl Values {
-    /// The values a robot file states, with unit tension scales and the
-    /// tracker frame at the base.
+    /// The values a robot file states (its `[base]` pose in the tracker's
+    /// frame among them), with unit tension scales.
     pub fn of(robot: &Robot) -> Values {
         Values {
             youngs_modulus: robot.youngs_modulus,
@@ -204,8 +205,8 @@ impl Values {
             offsets: robot.tendons.iter().map(|t| t.offset).collect(),
             angles: robot.tendons.iter().map(|t| t.angle).collect(),
             tension_scale: vec![1.0; robot.n_tendons()],
-            base_translation: [0.0; 3],
-            base_rotation: [0.0; 3],
+            base_translation: robot.base.translation,
+            base_rotation: robot.base.rotation,
         }
     }
 
@@ -257,6 +258,10 @@ impl Values {
                 t.end * stretch
             };
         }
+        r.base = crate::robot::BasePose {
+            translation: self.base_translation,
+            rotation: self.base_rotation,
+        };
         r
     }
 
@@ -315,7 +320,7 @@ pub fn bounds(p: Param, nominal: &Values) -> (f64, f64) {
         Param::Angle(_) => (x - ANGLE_BOUND_RAD, x + ANGLE_BOUND_RAD),
         Param::TensionScale(_) => TENSION_SCALE_BOUNDS,
         Param::BaseTranslation(_) => (-BASE_TRANSLATION_BOUND_M, BASE_TRANSLATION_BOUND_M),
-        Param::BaseRotation(_) => (-BASE_ROTATION_BOUND_RAD, BASE_ROTATION_BOUND_RAD),
+        Param::BaseRotation(_) => (x - BASE_ROTATION_BOUND_RAD, x + BASE_ROTATION_BOUND_RAD),
     }
 }
 
@@ -359,6 +364,27 @@ pub fn robot_toml(robot: &Robot, header: &[String]) -> String {
                 let _ = writeln!(s, "routing = \"helical\"\nhelix_turns = {}", f(turns));
             }
         }
+    }
+    if !robot.base.is_identity() {
+        let (t, r) = (robot.base.translation, robot.base.rotation);
+        let _ = writeln!(
+            s,
+            "\n[base]   # the base's pose in the tracker's frame (docs/design.md §2.4)"
+        );
+        let _ = writeln!(
+            s,
+            "translation = [{}, {}, {}]   # m",
+            f(t[0]),
+            f(t[1]),
+            f(t[2])
+        );
+        let _ = writeln!(
+            s,
+            "rotation = [{}, {}, {}]   # rad, rotation vector",
+            f(r[0]),
+            f(r[1]),
+            f(r[2])
+        );
     }
     match robot.damping {
         None => {}

@@ -146,23 +146,19 @@ impl Report {
         serde_json::to_string_pretty(self).expect("a report serialises")
     }
 
-    /// A warning when the fitted tracker frame is turned by more than the
-    /// tip noise at the rod's length: the robot file has no base pose, so a
-    /// model or a net that uses the file alone leaves that rotation out.
-    /// With E fixed the rotation is not only the tracker's: the base tilt
-    /// absorbs the weak signal that would separate E (docs/design.md §11),
-    /// and the file alone was 1.7 mm off the benchmark's real robot. None
+    /// A note when the fit turned the tracker's frame (from the nominal
+    /// file's `[base]`) by more than the tip noise at the rod's length. The
+    /// calibrated file's `[base]` carries the turn, so the loop uses it
+    /// (`docs/design.md` §2.4); but with E fixed the turn is not only the
+    /// tracker's: the base tilt absorbs the weak signal that would separate
+    /// E (§11), and the file is then right only with its frame. None
     /// without `length` among the parameters (no length to scale by).
     pub fn frame_rotation_note(&self) -> Option<String> {
-        let value = |name: &str| {
-            self.parameters
-                .iter()
-                .find(|p| p.name == name && !p.fixed)
-                .map(|p| p.fitted)
-        };
+        let fitted = |name: &str| self.parameters.iter().find(|p| p.name == name && !p.fixed);
+        let value = |name: &str| fitted(name).map(|p| p.fitted);
         let w: Vec<f64> = ["base_rx", "base_ry", "base_rz"]
             .iter()
-            .map(|n| value(n).unwrap_or(0.0))
+            .map(|n| fitted(n).map_or(0.0, |p| p.fitted - p.nominal))
             .collect();
         let angle = w.iter().map(|x| x * x).sum::<f64>().sqrt();
         let length = value("length").or_else(|| {
@@ -176,12 +172,13 @@ impl Report {
             return None;
         }
         Some(format!(
-            "The fitted frame is turned by ({:.2}, {:.2}, {:.2}) mrad, up to {:.2} mm at the \
-             tip. The robot file has no base pose: a model or net that uses the file alone \
-             leaves this rotation out, and with E fixed it carries part of the robot (the base \
-             tilt absorbs the signal that separates E). If the tracker's orientation relative \
-             to the base is known, fit `base_t` instead of `base` (BENCHMARKS.md, Calibration, \
-             Closed loop).",
+            "The fit turned the tracker's frame by ({:.2}, {:.2}, {:.2}) mrad, up to {:.2} mm at \
+             the tip. The calibrated file's [base] carries the turn, and the planner, the \
+             controller and fk/ik use it; but with E fixed it also carries part of the robot \
+             (the base tilt absorbs the signal that separates E), so keep the file and its \
+             [base] together. Rows with a known tip load (calibrate --plan-tip-mass-g) make E \
+             identifiable; if the tracker's orientation relative to the base is known, fit \
+             `base_t` instead of `base`.",
             w[0] * 1e3,
             w[1] * 1e3,
             w[2] * 1e3,

@@ -318,7 +318,7 @@ fn planner_picks_distinct_rows_within_the_limits() {
 }
 
 #[test]
-fn a_turned_tracker_frame_is_flagged_as_missing_from_the_robot_file() {
+fn a_turned_tracker_frame_is_noted_and_written_into_the_robot_file() {
     // Noiseless rows from a translated tracker: the fitted rotation is ≈ 0
     // and nothing is said.
     let nominal = repo_robot("seed-4t.toml");
@@ -328,6 +328,14 @@ fn a_turned_tracker_frame_is_flagged_as_missing_from_the_robot_file() {
     let mut opts = FitOptions::new(fit);
     opts.holdout_fraction = 0.0;
     let mut c = calibrate(&nominal, &data, &opts).unwrap();
+    // The fitted frame is the calibrated file's `[base]`, read back whole.
+    let back = Robot::from_toml(&c.robot_file(), Path::new("calibrated.toml")).unwrap();
+    assert_eq!(back.base, c.robot.base);
+    let t = back.base.translation;
+    assert!(
+        (t[0] - 0.002).abs() < 1e-5 && (t[1] + 0.001).abs() < 1e-5 && (t[2] - 0.0005).abs() < 1e-5,
+        "{t:?}"
+    );
     assert!(
         c.report.frame_rotation_note().is_none(),
         "{:?}",

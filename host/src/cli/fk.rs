@@ -60,6 +60,10 @@ pub struct FkArgs {
     /// --tensions: that one row (t0.., the tip load if given, the pose) as CSV.
     #[arg(long, value_name = "CSV")]
     output: Option<PathBuf>,
+    /// Give poses in the robot's base frame, not the tracker's frame of the
+    /// robot file's `[base]` (the same without one).
+    #[arg(long)]
+    base_frame: bool,
     /// RK4 steps over the length, 1 to 100000.
     #[arg(long, default_value_t = SolverSettings::default().steps)]
     steps: usize,
@@ -73,7 +77,10 @@ pub fn run(args: FkArgs) -> anyhow::Result<()> {
             args.steps
         );
     }
-    let (robot, _) = args.robot.load()?;
+    let (mut robot, _) = args.robot.load()?;
+    if args.base_frame {
+        robot.base = crate::robot::BasePose::IDENTITY;
+    }
     let settings = SolverSettings {
         steps: args.steps,
         ..SolverSettings::default()
@@ -129,12 +136,22 @@ fn parse_vector(text: Option<&str>, what: &str) -> anyhow::Result<Vector3<f64>> 
 
 fn single(statics: &Statics, load: &Load, args: &FkArgs) -> anyhow::Result<()> {
     let sol = statics.equilibrium(&load.tensions, load.tip_force, load.tip_moment, None)?;
-    let shape = args.shape.map(|n| statics.shape(&sol, n as usize));
-    let p = sol.position;
+    // Reported in the tracker's frame (the robot's `[base]`).
+    let to_tracker = statics.robot().base.to_tracker();
+    let shape = args.shape.map(|n| {
+        let points = statics.shape(&sol, n as usize);
+        points
+            .iter()
+            .map(|q| Vector3::from(to_tracker.point([q.x, q.y, q.z])))
+            .collect::<Vec<_>>()
+    });
+    let pose = to_tracker.pose(sol.pose());
+    let p = Vector3::new(pose[0], pose[1], pose[2]);
+    let q = [pose[3], pose[4], pose[5], pose[6]];
     if args.json {
         let mut obj = json!({
             "position": [p.x, p.y, p.z],
-            "quaternion": sol.quaternion,
+            "quaternion": q,
             "converged": true,
             "residual": sol.residual,
             "iterations": sol.iterations,
@@ -144,7 +161,6 @@ fn single(statics: &Statics, load: &Load, args: &FkArgs) -> anyhow::Result<()> {
         }
         println!("{obj}");
     } else {
-        let q = sol.quaternion;
         println!("position   [m]  {:+.9} {:+.9} {:+.9}", p.x, p.y, p.z);
         println!(
             "quaternion wxyz {:+.9} {:+.9} {:+.9} {:+.9}",

@@ -45,6 +45,10 @@ pub struct IkArgs {
     /// Use a net trained for another robot than --robot (with a warning) instead of refusing it.
     #[arg(long)]
     pub allow_robot_mismatch: bool,
+    /// Take (and with --exact give) poses in the robot's base frame, not the
+    /// tracker's frame of the robot file's `[base]` (the same without one).
+    #[arg(long)]
+    pub base_frame: bool,
     /// Batch input CSV with columns px,py,pz,qw,qx,qy,qz (others ignored).
     #[arg(long, value_name = "CSV", requires = "output")]
     pub input: Option<PathBuf>,
@@ -135,7 +139,13 @@ fn run_exact(a: &IkArgs, robot: &crate::robot::Robot) -> anyhow::Result<()> {
 
 /// Run `tendril ik`.
 pub fn run(a: IkArgs) -> anyhow::Result<()> {
-    let (robot, _) = a.robot.load()?;
+    let (mut robot, _) = a.robot.load()?;
+    if a.base_frame {
+        robot.base = crate::robot::BasePose::IDENTITY;
+    }
+    // The net answers in the base frame: a target in the tracker's frame
+    // (`docs/design.md` §2.4) is mapped to it first.
+    let to_base = robot.base.to_base();
     if a.exact {
         return run_exact(&a, &robot);
     }
@@ -144,7 +154,7 @@ pub fn run(a: IkArgs) -> anyhow::Result<()> {
     };
     let ik = GuardedNet::load(model, &robot, a.allow_extrapolation, a.allow_robot_mismatch)?;
     if let Some(text) = &a.pose {
-        let pose = parse_pose(text)?;
+        let pose = to_base.pose(parse_pose(text)?);
         let answer = ik.solve(&pose)?;
         if !answer.extrapolated.is_empty() {
             log::warn!(
@@ -172,7 +182,7 @@ pub fn run(a: IkArgs) -> anyhow::Result<()> {
     let (Some(input), Some(output)) = (&a.input, &a.output) else {
         bail!("give --pose px,py,pz,qw,qx,qy,qz or --input poses.csv --output tensions.csv");
     };
-    let s = solve_csv(&ik, input, output)?;
+    let s = solve_csv(&ik, input, output, &to_base)?;
     eprintln!(
         "wrote {} ({} {}, {} beyond the limits and clipped, {} extrapolated)",
         output.display(),

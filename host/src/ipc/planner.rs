@@ -201,6 +201,9 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
 struct Planned {
     motion: Motion,
     learner: Option<Learner>,
+    /// The model's `[base]`: the path is planned in its base frame and
+    /// published in the tracker's (`docs/design.md` §2.4).
+    base: crate::robot::BasePose,
 }
 
 fn plan(cfg: &PlannerConfig) -> Result<Planned, IpcError> {
@@ -250,6 +253,7 @@ fn plan(cfg: &PlannerConfig) -> Result<Planned, IpcError> {
     Ok(Planned {
         motion: Motion::new(traj, cfg.settle_s, rest, inverse),
         learner: learner(cfg, &robot, shaping)?,
+        base: robot.base,
     })
 }
 
@@ -262,6 +266,10 @@ struct PlannerTask<'a> {
     motion: Motion,
     learner: Option<Learner>,
     publisher: transport::Pub<Setpoint>,
+    /// The model's base frame → the tracker's, for what is published and
+    /// logged, and back, for the frames the learning reads.
+    to_tracker: crate::robot::RigidMap,
+    to_base: crate::robot::RigidMap,
     /// The controller's commands say it is alive (the peers-lost rule).
     commands: transport::Sub<TensionCommand>,
     /// The tracker's frames, for the learning only.
@@ -293,6 +301,8 @@ impl<'a> PlannerTask<'a> {
             motion: planned.motion,
             learner: planned.learner,
             publisher: transport::publisher(&services.setpoint)?,
+            to_tracker: planned.base.to_tracker(),
+            to_base: planned.base.to_base(),
             commands: transport::subscriber(&services.tension_cmd)?,
             last_frame: 0,
             feedforward: Vec::with_capacity(tendons),
@@ -314,6 +324,7 @@ impl<'a> PlannerTask<'a> {
         let (state, _): (Option<PlantState>, usize) = transport::latest(states)?;
         if let Some(state) = state.filter(|s| s.tip_seq != 0 && s.tip_seq != self.last_frame) {
             self.last_frame = state.tip_seq;
+            let state = super::frame::state(&self.to_base, &state);
             learn_from(learner, &self.motion, &state, self.start);
         }
         if let Some(outcome) = learner.advance(t_path) {
@@ -425,14 +436,19 @@ impl process::Task for PlannerTask<'_> {
             dynamic_offset,
             reserved: 0,
         };
-        transport::send(&self.publisher, msg)?;
-        // The log keeps the trajectory's pose (what the robot should do)
-        // and marks injected messages.
+        transport::send(
+            &self.publisher,
+            super::frame::setpoint(&self.to_tracker, &msg),
+        )?;
+        // The log keeps the trajectory's pose (what the robot should do,
+        // in the tracker's frame as the plant's log has the tip) and marks
+        // injected messages.
+        let clean = self.to_tracker.pose(clean.map(f64::from));
         let log_flags = log_flags | flags | if injected { LOG_INJECTED } else { 0 };
         let row = &mut self.row;
         row.clear();
         row.extend([stamp as f64, self.seq as f64, log_flags as f64]);
-        row.extend(clean.iter().map(|&v| v as f64));
+        row.extend(clean);
         row.extend_from_slice(&self.feedforward);
         row.push(miss);
         log.row(row)?;

@@ -15,7 +15,7 @@ use nalgebra::Vector3;
 use crate::dataset::generate::solve_bar;
 use crate::dataset::io::format_value;
 use crate::fsutil::write_atomic_with;
-use crate::robot::count;
+use crate::robot::{count, RigidMap};
 use crate::statics::batch::{solve_all, Load, RowResult};
 use crate::statics::{SolveError, Statics};
 
@@ -72,7 +72,7 @@ pub fn single_to_csv(
         row.extend(wrench.map(|&x| format_value(x)));
     }
     head.extend(RESULT_COLUMNS.iter().map(|c| c.to_string()));
-    row.extend(result_values(&Ok(sol)).0);
+    row.extend(result_values(&Ok(sol), &statics.robot().base.to_tracker()).0);
     write_atomic_with(output, |w| {
         let mut out = csv::Writer::from_writer(w);
         out.write_record(&head)?;
@@ -82,12 +82,14 @@ pub fn single_to_csv(
     .with_context(|| format!("{}: cannot write", output.display()))
 }
 
-/// The values of [`RESULT_COLUMNS`] for one row's result, and whether it
+/// The values of [`RESULT_COLUMNS`] for one row's result, the pose in the
+/// tracker's frame (`to_tracker`, the robot's `[base]`), and whether it
 /// failed. Every status a row can end with is decided here.
-fn result_values(result: &RowResult) -> (Vec<String>, bool) {
+fn result_values(result: &RowResult, to_tracker: &RigidMap) -> (Vec<String>, bool) {
     match result {
         Ok(sol) => (
-            sol.pose()
+            to_tracker
+                .pose(sol.pose())
                 .iter()
                 .map(|&x| format_value(x))
                 .chain(["true".to_string()])
@@ -237,6 +239,7 @@ pub fn solve_csv(
         .clone();
     let cols = Columns::of(&header, n, input)?;
 
+    let to_tracker = statics.robot().base.to_tracker();
     let bar = solve_bar(0, progress);
     let (mut rows, mut failed, mut unstable) = (0usize, 0usize, 0usize);
     // The first error met inside the streaming writer (it can only return io::Error).
@@ -274,7 +277,7 @@ pub fn solve_csv(
             for (rec, result) in records.iter().zip(&results) {
                 let mut row: Vec<String> = rec.iter().map(str::to_string).collect();
                 row.resize(cols.head.len(), String::new());
-                let (values, bad) = result_values(result);
+                let (values, bad) = result_values(result, &to_tracker);
                 failed += usize::from(bad);
                 unstable += usize::from(matches!(
                     result,

@@ -81,27 +81,33 @@ pub enum BatchError {
 
 /// The exact IK for `pose`, from `net`'s guess when given. An unreachable
 /// target is an answer (the closest pose, `reachable: false`); every other
-/// failure is an error.
+/// failure is an error. `pose` and the answer's pose are in the tracker's
+/// frame of the robot's `[base]` (`docs/design.md` §2.4); the IK and the
+/// net work in the base frame.
 pub fn answer(
     ik: &ExactIk,
     net: Option<&GuardedNet>,
     pose: &[f64; 7],
     position_only: bool,
 ) -> Result<Answer, InverseError> {
+    let base = ik.robot().base;
+    let pose = &base.to_base().pose(*pose);
     let target = Target::from_pose(pose, position_only)?;
     // The net's guess is only a start: a pose it refuses starts cold.
     let guess = net.and_then(|n| n.solve(pose).ok()).map(|a| a.tensions);
-    match ik.solve(&target, guess.as_deref(), None) {
-        Ok(solution) => Ok(Answer {
+    let mut answer = match ik.solve(&target, guess.as_deref(), None) {
+        Ok(solution) => Answer {
             solution,
             reachable: true,
-        }),
-        Err(InverseError::Unreachable { closest }) => Ok(Answer {
+        },
+        Err(InverseError::Unreachable { closest }) => Answer {
             solution: *closest,
             reachable: false,
-        }),
-        Err(e) => Err(e),
-    }
+        },
+        Err(e) => return Err(e),
+    };
+    answer.solution.pose = base.to_tracker().pose(answer.solution.pose);
+    Ok(answer)
 }
 
 /// What a batch did.

@@ -122,6 +122,8 @@ struct Connected {
     chip: ChipLink,
     n_tendons: usize,
     period_ns: u64,
+    /// The tracker's frame → the model's base frame (its `[base]`).
+    to_base: crate::robot::RigidMap,
     /// The run's net, when the chip runs another.
     first_net: Option<Vec<u8>>,
 }
@@ -157,6 +159,7 @@ fn connect(cfg: &ControllerConfig, mcu: &McuOptions) -> Result<Connected, IpcErr
         chip,
         n_tendons: robot.n_tendons(),
         period_ns: u64::from(setup.period_ns),
+        to_base: robot.base.to_base(),
         first_net,
     })
 }
@@ -168,6 +171,9 @@ struct Bridge {
     chip: ChipLink,
     n: usize,
     period_ns: u64,
+    /// Setpoints and tracker frames come in the tracker's frame, the chip
+    /// works in the model's base frame (`docs/design.md` §2.4).
+    to_base: crate::robot::RigidMap,
     garbage_every_ms: Option<u64>,
     setpoints: transport::Sub<Setpoint>,
     states: transport::Sub<PlantState>,
@@ -221,6 +227,7 @@ impl Bridge {
             chip: c.chip,
             n: c.n_tendons,
             period_ns: c.period_ns,
+            to_base: c.to_base,
             garbage_every_ms: mcu.garbage_every_ms,
             setpoints: transport::subscriber(&services.setpoint)?,
             states: transport::subscriber(&services.plant_state)?,
@@ -261,6 +268,7 @@ impl Bridge {
                 nonfinite += 1;
             }
         })?;
+        let sp = sp.map(|s| crate::ipc::frame::setpoint(&self.to_base, &s));
         if let Some(s) = &sp {
             self.quiet.setpoint(s, now_ns());
             // A setpoint that cannot go now is superseded by a newer one:
@@ -310,6 +318,7 @@ impl Bridge {
     /// whether one arrived.
     fn forward_state(&mut self, now: u64, link_free: bool) -> Result<bool, IpcError> {
         let (st, n_st): (Option<PlantState>, usize) = transport::latest(&self.states)?;
+        let st = st.map(|f| crate::ipc::frame::state(&self.to_base, &f));
         if let Some(f) = &st {
             self.last_state_seq = f.header.seq;
             let count = self.pending_state.map_or(0, |(_, c)| c) + n_st;

@@ -328,7 +328,12 @@ pub fn pose_of_record(record: &csv::StringRecord, cols: &[usize]) -> Result<[f64
 /// `output` atomically: `t0..` (the command stage's, N) then `raw_t0..` (the net's
 /// output, N), one row per input row. A refused row fails the whole batch,
 /// naming its line; nothing is written then.
-pub fn solve_csv(ik: &GuardedNet, input: &Path, output: &Path) -> Result<BatchSummary, IkError> {
+pub fn solve_csv(
+    ik: &GuardedNet,
+    input: &Path,
+    output: &Path,
+    to_base: &crate::robot::RigidMap,
+) -> Result<BatchSummary, IkError> {
     let file_error = |path: &Path, why: String| IkError::File {
         path: path.to_path_buf(),
         why,
@@ -342,7 +347,7 @@ pub fn solve_csv(ik: &GuardedNet, input: &Path, output: &Path) -> Result<BatchSu
     let mut answers = Vec::new();
     let mut summary = BatchSummary::default();
     for (i, pose) in read_poses(input)?.iter().enumerate() {
-        let answer = ik.solve(pose).map_err(|e| IkError::Row {
+        let answer = ik.solve(&to_base.pose(*pose)).map_err(|e| IkError::Row {
             path: input.to_path_buf(),
             line: i + 2,
             why: e.to_string(),

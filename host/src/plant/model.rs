@@ -50,6 +50,9 @@ pub struct PlantModel {
     lag_s: f64,
     /// The tip tracker.
     tracker: Tracker,
+    /// Base frame → the tracker's (the real robot's `[base]`): every tip
+    /// and shape the plant reports is in the tracker's frame.
+    to_tracker: crate::robot::RigidMap,
     /// Per motor: the play operator's output (backlash) and the tension the
     /// drive holds (dead band), N.
     drive: Vec<(f64, f64)>,
@@ -158,6 +161,7 @@ impl PlantModel {
             dynamics,
             lag_s: 0.0,
             tracker: Tracker::new(tracker),
+            to_tracker: robot.base.to_tracker(),
             drive: vec![(0.0, 0.0); n],
             dead_band_n: reality.motors.map_or(0.0, |m| m.dead_band_n),
             backlash_n: reality.motors.map_or(0.0, |m| m.backlash_n),
@@ -337,24 +341,32 @@ impl PlantModel {
         true
     }
 
-    /// The rod's backbone and tendon paths at `points` arc lengths (base
-    /// frame, m), for a run log. The quasi-static plant has them from its
-    /// last solve; the dynamic rod gives its backbone on its own grid,
-    /// resampled here, and no tendon paths.
+    /// The rod's backbone and tendon paths at `points` arc lengths (the
+    /// tracker's frame, m), for a run log. The quasi-static plant has them
+    /// from its last solve; the dynamic rod gives its backbone on its own
+    /// grid, resampled here, and no tendon paths.
     pub fn shape(&self, points: usize) -> Option<crate::statics::RodShape> {
-        if let Some(d) = &self.dynamics {
-            return Some(crate::statics::RodShape {
+        let mut shape = match &self.dynamics {
+            Some(d) => crate::statics::RodShape {
                 backbone: crate::numerics::polyline::resample(d.backbone(), points),
                 tendons: vec![],
-            });
+            },
+            None => self
+                .statics
+                .shape_with_tendons(self.solution.as_ref()?, points),
+        };
+        if !self.to_tracker.is_identity() {
+            let map =
+                |p: &mut nalgebra::Vector3<f64>| *p = self.to_tracker.point((*p).into()).into();
+            shape.backbone.iter_mut().for_each(map);
+            shape.tendons.iter_mut().flatten().for_each(map);
         }
-        let sol = self.solution.as_ref()?;
-        Some(self.statics.shape_with_tendons(sol, points))
+        Some(shape)
     }
 
-    /// True tip pose (no noise).
+    /// True tip pose (no noise), in the tracker's frame.
     pub fn pose(&self) -> [f64; 7] {
-        self.pose
+        self.to_tracker.pose(self.pose)
     }
 
     /// Tendon tensions (N).
@@ -371,7 +383,7 @@ impl PlantModel {
     /// it samples the true tip when a frame is due and delivers the frames
     /// whose latency has passed. Returns whether a new frame arrived.
     pub fn sense(&mut self, now_ns: u64) -> bool {
-        self.tracker.step(now_ns, &self.pose, &mut self.rng)
+        self.tracker.step(now_ns, &self.pose(), &mut self.rng)
     }
 
     /// The tracker's newest delivered frame (None before the first).

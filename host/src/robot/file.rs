@@ -10,7 +10,8 @@ use std::path::{Path, PathBuf};
 use nalgebra::Vector3;
 use serde::Deserialize;
 
-use super::{DampingKeys, Robot, Routing, Tendon, MAX_TENDONS};
+use super::base_pose::MAX_BASE_TRANSLATION_M;
+use super::{BasePose, DampingKeys, Robot, Routing, Tendon, MAX_TENDONS};
 
 /// Path of the default robot, relative to the workspace root.
 pub const DEFAULT_ROBOT: &str = "robots/seed-4t.toml";
@@ -53,6 +54,51 @@ struct RobotFile {
     #[serde(default)]
     tendon: Vec<TendonFile>,
     damping: Option<DampingFile>,
+    base: Option<BaseFile>,
+}
+
+/// `[base]`: the base's pose in the tracker's frame (`docs/design.md` §2.4).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct BaseFile {
+    #[serde(default)]
+    translation: [f64; 3],
+    #[serde(default)]
+    rotation: [f64; 3],
+}
+
+impl BaseFile {
+    fn validate(&self, v: &Validator<'_>) -> Result<BasePose, RobotError> {
+        for (k, x) in self.translation.iter().enumerate() {
+            v.finite(&format!("base.translation[{k}]"), *x)?;
+        }
+        for (k, x) in self.rotation.iter().enumerate() {
+            v.finite(&format!("base.rotation[{k}]"), *x)?;
+        }
+        let norm = |a: &[f64; 3]| a.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if norm(&self.translation) > MAX_BASE_TRANSLATION_M {
+            return Err(v.err(
+                "base.translation",
+                format!(
+                    "the base is {:.3} m from the tracker's origin: at most {MAX_BASE_TRANSLATION_M} m (metres, not millimetres)",
+                    norm(&self.translation)
+                ),
+            ));
+        }
+        if norm(&self.rotation) > PI {
+            return Err(v.err(
+                "base.rotation",
+                format!(
+                    "a rotation vector of {:.3} rad: at most π (axis × angle, radians, not degrees)",
+                    norm(&self.rotation)
+                ),
+            ));
+        }
+        Ok(BasePose {
+            translation: self.translation,
+            rotation: self.rotation,
+        })
+    }
 }
 
 #[derive(Deserialize)]
@@ -188,6 +234,10 @@ impl Robot {
             },
             tendons: Vec::new(),
             damping: raw.damping.as_ref().map(|d| d.validate(&v)).transpose()?,
+            base: match &raw.base {
+                Some(b) => b.validate(&v)?,
+                None => BasePose::IDENTITY,
+            },
         };
         if raw.name.trim().is_empty() {
             return Err(v.err("name", "must not be empty".into()));

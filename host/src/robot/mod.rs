@@ -9,10 +9,12 @@ use std::path::Path;
 
 use nalgebra::{Matrix3, Vector3};
 
+pub mod base_pose;
 pub mod file;
 pub mod fingerprint;
 pub mod groups;
 
+pub use base_pose::{BasePose, RigidMap};
 pub use file::{RobotError, BUILTIN_DEFAULT_TOML, DEFAULT_ROBOT};
 pub use groups::{anchor_groups, bending_dof, cocontraction_sets};
 
@@ -73,6 +75,10 @@ pub struct Robot {
     /// table (None: the dynamics' documented default); the statics never
     /// read it (`docs/design.md` §4.2).
     pub damping: Option<DampingKeys>,
+    /// Where the base sits in the tracker's frame, from the optional
+    /// `[base]` table (identity without it; `docs/design.md` §2.4). Not
+    /// part of the fingerprint: the rod does not change with it.
+    pub base: BasePose,
 }
 
 /// The optional `[damping]` table: Kelvin–Voigt damping n = Kse (v − e₃) +

@@ -394,6 +394,9 @@ struct HostTask {
     overran: bool,
     cpu_wait: super::clock::CpuWait,
     n_tendons: usize,
+    /// Setpoints and tracker frames come in the tracker's frame, the
+    /// period works in the model's base frame (`docs/design.md` §2.4).
+    to_base: crate::robot::RigidMap,
     setpoints: transport::Sub<Setpoint>,
     states: transport::Sub<PlantState>,
     weights: transport::Sub<WeightUpdate>,
@@ -417,6 +420,7 @@ impl HostTask {
             overran: false,
             cpu_wait: super::clock::CpuWait::for_this_thread(),
             n_tendons: robot.n_tendons(),
+            to_base: robot.base.to_base(),
             setpoints: transport::subscriber(&services.setpoint)?,
             states: transport::subscriber(&services.plant_state)?,
             weights: transport::subscriber(&services.weights)?,
@@ -450,6 +454,8 @@ impl process::Task for HostTask {
             }
         })?;
         let (state, n_st) = transport::latest(&self.states)?;
+        let setpoint = setpoint.map(|s| super::frame::setpoint(&self.to_base, &s));
+        let state = state.map(|f| super::frame::state(&self.to_base, &f));
         let (update, _): (Option<WeightUpdate>, usize) = transport::latest(&self.weights)?;
         let inbox = Inbox {
             setpoint,

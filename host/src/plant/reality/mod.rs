@@ -7,7 +7,8 @@
 //! A reality says, each part optional (absent = the ideal plant's value):
 //! - `[robot]`: scale factors on E, G, the density and the length; each
 //!   tendon's offset and angle off by given amounts, or by amounts drawn up
-//!   to a bound from a seed (so one file fits any robot);
+//!   to a bound from a seed (so one file fits any robot); the base's pose
+//!   in the tracker's frame off the file's `[base]`;
 //! - `[friction]`: the capstan friction of the tendons in their guides
 //!   (docs/design.md §2.3);
 //! - `[motors]`: the time constant, a dead band and backlash;
@@ -106,6 +107,11 @@ pub struct RobotChanges {
     pub tendon_angle_error_deg: Option<f64>,
     /// Seed of the drawn errors.
     pub seed: Option<u64>,
+    /// Where the base really is in the tracker's frame, against the file's
+    /// `[base]`: added to its translation, mm (`docs/design.md` §2.4).
+    pub base_translation_delta_mm: Option<[f64; 3]>,
+    /// ... and added to its rotation vector, mrad.
+    pub base_rotation_delta_mrad: Option<[f64; 3]>,
 }
 
 /// Capstan friction of the tendons in their guides (docs/design.md §2.3).
@@ -292,6 +298,27 @@ impl Reality {
                 }
             }
         }
+        for (field, v, bound) in [
+            (
+                "robot.base_translation_delta_mm",
+                r.base_translation_delta_mm,
+                1000.0,
+            ),
+            (
+                "robot.base_rotation_delta_mrad",
+                r.base_rotation_delta_mrad,
+                200.0,
+            ),
+        ] {
+            for (k, &x) in v.iter().flatten().enumerate() {
+                if !(x.is_finite() && x.abs() <= bound) {
+                    return Err(err(
+                        &format!("{field}[{k}]"),
+                        format!("{x}: must be within ±{bound}"),
+                    ));
+                }
+            }
+        }
         if r.tendon_offset_delta_mm.is_some() && r.tendon_offset_error_mm.is_some() {
             return Err(err(
                 "robot.tendon_offset_error_mm",
@@ -415,6 +442,14 @@ impl Reality {
                 ));
             }
         }
+        let (dt, dr) = (
+            r.base_translation_delta_mm.unwrap_or_default(),
+            r.base_rotation_delta_mrad.unwrap_or_default(),
+        );
+        for k in 0..3 {
+            robot.base.translation[k] += dt[k] * 1e-3;
+            robot.base.rotation[k] += dr[k] * 1e-3;
+        }
         Ok(robot)
     }
 
@@ -440,6 +475,9 @@ impl Reality {
         }
         if r.tendon_offset_delta_mm.is_some() || r.tendon_angle_delta_deg.is_some() {
             parts.push("tendon geometry off".into());
+        }
+        if r.base_translation_delta_mm.is_some() || r.base_rotation_delta_mrad.is_some() {
+            parts.push("tracker frame off".into());
         }
         if let Some(f) = &self.friction {
             parts.push(format!("friction μ {}", f.mu));

@@ -205,7 +205,8 @@ fn jittered_latency_keeps_frames_in_order() {
 
 /// The calibration benchmark's "real" robot file, made from seed-4t.toml by
 /// the text edits of scripts/calibration-benchmark and scripts/calibration-loop
-/// (E 227.7e9, ρ 45214.55, offsets 19.5, 18.5, 19.4, 18.7 mm).
+/// (E 227.7e9, ρ 45214.55, offsets 19.5, 18.5, 19.4, 18.7 mm), with the
+/// `[base]` of its measured rows' tracker (1.5, −1, 0.8 mm).
 fn calibration_real_robot() -> Robot {
     let text = crate::robot::BUILTIN_DEFAULT_TOML;
     let real = text
@@ -219,6 +220,7 @@ fn calibration_real_robot() -> Robot {
     // The edits must all have applied: a changed seed-4t.toml would make
     // the scripts' real robot silently the nominal one.
     assert!(out.contains("227.7e9") && out.contains("45214.55") && !out.contains("= 0.019\n"));
+    out.push_str("\n[base]\ntranslation = [0.0015, -0.001, 0.0008]\n");
     Robot::from_toml(&out, Path::new("real.toml")).unwrap()
 }
 
@@ -256,7 +258,9 @@ fn calibration_truth_is_the_calibration_benchmarks_real_robot() {
             assert!(plant.step(0.1));
         }
         let p = nalgebra::Vector3::from_row_slice(&plant.pose()[..3]);
-        let want = file.solve(plant.tensions(), None).unwrap().position;
+        // The plant reports in the tracker's frame: the file's `[base]`.
+        let at = file.solve(plant.tensions(), None).unwrap().position;
+        let want = nalgebra::Vector3::from(file.robot().base.to_tracker().point(at.into()));
         // Same robot up to the last bits of E, ρ and the offsets; the rest
         // is the solver's convergence (warm in the plant, cold here).
         assert!(
