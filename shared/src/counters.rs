@@ -54,3 +54,32 @@ pub struct Counters {
     /// Weight updates rejected (the old net kept).
     pub weight_rejections: u32,
 }
+
+impl Counters {
+    /// All zero, as a constant (`Default` is not `const`): for a period
+    /// that is a constant before it is configured.
+    pub const ZERO: Counters = Counters {
+        periods: 0,
+        missed_ticks: 0,
+        setpoints: 0,
+        setpoints_lost: 0,
+        planner_restarts: 0,
+        plant_restarts: 0,
+        plant_states_lost: 0,
+        plant_recoveries: 0,
+        plant_stale_periods: 0,
+        commands_not_applied: 0,
+        rejected_nonfinite: 0,
+        rejected_quaternion: 0,
+        rejected_workspace: 0,
+        watchdog_trips: 0,
+        watchdog_trips_late_planner: 0,
+        stuck_motor_holds: 0,
+        hold_periods: 0,
+        startup_hold_periods: 0,
+        saturated_periods: 0,
+        correction_periods: 0,
+        weight_swaps: 0,
+        weight_rejections: 0,
+    };
+}

@@ -137,6 +137,19 @@ pub struct TendonLimits {
 }
 
 impl TendonLimits {
+    /// Every tendon slot, 0 to 1 N at 1 N/s, no co-contraction: valid like
+    /// every `TendonLimits`, and a constant, for a controller that must
+    /// exist before it is configured (the firmware's node, a `static`
+    /// whose motors get nothing until its Setup comes; it is then
+    /// configured in place instead of built on the chip's stack).
+    pub const UNCONFIGURED: TendonLimits = TendonLimits {
+        n: MAX_TENDONS,
+        min_tension: [0.0; MAX_TENDONS],
+        max_tension: [1.0; MAX_TENDONS],
+        slew_rate: [1.0; MAX_TENDONS],
+        cocontraction: CoContraction::none(),
+    };
+
     /// Limits with one max tension (N) and one slew rate (N/s) per tendon.
     pub fn new(max_tension: &[f32], slew_rate: &[f32]) -> Result<Self, LimitsError> {
         let n = max_tension.len();

@@ -431,7 +431,14 @@ mod mcu {
             return false;
         }
         board.now_ns += u64::from(TICK_NS);
+        // Its stack counts too: a Setup configures the period (in place),
+        // on any tick a host sends one.
+        let paint = rt::stack::paint();
+        let sp_at_call = stack_pointer();
         let t_setup = ticks(|| node.tick(&mut board, &mut store, 0));
+        let setup_stack = paint
+            .high_water()
+            .saturating_sub(top.saturating_sub(sp_at_call));
         host.receive();
         if host.setup_error != Some(0) {
             let _ = writeln!(out, "error setup refused {:?}", host.setup_error);
@@ -452,7 +459,7 @@ mod mcu {
         let mut slice_periods = 0u32;
         let mut chunk_periods = 0u32;
         let mut stack_high = 0usize;
-        let mut node_stack = 0usize;
+        let mut node_stack = setup_stack;
         // A check runs from the period of an update's last chunk until a
         // command says it ended (swapped or refused).
         let mut checking = false;
@@ -568,7 +575,7 @@ mod mcu {
         }
         instr.sort_unstable();
         let p50 = instr.get(instr.len() / 2).copied().unwrap_or(0);
-        let lines: [(&str, u64); 21] = [
+        let lines: [(&str, u64); 22] = [
             ("periods", u64::from(PERIODS)),
             ("worst_period_instructions", worst),
             ("p50_period_instructions", u64::from(p50)),
@@ -580,6 +587,7 @@ mod mcu {
             ("chunk_periods", u64::from(chunk_periods)),
             ("stack_bytes", stack_high as u64),
             ("node_stack_bytes", node_stack as u64),
+            ("setup_tick_stack_bytes", setup_stack as u64),
             ("update_8_bytes", blob_8.len() as u64),
             ("update_4_bytes", blob_4.len() as u64),
             ("commands", u64::from(host.commands)),

@@ -78,7 +78,7 @@ pub struct ControlConfig {
 impl ControlConfig {
     /// Defaults for a 1 kHz loop: watchdog 50 ms, `dt` capped at 5 ms,
     /// quaternion tolerance 1e-2, no box margin, freeze on hold, no integral.
-    pub fn new(limits: TendonLimits) -> ControlConfig {
+    pub const fn new(limits: TendonLimits) -> ControlConfig {
         ControlConfig {
             limits,
             watchdog_ns: 50_000_000,
@@ -233,6 +233,13 @@ impl ControlState {
                 min
             };
         }
+        ControlState::holding(command, now_ns)
+    }
+
+    /// Start at time `now_ns` holding `command` as it is (the caller has
+    /// clamped it); `const`, for a period that is a constant before it is
+    /// configured.
+    pub const fn holding(command: Tensions, now_ns: u64) -> ControlState {
         ControlState {
             command,
             target: command,
@@ -356,7 +363,7 @@ pub fn control_step_in_place<const H: usize, const OUT: usize, const W: usize>(
     }
 
     // 2. Setpoint.
-    if let Some(sp) = input.setpoint {
+    if let Some(sp) = &input.setpoint {
         if st.has_setpoint && sp.seq <= st.last_setpoint_seq {
             status |= Status::STALE_SETPOINT;
         } else if sp.pose.iter().any(|v| !v.is_finite()) {

@@ -22,36 +22,27 @@
 //! truncated, oversized or undecodable frames are counted and dropped by
 //! the frame layer and here; none of them costs more than its bytes.
 
+use serde::Deserialize;
 use tendril_shared::link::wire::{
     Down, EventDetail, Feedback, Hello, LinkCommand, LinkSetpoint, Setup, Telemetry, Up,
     MAX_DOWN_PAYLOAD, MAX_UP_PAYLOAD, PROTOCOL_VERSION, TELEMETRY_EVERY,
 };
 use tendril_shared::link::{encode, max_frame_len, FrameCounters, FrameDecoder};
-use tendril_shared::{CoContraction, TendonLimits, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS, POSE_DIM};
+use tendril_shared::{MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS, POSE_DIM};
 
 use crate::board::Board;
-use crate::control::{ControlConfig, ControlTangent, IntegralConfig, SafeHold};
-use crate::period::{FeedbackIn, Inputs, Period, PeriodConfig, SetpointIn, StuckConfig, Update};
+use crate::control::ControlTangent;
+use crate::period::{FeedbackIn, Inputs, Period, SetpointIn, Update};
 use crate::swap::NetStore;
-use tendril_shared::counters::Counters;
+
+mod setup;
+pub use setup::{period_config, setup_error, setup_of, LINK_COMMANDS_IN_FLIGHT};
 
 /// Receive frame buffer: the largest host → chip frame.
 pub const RX_FRAME: usize = max_frame_len(MAX_DOWN_PAYLOAD);
 /// Transmit frame buffer: the largest chip → host frame (plus the 0x00
 /// sent ahead of a frame after a partial write).
 pub const TX_FRAME: usize = max_frame_len(MAX_UP_PAYLOAD) + 1;
-
-/// Why a Setup was refused ([`Hello::setup_error`]).
-pub mod setup_error {
-    /// Tendon count 0 or above the capacity.
-    pub const TENDONS: u8 = 1;
-    /// The tension limits do not validate (floors above ceilings, NaN…).
-    pub const LIMITS: u8 = 2;
-    /// The co-contraction sets do not validate.
-    pub const COCONTRACTION: u8 = 3;
-    /// A time or gain out of range (zero period, negative gain, NaN).
-    pub const TIMING: u8 = 4;
-}
 
 /// The chip's weight-update buffer: the largest net file a controller
 /// accepts ([`tendril_shared::MAX_NET_FILE`]: 7 inputs and as many hidden
@@ -61,165 +52,6 @@ pub const MCU_UPDATE_CAPACITY: usize = tendril_shared::MAX_NET_FILE;
 
 /// Bytes of a weight update's check per period on the chip.
 pub const SWAP_SLICE_BYTES: usize = crate::SWAP_SLICE_BYTES;
-
-/// Commands the plant may be behind over the link without it being a fault
-/// ([`PeriodConfig::commands_in_flight`]). A command reaches the plant
-/// through the bridge, and the plant's state comes back the same way, at
-/// most every ¾ period: the round trip can exceed the period, and then
-/// the state shows the command before last. Measured on the default
-/// robot's 10 s circle at 100 Hz: 174 of 1,217 periods were one behind,
-/// none more.
-pub const LINK_COMMANDS_IN_FLIGHT: u8 = 1;
-
-/// The first `n` entries.
-fn first(a: &[f32; MAX_TENDONS], n: usize) -> &[f32] {
-    a.get(..n).unwrap_or(&[])
-}
-
-/// The period's configuration from a Setup, validated.
-pub fn period_config(s: &Setup) -> Result<PeriodConfig, u8> {
-    let n = usize::from(s.n_tendons);
-    if n == 0 || n > MAX_TENDONS {
-        return Err(setup_error::TENDONS);
-    }
-    let limits = TendonLimits::new(first(&s.max_tension, n), first(&s.slew_rate, n))
-        .and_then(|l| l.with_min_tension(first(&s.min_tension, n)))
-        .map_err(|_| setup_error::LIMITS)?;
-    // No sets: every tendon outside one (NONE), or the all-zero arrays of
-    // a setup that never filled them (a set member has a weight > 0). Set 0
-    // is a set: testing `c != 0` lost a robot's only set on the link.
-    let in_a_set = s
-        .cocontraction_sets
-        .iter()
-        .zip(&s.cocontraction_weights)
-        .take(n)
-        .any(|(&c, &w)| c != CoContraction::NONE && w != 0.0);
-    let limits = if in_a_set {
-        let sets = CoContraction::new(
-            s.cocontraction_sets.get(..n).unwrap_or(&[]),
-            s.cocontraction_weights.get(..n).unwrap_or(&[]),
-        )
-        .map_err(|_| setup_error::COCONTRACTION)?;
-        limits
-            .with_cocontraction(sets)
-            .map_err(|_| setup_error::COCONTRACTION)?
-    } else {
-        limits
-    };
-    let finite_pos = |v: f32| v.is_finite() && v >= 0.0;
-    let times_ok = s.period_ns > 0 && s.watchdog_ns > 0 && s.max_dt_ns > 0;
-    let gains_ok = [
-        s.quaternion_tolerance,
-        s.box_margin,
-        s.ki,
-        s.correction_limit,
-        s.lead_s,
-        s.stuck_model_gain,
-        s.stuck_error_n,
-        s.correction_filter_tau_s,
-        s.correction_map_gain,
-        s.correction_map_limit,
-    ]
-    .into_iter()
-    .all(finite_pos)
-        && (finite_pos(s.correction_window) || s.correction_window == f32::INFINITY);
-    let map_ok = s.correction_map_scale.is_finite()
-        && s.correction_map_scale > 0.0
-        && s.jump_m.is_finite()
-        && s.jump_m > 0.0;
-    if !times_ok || !gains_ok || !map_ok {
-        return Err(setup_error::TIMING);
-    }
-    let mut control = ControlConfig::new(limits);
-    control.watchdog_ns = u64::from(s.watchdog_ns);
-    control.max_dt_ns = u64::from(s.max_dt_ns);
-    control.quaternion_tolerance = s.quaternion_tolerance;
-    control.box_margin = s.box_margin;
-    control.safe_hold = SafeHold::Freeze;
-    if s.ki > 0.0 {
-        control.integral = IntegralConfig {
-            ki: s.ki,
-            limit: s.correction_limit,
-            feedback_timeout_ns: u64::from(s.feedback_timeout_ns),
-            window: s.correction_window,
-            filter_tau_s: s.correction_filter_tau_s,
-            map_gain: s.correction_map_gain,
-            map_scale: s.correction_map_scale,
-            map_limit: s.correction_map_limit,
-        };
-    }
-    let stuck = if s.stuck_enabled {
-        StuckConfig {
-            enabled: true,
-            model_gain: s.stuck_model_gain,
-            tension_error_n: s.stuck_error_n,
-            persist_ns: u64::from(s.stuck_persist_ns),
-        }
-    } else {
-        StuckConfig::OFF
-    };
-    Ok(PeriodConfig {
-        control,
-        period_ns: u64::from(s.period_ns),
-        lead_s: s.lead_s,
-        plant_stale_ns: u64::from(s.plant_stale_ns),
-        stuck,
-        swap_slice_bytes: SWAP_SLICE_BYTES,
-        jump_m: s.jump_m,
-        settle_after_jump_ns: u64::from(s.settle_after_jump_ns),
-        commands_in_flight: LINK_COMMANDS_IN_FLIGHT,
-    })
-}
-
-/// The link's `Setup` for a period configuration: [`period_config`]'s
-/// inverse, beside it (the host's bridge and the budget image use it;
-/// round trip: `node::tests`). Times above u32::MAX ns are clamped to it.
-pub fn setup_of(p: &PeriodConfig) -> Setup {
-    let l = &p.control.limits;
-    let n = l.n_tendons();
-    let pad = |a: &[f32]| {
-        let mut out = [0.0f32; MAX_TENDONS];
-        for (d, v) in out.iter_mut().zip(a) {
-            *d = *v;
-        }
-        out
-    };
-    let mut sets = [0u8; MAX_TENDONS];
-    for (d, c) in sets.iter_mut().zip(l.cocontraction().sets()).take(n) {
-        *d = *c;
-    }
-    let ns = |v: u64| v.min(u64::from(u32::MAX)) as u32;
-    let ic = p.control.integral;
-    Setup {
-        n_tendons: n as u8,
-        max_tension: pad(l.max_tension()),
-        min_tension: pad(l.min_tension()),
-        slew_rate: pad(l.slew_rate()),
-        cocontraction_sets: sets,
-        cocontraction_weights: *l.cocontraction().weights(),
-        period_ns: ns(p.period_ns),
-        watchdog_ns: ns(p.control.watchdog_ns),
-        max_dt_ns: ns(p.control.max_dt_ns),
-        quaternion_tolerance: p.control.quaternion_tolerance,
-        box_margin: p.control.box_margin,
-        ki: ic.ki,
-        correction_limit: ic.limit,
-        feedback_timeout_ns: ns(ic.feedback_timeout_ns),
-        correction_window: ic.window,
-        correction_filter_tau_s: ic.filter_tau_s,
-        correction_map_gain: ic.map_gain,
-        correction_map_scale: ic.map_scale,
-        correction_map_limit: ic.map_limit,
-        jump_m: p.jump_m,
-        settle_after_jump_ns: ns(p.settle_after_jump_ns),
-        lead_s: p.lead_s,
-        plant_stale_ns: ns(p.plant_stale_ns),
-        stuck_enabled: p.stuck.enabled,
-        stuck_model_gain: p.stuck.model_gain,
-        stuck_error_n: p.stuck.tension_error_n,
-        stuck_persist_ns: ns(p.stuck.persist_ns),
-    }
-}
 
 /// What arrived since the last period.
 #[derive(Clone, Copy, Debug, Default)]
@@ -367,13 +199,7 @@ impl<const U: usize> Node<U> {
         if core.pending.hello_asked || (core.period.is_none() && core.ticks % TELEMETRY_EVERY == 1)
         {
             core.pending.hello_asked = false;
-            let hello = Up::Hello(Hello {
-                protocol: PROTOCOL_VERSION,
-                net_hash: core.net_hash,
-                setup_hash: core.setup_hash,
-                setup_error: core.setup_error,
-            });
-            core.send(board, &hello);
+            core.send_hello(board);
         }
         // 2. The period, every `per` ticks (none in lock-step mode).
         core.timed_period(board, store, missed, self.rx.counters(), t0);
@@ -383,9 +209,9 @@ impl<const U: usize> Node<U> {
 impl<const U: usize> Core<U> {
     /// The timer's period, when `per` ticks have passed since the last (none
     /// in lock-step mode or before a configuration).
-    // Not inlined, like `step`: its copy of the inputs then takes stack only
-    // while it runs, not in `tick`'s frame under a lock-step period (tests/
-    // tests/mcu_budget.rs measures the stack).
+    // Not inlined, like `step`: what it needs takes stack only while it
+    // runs, not in `tick`'s frame under a lock-step period (tests/tests/
+    // mcu_budget.rs measures the stack).
     #[inline(never)]
     fn timed_period<B, S>(
         &mut self,
@@ -413,7 +239,9 @@ impl<const U: usize> Core<U> {
         }
         let missed_periods = self.since_period / per - 1;
         self.since_period %= per;
-        let mut input = self.pending.inputs;
+        // The period reads the pending inputs where they are: a copy of
+        // them (312 B) would sit on the stack under the whole period.
+        let input = &mut self.pending.inputs;
         input.now_ns = t0;
         input.missed_ticks = missed_periods;
         if let Some(f) = input.feedback.as_mut() {
@@ -425,14 +253,12 @@ impl<const U: usize> Core<U> {
             let waited = t0.saturating_sub(self.pending.feedback_received_ns);
             f.tip_age_ns = f.tip_age_ns.saturating_add(waited);
         }
-        self.pending.inputs = Inputs::default();
-        self.run_period(board, store, &input, frames, t0);
+        self.run_pending(board, store, frames, t0);
     }
 
     /// A [`Down::Step`]: one period now, at `now_ns`.
-    // Not inlined: its locals (a decoded Setup, a new period's
-    // configuration, a frame buffer) then take stack only while it runs,
-    // not in every caller's frame through the whole period (tests/tests/
+    // Not inlined: what it needs then takes stack only while it runs, not
+    // in `tick`'s frame through the whole period (tests/tests/
     // mcu_budget.rs measures the stack: 19 KB → 6 KB with the update buffer
     // out of the period, less with these).
     #[inline(never)]
@@ -451,36 +277,33 @@ impl<const U: usize> Core<U> {
             // The Setup configured the period at the chip's clock, and the
             // timer may have run periods since, neither of which the host
             // knows: start afresh at the Step's time instead, keeping any
-            // update chunks that came meanwhile.
-            restart(period, now_ns);
+            // update chunks that came meanwhile. In place: a new period
+            // built on the stack would be 1.2 KB.
+            period.restart(now_ns);
         }
         self.lockstep = true;
         self.since_period = 0;
-        let mut input = self.pending.inputs;
+        let input = &mut self.pending.inputs;
         input.now_ns = now_ns;
         input.missed_ticks = 0;
-        self.pending.inputs = Inputs::default();
-        self.run_period(board, store, &input, frames, t0);
+        self.run_pending(board, store, frames, t0);
     }
 
-    /// Run the period on `input`, apply and send its command, and now and
-    /// then the counters; `t0` is when the work began (the board's clock).
-    fn run_period<B, S>(
-        &mut self,
-        board: &mut B,
-        store: &mut S,
-        input: &Inputs,
-        frames: FrameCounters,
-        t0: u64,
-    ) where
+    /// Run the period on the pending inputs (then forgotten), apply and
+    /// send its command, and now and then the counters; `t0` is when the
+    /// work began (the board's clock).
+    fn run_pending<B, S>(&mut self, board: &mut B, store: &mut S, frames: FrameCounters, t0: u64)
+    where
         B: Board,
         S: NetStore<POSE_DIM, MAX_HIDDEN, MAX_TENDONS, MAX_WEIGHTS> + ?Sized,
     {
         let core = self;
         let Some(period) = core.period.as_mut() else {
+            core.pending.inputs = Inputs::default();
             return;
         };
-        let out = period.run(store, &mut core.update, input);
+        let out = period.run(store, &mut core.update, &core.pending.inputs);
+        core.pending.inputs = Inputs::default();
         if out.events.has(crate::period::event::WEIGHTS_SWAPPED) {
             // The Hello names the net that runs, so that a host which
             // reconnects sees whether its net is on the chip.
@@ -492,40 +315,57 @@ impl<const U: usize> Core<U> {
             core.last_hold_tick = core.ticks;
             core.last_hold_silence_us = (out.events.hold_silence_ns / 1000) as u32;
         }
-        let c = out.command;
+        let c = &out.command;
         board.set_tensions(c.tensions.get(..c.count).unwrap_or(&[]));
         // 3. The command, and now and then the counters.
-        let cmd = Up::Command(LinkCommand {
-            seq: c.seq as u32,
-            setpoint_seq: c.setpoint_seq as u32,
-            status: c.status,
-            events: out.events.bits | core.refused_events,
-            detail: detail_of(&out.events),
-            tensions: heapless::Vec::from_slice(c.tensions.get(..c.count).unwrap_or(&[]))
-                .unwrap_or_default(),
-        });
-        core.refused_events = 0;
-        let counters = *period.counters();
-        core.send(board, &cmd);
+        core.send_command(board, &out);
         if core.ticks.wrapping_sub(core.last_telemetry_tick) >= TELEMETRY_EVERY {
-            core.send_telemetry(board, counters, frames);
+            core.send_telemetry(board, frames);
         }
         let took = board.now_ns().saturating_sub(t0);
         core.worst_period_ns = core.worst_period_ns.max(took);
     }
 
-    // Not inlined: its locals (a decoded Setup, a new period's
-    // configuration, a frame buffer) then take stack only while it runs,
-    // not in every caller's frame through the whole period (tests/tests/
-    // mcu_budget.rs measures the stack: 19 KB → 6 KB with the update buffer
-    // out of the period, less with these).
+    // The senders are not inlined: each message (up to 152 B) and its
+    // frame buffer then take stack only while it is sent, not in the
+    // caller's frame through the whole period (tests/tests/mcu_budget.rs
+    // measures the stack: 19 KB → 6 KB with the update buffer out of the
+    // period, 3.8 KB → 1.8 KB with no message, inputs or period copied
+    // under it, issue 43).
     #[inline(never)]
-    fn send_telemetry<B: Board>(
-        &mut self,
-        board: &mut B,
-        counters: Counters,
-        frames: FrameCounters,
-    ) {
+    fn send_command<B: Board>(&mut self, board: &mut B, out: &crate::period::Outputs) {
+        let c = &out.command;
+        let cmd = Up::Command(LinkCommand {
+            seq: c.seq as u32,
+            setpoint_seq: c.setpoint_seq as u32,
+            status: c.status,
+            events: out.events.bits | self.refused_events,
+            detail: detail_of(&out.events),
+            tensions: heapless::Vec::from_slice(c.tensions.get(..c.count).unwrap_or(&[]))
+                .unwrap_or_default(),
+        });
+        self.refused_events = 0;
+        self.send(board, &cmd);
+    }
+
+    #[inline(never)]
+    fn send_hello<B: Board>(&mut self, board: &mut B) {
+        let hello = Up::Hello(Hello {
+            protocol: PROTOCOL_VERSION,
+            net_hash: self.net_hash,
+            setup_hash: self.setup_hash,
+            setup_error: self.setup_error,
+        });
+        self.send(board, &hello);
+    }
+
+    #[inline(never)]
+    fn send_telemetry<B: Board>(&mut self, board: &mut B, frames: FrameCounters) {
+        let counters = self
+            .period
+            .as_ref()
+            .map(|p| *p.counters())
+            .unwrap_or_default();
         self.last_telemetry_tick = self.ticks;
         let t = Up::Telemetry(Telemetry {
             counters,
@@ -547,10 +387,14 @@ impl<const U: usize> Core<U> {
     /// (the caller runs the period at once).
     #[inline(never)]
     fn receive(&mut self, payload: &[u8], now_ns: u64) -> Option<u64> {
-        match postcard::from_bytes::<Down<'_>>(payload) {
-            Ok(Down::Step { now_ns: at }) => Some(at),
+        // `Down::deserialize` itself, matched by reference: `from_bytes`
+        // (`?` then `Ok`) and a by-value match each made a second copy of
+        // the message (up to 240 B) in this frame.
+        let mut de = postcard::Deserializer::from_bytes(payload);
+        match &Down::deserialize(&mut de) {
+            Ok(Down::Step { now_ns: at }) => Some(*at),
             Ok(msg) => {
-                self.handle(&msg, now_ns);
+                self.handle(msg, now_ns);
                 None
             }
             Err(_) => {
@@ -563,28 +407,7 @@ impl<const U: usize> Core<U> {
     fn handle(&mut self, msg: &Down<'_>, now_ns: u64) {
         match msg {
             Down::Hello { .. } => self.pending.hello_asked = true,
-            Down::Setup(s) => {
-                self.pending.hello_asked = true;
-                let hash = s.hash();
-                if self.period.is_some() && hash == self.setup_hash {
-                    // The running configuration: keep the loop (and forget
-                    // a refusal before it: the last Setup was not refused).
-                    self.setup_error = 0;
-                    return;
-                }
-                match period_config(s) {
-                    Ok(cfg) => {
-                        self.period = Some(Period::new(cfg, now_ns));
-                        self.update.reset();
-                        self.since_period = 0;
-                        self.setup_hash = hash;
-                        self.setup_error = 0;
-                        self.last_tangent = None;
-                        self.lockstep = false;
-                    }
-                    Err(e) => self.setup_error = e,
-                }
-            }
+            Down::Setup(s) => self.configure(s, now_ns),
             Down::Setpoint(s) => self.setpoint(s),
             // Taken by `Node::tick`, which has the board and the store.
             Down::Step { .. } => {}
@@ -606,6 +429,43 @@ impl<const U: usize> Core<U> {
         }
     }
 
+    /// A Setup: configure (or, if it is the running configuration, keep)
+    /// the controller.
+    // Not inlined: its configuration (328 B) and the validation's
+    // temporaries take stack only while a Setup is handled, not in
+    // `receive`'s frame at every message.
+    #[inline(never)]
+    fn configure(&mut self, s: &Setup, now_ns: u64) {
+        self.pending.hello_asked = true;
+        let hash = setup_hash(s);
+        if self.period.is_some() && hash == self.setup_hash {
+            // The running configuration: keep the loop (and forget a
+            // refusal before it: the last Setup was not refused).
+            self.setup_error = 0;
+            return;
+        }
+        // `period_config` in its two steps, so neither runs on top of the
+        // other; matched by reference: a moved copy of the configuration
+        // would be a second one (328 B) in this frame.
+        match &setup::limits_of(s).and_then(|limits| setup::config_with(s, limits)) {
+            Ok(cfg) => {
+                // In place: a new period built on the stack and moved here
+                // would be 1.2 KB of it.
+                Period::configure(&mut self.period, cfg, now_ns);
+                self.update.reset();
+                self.since_period = 0;
+                self.setup_hash = hash;
+                self.setup_error = 0;
+                self.last_tangent = None;
+                self.lockstep = false;
+            }
+            Err(e) => self.setup_error = *e,
+        }
+    }
+
+    // `setpoint` and `feedback` are not inlined: what they build (up to
+    // 200 B) would otherwise sit in `receive`'s frame under a Setup too.
+    #[inline(never)]
     fn setpoint(&mut self, s: &LinkSetpoint) {
         if let Some(t) = &s.tangent {
             self.last_tangent = Some(tangent_in(t));
@@ -629,6 +489,7 @@ impl<const U: usize> Core<U> {
         });
     }
 
+    #[inline(never)]
     fn feedback(&mut self, f: &Feedback, now_ns: u64) {
         self.pending.feedback_received_ns = now_ns;
         let i = &mut self.pending.inputs;
@@ -646,11 +507,7 @@ impl<const U: usize> Core<U> {
     /// Frame and queue one message; a frame the queue cannot take whole is
     /// dropped and counted, and the next frame starts with a 0x00 so the
     /// host drops the fragment instead of the next frame.
-    // Not inlined: its locals (a decoded Setup, a new period's
-    // configuration, a frame buffer) then take stack only while it runs,
-    // not in every caller's frame through the whole period (tests/tests/
-    // mcu_budget.rs measures the stack: 19 KB → 6 KB with the update buffer
-    // out of the period, less with these).
+    // Not inlined: its frame buffer takes stack only while it runs.
     #[inline(never)]
     fn send<B: Board>(&mut self, board: &mut B, msg: &Up) {
         let mut buf = [0u8; TX_FRAME];
@@ -677,12 +534,11 @@ impl<const U: usize> Core<U> {
     }
 }
 
-/// `period` afresh at `now_ns`, same configuration. Not inlined: the new
-/// period (~1 KB) is built in this frame, which is gone before the period
-/// runs.
+/// [`Setup::hash`], not inlined: its 256-byte buffer then takes no stack
+/// in [`Core::configure`]'s frame while the configuration is validated.
 #[inline(never)]
-fn restart(period: &mut Period, now_ns: u64) {
-    *period = Period::new(*period.config(), now_ns);
+fn setup_hash(s: &Setup) -> u32 {
+    s.hash()
 }
 
 /// The values of `e` for the wire (saturated to `u32`).

@@ -393,6 +393,51 @@ fn setups_refused_kept_and_replaced() {
 }
 
 #[test]
+fn a_setup_that_replaces_the_running_one_configures_as_a_fresh_node() {
+    // The node configures its period in place (no `Period` on the stack):
+    // a running node, with counters, a latched stuck-motor hold and the
+    // integral loop's state, then another Setup, must command exactly as a
+    // node configured with that Setup alone.
+    let mut other = setup();
+    other.ki = 4.0;
+    other.correction_window = f32::INFINITY;
+    other.slew_rate = [150.0; MAX_TENDONS];
+    let mut running = configured();
+    let mut stuck = setup();
+    stuck.stuck_enabled = true;
+    running.send(&Down::Setup(stuck));
+    running.tick();
+    for k in 0..200u32 {
+        running.send(&setpoint(k + 1));
+        running.send(&feedback(k + 1, k));
+        running.step(u64::from(k) * 1_000_000);
+    }
+    assert!(running.node.period().unwrap().holding(), "a latched hold");
+    running.send(&Down::Setup(other));
+    running.tick();
+    let mut fresh = Rig::new();
+    fresh.send(&Down::Setup(other));
+    fresh.tick();
+    assert!(!running.node.period().unwrap().holding());
+    for k in 0..100u32 {
+        let now = 1_000_000_000 + u64::from(k) * 1_000_000;
+        for r in [&mut running, &mut fresh] {
+            r.send(&setpoint(1000 + k));
+            r.send(&feedback(1000 + k, k));
+        }
+        let (a, b) = (commands(&running.step(now)), commands(&fresh.step(now)));
+        assert_eq!(a.len(), 1);
+        assert_eq!(a, b, "period {k}");
+    }
+    let counters = |r: &Rig| *r.node.period().unwrap().counters();
+    assert_eq!(counters(&running), counters(&fresh));
+    assert!(
+        counters(&fresh).correction_periods > 0,
+        "the loop integrated"
+    );
+}
+
+#[test]
 fn garbage_and_truncated_frames_between_messages_are_counted_and_cost_no_period() {
     let mut r = configured();
     let (mut bad_messages, mut frame_errors, mut seen) = (0, 0, 0);

@@ -31,6 +31,7 @@
 //! [`Inputs::now_ns`], so a recorded input trace replays to the same
 //! commands bit for bit on any build.
 
+mod configure;
 mod stuck;
 #[cfg(test)]
 mod tests;
@@ -247,12 +248,11 @@ pub struct Outputs {
     pub events: Events,
 }
 
-/// The controller: configured once ([`Period::new`]), then [`Period::run`]
-/// once per tick. The weight update in progress is the caller's
-/// ([`Update`], lent to each run): it is the receive buffer, kilobytes the
-/// period's own state (about 1 KB) should not carry — a `Period` is built
-/// on the stack when configured, an `Update` lives in a `static` on the
-/// chip.
+/// The controller: configured once ([`Period::new`], or in place:
+/// [`Period::configure`]), then [`Period::run`] once per tick. The weight
+/// update in progress is the caller's ([`Update`], lent to each run): it is
+/// the receive buffer, kilobytes the period's own state (about 1.1 KB)
+/// should not carry; on the chip both live in the node's `static`.
 #[derive(Clone, Debug)]
 pub struct Period {
     cfg: PeriodConfig,
@@ -285,44 +285,6 @@ pub struct Period {
 }
 
 impl Period {
-    /// Configure at time `now_ns`, holding the tension floors until the
-    /// first setpoint.
-    pub fn new(cfg: PeriodConfig, now_ns: u64) -> Self {
-        let n = cfg.control.limits.n_tendons();
-        let state = ControlState::new(&cfg.control.limits, &[0.0; MAX_TENDONS], now_ns);
-        Period {
-            cfg,
-            n,
-            state,
-            stuck: StuckDetector::new(),
-            counters: Counters::default(),
-            cmd: PeriodCommand {
-                seq: 0,
-                setpoint_seq: 0,
-                feedback_seq: 0,
-                tensions: state.command,
-                count: n,
-                status: 0,
-            },
-            last_sp: None,
-            last_fb_seq: None,
-            last_tip: None,
-            last_sp_position: None,
-            quiet_until_ns: 0,
-            local_sp_seq: 0,
-            local_fb_seq: 0,
-            last_feedback_ns: now_ns,
-            last_setpoint_ns: now_ns,
-            stale: false,
-            in_hold: false,
-            outside: false,
-            tracking_started: false,
-            stuck_hold: false,
-            hold_after_seq: None,
-            last_sp_gap: 0,
-        }
-    }
-
     /// The configuration.
     pub const fn config(&self) -> &PeriodConfig {
         &self.cfg
@@ -387,12 +349,22 @@ impl Period {
             self.counters.rejected_nonfinite += input.superseded_nonfinite;
             ev.bits |= event::NONFINITE_SETPOINT;
         }
-        let setpoint = input
-            .setpoint
-            .map(|s| self.take_setpoint(&s, input.setpoints, now, &mut ev));
-        let feedback = input
+        // Taken by reference, straight into the step's input (the setpoint,
+        // with its tangent, written in place): copies would sit in this
+        // frame under the control step and the inference, the chip's
+        // deepest stack (tests/tests/mcu_budget.rs).
+        let mut step = StepInput {
+            now_ns: now,
+            setpoint: None,
+            feedback: None,
+        };
+        if let Some(s) = &input.setpoint {
+            self.take_setpoint(s, input.setpoints, now, &mut ev, &mut step.setpoint);
+        }
+        step.feedback = input
             .feedback
-            .and_then(|f| self.take_feedback(&f, input.feedbacks, now, &mut ev));
+            .as_ref()
+            .and_then(|f| self.take_feedback(f, input.feedbacks, now, &mut ev));
         if input.feedback.is_none()
             && !self.stale
             && now.saturating_sub(self.last_feedback_ns) > self.cfg.plant_stale_ns
@@ -405,11 +377,6 @@ impl Period {
             extra |= wire::PLANT_STALE;
         }
 
-        let step = StepInput {
-            now_ns: now,
-            setpoint,
-            feedback,
-        };
         // The period that wrote the new net does not also run it (the
         // chip's period budget): the target stays one period.
         let out = control_step_in_place(
@@ -460,13 +427,15 @@ impl Period {
         ev
     }
 
+    /// The setpoint `s` for the step, into `out`.
     fn take_setpoint(
         &mut self,
         s: &SetpointIn,
         count: u32,
         now: u64,
         ev: &mut Events,
-    ) -> ControlSetpoint {
+        out: &mut Option<ControlSetpoint>,
+    ) {
         let position = [s.pose[0], s.pose[1], s.pose[2]];
         if let Some(before) = self.last_sp_position {
             let d2 = position
@@ -511,11 +480,11 @@ impl Period {
             }
         }
         self.last_sp = Some((s.seq, s.velocity));
-        ControlSetpoint {
+        *out = Some(ControlSetpoint {
             seq: self.local_sp_seq,
             pose,
             tangent: s.tangent,
-        }
+        });
     }
 
     /// Plant feedback: sequence, staleness, stuck motors; the tip to

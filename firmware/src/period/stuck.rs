@@ -47,15 +47,22 @@ impl StuckConfig {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct StuckDetector {
     expected: [f32; MAX_TENDONS],
-    over_since: [Option<u64>; MAX_TENDONS],
+    /// Since when each tendon's error has been over the limit, ns; valid
+    /// where its bit of `over` is set. (A bit set and a plain `u64`, not an
+    /// `[Option<u64>; _]`: 72 B less of the chip's RAM.)
+    over_since: [u64; MAX_TENDONS],
+    over: u16,
     synced: bool,
 }
+
+const _: () = assert!(MAX_TENDONS <= 16, "one bit of `over` per tendon");
 
 impl StuckDetector {
     pub(crate) const fn new() -> StuckDetector {
         StuckDetector {
             expected: [0.0; MAX_TENDONS],
-            over_since: [None; MAX_TENDONS],
+            over_since: [0; MAX_TENDONS],
+            over: 0,
             synced: false,
         }
     }
@@ -64,7 +71,7 @@ impl StuckDetector {
     /// measurement becomes the model's state.
     pub(crate) fn resync(&mut self) {
         self.synced = false;
-        self.over_since = [None; MAX_TENDONS];
+        self.over = 0;
     }
 
     /// One fresh measurement at `now_ns` after `sent` was applied for about a
@@ -96,11 +103,17 @@ impl StuckDetector {
         {
             *e += (c - *e) * cfg.model_gain;
             let err = m - *e;
+            // i < MAX_TENDONS ≤ 16 (the zip): the shift never wraps.
+            let bit = 1u16.wrapping_shl(i as u32);
             if err.is_finite() && err.abs() <= cfg.tension_error_n {
-                *since = None;
+                self.over &= !bit;
                 continue;
             }
-            let from = *since.get_or_insert(now_ns);
+            if self.over & bit == 0 {
+                self.over |= bit;
+                *since = now_ns;
+            }
+            let from = *since;
             if now_ns.saturating_sub(from) >= cfg.persist_ns && stuck.is_none() {
                 stuck = Some((i, err));
             }

@@ -817,3 +817,55 @@ fn the_error_map_converges_on_a_fast_circle_away_from_where_tracking_began() {
         assert!(pair[1] < 1.05 * pair[0], "it never grows: {rms_mm:?}");
     }
 }
+
+#[test]
+fn a_period_configured_again_in_place_runs_as_a_new_one() {
+    // Dirty every part of a period: setpoints, feedback, a stuck motor's
+    // latched hold, the counters.
+    let mut st = store(1);
+    let mut p = P::new(config(), 0);
+    let mut last = *p.last_command();
+    for k in 1..=300u64 {
+        let mut measured = last.tensions;
+        measured[1] += if k >= 50 { 3.0 } else { 0.0 };
+        let mut i = with_sp(k, sp(k));
+        i.feedback = Some(fb(k, last.seq, measured));
+        i.feedbacks = 1;
+        last = p.run(&mut *st, &i).command;
+    }
+    assert!(p.holding() && p.counters().stuck_motor_holds == 1);
+    let t0 = 400 * T;
+    // Restarted (the node's first Step) and configured again (a Setup),
+    // in place; and configured into an empty slot (the node's first Setup).
+    let mut restarted = P::new(config(), 0);
+    restarted.period = p.period.clone();
+    restarted.period.restart(t0);
+    let mut fresh_same = P::new(config(), t0);
+    p.period.reconfigure(&integral_config(), t0);
+    let mut fresh = P::new(integral_config(), t0);
+    let mut slot = None;
+    let configured = Period::configure(&mut slot, &integral_config(), t0).clone();
+    let mut empty = P::new(config(), 0);
+    empty.period = configured;
+    for (a, b) in [(&mut restarted, &mut fresh_same), (&mut p, &mut fresh)] {
+        assert_eq!(a.counters(), b.counters());
+        assert_eq!(a.last_command(), b.last_command());
+        assert_eq!(a.period.config(), b.period.config());
+        assert!(!a.holding());
+    }
+    let mut stores = [store(1), store(1), store(1), store(1), store(1)];
+    for k in 401..=600u64 {
+        let mut s = sp(k);
+        s.pose[0] += (k as f32 * 0.01).sin() * 0.01;
+        let mut i = with_sp(k, s);
+        i.feedback = Some(fb(k, k - 1, fresh.last_command().tensions));
+        i.feedbacks = 1;
+        let [s0, s1, s2, s3, s4] = &mut stores;
+        let want = fresh.run(&mut **s0, &i);
+        assert_eq!(p.run(&mut **s1, &i), want, "period {k}");
+        assert_eq!(empty.run(&mut **s2, &i), want, "period {k}");
+        assert_eq!(restarted.run(&mut **s3, &i), fresh_same.run(&mut **s4, &i));
+    }
+    assert_eq!(p.counters(), fresh.counters());
+    assert_eq!(p.period.correction(), fresh.period.correction());
+}
