@@ -1,27 +1,25 @@
 //! The estimator (`docs/design.md` §11): Levenberg–Marquardt on the chosen
-//! parameters, a Huber loss by iteratively reweighted rows, central
-//! finite-difference sensitivities through warm-started statics, 95 %
-//! intervals from the covariance and the identifiability rule.
+//! parameters, a Huber loss by iteratively reweighted rows, sensitivities
+//! from the statics' tangent (the implicit function theorem through each
+//! row's solution, [`crate::statics::implicit`]; central differences through
+//! warm-started solves where a tangent is singular), 95 % intervals from the
+//! covariance and the identifiability rule.
 
 use std::time::Instant;
 
-use nalgebra::{DMatrix, DVector, UnitQuaternion, Vector3};
-use rayon::prelude::*;
+use nalgebra::{DMatrix, DVector, Vector3};
 
 use super::data::Measurements;
 use super::identify::identify;
 use super::params::{bounds, scale, Param, Values};
+pub use super::problem::FD_STEP;
+use super::problem::{tips, ModelTip, Problem};
 use super::report::{DownWeighted, FittedParam, Report, ResidualStats};
 use super::rows::{check_rows, split};
 use super::CalibError;
 use crate::robot::Robot;
-use crate::statics::{Solution, SolverSettings, Statics};
+use crate::statics::{Solution, SolverSettings};
 
-/// Relative central-difference step: the parameter moves by ±1e-4 of its
-/// scale ([`super::params::scale`]). The truncation error is O(h²) ≈ 1e-8
-/// of the sensitivity; the solve's own error (residual ≤ 5e-10 N) divided
-/// by h stays far below the tracker's noise.
-pub const FD_STEP: f64 = 1e-4;
 /// 95 % two-sided normal quantile.
 const Z95: f64 = 1.959963984540054;
 /// A row whose Huber weight falls below this is named as down-weighted.
@@ -94,129 +92,21 @@ pub struct Calibration {
     pub held_out: Vec<bool>,
 }
 
-/// The fit's view of the data: what is observed per row and how.
-struct Problem<'a> {
-    nominal: &'a Robot,
-    nominal_values: Values,
-    data: &'a Measurements,
-    use_orientation: bool,
-    orientation_m_per_rad: f64,
-    settings: SolverSettings,
-}
-
-impl Problem<'_> {
-    /// Residual entries per row: 3 position, plus 3 orientation.
-    fn dims(&self) -> usize {
-        if self.use_orientation {
-            6
-        } else {
-            3
-        }
-    }
-
-    /// Statics of every row at `v`, warm-started from `warm` when given.
-    fn solve(
-        &self,
-        v: &Values,
-        rows: &[usize],
-        warm: Option<&[Solution]>,
-    ) -> Result<Vec<Solution>, CalibError> {
-        let statics = Statics::new(&v.solving_robot(self.nominal), self.settings);
-        rows.par_iter()
-            .enumerate()
-            .map(|(k, &i)| {
-                let tau = v.scaled_tensions(&self.data.tensions[i]);
-                let f = Vector3::from(self.data.tip_forces[i]);
-                let m = Vector3::from(self.data.tip_moments[i]);
-                let w = warm.map(|s| &s[k].warm);
-                statics
-                    .solve_loaded(&tau, f, m, w)
-                    .map_err(|error| CalibError::Solve {
-                        line: self.data.lines[i],
-                        error,
-                    })
-            })
-            .collect()
-    }
-
-    /// The model's tip position in the tracker frame: p_tracker = R_b p + t_b.
-    fn tip_in_tracker(v: &Values, sol: &Solution) -> Vector3<f64> {
-        v.base_rotation_matrix() * sol.position + Vector3::from(v.base_translation)
-    }
-
-    /// Residuals (measured − model) of `rows`, row-major.
-    fn residuals(&self, v: &Values, rows: &[usize], sols: &[Solution]) -> DVector<f64> {
-        let d = self.dims();
-        let mut r = DVector::zeros(rows.len() * d);
-        let rb = v.base_rotation_matrix();
-        for (k, &i) in rows.iter().enumerate() {
-            let p = Self::tip_in_tracker(v, &sols[k]);
-            let e = Vector3::from(self.data.positions[i]) - p;
-            r.fixed_rows_mut::<3>(k * d).copy_from(&e);
-            if let (true, Some(q)) = (self.use_orientation, &self.data.quaternions) {
-                let [w, x, y, z] = q[i];
-                let measured =
-                    UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
-                let [w, x, y, z] = sols[k].quaternion;
-                let tip = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
-                let model = UnitQuaternion::from_rotation_matrix(&rb) * tip;
-                // The rotation taking the model's tip frame to the measured
-                // one, as a rotation vector (rad), weighed as a length.
-                let err = (measured * model.inverse()).scaled_axis();
-                r.fixed_rows_mut::<3>(k * d + 3)
-                    .copy_from(&(err * self.orientation_m_per_rad));
-            }
-        }
-        r
-    }
-
-    /// d(residuals)/dθ for the fitted parameters at `v` (θ_j = p_j / scale_j),
-    /// by central differences; `sols` are the solves at `v`, whose warm
-    /// starts seed every perturbed solve. Returns the Jacobian and the
-    /// number of solves spent.
-    fn jacobian(
-        &self,
-        v: &Values,
-        params: &[Param],
-        rows: &[usize],
-        sols: &[Solution],
-    ) -> Result<(DMatrix<f64>, usize), CalibError> {
-        let m = rows.len() * self.dims();
-        let mut jac = DMatrix::zeros(m, params.len());
-        let mut solves = 0;
-        for (j, &p) in params.iter().enumerate() {
-            let h = FD_STEP * scale(p, &self.nominal_values);
-            let mut side = |sign: f64| -> Result<DVector<f64>, CalibError> {
-                let mut vp = v.clone();
-                vp.set(p, v.get(p) + sign * h);
-                if p.moves_rod() {
-                    let s = self.solve(&vp, rows, Some(sols))?;
-                    solves += rows.len();
-                    Ok(self.residuals(&vp, rows, &s))
-                } else {
-                    Ok(self.residuals(&vp, rows, sols))
-                }
-            };
-            let plus = side(1.0)?;
-            let minus = side(-1.0)?;
-            // d r / d θ = scale × d r / d p.
-            jac.set_column(j, &((plus - minus) / (2.0 * FD_STEP)));
-        }
-        Ok((jac, solves))
-    }
-}
-
 /// What a fit of `data` will cost, in words, before it starts: the solves
 /// of one Levenberg–Marquardt iteration and a typical fit's dozen, timed
 /// by one solve of the robot on this machine.
 pub fn cost_estimate(robot: &Robot, data: &Measurements, opts: &FitOptions) -> String {
     let rod = opts.fit.iter().filter(|p| p.moves_rod()).count();
-    let per_iteration = data.len() * (2 * rod + 2);
+    // An iteration: a trial solve or two a row, and the Jacobian's tangent
+    // pass (≈ 4.5 plain passes) and two plain passes per parameter that
+    // moves the rod; a warm solve is ≈ 6 plain passes (BENCHMARKS.md).
+    let solves = 2.0 + (2 * rod) as f64 / 6.0 + 4.5 / 6.0;
+    let per_iteration = (data.len() as f64 * solves).round() as usize;
     let threads = rayon::current_num_threads().max(1);
     let seconds = 12.0 * per_iteration as f64 * super::seconds_per_solve(robot) / threads as f64;
     format!(
-        "fitting {} parameters to {} rows: {per_iteration} statics solves per iteration, about \
-         {seconds:.0} s for a typical dozen iterations on {threads} threads",
+        "fitting {} parameters to {} rows: about {per_iteration} statics solves' work per \
+         iteration, about {seconds:.0} s for a typical dozen iterations on {threads} threads",
         opts.fit.len(),
         data.len()
     )
@@ -315,7 +205,7 @@ pub fn calibrate(
     let (jac0, s0) = problem.jacobian(&v, &opts.fit, &rows, &sols)?;
     solves += s0;
     let ones = vec![1.0; rows.len()];
-    let r0 = problem.residuals(&v, &rows, &sols);
+    let r0 = problem.residuals(&v, &rows, &tips(&sols));
     let (a0, _) = normal_equations(&jac0, &r0, &ones, d);
     let any_moment = data.tip_moments.iter().any(|m| m.iter().any(|x| *x != 0.0));
     let g_unseen =
@@ -346,7 +236,7 @@ pub fn calibrate(
         iterations += it;
         solves += s;
         // The covariance at the solution, with its final weights.
-        let r = problem.residuals(&v, &rows, &sols);
+        let r = problem.residuals(&v, &rows, &tips(&sols));
         let norms = row_norms(&r, d);
         sigma = robust_sigma(&norms, d);
         weights = huber_weights(&norms, sigma, opts.huber_k);
@@ -417,11 +307,11 @@ pub fn calibrate(
     solves += 2 * all.len();
     let before: Vec<[f64; 3]> = before_sols
         .iter()
-        .map(|s| Problem::tip_in_tracker(nv, s).into())
+        .map(|s| Problem::tip_in_tracker(nv, &ModelTip::of(s)).into())
         .collect();
     let after: Vec<[f64; 3]> = after_sols
         .iter()
-        .map(|s| Problem::tip_in_tracker(&v, s).into())
+        .map(|s| Problem::tip_in_tracker(&v, &ModelTip::of(s)).into())
         .collect();
     let stats = |tips: &[[f64; 3]], idx: &[usize]| {
         ResidualStats::of(
@@ -494,10 +384,29 @@ pub fn calibrate(
     })
 }
 
+/// A step smaller than this (in θ = p / scale) keeps the Jacobian for the
+/// next iteration: over a step of a few per cent of each parameter's scale
+/// the sensitivities move by about as much, which changes the next step's
+/// direction, not the point the fit converges to (the fit only stops on a
+/// fresh Jacobian). Measured on the calibration benchmark's rows
+/// (BENCHMARKS.md, "Calibration fit time").
+const KEEP_JACOBIAN_STEP: f64 = 0.05;
+/// Iterations a Jacobian is kept for at most: kept longer, the IRLS
+/// weights' drift turns the fit's last digits into a slow creep (the
+/// benchmark's first fit ran into the 40-iteration cap).
+const KEPT_JACOBIAN_ITERATIONS: usize = 1;
+/// Tries of a kept Jacobian that does not lower the cost before it is
+/// refreshed (a fresh one gets the usual dozen as λ grows).
+const KEPT_JACOBIAN_TRIES: usize = 2;
+
 /// Levenberg–Marquardt with Marquardt's diagonal scaling on θ = p / scale,
 /// the Huber weights recomputed from the residuals at each iterate (IRLS),
-/// every step projected into the bounds. Updates `v` and `sols`; returns
-/// iterations and solves spent.
+/// every step projected into the bounds. The Jacobian is kept over small
+/// steps ([`KEEP_JACOBIAN_STEP`]) and refreshed after a large one, when a
+/// kept one finds no lower cost, and before the fit stops: the fit ends
+/// only on a fresh Jacobian, so where it stops is the stationary point of
+/// the true one. Updates `v` and `sols`; returns iterations and solves
+/// spent.
 fn levenberg_marquardt(
     problem: &Problem<'_>,
     v: &mut Values,
@@ -514,19 +423,29 @@ fn levenberg_marquardt(
     if free.is_empty() {
         return Ok((0, 0));
     }
+    let mut kept: Option<DMatrix<f64>> = None;
+    let mut kept_for = 0;
     for _ in 0..opts.max_iterations {
         iterations += 1;
-        let r = problem.residuals(v, rows, sols);
+        let r = problem.residuals(v, rows, &tips(sols));
         let norms = row_norms(&r, d);
         let w = huber_weights(&norms, robust_sigma(&norms, d), opts.huber_k);
         let c0 = cost(&norms, &w);
-        let (jac, s) = problem.jacobian(v, free, rows, sols)?;
-        solves += s;
+        let fresh = kept.is_none();
+        let jac = match kept.take() {
+            Some(jac) => jac,
+            None => {
+                let (jac, s) = problem.jacobian(v, free, rows, sols)?;
+                solves += s;
+                jac
+            }
+        };
         // J = ∂r/∂θ, so a step δ leaves the residual r + J δ: the damped
         // normal equations (JᵀWJ + λ diag) δ = −JᵀW r.
         let (a, g) = normal_equations(&jac, &r, &w, d);
         let mut accepted = None;
-        for _ in 0..12 {
+        let lambda_before = lambda;
+        for _ in 0..if fresh { 12 } else { KEPT_JACOBIAN_TRIES } {
             let mut damped = a.clone();
             for j in 0..free.len() {
                 damped[(j, j)] += lambda * a[(j, j)].max(1e-30);
@@ -553,7 +472,7 @@ fn levenberg_marquardt(
             };
             solves += rows.len();
             let c1 = cost(
-                &row_norms(&problem.residuals(&trial, rows, &trial_sols), d),
+                &row_norms(&problem.residuals(&trial, rows, &tips(&trial_sols)), d),
                 &w,
             );
             if c1 < c0 {
@@ -564,12 +483,25 @@ fn levenberg_marquardt(
             lambda *= 4.0;
         }
         let Some((trial, trial_sols, step, c1)) = accepted else {
-            break;
+            if fresh {
+                break;
+            }
+            // A kept Jacobian found nothing lower: refresh it, and try
+            // again from the damping it had.
+            lambda = lambda_before;
+            continue;
         };
         *v = trial;
         *sols = trial_sols;
-        if step < 1e-10 || c0 - c1 <= 1e-14 * c0 {
+        let converged = step < 1e-10 || c0 - c1 <= 1e-14 * c0;
+        if converged && fresh {
             break;
+        }
+        if !converged && step < KEEP_JACOBIAN_STEP && kept_for < KEPT_JACOBIAN_ITERATIONS {
+            kept = Some(jac);
+            kept_for += 1;
+        } else {
+            kept_for = 0;
         }
     }
     Ok((iterations, solves))

@@ -11,8 +11,10 @@ pub mod identify;
 pub mod noise;
 pub mod params;
 pub mod plan;
+mod problem;
 pub mod report;
 pub mod rows;
+mod sensitivity;
 pub mod step;
 pub mod verdict;
 
