@@ -3,6 +3,7 @@
 //! Python; this crate only converts arrays and errors and releases the GIL.
 
 mod arrays;
+mod calibration;
 mod classes;
 mod detach;
 mod errors;
@@ -17,6 +18,7 @@ fn _tendril(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<classes::Robot>()?;
     m.add_class::<classes::Net>()?;
     m.add_function(wrap_pyfunction!(generate::generate, m)?)?;
+    m.add_function(wrap_pyfunction!(calibration::fit_step, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

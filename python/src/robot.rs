@@ -185,6 +185,58 @@ impl Robot {
         &self.source
     }
 
+    /// Where the base sits in the tracker's frame (the file's ``[base]``,
+    /// docs/design.md §2.4): ``(translation (3,) m, rotation vector (3,)
+    /// rad)``; zeros without one. ``fk``, ``shape`` and ``ik`` work in that
+    /// frame.
+    #[getter]
+    fn base<'py>(&self, py: Python<'py>) -> (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>) {
+        let b = self.model.base;
+        (
+            b.translation.to_vec().into_pyarray(py),
+            b.rotation.to_vec().into_pyarray(py),
+        )
+    }
+
+    /// Tension sets to measure for a calibration: the library call of
+    /// ``tendril calibrate --plan n`` (greedy D-optimal over the rod's
+    /// parameters in ``fit``). tip_mass_g: hang this mass on the tip in
+    /// some rows (a known load makes E identifiable; needs gravity in the
+    /// robot file).
+    ///
+    /// Returns ``(tensions (n, k) N, tip_forces (n, 3) N, base frame)``:
+    /// measure each row with its force applied (zero: nothing hung).
+    /// ``ValueError`` for bad options.
+    #[pyo3(signature = (n, fit=tendril::calibrate::DEFAULT_FIT, seed=1, tip_mass_g=None))]
+    fn calibration_plan<'py>(
+        &self,
+        py: Python<'py>,
+        n: usize,
+        fit: &str,
+        seed: u64,
+        tip_mass_g: Option<f64>,
+    ) -> PyResult<Bound<'py, PyTuple>> {
+        use tendril::calibrate::{self as cal, plan};
+        let params = cal::parse_fit_list(fit, self.model.n_tendons()).map_err(value_error)?;
+        let load = match tip_mass_g {
+            None => None,
+            Some(g) if g.is_finite() && g > 0.0 => Some(
+                plan::hung_mass_force(&self.model, g).ok_or_else(|| {
+                    value_error("tip_mass_g: the robot has no gravity, so a hung mass's direction is unknown")
+                })?,
+            ),
+            Some(g) => return Err(value_error(format!("tip_mass_g must be a mass > 0 g, got {g}"))),
+        };
+        let model = &self.model;
+        let fit = plan::plannable(model, &params);
+        let rows =
+            detached(py, |_| plan::plan(model, &fit, n, seed, load))?.map_err(|e| invalid(&e))?;
+        let k = model.n_tendons();
+        let tensions = Array2::from_shape_fn((rows.len(), k), |(r, c)| rows[r].tensions[c]);
+        let forces = Array2::from_shape_fn((rows.len(), 3), |(r, c)| rows[r].tip_force[c]);
+        (tensions.into_pyarray(py), forces.into_pyarray(py)).into_pyobject(py)
+    }
+
     fn __repr__(&self) -> String {
         let origin = match (&self.file, self.builtin) {
             (Some(f), _) => f.display().to_string(),

@@ -44,6 +44,17 @@ class Robot:
         """The robot file's path, or None (made from text or built in)."""
     @property
     def toml(self) -> str: ...
+    @property
+    def base(self) -> Tuple[_Array, _Array]:
+        """The file's [base]: (translation (3,) m, rotation vector (3,) rad) in the tracker's frame."""
+    def calibration_plan(
+        self,
+        n: int,
+        fit: str = "E,density,length,offsets,angles,base",
+        seed: int = 1,
+        tip_mass_g: Optional[float] = None,
+    ) -> Tuple[_Array, _Array]:
+        """Tension sets to measure (tendril calibrate --plan): (tensions (n, k) N, tip forces (n, 3) N)."""
     def calibrate(
         self,
         data: _Path,
@@ -113,3 +124,6 @@ def generate(
     progress: bool = False,
 ) -> Tuple[_Array, _Array]:
     """Sample tensions, solve each: (tensions (n, k) N, poses (n, 7)); CSV + sidecar at path."""
+
+def fit_step(trace: _Path, skip_s: float = 0.1) -> Dict[str, Any]:
+    """The first bending mode from a step's tracker trace (tendril calibrate --step): the fit as a dict."""

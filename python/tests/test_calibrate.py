@@ -2,7 +2,9 @@
 gives the CLI's robot file and report."""
 
 import json
+import math
 
+import numpy as np
 import pytest
 
 import tendril
@@ -43,3 +45,60 @@ def test_calibrate_bad_input_is_a_value_error(tmp_path):
         tendril.Robot.default().calibrate(tmp_path / "m.csv")
     with pytest.raises(ValueError, match="unknown parameter"):
         tendril.Robot.default().calibrate(tmp_path / "m.csv", fit="E,stiffness")
+
+
+def test_calibration_plan_matches_the_cli(tmp_path, root, cli):
+    """Robot.calibration_plan is `calibrate --plan N --plan-tip-mass-g G`:
+    the same rows, the hung mass's weight along the file's gravity."""
+    robot = tendril.Robot.load(root / "robots" / "seed-4t.toml")
+    tensions, forces = robot.calibration_plan(12, tip_mass_g=50.0)
+    assert tensions.shape == (12, 4) and forces.shape == (12, 3)
+    done = run_cli(cli, "calibrate", "--robot", str(root / "robots" / "seed-4t.toml"),
+                   "--plan", "12", "--plan-tip-mass-g", "50", "--out", str(tmp_path / "plan.csv"))
+    assert done.returncode == 0, done.stderr
+    rows = np.loadtxt(tmp_path / "plan.csv", delimiter=",", skiprows=1)
+    assert np.array_equal(rows[:, :4], tensions)
+    assert np.array_equal(rows[:, 4:], forces)
+    hung = forces[np.any(forces != 0.0, axis=1)]
+    assert len(hung) > 0
+    # 50 g under g = 9.81 m/s² along +x (the file's gravity).
+    assert np.allclose(hung, [0.05 * 9.81, 0.0, 0.0])
+    with pytest.raises(ValueError, match="tip_mass_g"):
+        robot.calibration_plan(12, tip_mass_g=-1.0)
+
+
+def test_fit_step_recovers_a_damped_sinusoid_and_matches_the_cli(tmp_path, cli):
+    """tendril.fit_step on the closed form of a ringing tip: x(t) = a e^(-ζωt)
+    cos(ω_d t) about its rest, sampled at 400 Hz with 20 µm of jitter; the
+    intervals cover the f and ζ it was made with, and the dict is the CLI's
+    `calibrate --step` "fit"."""
+    f, zeta = 3.4, 0.05
+    w = 2 * math.pi * f
+    wd = w * math.sqrt(1 - zeta**2)
+    t = np.arange(0, 3, 1 / 400)
+    rng = np.random.default_rng(7)
+    x = 0.03 + 0.002 * np.exp(-zeta * w * t) * np.cos(wd * t) + rng.normal(0, 2e-5, t.size)
+    trace = tmp_path / "step.csv"
+    with open(trace, "w") as out:
+        out.write("t_s,x_m,y_m,z_m\n")
+        for row in zip(t, x):
+            out.write(f"{float(row[0])!r},{float(row[1])!r},0.0,0.39\n")
+    fit = tendril.fit_step(trace)
+    lo, hi = fit["freq_hz"]["interval_95"]
+    assert lo <= f <= hi, fit["freq_hz"]
+    lo, hi = fit["damping_ratio"]["interval_95"]
+    assert lo <= zeta <= hi, fit["damping_ratio"]
+    done = run_cli(cli, "calibrate", "--step", str(trace), "--out", "-")
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["fit"] == fit
+    with pytest.raises(ValueError):
+        tendril.fit_step(tmp_path / "missing.csv")
+
+
+def test_base_is_the_files_frame():
+    plain = tendril.Robot.default()
+    t, r = plain.base
+    assert np.array_equal(t, np.zeros(3)) and np.array_equal(r, np.zeros(3))
+    turned = tendril.Robot.from_toml(plain.toml + "\n[base]\ntranslation = [0.1, 0.0, 0.0]\n")
+    t, r = turned.base
+    assert np.array_equal(t, [0.1, 0.0, 0.0]) and np.array_equal(r, np.zeros(3))
