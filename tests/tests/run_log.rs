@@ -106,6 +106,16 @@ fn a_sim_leaves_a_run_log_foxglove_opens_and_the_report_counts_it() {
         .iter()
         .map(|(t, bytes)| {
             let tf = foxglove::messages::FrameTransforms::decode(bytes.as_slice()).unwrap();
+            // Everything hangs off the tracker's frame; the robot's base is
+            // a child of it (the identity here: seed-4t has no [base]).
+            assert!(tf.transforms.iter().all(|f| f.parent_frame_id == "tracker"));
+            let base = tf
+                .transforms
+                .iter()
+                .find(|f| f.child_frame_id == "base")
+                .and_then(|f| f.translation)
+                .expect("a base transform");
+            assert_eq!([base.x, base.y, base.z], [0.0; 3]);
             let tip = tf
                 .transforms
                 .iter()
@@ -390,7 +400,8 @@ fn a_dynamics_run_logs_the_swinging_rod() {
         .iter()
         .map(|(t, b)| {
             let tf = foxglove::messages::FrameTransforms::decode(b.as_slice()).unwrap();
-            (*t, tf.transforms[0].translation.unwrap())
+            let tip = tf.transforms.iter().find(|f| f.child_frame_id == "tip");
+            (*t, tip.expect("a tip transform").translation.unwrap())
         })
         .collect();
     let mut moved = 0.0f64;

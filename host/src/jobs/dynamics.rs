@@ -443,6 +443,7 @@ fn log_step(log: &mut crate::runlog::RunLog, step: &TensionStep, s: &Sample, dyn
             crate::numerics::polyline::resample(dynamics.backbone(), log.backbone_points());
         log.scene(crate::runlog::SceneRecord {
             t_ns,
+            base: [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0],
             backbone: backbone.iter().map(|v| [v.x, v.y, v.z]).collect(),
             tendons: vec![],
             tip: pose,

@@ -364,6 +364,11 @@ impl PlantModel {
         Some(shape)
     }
 
+    /// The robot's base pose in the tracker's frame (its `[base]`).
+    pub fn base_pose(&self) -> [f64; 7] {
+        self.to_tracker.pose([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
+    }
+
     /// True tip pose (no noise), in the tracker's frame.
     pub fn pose(&self) -> [f64; 7] {
         self.to_tracker.pose(self.pose)

@@ -28,7 +28,11 @@ pub const LOG: &str = "/log";
 /// Every topic a run log has, in the order they are created.
 pub const ALL: [&str; 6] = [SCENE, TF, TENSIONS, TRACKING, STATUS, LOG];
 
-/// The frame everything is drawn in: the robot's base.
+/// The frame everything is drawn in: the tracker's (docs/design.md §2.4;
+/// the robot's base frame when its file has no `[base]`).
+pub const TRACKER_FRAME: &str = "tracker";
+/// The robot's base, a child of [`TRACKER_FRAME`] at the plant robot's
+/// `[base]`.
 pub const BASE_FRAME: &str = "base";
 /// The true tip's frame.
 pub const TIP_FRAME: &str = "tip";

@@ -72,7 +72,10 @@ pub struct StepRecord {
 pub struct SceneRecord {
     /// Loop time, ns.
     pub t_ns: u64,
-    /// Backbone points, base frame, m (empty when the plant has no shape).
+    /// The robot's base pose in the drawing's frame (the tracker's: the
+    /// plant robot's `[base]`; the identity pose without one).
+    pub base: [f64; 7],
+    /// Backbone points, the tracker's frame, m (empty when the plant has no shape).
     pub backbone: Vec<[f64; 3]>,
     /// Each tendon's path, m.
     pub tendons: Vec<Vec<[f64; 3]>>,
@@ -551,7 +554,7 @@ impl Sinks {
         }
         let entity = SceneEntity {
             timestamp: Some(ts),
-            frame_id: ch::BASE_FRAME.into(),
+            frame_id: ch::TRACKER_FRAME.into(),
             id: "robot".into(),
             lines,
             spheres,
@@ -562,7 +565,7 @@ impl Sinks {
         if path.len() >= 2 && self.scenes.is_multiple_of(PATH_EVERY_SCENES) {
             entities.push(SceneEntity {
                 timestamp: Some(ts),
-                frame_id: ch::BASE_FRAME.into(),
+                frame_id: ch::TRACKER_FRAME.into(),
                 id: "target_path".into(),
                 lines: vec![strip(&path, 0.0005, rgba(0.2, 0.8, 0.3, 0.8))],
                 ..SceneEntity::default()
@@ -579,7 +582,7 @@ impl Sinks {
         self.count(ch::SCENE);
         let transform = |child: &str, p: &[f64; 7]| FrameTransform {
             timestamp: Some(ts),
-            parent_frame_id: ch::BASE_FRAME.into(),
+            parent_frame_id: ch::TRACKER_FRAME.into(),
             child_frame_id: child.into(),
             translation: Some(Vector3 {
                 x: p[0],
@@ -593,7 +596,10 @@ impl Sinks {
                 z: p[6],
             }),
         };
-        let mut transforms = vec![transform(ch::TIP_FRAME, &s.tip)];
+        let mut transforms = vec![
+            transform(ch::BASE_FRAME, &s.base),
+            transform(ch::TIP_FRAME, &s.tip),
+        ];
         if let Some(m) = &s.frame {
             transforms.push(transform(ch::MEASURED_TIP_FRAME, m));
         }

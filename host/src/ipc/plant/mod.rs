@@ -499,6 +499,7 @@ impl Recorder {
             let xyz = |v: &nalgebra::Vector3<f64>| [v.x, v.y, v.z];
             self.log.scene(SceneRecord {
                 t_ns,
+                base: model.base_pose(),
                 backbone: shape.backbone.iter().map(xyz).collect(),
                 tendons: shape
                     .tendons
