@@ -207,7 +207,8 @@ impl Report {
         let _ = writeln!(
             s,
             "{} fit rows, {} held out; orientation {}; {} LM iterations, {} solves, {:.2} s; \
-             sensitivities by central differences, relative step {:e}.\n",
+             sensitivities from the statics' tangent, the residuals differenced over a \
+             relative step {:e}.\n",
             self.rows_fit,
             self.rows_held_out,
             if self.used_orientation {
