@@ -256,14 +256,15 @@ impl Robot {
     /// data: a measured CSV (t0..t{k-1} [N], px, py, pz [m], optional
     /// qw..qz, fx,fy,fz, mx,my,mz). fit: the parameter list of ``--fit``.
     /// holdout: fraction of rows held out; seed: its split;
-    /// positions_only: ignore orientations; mm_per_deg: orientation weight.
+    /// positions_only: ignore orientations; mm_per_deg: orientation weight;
+    /// tension_noise_n: the load cells' noise, N (its tip scatter may remain).
     ///
     /// Returns ``(robot, report)``: the calibrated ``Robot`` (its ``toml`` is
     /// the file the CLI writes) and the report as a dict (the CLI's
     /// ``.report.json``). ``ValueError`` for bad data or options,
     /// ``OSError`` when the file cannot be read, ``RuntimeError`` when a
     /// statics solve fails. Ctrl-C raises once the fit returns.
-    #[pyo3(signature = (data, fit=tendril::calibrate::DEFAULT_FIT, holdout=0.2, seed=1, positions_only=false, mm_per_deg=0.1 * 1e3 * std::f64::consts::PI / 180.0))]
+    #[pyo3(signature = (data, fit=tendril::calibrate::DEFAULT_FIT, holdout=0.2, seed=1, positions_only=false, mm_per_deg=0.1 * 1e3 * std::f64::consts::PI / 180.0, tension_noise_n=0.0))]
     #[allow(clippy::too_many_arguments)]
     fn calibrate<'py>(
         &self,
@@ -274,6 +275,7 @@ impl Robot {
         seed: u64,
         positions_only: bool,
         mm_per_deg: f64,
+        tension_noise_n: f64,
     ) -> PyResult<(Robot, Bound<'py, PyAny>)> {
         use tendril::calibrate::{self as cal, CalibError};
         let params = cal::parse_fit_list(fit, self.model.n_tendons()).map_err(value_error)?;
@@ -294,6 +296,12 @@ impl Robot {
         opts.seed = seed;
         opts.use_orientation = !positions_only;
         opts.orientation_m_per_rad = mm_per_deg * 1e-3 * 180.0 / std::f64::consts::PI;
+        if !(tension_noise_n.is_finite() && (0.0..=1.0).contains(&tension_noise_n)) {
+            return Err(value_error(format!(
+                "tension_noise_n must be a tension in [0, 1] N, got {tension_noise_n}"
+            )));
+        }
+        opts.tension_noise_n = tension_noise_n;
         let model = &self.model;
         let result = detached(py, |_| cal::calibrate(model, &measured, &opts))?;
         let c = match result {

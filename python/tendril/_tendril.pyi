@@ -63,6 +63,7 @@ class Robot:
         seed: int = 1,
         positions_only: bool = False,
         mm_per_deg: float = 1.7453292519943295,
+        tension_noise_n: float = 0.0,
     ) -> Tuple["Robot", Dict[str, Any]]:
         """Fit this robot to a measured CSV (tendril calibrate) -> (calibrated robot, report dict)."""
     def fk(

@@ -51,6 +51,10 @@ pub struct FitOptions {
     pub max_iterations: usize,
     /// Statics settings of every solve.
     pub settings: SolverSettings,
+    /// Standard deviation of the recorded tensions' noise (load cells), N:
+    /// its scatter at the tip, through the robot's compliance, is added to
+    /// the residual a calibration may leave ([`super::verdict`]).
+    pub tension_noise_n: f64,
 }
 
 impl FitOptions {
@@ -67,6 +71,7 @@ impl FitOptions {
             identifiable_fraction: 0.05,
             max_iterations: 40,
             settings: SolverSettings::default(),
+            tension_noise_n: 0.0,
         }
     }
 }
@@ -342,6 +347,9 @@ pub fn calibrate(
         .collect();
     let measured_tips: Vec<Vector3<f64>> =
         data.positions.iter().map(|&x| Vector3::from(x)).collect();
+    let tension_scatter_m = (opts.tension_noise_n > 0.0)
+        .then(|| problem.tension_scatter_m(&v, &rows, &sols, opts.tension_noise_n))
+        .flatten();
     let evidence = super::verdict::Evidence {
         at_bound,
         median_spread_m: super::rows::median_spread_m(&measured_tips),
@@ -357,6 +365,8 @@ pub fn calibrate(
         correlated,
         residual_sigma_m: var.sqrt(),
         robust_sigma_m: sigma,
+        tension_noise_n: opts.tension_noise_n,
+        tension_scatter_m,
         rows_with_weight_below_1: weights.iter().filter(|&&w| w < 1.0).count(),
         downweighted,
         fit_before: stats(&before, &rows),

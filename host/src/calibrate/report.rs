@@ -116,6 +116,12 @@ pub struct Report {
     pub residual_sigma_m: f64,
     /// Robust (median-based) per-axis noise scale, m.
     pub robust_sigma_m: f64,
+    /// The load cells' noise the fit was told of (`--tension-noise-n`), N.
+    pub tension_noise_n: f64,
+    /// The tip scatter per axis that noise makes through the robot's
+    /// compliance (RMS over the fit rows, from the statics' tangent), m;
+    /// None without tension noise.
+    pub tension_scatter_m: Option<f64>,
     /// Rows with any down-weighting.
     pub rows_with_weight_below_1: usize,
     /// Rows weighted below one half, named.
@@ -296,6 +302,15 @@ impl Report {
             mm(self.residual_sigma_m),
             mm(self.robust_sigma_m)
         );
+        if let Some(t) = self.tension_scatter_m {
+            let _ = writeln!(
+                s,
+                "The load cells' {} N of noise makes {} mm per axis at the tip (the robot's \
+                 compliance at the fitted values).",
+                self.tension_noise_n,
+                mm(t)
+            );
+        }
         let _ = writeln!(
             s,
             "\n## Down-weighted rows\n\n{} rows have a Huber weight below 1; below 0.5 (outliers): {}.",

@@ -118,6 +118,44 @@ impl Problem<'_> {
         Ok((jac, 0))
     }
 
+    /// The tip scatter per axis, m, that `sigma_n` of independent noise on
+    /// every recorded tension makes at `v`: the RMS over `rows` of
+    /// σ_τ √(Σ_i ‖∂p/∂τ_i‖² / 3), ∂p/∂τ_i by the implicit function theorem
+    /// (one tangent pass and a plain pass per tendon a row). `None` when a
+    /// tangent is singular.
+    pub(super) fn tension_scatter_m(
+        &self,
+        v: &Values,
+        rows: &[usize],
+        sols: &[Solution],
+        sigma_n: f64,
+    ) -> Option<f64> {
+        let statics = Statics::new(&v.solving_robot(self.nominal), self.settings);
+        // A step far below any tension, far above the pass's rounding.
+        const H_N: f64 = 1e-5;
+        let squares: Option<Vec<f64>> = rows
+            .par_iter()
+            .enumerate()
+            .map(|(k, &i)| {
+                let recorded = &self.data.tensions[i];
+                let tangent = statics.unknowns_tangent(&sols[k])?;
+                let (tip, res) = statics.at_unknowns_of(&sols[k], &v.scaled_tensions(recorded))?;
+                let mut sum = 0.0;
+                for t in 0..recorded.len() {
+                    let mut moved = recorded.clone();
+                    moved[t] += H_N;
+                    let (tip_t, res_t) =
+                        statics.at_unknowns_of(&sols[k], &v.scaled_tensions(&moved))?;
+                    let d = tangent.solved(&(tip_t - tip), &(res_t - res)) / H_N;
+                    sum += d.fixed_rows::<3>(0).norm_squared();
+                }
+                Some(sum / 3.0)
+            })
+            .collect();
+        let squares = squares?;
+        Some(sigma_n * (squares.iter().sum::<f64>() / squares.len().max(1) as f64).sqrt())
+    }
+
     /// [`Problem::jacobian`] by central differences through warm-started
     /// solves: `sols` seed every perturbed solve.
     pub(super) fn jacobian_by_solves(

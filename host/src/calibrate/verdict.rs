@@ -52,11 +52,25 @@ pub fn judge(report: &Report, evidence: &Evidence) -> Verdict {
             mm(before.median_m)
         ));
     }
-    if report.robust_sigma_m > MAX_TRACKER_SIGMA_M {
+    // Noise on the recorded tensions moves the rows' tips through the
+    // robot's compliance: twice its predicted scatter more may remain.
+    let tension = report.tension_scatter_m.unwrap_or(0.0);
+    if report.robust_sigma_m > MAX_TRACKER_SIGMA_M + 2.0 * tension {
+        let why = if tension > 0.0 {
+            format!(
+                "more than a tracker's noise (at most 1 mm) and twice the {:.2} mm the load \
+                 cells' noise makes",
+                mm(tension)
+            )
+        } else {
+            "more than a tracker's noise (at most 1 mm; noisy load cells: give \
+             --tension-noise-n)"
+                .to_string()
+        };
         problems.push(format!(
-            "the residual is {:.2} mm per axis (robust σ), more than a tracker's noise (at most \
-             1 mm): most rows are outliers, or the rows are another robot's, or not in metres \
-             and newtons — the fit cannot tell which",
+            "the residual is {:.2} mm per axis (robust σ), {why}: most rows are outliers, or \
+             the rows are another robot's, or not in metres and newtons — the fit cannot tell \
+             which",
             mm(report.robust_sigma_m)
         ));
     }

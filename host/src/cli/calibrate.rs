@@ -80,6 +80,11 @@ pub struct CalibrateArgs {
     /// degree, in [0.001, 1000].
     #[arg(long, default_value_t = 0.1 * 1e3 * std::f64::consts::PI / 180.0)]
     pub mm_per_deg: f64,
+    /// Standard deviation of the recorded tensions' noise (the load cells),
+    /// N, in [0, 1]: the tip scatter it makes through the robot's
+    /// compliance is reported and may remain in the fit's residual.
+    #[arg(long, default_value_t = 0.0, value_name = "N")]
+    pub tension_noise_n: f64,
 }
 
 /// The known tip load `--plan-tip-mass-g` or `--plan-tip-load` asks for.
@@ -211,6 +216,13 @@ pub fn run(args: CalibrateArgs) -> anyhow::Result<()> {
     opts.seed = args.seed;
     opts.use_orientation = !args.positions_only;
     opts.orientation_m_per_rad = args.mm_per_deg * 1e-3 * 180.0 / std::f64::consts::PI;
+    if !(args.tension_noise_n.is_finite() && (0.0..=1.0).contains(&args.tension_noise_n)) {
+        anyhow::bail!(
+            "--tension-noise-n must be a tension in [0, 1] N, got {}",
+            crate::units::given(args.tension_noise_n)
+        );
+    }
+    opts.tension_noise_n = args.tension_noise_n;
     log::info!("{}", calibrate::fit::cost_estimate(&robot, &data, &opts));
     let c = calibrate::calibrate(&robot, &data, &opts)?;
     let calibrated = c.report.verdict.calibrated;
