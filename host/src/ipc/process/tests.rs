@@ -125,7 +125,10 @@ fn a_run_ends_at_its_duration_with_its_log_and_stats_written() {
     };
     let toy = case.toy(true);
     let steps = run(&process, || Ok(()), |(), _| Ok(toy)).unwrap();
-    assert!(steps >= 20, "{steps} steps in 0.1 s of 1 ms steps");
+    // That the loop ran and counted, not its cadence (the real-time tests
+    // measure that): the unit tests run beside CPU-bound ones (the
+    // calibration's 20-repetition coverage takes both cores for 3 s).
+    assert!(steps >= 3, "{steps} steps in 0.1 s of 1 ms steps");
     assert_eq!(case.stats(), Some(steps));
     assert_eq!(case.log_rows() as u64, steps);
     assert_eq!(*case.finished_with.lock().unwrap(), Some(true));
@@ -150,8 +153,9 @@ fn silent_peers_end_the_run_as_lost_and_the_task_is_still_finished() {
     );
     assert!(t0.elapsed().as_secs_f64() < 2.0);
     assert_eq!(*case.finished_with.lock().unwrap(), Some(false));
-    assert!(case.stats().is_some_and(|s| s > 10));
-    assert!(case.log_rows() > 10);
+    // The task stepped before its peers were lost (see above: not its cadence).
+    assert!(case.stats().is_some_and(|s| s >= 3));
+    assert!(case.log_rows() >= 3);
 }
 
 /// A STOP on the loop's control service (what `tendril sim` sends) ends
