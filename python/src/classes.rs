@@ -30,4 +30,7 @@ pub struct Robot {
 #[pyclass(frozen, module = "tendril._tendril")]
 pub struct Net {
     pub(crate) ik: GuardedNet,
+    /// The robot's `[base]`: poses come in the tracker's frame, as for
+    /// `tendril ik` (docs/design.md §2.4).
+    pub(crate) to_base: tendril::robot::RigidMap,
 }

@@ -57,7 +57,10 @@ impl Net {
         )
         .map_err(|e| invalid(&e))?;
         let ik = GuardedNet::new(net, model, allow_extrapolation).map_err(|e| invalid(&e))?;
-        Ok(Net { ik })
+        Ok(Net {
+            ik,
+            to_base: model.base.to_base(),
+        })
     }
 
     /// Number of tendons (outputs) ``k``.
@@ -69,7 +72,9 @@ impl Net {
     /// Tensions for tip poses.
     ///
     /// poses: ``(n, 7)`` (or ``(7,)``) = px, py, pz (m), qw, qx, qy, qz (a
-    /// unit quaternion; its sign is normalised to w >= 0).
+    /// unit quaternion; its sign is normalised to w >= 0), in the tracker's
+    /// frame of the robot's ``[base]`` as ``tendril ik`` takes them (the
+    /// base frame without one).
     ///
     /// Returns ``(tensions, raw)``, each ``(n, k)`` in N (``(k,)`` for one
     /// pose): what the firmware's command stage commands for the net's
@@ -94,7 +99,7 @@ impl Net {
                 .map(|(r, pose)| {
                     let pose: [f64; 7] = pose.as_slice().try_into().unwrap_or([f64::NAN; 7]);
                     self.ik
-                        .solve(&pose)
+                        .solve(&self.to_base.pose(pose))
                         .map_err(|e| value_error(format!("poses: row {r}: {e}")))
                 })
                 .collect::<PyResult<Vec<_>>>()

@@ -1,6 +1,7 @@
 """Net.predict against `tendril ik --model` on the same poses."""
 
 import csv
+import math
 
 import numpy as np
 import pytest
@@ -87,3 +88,26 @@ def test_a_net_for_another_robot_is_refused_unless_allowed(tmp_path, root, cli):
         tendril.Net.load(model, tendril.Robot.load(soft))
     net = tendril.Net.load(model, tendril.Robot.load(soft), allow_robot_mismatch=True)
     assert net.n_tendons == 4
+
+
+def test_a_net_takes_poses_in_the_trackers_frame_of_the_robots_base(root):
+    """With a robot whose file has [base], Net.predict takes the pose in the
+    tracker's frame, as `tendril ik` does: the same tensions as the plain
+    robot's net for the pose mapped back by hand (Rodrigues' formula)."""
+    net_path = root / "firmware" / "vectors" / "default.tnet"
+    plain = tendril.Robot.default()
+    t, rv = np.array([0.1, -0.2, 0.05]), np.array([0.0, 0.4, 0.3])
+    turned = tendril.Robot.from_toml(
+        plain.toml + f"\n[base]\ntranslation = [{', '.join(repr(float(x)) for x in t)}]\n"
+        f"rotation = [{', '.join(repr(float(x)) for x in rv)}]\n")
+    pose_base, ok = plain.fk([2.0, 1.0, 0.0, 0.0])
+    assert ok
+    angle = np.linalg.norm(rv)
+    k = rv / angle
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    R = np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+    pose_tracker, _ = turned.fk([2.0, 1.0, 0.0, 0.0])
+    assert np.allclose(pose_tracker[:3], R @ pose_base[:3] + t, atol=1e-12)
+    by_plain, _ = tendril.Net.load(net_path, plain).predict(pose_base)
+    by_turned, _ = tendril.Net.load(net_path, turned).predict(pose_tracker)
+    assert np.allclose(by_turned, by_plain, atol=1e-4)
