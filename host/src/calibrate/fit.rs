@@ -13,7 +13,7 @@ use super::data::Measurements;
 use super::identify::identify;
 use super::params::{bounds, scale, Param, Values};
 pub use super::problem::FD_STEP;
-use super::problem::{tips, ModelTip, Problem};
+use super::problem::{tips, Problem};
 use super::report::{DownWeighted, FittedParam, Report, ResidualStats};
 use super::rows::{check_rows, split};
 use super::CalibError;
@@ -310,14 +310,13 @@ pub fn calibrate(
     let before_sols = problem.solve(nv, &all, None)?;
     let after_sols = problem.solve(&v, &all, None)?;
     solves += 2 * all.len();
-    let before: Vec<[f64; 3]> = before_sols
-        .iter()
-        .map(|s| Problem::tip_in_tracker(nv, &ModelTip::of(s)).into())
-        .collect();
-    let after: Vec<[f64; 3]> = after_sols
-        .iter()
-        .map(|s| Problem::tip_in_tracker(&v, &ModelTip::of(s)).into())
-        .collect();
+    let in_tracker = |values: &Values, sols: &[Solution]| -> Vec<[f64; 3]> {
+        let to_tracker = values.base().to_tracker();
+        sols.iter()
+            .map(|s| to_tracker.point(s.position.into()))
+            .collect()
+    };
+    let (before, after) = (in_tracker(nv, &before_sols), in_tracker(&v, &after_sols));
     let stats = |tips: &[[f64; 3]], idx: &[usize]| {
         ResidualStats::of(
             idx.iter()

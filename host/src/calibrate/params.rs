@@ -5,8 +5,6 @@
 use std::f64::consts::PI;
 use std::fmt;
 
-use nalgebra::{Rotation3, Vector3};
-
 use crate::robot::Robot;
 
 /// Largest and smallest tension scale (sensor gain) a fit may reach.
@@ -258,10 +256,7 @@ impl Values {
                 t.end * stretch
             };
         }
-        r.base = crate::robot::BasePose {
-            translation: self.base_translation,
-            rotation: self.base_rotation,
-        };
+        r.base = self.base();
         r
     }
 
@@ -284,9 +279,13 @@ impl Values {
             .collect()
     }
 
-    /// Rotation of the base frame into the tracker frame.
-    pub fn base_rotation_matrix(&self) -> Rotation3<f64> {
-        Rotation3::new(Vector3::from(self.base_rotation))
+    /// The base's pose in the tracker's frame these values give (the
+    /// robot file's `[base]`, `docs/design.md` §2.4).
+    pub fn base(&self) -> crate::robot::BasePose {
+        crate::robot::BasePose {
+            translation: self.base_translation,
+            rotation: self.base_rotation,
+        }
     }
 }
 

@@ -95,18 +95,15 @@ impl Problem<'_> {
             .collect()
     }
 
-    /// The model's tip position in the tracker frame: p_tracker = R_b p + t_b.
-    pub(super) fn tip_in_tracker(v: &Values, tip: &ModelTip) -> Vector3<f64> {
-        v.base_rotation_matrix() * tip.position + Vector3::from(v.base_translation)
-    }
-
     /// Residuals (measured − model) of `rows`, row-major.
     pub(super) fn residuals(&self, v: &Values, rows: &[usize], sols: &[ModelTip]) -> DVector<f64> {
         let d = self.dims();
         let mut r = DVector::zeros(rows.len() * d);
-        let rb = v.base_rotation_matrix();
+        // The model's tips in the tracker's frame: p_tracker = R_b p + t_b.
+        let to_tracker = v.base().to_tracker();
+        let qb = UnitQuaternion::from_scaled_axis(Vector3::from(v.base_rotation));
         for (k, &i) in rows.iter().enumerate() {
-            let p = Self::tip_in_tracker(v, &sols[k]);
+            let p = Vector3::from(to_tracker.point(sols[k].position.into()));
             let e = Vector3::from(self.data.positions[i]) - p;
             r.fixed_rows_mut::<3>(k * d).copy_from(&e);
             if let (true, Some(q)) = (self.use_orientation, &self.data.quaternions) {
@@ -115,7 +112,7 @@ impl Problem<'_> {
                     UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
                 let [w, x, y, z] = sols[k].quaternion;
                 let tip = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
-                let model = UnitQuaternion::from_rotation_matrix(&rb) * tip;
+                let model = qb * tip;
                 // The rotation taking the model's tip frame to the measured
                 // one, as a rotation vector (rad), weighed as a length.
                 let err = (measured * model.inverse()).scaled_axis();
