@@ -189,7 +189,7 @@ fn two_segment_planner_kill_holds_then_resumes_tracking() {
             "--settle",
             "1",
             "--duration",
-            "8",
+            "6",
             "--kill-planner-at",
             "2.5",
             "--restart-planner-after",

@@ -103,8 +103,9 @@ fn everything_at_once_holds_the_circle_within_a_millimetre() {
 
 #[test]
 fn a_stiffer_robot_than_its_model_is_corrected_along_the_circle() {
-    // The net alone is off by ≈ 1.4 mm around the circle on this robot;
-    // the corrected loop learns the error's map.
+    // The net alone is off by ≈ 1.4 mm around the circle on this robot
+    // (half a revolution shows it); the corrected loop learns the error's
+    // map.
     let alone = against(
         "stiffer-10pct",
         &[
@@ -115,7 +116,7 @@ fn a_stiffer_robot_than_its_model_is_corrected_along_the_circle() {
             "--settle",
             "1.5",
             "--duration",
-            "5",
+            "2.5",
         ],
     );
     let rms_alone = mm(&alone, "rms_tracking_error_mm");
@@ -160,7 +161,7 @@ fn a_plant_robot_file_moves_the_plant_like_the_calibration_truth_reality() {
         "--correction",
         "off",
         "--duration",
-        "4",
+        "2.5",
         "--max-rms-mm",
         "100",
     ];

@@ -175,6 +175,19 @@ fn a_sim_leaves_a_run_log_foxglove_opens_and_the_report_counts_it() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(std::fs::metadata(&png).unwrap().len() > 10_000);
+
+    // A log cut short (a killed plant's) reads up to its last whole chunk.
+    let bytes = std::fs::read(dir.path().join("run.mcap")).unwrap();
+    let whole = tendril::runlog::RunLogFile::from_bytes(Path::new("whole"), &bytes).unwrap();
+    assert!(!whole.truncated);
+    let cut = &bytes[..bytes.len() * 2 / 3];
+    let part = tendril::runlog::RunLogFile::from_bytes(Path::new("cut"), cut).unwrap();
+    assert!(part.truncated);
+    let (w, p) = (
+        whole.messages("/tensions").len(),
+        part.messages("/tensions").len(),
+    );
+    assert!(p > 0 && p < w, "cut file: {p} of {w} tension messages");
 }
 
 #[test]
@@ -203,22 +216,6 @@ fn a_plant_killed_mid_run_leaves_a_readable_log() {
     assert!(n > 2500, "only {n} tension messages before the kill");
     assert!(log.metadata.contains_key("report"));
     assert!(!dir.path().join("run.mcap.partial").exists());
-}
-
-#[test]
-fn a_cut_log_reads_up_to_its_last_chunk() {
-    let (dir, _) = run_sim(&["--model", NET, "--duration", "2"]);
-    let bytes = std::fs::read(dir.path().join("run.mcap")).unwrap();
-    let whole = tendril::runlog::RunLogFile::from_bytes(Path::new("whole"), &bytes).unwrap();
-    assert!(!whole.truncated);
-    let cut = &bytes[..bytes.len() * 2 / 3];
-    let part = tendril::runlog::RunLogFile::from_bytes(Path::new("cut"), cut).unwrap();
-    assert!(part.truncated);
-    let (w, p) = (
-        whole.messages("/tensions").len(),
-        part.messages("/tensions").len(),
-    );
-    assert!(p > 0 && p < w, "cut file: {p} of {w} tension messages");
 }
 
 /// A free local port (bound, then released for the server).
