@@ -111,24 +111,33 @@ pub fn json(path: &Path) -> serde_json::Value {
 /// `tendril evaluate` of `model` on the test split of `data` (both relative
 /// to `dir`), tips through `robot`'s statics: the held-out tip error's mean, mm.
 pub fn held_out_tip_mean_mm(dir: &Path, model: &str, data: &str, robot: &Path) -> f64 {
+    held_out_tip_mean_mm_with(dir, model, data, robot, &[])
+}
+
+/// [`held_out_tip_mean_mm`] with more `evaluate` arguments (`extra`).
+pub fn held_out_tip_mean_mm_with(
+    dir: &Path,
+    model: &str,
+    data: &str,
+    robot: &Path,
+    extra: &[&str],
+) -> f64 {
     let out = format!("{model}.{data}.eval.json");
     let robot = robot.to_str().expect("robot path is UTF-8");
-    let o = tendril_in(
-        dir,
-        &[
-            "evaluate",
-            "--model",
-            model,
-            "--data",
-            data,
-            "--robot",
-            robot,
-            "--rows",
-            "test",
-            "--json-out",
-            &out,
-        ],
-    );
+    let args = [
+        "evaluate",
+        "--model",
+        model,
+        "--data",
+        data,
+        "--robot",
+        robot,
+        "--rows",
+        "test",
+        "--json-out",
+        &out,
+    ];
+    let o = tendril_in(dir, &[&args[..], extra].concat());
     assert_ok(&o, &format!("evaluate {model} on {data}"));
     json(&dir.join(out))["metrics"]["position_mm"]["mean"]
         .as_f64()

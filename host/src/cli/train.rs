@@ -197,6 +197,14 @@ pub struct TrainArgs {
     /// local fit]. Makes the rows measured even with a sidecar.
     #[arg(long, value_name = "SIGMA")]
     pub noise_mm: Option<f64>,
+    /// Fine-tune this net on --data instead of growing a new one: its
+    /// weights are polished on the rows (--polish steps, default 10,000, the
+    /// best validation step kept) and its normalisation kept. The measured
+    /// workflow: a net trained on rows generated from a calibrated robot
+    /// file, fine-tuned on the robot's own measured rows (docs/design.md §4).
+    /// It must be a net for --robot.
+    #[arg(long, value_name = "TNET")]
+    pub init: Option<PathBuf>,
     /// Measured rows: what to do with outliers of the tip [default: reject].
     /// Makes the rows measured even with a sidecar.
     #[arg(long, value_enum)]
@@ -333,10 +341,24 @@ impl TrainArgs {
         if let Some(p) = &self.report {
             outputs.report = p.clone();
         }
+        let init = match &self.init {
+            Some(path) => {
+                let (net, _) =
+                    crate::net::load_for_robot(path, &r.robot, self.allow_robot_mismatch)?;
+                let (net, ranges) = cascor::fine_tune::from_tnet(&net)
+                    .map_err(|e| anyhow::anyhow!("--init {}: {e}", path.display()))?;
+                Some(job::InitNet { net, ranges })
+            }
+            None => None,
+        };
+        let mut options = self.options(&r.robot);
+        if init.is_some() && self.polish.is_none() {
+            options.polish.max_iterations = FINE_TUNE_STEPS;
+        }
         Ok(TrainJob {
             data,
             data_file: Some(self.data.clone()),
-            options: self.options(&r.robot),
+            options,
             targets: r.targets,
             split: SplitSpec {
                 seed: self.seed,
@@ -350,9 +372,14 @@ impl TrainArgs {
             outputs,
             threads: self.threads,
             robot: Some(r.robot),
+            init,
         })
     }
 }
+
+/// `--init`'s polish steps when `--polish` is not given: the polish is all a
+/// fine-tune does, and its patience ends it where the rows stop agreeing.
+const FINE_TUNE_STEPS: usize = 10_000;
 
 /// Run `tendril train`.
 pub fn run(a: TrainArgs) -> anyhow::Result<()> {

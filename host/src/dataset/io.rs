@@ -61,6 +61,17 @@ pub enum DatasetError {
 }
 
 impl Dataset {
+    /// Every row's pose through `map` (measured tips from the tracker's
+    /// frame to the base's, `docs/design.md` §2.4).
+    pub fn map_poses(&mut self, map: &crate::robot::RigidMap) {
+        for mut row in self.poses.row_iter_mut() {
+            let pose: [f64; 7] = std::array::from_fn(|c| row[c]);
+            for (c, v) in map.pose(pose).into_iter().enumerate() {
+                row[c] = v;
+            }
+        }
+    }
+
     /// An empty dataset for `n_tendons` tendons.
     pub fn empty(n_tendons: usize) -> Dataset {
         Dataset {
@@ -335,6 +346,32 @@ pub struct Sidecar {
     pub seconds: f64,
     /// tendril version that wrote it.
     pub tendril_version: String,
+    /// The residual of measured rows every pose carries (`generate
+    /// --residual-from`, docs/design.md §11.5); absent for the model's own
+    /// rows.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub residual: Option<ResidualRecord>,
+}
+
+/// What a dataset's residual was fitted from and how well it explains the
+/// measured rows (`crate::calibrate::residual`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ResidualRecord {
+    /// The measured rows' file, as given.
+    pub file: String,
+    /// Measured rows.
+    pub rows: usize,
+    /// Rows left out as outliers.
+    pub outliers: usize,
+    /// Degree of the tension polynomial.
+    pub degree: usize,
+    /// Ridge strength (relative to the mean diagonal of the Gram matrix).
+    pub lambda: f64,
+    /// The model's position error on the validation rows, RMS mm, without
+    /// and with the residual.
+    pub valid_position_rms_mm: (f64, f64),
+    /// The same for the orientation, RMS degrees.
+    pub valid_angle_rms_deg: (f64, f64),
 }
 
 /// The resolution of sidecars written before it was recorded.

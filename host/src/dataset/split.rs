@@ -183,6 +183,27 @@ impl Prepared {
             tensions: self.y_range.clone(),
         }
     }
+
+    /// The same split normalised with other ranges (a trained net's, which
+    /// a fine-tune keeps): inputs `x_lo..x_hi`, outputs `y_lo..y_hi`. Rows
+    /// outside them fall outside [0, 1], as they would for the net.
+    pub fn in_ranges(self, x_lo: &[f64], x_hi: &[f64], y_lo: &[f64], y_hi: &[f64]) -> Prepared {
+        let x_range = MinMax::from_bounds(x_lo.to_vec(), x_hi.to_vec());
+        let y_range = MinMax::from_bounds(y_lo.to_vec(), y_hi.to_vec());
+        let x = |m: &DMatrix<f64>| x_range.normalise(&self.x_range.denormalise(m));
+        let y = |m: &DMatrix<f64>| y_range.normalise(&self.y_range.denormalise(m));
+        Prepared {
+            train_x: x(&self.train_x),
+            train_y: y(&self.train_y),
+            valid_x: x(&self.valid_x),
+            valid_y: y(&self.valid_y),
+            test_x: x(&self.test_x),
+            test_y: y(&self.test_y),
+            x_range,
+            y_range,
+            ..self
+        }
+    }
 }
 
 /// Split `data` into train / test (`test_fraction`), carve a validation split

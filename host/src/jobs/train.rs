@@ -17,6 +17,7 @@ use crate::dataset::split::{SPLIT_SEED, TEST_FRACTION, VALID_FRACTION};
 use crate::dataset::{prepare_excluding, Dataset};
 use crate::fsutil::{check_distinct, write_atomic, write_atomic_with};
 use crate::learn::cascor::export::{write_tnet_with, Ranges};
+use crate::learn::cascor::fine_tune::fine_tune_with_stop;
 use crate::learn::cascor::polish::{PolishLoss, RowMetrics};
 use crate::learn::cascor::tip_metric::tip_metrics;
 pub use crate::learn::cascor::{robot_for_data, DataRobot, TrainError};
@@ -142,6 +143,19 @@ pub struct TrainJob<'a> {
     /// go into the `.tnet` (version 2, `docs/design.md` §5.1) so that every
     /// consumer can check the robot it is given. `None` writes version 1.
     pub robot: Option<crate::robot::Robot>,
+    /// Fine-tune this net instead of growing one
+    /// ([`crate::learn::cascor::fine_tune`]): its ranges normalise the rows
+    /// and go into the written file.
+    pub init: Option<InitNet>,
+}
+
+/// The net a fine-tuning run starts from (`tendril train --init`).
+#[derive(Clone, Debug)]
+pub struct InitNet {
+    /// Its weights (normalised, inputs in [0, 1]).
+    pub net: GrowingNet,
+    /// Its normalisation ranges.
+    pub ranges: Ranges,
 }
 
 /// Rows in each split.
@@ -292,7 +306,14 @@ fn check_tensions_vary(data: &crate::dataset::Dataset) -> Result<(), TrainError>
 fn train_and_write(job: &TrainJob<'_>, stop: &AtomicBool) -> Result<TrainResult, TrainError> {
     let data = job.data;
     let s = job.split;
-    let learned = job.targets.learning_data(data);
+    let mut learned = job.targets.learning_data(data);
+    // Measured tips are in the tracker's frame; the net takes the base's
+    // (`docs/design.md` §2.4): a robot file with a `[base]` maps them.
+    if let (Some(_), Some(robot)) = (s.measured, job.robot.as_ref()) {
+        if !robot.base.is_identity() {
+            learned.map_poses(&robot.base.to_base());
+        }
+    }
     let outliers = s
         .measured
         .map(|_| crate::dataset::measured::training_outliers(data, s.test_fraction, s.seed));
@@ -315,6 +336,13 @@ fn train_and_write(job: &TrainJob<'_>, stop: &AtomicBool) -> Result<TrainResult,
         s.seed,
         &exclude,
     );
+    // A fine-tuned net keeps the normalisation it was trained with.
+    let p = match &job.init {
+        Some(InitNet { ranges: r, .. }) => {
+            p.in_ranges(&r.input_lo, &r.input_hi, &r.output_lo, &r.output_hi)
+        }
+        None => p,
+    };
     let sizes = SplitSizes {
         train: p.train_x.nrows(),
         valid: p.valid_x.nrows(),
@@ -340,19 +368,15 @@ fn train_and_write(job: &TrainJob<'_>, stop: &AtomicBool) -> Result<TrainResult,
         options.max_hidden = cap;
     }
     let metrics = polish_metrics(job, &options, data, &p, stop)?;
-    let (net, report) = train_with_stop(
-        &p.train_x,
-        &p.train_y,
-        &p.valid_x,
-        &p.valid_y,
-        &options,
-        s.seed,
-        stop,
-        Metrics {
-            train: metrics.as_ref().map(|m| &m.0),
-            valid: metrics.as_ref().map(|m| &m.1),
-        },
-    )?;
+    let metrics = Metrics {
+        train: metrics.as_ref().map(|m| &m.0),
+        valid: metrics.as_ref().map(|m| &m.1),
+    };
+    let (x, y, vx, vy) = (&p.train_x, &p.train_y, &p.valid_x, &p.valid_y);
+    let (net, report) = match &job.init {
+        Some(init) => fine_tune_with_stop(&init.net, x, y, vx, vy, &options, stop, metrics)?,
+        None => train_with_stop(x, y, vx, vy, &options, s.seed, stop, metrics)?,
+    };
     // The last unit may have finished after Ctrl-C: still write nothing.
     if stop.load(Ordering::SeqCst) {
         return Err(LearnError::Interrupted.into());
@@ -596,6 +620,7 @@ mod tests {
             outputs: TrainOutputs::beside(&dir.join("m.tnet")),
             threads: Some(1),
             robot: None,
+            init: None,
         }
     }
 

@@ -270,6 +270,7 @@ fn stages(
             },
             threads: None,
             robot: Some(robot.clone()),
+            init: None,
         },
         stop_flag(),
     )?;

@@ -11,6 +11,7 @@
 //! - [`train`]: the grow-and-freeze loop, the choice of output configuration,
 //!   stopping and progress;
 //! - [`polish`]: every weight trained together after growth;
+//! - [`fine_tune`]: a trained net polished on other rows (measured ones);
 //! - `batch`: the polish's loss and gradient over tiles of rows;
 //! - [`tip_metric`]: what an output error costs at the tip, the polish's weights;
 //! - (a whole `tendril train` run — split, train, write every output and the
@@ -22,6 +23,7 @@ pub mod candidates;
 mod data_robot;
 mod error;
 pub mod export;
+pub mod fine_tune;
 mod growth;
 pub mod net;
 pub mod options;

@@ -328,7 +328,7 @@ fn progress_bar(opts: &CascorOptions, len: usize, template: &str) -> ProgressBar
 }
 
 /// Polish `net` (centred inputs) on the training rows with a progress bar.
-fn polish_net(
+pub(super) fn polish_net(
     net: &mut GrowingNet,
     x: &DMatrix<f64>,
     vx: &DMatrix<f64>,
