@@ -13,6 +13,7 @@ pub mod params;
 pub mod plan;
 mod problem;
 pub mod report;
+pub mod residual;
 pub mod rows;
 mod sensitivity;
 pub mod step;

@@ -44,6 +44,14 @@ pub struct GenerateArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Add to every row's pose the residual that measured rows (a CSV of
+    /// tensions and tracker poses, no sidecar) show against this robot
+    /// file's statics: give the calibrated file and the rows it was
+    /// calibrated on, and the dataset carries what no parameter of the file
+    /// explains (a smooth function of the tensions, fitted by ridge
+    /// regression; docs/design.md §11.5). The fit is in the sidecar.
+    #[arg(long, value_name = "CSV")]
+    pub residual_from: Option<PathBuf>,
     /// Synthetic measurements: Gaussian tracker jitter on each position axis, mm.
     #[arg(long, value_name = "SIGMA", default_value_t = 0.0)]
     pub noise_mm: f64,
@@ -90,7 +98,35 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
         "a dataset is a CSV with its sidecar (.json) beside it",
     )?;
     let noise = tracker_noise(&args)?;
-    let sidecar = job::generate(&args.request(), !args.quiet, stop_flag())?;
+    // The residual is fitted before anything is generated: rows it cannot
+    // use leave no dataset behind.
+    let residual = match &args.residual_from {
+        Some(path) => Some(fit_residual(&args, path)?),
+        None => None,
+    };
+    let mut sidecar = job::generate(&args.request(), !args.quiet, stop_flag())?;
+    if let Some((residual, record)) = residual {
+        let mut data = crate::dataset::Dataset::read_csv(&args.out)?;
+        residual.apply_all(&mut data);
+        data.write_csv(&args.out)?;
+        crate::dataset::generate::describe_again(&mut sidecar, &data);
+        log::info!(
+            "added the residual of {} ({} rows, {} outliers left out; degree {}, λ {:.0e}): the \
+             model's position error on its validation rows {:.3} → {:.3} mm RMS, orientation \
+             {:.3}° → {:.3}°",
+            record.file,
+            record.rows,
+            record.outliers,
+            record.degree,
+            record.lambda,
+            record.valid_position_rms_mm.0,
+            record.valid_position_rms_mm.1,
+            record.valid_angle_rms_deg.0,
+            record.valid_angle_rms_deg.1
+        );
+        sidecar.residual = Some(record);
+        sidecar.write(&crate::dataset::Sidecar::path_for(&args.out))?;
+    }
     if let Some(noise) = noise {
         // The rows as a tracker would record them (docs/design.md §11); the
         // sidecar keeps describing the noiseless solves.
@@ -116,6 +152,29 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
         sidecar.dropped
     );
     Ok(())
+}
+
+/// The residual of the measured rows at `path` against the robot's statics.
+fn fit_residual(
+    args: &GenerateArgs,
+    path: &std::path::Path,
+) -> anyhow::Result<(
+    crate::calibrate::residual::Residual,
+    crate::dataset::ResidualRecord,
+)> {
+    let (robot, _) = args.robot.load()?;
+    let statics = crate::statics::Statics::new(
+        &robot,
+        SolverSettings {
+            steps: args.steps,
+            ..SolverSettings::default()
+        },
+    );
+    let rows = crate::dataset::Dataset::read_csv(path)
+        .map_err(|e| anyhow::anyhow!("--residual-from: {e}"))?;
+    let shown = path.display().to_string();
+    crate::calibrate::residual::fit(&statics, &rows, &shown, args.seed)
+        .map_err(|e| anyhow::anyhow!("--residual-from {shown}: {e}"))
 }
 
 fn rows(n: usize) -> String {

@@ -16,7 +16,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 
-use super::io::ColumnRange;
+use super::io::{ColumnRange, Sidecar};
 use super::sample::{snake_order, Sampler};
 use super::{Dataset, Resolve};
 use crate::inverse::{ExactIk, IkSettings, Target};
@@ -336,6 +336,21 @@ pub fn solve_bar(len: usize, visible: bool) -> ProgressBar {
         visible,
         "{spinner} solving statics [{bar:30}] {pos}/{len} {per_sec} eta {eta}",
     )
+}
+
+/// Make `sidecar` describe `data` again after its rows changed (the same
+/// count; `generate --residual-from`): the column ranges and the training
+/// split's ranges.
+pub fn describe_again(sidecar: &mut Sidecar, data: &Dataset) {
+    let columns = (0..data.n_tendons)
+        .map(|j| data.tensions.column(j))
+        .chain((0..7).map(|k| data.poses.column(k)));
+    let (lo, hi): (Vec<f64>, Vec<f64>) = columns.map(|c| (c.min(), c.max())).unzip();
+    sidecar.ranges = column_ranges(data.n_tendons, &lo, &hi);
+    sidecar.count = data.len();
+    sidecar.train_ranges = Some(
+        super::split::prepare(data, sidecar.test_fraction, 0.0, super::split::SPLIT_SEED).ranges(),
+    );
 }
 
 /// Per-column value ranges, for the sidecar, from the minima `lo` and maxima

@@ -16,7 +16,7 @@ pub mod resolve;
 pub mod sample;
 pub mod split;
 
-pub use io::{Dataset, DatasetError, Sidecar};
+pub use io::{Dataset, DatasetError, ResidualRecord, Sidecar};
 pub use resolve::Resolve;
 pub use sample::Sampler;
 pub use split::{prepare, prepare_excluding, split_indices, MinMax, Prepared};

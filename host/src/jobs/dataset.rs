@@ -348,6 +348,7 @@ pub fn generate(
         train_ranges: Some(train_ranges),
         seconds: start.elapsed().as_secs_f64(),
         tendril_version: env!("CARGO_PKG_VERSION").into(),
+        residual: None,
     };
     commit(temp, &req.out, &sidecar)?;
     let fraction = tally.dropped as f64 / req.samples as f64;
