@@ -19,6 +19,8 @@ fn _tendril(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<classes::Net>()?;
     m.add_function(wrap_pyfunction!(generate::generate, m)?)?;
     m.add_function(wrap_pyfunction!(calibration::fit_step, m)?)?;
+    m.add_function(wrap_pyfunction!(calibration::fit_residual, m)?)?;
+    m.add_class::<calibration::Residual>()?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

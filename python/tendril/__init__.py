@@ -8,6 +8,6 @@ tendon-driven continuum robots, from the same Rust code as the ``tendril`` CLI.
 Units: m, N, N m; poses are px, py, pz, qw, qx, qy, qz (unit quaternion, w >= 0).
 """
 
-from ._tendril import Net, Robot, __version__, fit_step, generate
+from ._tendril import Net, Residual, Robot, __version__, fit_residual, fit_step, generate
 
-__all__ = ["Net", "Robot", "fit_step", "generate", "__version__"]
+__all__ = ["Net", "Residual", "Robot", "fit_residual", "fit_step", "generate", "__version__"]

@@ -128,3 +128,15 @@ def generate(
 
 def fit_step(trace: _Path, skip_s: float = 0.1) -> Dict[str, Any]:
     """The first bending mode from a step's tracker trace (tendril calibrate --step): the fit as a dict."""
+
+class Residual:
+    """A fitted residual of measured rows against a robot file's statics (design §11.5)."""
+
+    def apply(self, tensions: _ArrayLike, poses: _ArrayLike) -> _Array:
+        """The model's poses (n, 7) at tensions (n, k), moved by the residual."""
+    @property
+    def report(self) -> Dict[str, Any]:
+        """The fit: rows, outliers, degree, lambda, validation RMS without and with it."""
+
+def fit_residual(robot: Robot, tensions: _ArrayLike, poses: _ArrayLike, seed: int = 1) -> Residual:
+    """The residual measured rows (tracker frame) show against robot's statics at their tensions."""

@@ -102,3 +102,40 @@ def test_base_is_the_files_frame():
     turned = tendril.Robot.from_toml(plain.toml + "\n[base]\ntranslation = [0.1, 0.0, 0.0]\n")
     t, r = turned.base
     assert np.array_equal(t, [0.1, 0.0, 0.0]) and np.array_equal(r, np.zeros(3))
+
+
+def test_fit_residual_gives_the_rows_of_generate_residual_from(tmp_path, root, cli):
+    """tendril.fit_residual + Residual.apply on generate's rows are the rows of
+    `tendril generate --residual-from`, and those move like the real robot
+    (a robot 8 % softer than its file) where the file's own rows do not."""
+    text = (root / "robots" / "seed-4t.toml").read_text()
+    real = text.replace("youngs_modulus = 207e9", "youngs_modulus = 190.44e9")
+    assert real != text
+    (tmp_path / "real.toml").write_text(real)
+    done = run_cli(cli, "generate", "--robot", str(tmp_path / "real.toml"), "--samples", "300",
+                   "--seed", "3", "--noise-mm", "0.05", "--quiet", "--out", str(tmp_path / "m.csv"))
+    assert done.returncode == 0, done.stderr
+    (tmp_path / "m.json").unlink()
+    rows = np.loadtxt(tmp_path / "m.csv", delimiter=",", skiprows=1)
+    nominal = tendril.Robot.load(root / "robots" / "seed-4t.toml")
+    residual = tendril.fit_residual(nominal, rows[:, :4], rows[:, 4:])
+    report = residual.report
+    assert report["rows"] == 300
+    assert report["valid_position_rms_mm"][1] < 0.2 * report["valid_position_rms_mm"][0]
+
+    tensions, model = tendril.generate(nominal, 100, seed=9)
+    moved = residual.apply(tensions, model)
+    done = run_cli(cli, "generate", "--robot", str(root / "robots" / "seed-4t.toml"), "--samples",
+                   "100", "--seed", "9", "--residual-from", str(tmp_path / "m.csv"), "--quiet",
+                   "--out", str(tmp_path / "r.csv"))
+    assert done.returncode == 0, done.stderr
+    cli_rows = np.loadtxt(tmp_path / "r.csv", delimiter=",", skiprows=1)
+    assert np.allclose(cli_rows[:, 4:], moved, rtol=0, atol=1e-12)
+    truth, _ = tendril.Robot.load(tmp_path / "real.toml").fk(tensions)
+    off = lambda p: np.max(np.linalg.norm(p[:, :3] - truth[:, :3], axis=1))
+    assert off(model) > 2e-3
+    assert off(moved) < 0.1 * off(model)
+
+    with pytest.raises(ValueError, match="tensions: expected shape"):
+        tendril.fit_residual(tendril.Robot.load(root / "robots" / "seed-1t.toml"),
+                             rows[:, :4], rows[:, 4:])
