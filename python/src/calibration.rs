@@ -26,7 +26,7 @@ pub fn fit_step<'py>(py: Python<'py>, trace: PathBuf, skip_s: f64) -> PyResult<B
             "skip_s must be a number of seconds >= 0, got {skip_s}"
         )));
     }
-    let read = step::read_trace(&trace).map_err(|e| invalid(&e))?;
+    let read = tendril::jobs::step_trace::read_step_trace(&trace).map_err(|e| invalid(&e))?;
     let fit = step::fit_step(&read, skip_s).map_err(|e| invalid(&e))?;
     let text = serde_json::to_string(&fit).map_err(|e| value_error(e.to_string()))?;
     py.import("json")?.call_method1("loads", (text,))

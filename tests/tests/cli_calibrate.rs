@@ -415,7 +415,9 @@ fn a_plan_with_a_hung_mass_writes_its_tip_force_on_some_rows() {
 /// dynamic model's identification gives at the step's tensions
 /// (`dynamics::modes`, checked against Euler–Bernoulli and the plant's own
 /// ringing): the fitted 95 % intervals of f₁ and ζ₁ must cover it, ζ₁ to a
-/// few per cent, and the retardation time must be t_r = 2ζ/ω.
+/// few per cent, and the retardation time must be t_r = 2ζ/ω. Each trace is
+/// fitted twice: as a CSV of the delivered frames, and as the run log
+/// (`.mcap`) a sim writes of the same plant steps.
 #[test]
 fn a_step_trace_through_each_trackers_gives_the_rods_first_mode_with_intervals() {
     use tendril::dynamics::modes::{identify, ModeSearch};
@@ -443,14 +445,35 @@ fn a_step_trace_through_each_trackers_gives_the_rods_first_mode_with_intervals()
             },
         )
         .unwrap();
-        // 4 s after the step: the frames as the tracker delivers them.
+        // 4 s after the step: the frames as the tracker delivers them, and
+        // every plant step in a run log as a sim writes it (its /tracking
+        // repeats the newest frame at each 1 ms step).
+        let mcap = dir.path().join(format!("{name}.mcap"));
+        let log = tendril::runlog::RunLog::start(&tendril::runlog::RunLogConfig {
+            mcap: Some(mcap.clone()),
+            lossless: true,
+            ..Default::default()
+        })
+        .unwrap();
         let mut csv = String::from("t_s,x_m,y_m,z_m\n");
         let mut last_seq = 0;
         for k in 1..=4000u64 {
             plant.command(&command);
             assert!(plant.step(1e-3));
             plant.sense(k * 1_000_000);
-            if let Some(f) = plant.frame().filter(|f| f.seq != last_seq) {
+            let frame = plant.frame();
+            log.step(tendril::runlog::StepRecord {
+                t_ns: k * 1_000_000,
+                command_seq: 1,
+                controller_status: 0,
+                plant_status: 0,
+                commanded: command.clone(),
+                measured: command.clone(),
+                tip: plant.pose(),
+                frame: frame.map(|f| f.pose),
+                desired: None,
+            });
+            if let Some(f) = frame.filter(|f| f.seq != last_seq) {
                 last_seq = f.seq;
                 csv += &format!(
                     "{},{},{},{}\n",
@@ -461,45 +484,49 @@ fn a_step_trace_through_each_trackers_gives_the_rods_first_mode_with_intervals()
                 );
             }
         }
+        log.finish().unwrap();
         let trace = dir.path().join(format!("{name}.csv"));
         std::fs::write(&trace, csv).unwrap();
-        let out = tendril(&["calibrate", "--step", trace.to_str().unwrap(), "--out", "-"]);
-        ok(&out);
-        let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-        let fit = &r["fit"];
-        let value = |key: &str| {
-            let e = &fit[key];
-            (
-                e["value"].as_f64().unwrap(),
-                [
-                    e["interval_95"][0].as_f64().unwrap(),
-                    e["interval_95"][1].as_f64().unwrap(),
-                ],
-            )
-        };
-        let (f, f_ci) = value("freq_hz");
-        let (zeta, zeta_ci) = value("damping_ratio");
-        let (tr, _) = value("retardation_s");
-        eprintln!(
-            "{name}: f1 {f:.4} Hz {f_ci:?}, ζ {zeta:.4} {zeta_ci:?} (model: {:.4} Hz, ζ {:.4})",
-            truth.freq_hz, truth.damping_ratio
-        );
-        assert!(
-            f_ci[0] <= truth.freq_hz && truth.freq_hz <= f_ci[1],
-            "{name}: f1 {f_ci:?} misses {}",
-            truth.freq_hz
-        );
-        assert!(
-            zeta_ci[0] <= truth.damping_ratio && truth.damping_ratio <= zeta_ci[1],
-            "{name}: ζ {zeta_ci:?} misses {}",
-            truth.damping_ratio
-        );
-        assert!(
-            zeta_ci[1] - zeta_ci[0] < 0.2 * truth.damping_ratio,
-            "{name}: ζ {zeta_ci:?}"
-        );
-        let wn = std::f64::consts::TAU * f;
-        assert!((tr - 2.0 * zeta / wn).abs() < 1e-9, "{name}: t_r {tr}");
+        for trace in [trace, mcap] {
+            let name = trace.file_name().unwrap().to_str().unwrap();
+            let out = tendril(&["calibrate", "--step", trace.to_str().unwrap(), "--out", "-"]);
+            ok(&out);
+            let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+            let fit = &r["fit"];
+            let value = |key: &str| {
+                let e = &fit[key];
+                (
+                    e["value"].as_f64().unwrap(),
+                    [
+                        e["interval_95"][0].as_f64().unwrap(),
+                        e["interval_95"][1].as_f64().unwrap(),
+                    ],
+                )
+            };
+            let (f, f_ci) = value("freq_hz");
+            let (zeta, zeta_ci) = value("damping_ratio");
+            let (tr, _) = value("retardation_s");
+            eprintln!(
+                "{name}: f1 {f:.4} Hz {f_ci:?}, ζ {zeta:.4} {zeta_ci:?} (model: {:.4} Hz, ζ {:.4})",
+                truth.freq_hz, truth.damping_ratio
+            );
+            assert!(
+                f_ci[0] <= truth.freq_hz && truth.freq_hz <= f_ci[1],
+                "{name}: f1 {f_ci:?} misses {}",
+                truth.freq_hz
+            );
+            assert!(
+                zeta_ci[0] <= truth.damping_ratio && truth.damping_ratio <= zeta_ci[1],
+                "{name}: ζ {zeta_ci:?} misses {}",
+                truth.damping_ratio
+            );
+            assert!(
+                zeta_ci[1] - zeta_ci[0] < 0.2 * truth.damping_ratio,
+                "{name}: ζ {zeta_ci:?}"
+            );
+            let wn = std::f64::consts::TAU * f;
+            assert!((tr - 2.0 * zeta / wn).abs() < 1e-9, "{name}: t_r {tr}");
+        }
     }
 }
 

@@ -136,19 +136,28 @@ pub fn read_trace(path: &Path) -> Result<StepTrace, StepError> {
             number(position[1])?,
             number(position[2])?,
         ];
-        if trace.tip_m.last() == Some(&p) {
-            continue;
-        }
-        if trace.t_s.last().is_some_and(|&last| t <= last) {
-            return Err(bad(format!(
-                "line {}: time {t} s does not increase",
-                line + 2
-            )));
-        }
-        trace.t_s.push(t);
-        trace.tip_m.push(p);
+        trace
+            .push(t, p)
+            .map_err(|why| bad(format!("line {}: {why}", line + 2)))?;
     }
     Ok(trace)
+}
+
+impl StepTrace {
+    /// Add a tracker frame at `t` s: a frame equal to the last one is the
+    /// same frame repeated (a log row per loop step) and is skipped; time
+    /// must increase.
+    pub fn push(&mut self, t: f64, p: [f64; 3]) -> Result<(), String> {
+        if self.tip_m.last() == Some(&p) {
+            return Ok(());
+        }
+        if self.t_s.last().is_some_and(|&last| t <= last) {
+            return Err(format!("time {t} s does not increase"));
+        }
+        self.t_s.push(t);
+        self.tip_m.push(p);
+        Ok(())
+    }
 }
 
 /// The model's value and its derivatives at one sample.

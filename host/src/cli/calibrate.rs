@@ -26,11 +26,12 @@ pub struct CalibrateArgs {
     )]
     pub data: Option<PathBuf>,
     /// A tracker's trace of the tip after a tension step (CSV: `t_s` or
-    /// `t_ns`; `x_m,y_m,z_m`, or a plant log's `mx,my,mz`, or `px,py,pz`):
-    /// fit the rod's first bending mode, its damping and the dynamic rod's
-    /// retardation time with 95 % intervals, instead of the statics. The
-    /// fit goes to --out as JSON (`-`: stdout).
-    #[arg(long, value_name = "CSV", conflicts_with_all = ["data", "plan"])]
+    /// `t_ns`; `x_m,y_m,z_m`, or a plant log's `mx,my,mz`, or `px,py,pz`;
+    /// or a run log, `*.mcap`, its `/tracking` frames): fit the rod's first
+    /// bending mode, its damping and the dynamic rod's retardation time
+    /// with 95 % intervals, instead of the statics. The fit goes to --out
+    /// as JSON (`-`: stdout).
+    #[arg(long, value_name = "TRACE", conflicts_with_all = ["data", "plan"])]
     pub step: Option<PathBuf>,
     /// With --step: seconds after the trace's first frame (the step) before
     /// the fit starts: the motors' rise and the higher modes.
@@ -286,7 +287,10 @@ fn step(
         );
     }
     crate::fsutil::check_distinct(&[("--step", trace)], &[("--out", &args.out)])?;
-    let fit = calibrate::step::fit_step(&calibrate::step::read_trace(trace)?, args.skip_s)?;
+    let fit = calibrate::step::fit_step(
+        &crate::jobs::step_trace::read_step_trace(trace)?,
+        args.skip_s,
+    )?;
     let zeros = vec![0.0; robot.n_tendons()];
     let file_mode = crate::dynamics::modes::identify(
         robot,

@@ -11,4 +11,5 @@ pub mod evaluate;
 pub mod fk_batch;
 pub mod ik_batch;
 pub mod modes;
+pub mod step_trace;
 pub mod train;
