@@ -1,9 +1,12 @@
 """Shared fixtures: the workspace root and the `tendril` CLI binary the
 results are compared with (scripts/python-test builds it)."""
 
+import contextlib
+import fcntl
 import os
 import pathlib
 import subprocess
+import tempfile
 
 import pytest
 
@@ -29,3 +32,19 @@ def run_cli(cli: pathlib.Path, *args: str) -> subprocess.CompletedProcess:
     return subprocess.run(
         [str(cli), *args], cwd=ROOT, capture_output=True, text=True, check=False
     )
+
+
+@contextlib.contextmanager
+def one_loop_at_a_time():
+    """Hold the machine-wide lock the Rust tests' closed loops take
+    (tests/src/lib.rs, `loop_lock_path`: the same file, flock'ed): scripts/test
+    runs these tests beside the Rust real-time ones, and two closed loops must
+    not share the CPUs (each measures its own periods)."""
+    path = pathlib.Path(tempfile.gettempdir()) / "tendril-realtime-tests.lock"
+    with open(path, "a") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+

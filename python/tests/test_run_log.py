@@ -8,15 +8,16 @@ import json
 import pytest
 from mcap.reader import make_reader
 
-from conftest import run_cli
+from conftest import one_loop_at_a_time, run_cli
 
 
 def test_a_sims_run_log_reads_in_python(tmp_path, cli):
     out = tmp_path / "sim"
-    r = run_cli(
-        cli, "sim", "--model", "firmware/vectors/default.tnet", "--duration", "1.5",
-        "--out", str(out),
-    )
+    with one_loop_at_a_time():
+        r = run_cli(
+            cli, "sim", "--model", "firmware/vectors/default.tnet", "--duration", "1.5",
+            "--out", str(out),
+        )
     assert r.returncode == 0, r.stderr
     report = json.loads((out / "report.json").read_text())
     written = report["plant"]["generations"][0]["runlog"]
