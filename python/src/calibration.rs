@@ -54,8 +54,7 @@ impl Residual {
         poses: numpy::PyArrayLikeDyn<'py, f64, numpy::AllowTypeChange>,
     ) -> PyResult<Bound<'py, numpy::PyArray2<f64>>> {
         use numpy::IntoPyArray;
-        let (data, _) = dataset(&tensions, &poses, self.n_tendons)?;
-        let mut data = data;
+        let mut data = dataset(&tensions, &poses, self.n_tendons)?;
         self.inner.apply_all(&mut data);
         let rows = data.len();
         let flat: Vec<f64> = (0..rows)
@@ -82,7 +81,7 @@ fn dataset(
     tensions: &numpy::PyArrayLikeDyn<'_, f64, numpy::AllowTypeChange>,
     poses: &numpy::PyArrayLikeDyn<'_, f64, numpy::AllowTypeChange>,
     n: usize,
-) -> PyResult<(tendril::dataset::Dataset, usize)> {
+) -> PyResult<tendril::dataset::Dataset> {
     use crate::arrays::{check_finite, rows};
     let t = rows(tensions, "tensions", n)?;
     let p = rows(poses, "poses", 7)?;
@@ -96,12 +95,11 @@ fn dataset(
         )));
     }
     let m = t.rows.len();
-    let data = tendril::dataset::Dataset {
+    Ok(tendril::dataset::Dataset {
         n_tendons: n,
         tensions: nalgebra::DMatrix::from_fn(m, n, |i, j| t.rows[i][j]),
         poses: nalgebra::DMatrix::from_fn(m, 7, |i, j| p.rows[i][j]),
-    };
-    Ok((data, m))
+    })
 }
 
 /// The residual measured rows show against ``robot``'s statics at their
@@ -120,7 +118,7 @@ pub fn fit_residual<'py>(
     seed: u64,
 ) -> PyResult<Residual> {
     let n = robot.model.n_tendons();
-    let (data, _) = dataset(&tensions, &poses, n)?;
+    let data = dataset(&tensions, &poses, n)?;
     let statics =
         tendril::statics::Statics::new(&robot.model, tendril::statics::SolverSettings::default());
     let fitted = crate::detach::detached(py, |_| {

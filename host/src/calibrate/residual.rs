@@ -14,12 +14,13 @@
 //! repeated. Tensions outside the measured ranges are clamped to them: a
 //! polynomial is not extrapolated.
 
-use nalgebra::{DMatrix, Quaternion, SymmetricEigen, UnitQuaternion, Vector3};
+use nalgebra::{DMatrix, Quaternion, UnitQuaternion, Vector3};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rayon::prelude::*;
 
 use crate::dataset::Dataset;
+use crate::learn::linalg::ridge_solve;
 use crate::statics::Statics;
 
 /// Degrees of the tension polynomial tried.
@@ -73,15 +74,7 @@ impl Residual {
     /// Move `pose` (the model's, base frame, `[px, py, pz, qw, qx, qy, qz]`)
     /// by the residual at `tensions`.
     pub fn apply(&self, tensions: &[f64], pose: &mut [f64; 7]) {
-        let phi = self.features(tensions);
-        let r: Vec<f64> = (0..6)
-            .map(|k| {
-                phi.iter()
-                    .enumerate()
-                    .map(|(i, f)| f * self.weights[(i, k)])
-                    .sum()
-            })
-            .collect();
+        let r = self.at(tensions);
         for k in 0..3 {
             pose[k] += r[k];
         }
@@ -90,6 +83,17 @@ impl Residual {
         let q = UnitQuaternion::from_scaled_axis(Vector3::new(r[3], r[4], r[5])) * q;
         let s = if q.w < 0.0 { -1.0 } else { 1.0 };
         pose[3..].copy_from_slice(&[s * q.w, s * q.i, s * q.j, s * q.k]);
+    }
+
+    /// The residual at `tensions`: Δp (m), then the rotation vector (rad).
+    fn at(&self, tensions: &[f64]) -> [f64; 6] {
+        let phi = self.features(tensions);
+        std::array::from_fn(|k| {
+            phi.iter()
+                .enumerate()
+                .map(|(j, f)| f * self.weights[(j, k)])
+                .sum()
+        })
     }
 
     /// Move every row's pose of `data` (the model's rows, base frame) by
@@ -123,29 +127,39 @@ impl Residual {
     }
 }
 
-/// Every exponent list of `n` variables with total degree ≤ `d`.
+/// Move the rows of the dataset generated at `csv` (its `sidecar` in hand)
+/// by `residual`, and write both again (each atomically), the sidecar
+/// describing the moved rows and recording the fit.
+pub fn add_to_dataset(
+    csv: &std::path::Path,
+    sidecar: &mut crate::dataset::Sidecar,
+    residual: &Residual,
+    record: ResidualReport,
+) -> Result<(), crate::dataset::DatasetError> {
+    let mut data = Dataset::read_csv(csv)?;
+    residual.apply_all(&mut data);
+    data.write_csv(csv)?;
+    crate::dataset::generate::describe_again(sidecar, &data);
+    sidecar.residual = Some(record);
+    sidecar.write(&crate::dataset::Sidecar::path_for(csv))
+}
+
+/// Every exponent list of `n` variables with total degree ≤ `d`, each
+/// monomial once.
 fn exponents(n: usize, d: usize) -> Vec<Vec<u8>> {
-    let mut out = vec![vec![0u8; n]];
-    for _ in 0..d {
-        let mut next = Vec::new();
-        for e in &out {
-            // Raise one variable at or after the last raised one: each
-            // monomial once.
-            let from = e.iter().rposition(|&k| k > 0).unwrap_or(0);
-            for v in from..n {
-                let mut f = e.clone();
-                f[v] += 1;
-                next.push(f);
-            }
+    fn extend(prefix: &mut Vec<u8>, n: usize, left: usize, out: &mut Vec<Vec<u8>>) {
+        if prefix.len() == n {
+            out.push(prefix.clone());
+            return;
         }
-        out.extend(
-            next.iter()
-                .filter(|e| e.iter().map(|&k| k as usize).sum::<usize>() <= d)
-                .cloned(),
-        );
-        out.sort();
-        out.dedup();
+        for k in 0..=left {
+            prefix.push(k as u8);
+            extend(prefix, n, left - k, out);
+            prefix.pop();
+        }
     }
+    let mut out = Vec::new();
+    extend(&mut Vec::with_capacity(n), n, d, &mut out);
     out
 }
 
@@ -199,7 +213,13 @@ pub fn fit(
     let n_valid = ((rows.len() as f64 * VALID_FRACTION).round() as usize).max(1);
     let (valid, fit_rows) = order.split_at(n_valid);
     let mut kept: Vec<usize> = fit_rows.to_vec();
-    let mut best = choose(&centre, &half_width, rows, &targets, &kept, valid);
+    let no_fit = || {
+        ResidualError::Rows(format!(
+            "{file}: no ridge solve of the residual succeeded (a tension column that never \
+             changes?)"
+        ))
+    };
+    let mut best = choose(&centre, &half_width, rows, &targets, &kept, valid).ok_or_else(no_fit)?;
     // Leave out the rows the first fit calls outliers, then fit again.
     let errors: Vec<f64> = kept
         .iter()
@@ -216,7 +236,7 @@ pub fn fit(
         .map(|(&i, _)| i)
         .collect();
     if kept.len() < before {
-        best = choose(&centre, &half_width, rows, &targets, &kept, valid);
+        best = choose(&centre, &half_width, rows, &targets, &kept, valid).ok_or_else(no_fit)?;
     }
     let (residual, lambda) = best;
     let rms = |f: &dyn Fn(usize) -> f64| {
@@ -256,17 +276,9 @@ fn residual_of(measured: &[f64; 7], model: &[f64; 7]) -> [f64; 6] {
     ]
 }
 
-fn predicted(r: &Residual, rows: &Dataset, i: usize) -> Vec<f64> {
+fn predicted(r: &Residual, rows: &Dataset, i: usize) -> [f64; 6] {
     let t: Vec<f64> = rows.tensions.row(i).iter().copied().collect();
-    let phi = r.features(&t);
-    (0..6)
-        .map(|k| {
-            phi.iter()
-                .enumerate()
-                .map(|(j, f)| f * r.weights[(j, k)])
-                .sum()
-        })
-        .collect()
+    r.at(&t)
 }
 
 /// How far the residual at row `i` misses its target: the position
@@ -297,7 +309,7 @@ fn choose(
     targets: &[[f64; 6]],
     fit: &[usize],
     valid: &[usize],
-) -> (Residual, f64) {
+) -> Option<(Residual, f64)> {
     let n = centre.len();
     let mut best: Option<(f64, Residual, f64)> = None;
     for degree in DEGREES {
@@ -312,21 +324,21 @@ fn choose(
         if m >= fit.len() {
             continue;
         }
-        let f = DMatrix::from_fn(fit.len(), m, |a, b| {
-            let t: Vec<f64> = rows.tensions.row(fit[a]).iter().copied().collect();
-            r.features(&t)[b]
-        });
-        let y = DMatrix::from_fn(fit.len(), 6, |a, k| targets[fit[a]][k]);
-        let gram = f.tr_mul(&f);
-        let scale = (gram.trace() / m as f64).max(f64::MIN_POSITIVE);
-        let eig = SymmetricEigen::new(gram);
-        let vtb = eig.eigenvectors.tr_mul(&f.tr_mul(&y));
-        for lam in LAMBDAS {
-            let mut s = vtb.clone();
-            for (i, mut row) in s.row_iter_mut().enumerate() {
-                row /= eig.eigenvalues[i].max(0.0) + lam * scale;
+        let mut f = DMatrix::zeros(fit.len(), m);
+        for (a, &i) in fit.iter().enumerate() {
+            let t: Vec<f64> = rows.tensions.row(i).iter().copied().collect();
+            for (b, v) in r.features(&t).into_iter().enumerate() {
+                f[(a, b)] = v;
             }
-            r.weights = &eig.eigenvectors * s;
+        }
+        let y = DMatrix::from_fn(fit.len(), 6, |a, k| targets[fit[a]][k]);
+        let (gram, cross) = (f.tr_mul(&f), f.tr_mul(&y));
+        for lam in LAMBDAS {
+            // A λ too small for the Gram matrix's conditioning is skipped.
+            let Ok(w) = ridge_solve(&gram, &cross, lam) else {
+                continue;
+            };
+            r.weights = w;
             let e: f64 = valid
                 .iter()
                 .map(|&i| position_miss(&r, rows, targets, i).powi(2))
@@ -336,8 +348,7 @@ fn choose(
             }
         }
     }
-    let (_, r, lam) = best.expect("degree 1 has fewer features than MIN_ROWS rows");
-    (r, lam)
+    best.map(|(_, r, lam)| (r, lam))
 }
 
 #[cfg(test)]

@@ -106,10 +106,6 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
     };
     let mut sidecar = job::generate(&args.request(), !args.quiet, stop_flag())?;
     if let Some((residual, record)) = residual {
-        let mut data = crate::dataset::Dataset::read_csv(&args.out)?;
-        residual.apply_all(&mut data);
-        data.write_csv(&args.out)?;
-        crate::dataset::generate::describe_again(&mut sidecar, &data);
         log::info!(
             "added the residual of {} ({} rows, {} outliers left out; degree {}, λ {:.0e}): the \
              model's position error on its validation rows {:.3} → {:.3} mm RMS, orientation \
@@ -124,8 +120,7 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
             record.valid_angle_rms_deg.0,
             record.valid_angle_rms_deg.1
         );
-        sidecar.residual = Some(record);
-        sidecar.write(&crate::dataset::Sidecar::path_for(&args.out))?;
+        crate::calibrate::residual::add_to_dataset(&args.out, &mut sidecar, &residual, record)?;
     }
     if let Some(noise) = noise {
         // The rows as a tracker would record them (docs/design.md §11); the

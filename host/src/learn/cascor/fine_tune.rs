@@ -20,6 +20,7 @@ use super::net::{GrowingNet, OutputKind};
 use super::outputs::Data;
 use super::train::{polish_net, CascorOptions, Metrics, OutputSolver, TrainReport};
 use super::unit_log::UnitLog;
+use crate::learn::linalg::ridge_solve;
 use crate::learn::LearnError;
 
 /// A decoded `.tnet` as the trainer's net (normalised in, normalised out;
@@ -210,18 +211,14 @@ fn residual_outputs(
     let m = f.ncols();
     let w0 = DMatrix::from_fn(m, net.n_outputs, |r, o| net.outputs[o][r]);
     let (resid, resid_v) = (y - &f * &w0, vy - &fv * &w0);
-    let gram = f.tr_mul(&f);
-    let scale = (gram.trace() / m as f64).max(f64::MIN_POSITIVE);
-    let eig = nalgebra::SymmetricEigen::new(gram);
-    let vtb = eig.eigenvectors.tr_mul(&f.tr_mul(&resid));
+    let (gram, cross) = (f.tr_mul(&f), f.tr_mul(&resid));
     let err = |d: &DMatrix<f64>| (&resid_v - &fv * d).norm_squared();
     let mut best: (f64, Option<(f64, DMatrix<f64>)>) = (resid_v.norm_squared(), None);
     for lam in RESIDUAL_LAMBDAS {
-        let mut s = vtb.clone();
-        for (i, mut row) in s.row_iter_mut().enumerate() {
-            row /= eig.eigenvalues[i].max(0.0) + lam * scale;
-        }
-        let delta = &eig.eigenvectors * s;
+        // A λ too small for the features' conditioning is skipped.
+        let Ok(delta) = ridge_solve(&gram, &cross, lam) else {
+            continue;
+        };
         let e = err(&delta);
         if e < best.0 {
             best = (e, Some((lam, delta)));
