@@ -245,8 +245,9 @@ fn plan(cfg: &PlannerConfig) -> Result<Planned, IpcError> {
         _ => None,
     };
     // Only where the path has an acceleration everywhere: at a corner the
-    // inverse asks for a kick (a helix's height turning back: the
-    // three-segment robot's helix went from 3.4 to 8 mm RMS with it).
+    // inverse asks for a kick (a helix whose height turned back at a corner
+    // went from 3.4 to 8 mm RMS with it on the three-segment robot; its
+    // height now turns back on a parabola, `plan::path::helix_height`).
     let inverse = shaping
         .filter(|_| cfg.dynamic_offset && cfg.shape.is_smooth())
         .map(|s| s.modal_inverse());

@@ -33,13 +33,32 @@ pub fn figure_eight_point(center: [f64; 2], radius: f64, freq: f64, t: f64) -> [
     ]
 }
 
-/// Height at `t` s of a helix that rises linearly from `heights[0]` to
-/// `heights[1]` over `turns` revolutions at `freq` Hz and falls back over
-/// as many.
+/// The share of a helix's rise, on each side of a turn, over which its
+/// height turns back smoothly: 0.05 turns it over a tenth of a rise (1 s of
+/// a 10 s rise).
+pub const HELIX_TURN_BLEND: f64 = 0.05;
+
+/// Height at `t` s of a helix that rises from `heights[0]` to `heights[1]`
+/// over `turns` revolutions at `freq` Hz and falls back over as many: at a
+/// constant rate, except within [`HELIX_TURN_BLEND`] of a rise of each turn,
+/// where a parabola turns it back (the rate changes linearly, so the path
+/// has an acceleration everywhere: the dynamic offset needs one, and a
+/// corner asked the rod for a kick; `docs/design.md` §6.4). The rate is
+/// raised by 1/(1 − blend) so the heights are still reached exactly.
 pub fn helix_height(heights: [f64; 2], turns: f64, freq: f64, t: f64) -> f64 {
     let rise = turns / freq;
-    // Up over the first `turns` revolutions, down over the next.
-    let f = if t <= rise { t / rise } else { 2.0 - t / rise };
+    let b = HELIX_TURN_BLEND;
+    // Up over the first `turns` revolutions (s in [0, 1]), down over the next.
+    let s = (t / rise).rem_euclid(2.0);
+    let (to_top, to_bottom) = ((s - 1.0).abs(), s.min(2.0 - s));
+    let g = if to_top < b {
+        1.0 - 0.5 * b - to_top * to_top / (2.0 * b)
+    } else if to_bottom < b {
+        0.5 * b + to_bottom * to_bottom / (2.0 * b)
+    } else {
+        1.0 - to_top
+    };
+    let f = (g - 0.5 * b) / (1.0 - b);
     heights[0] + f * (heights[1] - heights[0])
 }
 
@@ -89,9 +108,39 @@ mod tests {
         assert!((a[0] - 0.025).abs() < 1e-15 && (a[0] - b[0]).abs() < 1e-12);
         let e = figure_eight_point(c, r, f, 1.25);
         assert!((e[0] - 0.025).abs() < 1e-12 && (e[1] - c[1]).abs() < 1e-12);
-        assert_eq!(helix_height([1.0, 2.0], 1.0, 0.5, 2.0), 2.0);
-        assert_eq!(helix_height([1.0, 2.0], 1.0, 0.5, 4.0), 1.0);
+        assert!((helix_height([1.0, 2.0], 1.0, 0.5, 2.0) - 2.0).abs() < 1e-12);
+        assert!((helix_height([1.0, 2.0], 1.0, 0.5, 4.0) - 1.0).abs() < 1e-12);
         assert!((sweep_coordinate(0.05, 0.09, 0.25, 2.0) - 0.09).abs() < 1e-15);
+    }
+
+    /// The helix reaches both heights exactly, rises at Δh/(rise (1 − b))
+    /// between its turns, and its rate of climb has no jump anywhere (the
+    /// triangle it replaces jumped by twice the rate at each turn): the
+    /// largest change of the rate over 1 ms is the parabola's, 2 · rate ·
+    /// 1 ms / (2 b · rise), against the triangle's 2 · rate.
+    #[test]
+    fn the_helix_turns_back_smoothly_and_reaches_both_heights() {
+        let (heights, turns, freq) = ([0.39347, 0.39747], 2.0, 0.2);
+        let rise = turns / freq;
+        let h = |t: f64| helix_height(heights, turns, freq, t);
+        let dh = heights[1] - heights[0];
+        let rate = dh / (rise * (1.0 - HELIX_TURN_BLEND));
+        let (lo, hi) = (0..=20_000)
+            .map(|i| h(i as f64 * 1e-3))
+            .fold((f64::MAX, f64::MIN), |(a, b), z| (a.min(z), b.max(z)));
+        assert!((lo - heights[0]).abs() < 1e-12 && (hi - heights[1]).abs() < 1e-12);
+        let dt = 1e-3;
+        let climb = |t: f64| (h(t + dt) - h(t)) / dt;
+        assert!((climb(0.3 * rise) - rate).abs() < 1e-6 * rate);
+        assert!((climb(1.5 * rise) + rate).abs() < 1e-6 * rate);
+        let worst = (0..20_000)
+            .map(|i| (climb(i as f64 * dt + dt) - climb(i as f64 * dt)).abs())
+            .fold(0.0, f64::max);
+        let parabola = 2.0 * rate * dt / (2.0 * HELIX_TURN_BLEND * rise);
+        assert!(
+            worst <= 1.01 * parabola && worst < 0.01 * rate,
+            "the climb rate jumps by {worst} m/s in 1 ms (rate {rate})"
+        );
     }
 
     #[test]

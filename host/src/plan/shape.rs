@@ -91,13 +91,17 @@ pub enum PathShape {
 }
 
 impl PathShape {
-    /// Whether the path has a second derivative everywhere (a circle, a
-    /// figure eight, a sweep): what the dynamic offset needs, r̈ (a helix's
-    /// height turns back with a corner, steps and pose tables jump or turn).
+    /// Whether the path has an acceleration everywhere (a circle, a figure
+    /// eight, a sweep, a helix, whose height turns back on a parabola):
+    /// what the dynamic offset needs, r̈ (steps and pose tables jump or
+    /// turn a corner).
     pub fn is_smooth(&self) -> bool {
         matches!(
             self,
-            PathShape::Circle { .. } | PathShape::FigureEight { .. } | PathShape::Sweep { .. }
+            PathShape::Circle { .. }
+                | PathShape::FigureEight { .. }
+                | PathShape::Sweep { .. }
+                | PathShape::Helix { .. }
         )
     }
 

@@ -280,9 +280,11 @@ mod tests {
     }
 
     /// A helix on the two-segment robot: every sample's tip is on the
-    /// circle, and its height is the linear rise and fall between the two
-    /// heights (the lifted poses put the tip there, so the planner's poses
-    /// are the shape's points).
+    /// circle, and its height rises and falls linearly between the two
+    /// heights away from its turns (at 1/(1 − b) the triangle's rate, b =
+    /// [`crate::plan::path::HELIX_TURN_BLEND`]) and is each height at its
+    /// turn (the lifted poses put the tip there, so the planner's poses are
+    /// the shape's points).
     #[test]
     fn helix_rises_and_falls_linearly_on_its_circle() {
         let s = statics_of("tdcr-2seg.toml");
@@ -304,7 +306,13 @@ mod tests {
             let p = traj.sample(t);
             let r = p.pose[0].hypot(p.pose[1]);
             assert!((r - 0.01).abs() < 2e-6, "t {t}: r = {r}");
-            let rise = if t <= 2.0 { t / 2.0 } else { 2.0 - t / 2.0 };
+            let b = crate::plan::path::HELIX_TURN_BLEND;
+            let triangle: f64 = if t <= 2.0 { t / 2.0 } else { 2.0 - t / 2.0 };
+            let rise = if t == 0.0 || t == 2.0 {
+                triangle
+            } else {
+                (triangle - b / 2.0) / (1.0 - b)
+            };
             let want = z0 + rise * (z1 - z0);
             assert!(
                 (p.pose[2] - want).abs() < 1e-6,
