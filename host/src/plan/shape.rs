@@ -57,9 +57,10 @@ pub enum PathShape {
         #[serde(default, skip_serializing_if = "Option::is_none")]
         height_m: Option<f64>,
     },
-    /// A circle whose height moves linearly from `heights_m[0]` to
-    /// `heights_m[1]` over `turns` revolutions and back over as many
-    /// (periodic; a robot that reaches a volume).
+    /// A circle whose height moves at a constant rate from `heights_m[0]`
+    /// to `heights_m[1]` over `turns` revolutions and back over as many,
+    /// turning back on a parabola ([`super::path::helix_height`]; periodic;
+    /// a robot that reaches a volume).
     Helix {
         /// Lateral centre, m.
         center_m: [f64; 2],
