@@ -80,9 +80,7 @@ impl PlantModel {
             params.motor_tau_s = tau * 1e-3;
         }
         let damping = reality.damping(robot);
-        if let Some(d) = reality.dynamics {
-            params.model = d.model;
-        }
+        params.model = params.model_in_effect();
         let tracker = reality.tracker.unwrap_or(TrackerSpec {
             position_jitter_mm: params.noise_m * 1e3,
             // A rotation by a small angle a moves the quaternion's vector

@@ -130,3 +130,14 @@ impl Default for PlantParams {
         }
     }
 }
+
+impl PlantParams {
+    /// The robot model the plant runs: the reality's `[dynamics] model`
+    /// where it has one, else [`PlantParams::model`].
+    pub fn model_in_effect(&self) -> RobotModel {
+        self.reality
+            .as_ref()
+            .and_then(|r| r.dynamics)
+            .map_or(self.model, |d| d.model)
+    }
+}

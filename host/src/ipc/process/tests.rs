@@ -153,9 +153,13 @@ fn silent_peers_end_the_run_as_lost_and_the_task_is_still_finished() {
     );
     assert!(t0.elapsed().as_secs_f64() < 2.0);
     assert_eq!(*case.finished_with.lock().unwrap(), Some(false));
-    // The task stepped before its peers were lost (see above: not its cadence).
-    assert!(case.stats().is_some_and(|s| s >= 3));
-    assert!(case.log_rows() >= 3);
+    // The task stepped before its peers were lost, and its stats and log
+    // were written. Not how often: the loss is told by the wall clock, and
+    // a unit test beside CPU-bound ones may get the CPU only a few times
+    // in the 0.1 s (CI once saw fewer than three steps).
+    let steps = case.stats().expect("the stats were written");
+    assert!(steps >= 1);
+    assert_eq!(case.log_rows() as u64, steps);
 }
 
 /// A STOP on the loop's control service (what `tendril sim` sends) ends
