@@ -502,6 +502,9 @@ mod pinning_tests {
         assert_eq!(cpus_of(None, RobotModel::QuasiStatic), quasi);
         assert_eq!(cpus_of(Some("friction"), RobotModel::QuasiStatic), quasi);
         assert_eq!(cpus_of(None, RobotModel::Dynamic), dynamic);
-        assert_eq!(cpus_of(Some("everything"), RobotModel::QuasiStatic), dynamic);
+        assert_eq!(
+            cpus_of(Some("everything"), RobotModel::QuasiStatic),
+            dynamic
+        );
     }
 }
