@@ -132,6 +132,24 @@ pub const CONTROLLER_PRIORITY: i32 = 50;
 /// waits for the controller to sleep or is woken on the other CPU). The
 /// plant stands in for hardware, which also reacts at once.
 pub const PLANT_PRIORITY: i32 = 55;
+/// SCHED_FIFO priority of the simulated plant on the dynamic rod: *below*
+/// the controller, on the same CPU. Its time step costs 0.2–2 ms (release
+/// to the tests' dev build, p50–p99), against a 1 ms period: above the
+/// controller a long step took the controller's next deadlines (12.6 % of
+/// the periods overran in the dev build's `everything` circle), and on the
+/// planner's CPU it made the planner's setpoints late (482 watchdog holds
+/// in the same run). Below the controller, the controller preempts it at
+/// each deadline; the plant runs as soon as the controller sleeps, a few µs
+/// after the command, and steps the rod over the time that passed.
+pub const DYNAMIC_PLANT_PRIORITY: i32 = 45;
+
+/// The plant's SCHED_FIFO priority for its robot model.
+pub fn plant_priority(model: crate::plant::RobotModel) -> i32 {
+    match model {
+        crate::plant::RobotModel::QuasiStatic => PLANT_PRIORITY,
+        crate::plant::RobotModel::Dynamic => DYNAMIC_PLANT_PRIORITY,
+    }
+}
 
 /// The CPUs this process may run on, in order.
 pub fn allowed_cpus() -> Vec<usize> {
@@ -343,6 +361,34 @@ impl Ticker {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The quasi-static plant preempts the controller (it reacts at once);
+    /// the dynamic rod, asked for directly or by a reality, never does.
+    #[test]
+    fn the_dynamic_plant_runs_below_the_controller_the_quasi_static_one_above() {
+        use crate::plant::{reality::Reality, PlantParams, RobotModel};
+        let priority = |model, reality: Option<&str>| {
+            let params = PlantParams {
+                model,
+                reality: reality.map(|r| Reality::builtin(r).unwrap()),
+                ..PlantParams::default()
+            };
+            plant_priority(params.model_in_effect())
+        };
+        for quasi in [
+            priority(RobotModel::QuasiStatic, None),
+            priority(RobotModel::QuasiStatic, Some("friction")),
+        ] {
+            assert!(quasi > CONTROLLER_PRIORITY);
+        }
+        for dynamic in [
+            priority(RobotModel::Dynamic, None),
+            priority(RobotModel::QuasiStatic, Some("everything")),
+            priority(RobotModel::QuasiStatic, Some("dynamic-light-damping")),
+        ] {
+            assert!(dynamic < CONTROLLER_PRIORITY && dynamic > PLANNER_PRIORITY);
+        }
+    }
 
     #[test]
     fn ticker_runs_consecutive_periods_when_on_time() {

@@ -138,7 +138,7 @@ pub fn run(cfg: &PlantConfig) -> Result<PlantStats, IpcError> {
         scheduling: Some(Scheduling {
             cpu: cfg.cpu,
             realtime: cfg.realtime,
-            priority: super::clock::PLANT_PRIORITY,
+            priority: super::clock::plant_priority(cfg.params.model_in_effect()),
         }),
     };
     let load = || {

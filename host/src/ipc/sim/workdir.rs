@@ -8,7 +8,6 @@ use serde::Serialize;
 
 use super::supervisor::Role;
 use super::{SimConfig, SimError, RUN_DIR};
-use crate::plant::RobotModel;
 
 /// Paths of one run, and its lock on the output directory.
 pub struct RunDir {
@@ -230,15 +229,10 @@ impl Configs<'_> {
                 c.prefix = self.prefix.clone();
                 c.log = log;
                 c.stats = stats;
-                // The quasi-static plant (tens of µs a step) shares the
-                // controller's CPU, above it; the dynamic rod (0.2–2 ms a
-                // step, at times longer than a period) would take the
-                // controller's next periods there, so it runs beside the
-                // planner (docs/design/06-ipc-and-plant.md, "Pinning").
-                c.cpu = match c.params.model_in_effect() {
-                    RobotModel::QuasiStatic => loop_cpu,
-                    RobotModel::Dynamic => planner_cpu.or(loop_cpu),
-                };
+                // On the controller's CPU: above the controller when
+                // quasi-static, below it when dynamic (the plant process
+                // picks its priority, `clock::plant_priority`).
+                c.cpu = loop_cpu;
                 c.realtime = self.cfg.realtime;
                 c.supervised = true;
                 c.duration_s = None;
@@ -453,58 +447,5 @@ mod tests {
         std::fs::create_dir(&kept).unwrap();
         RunDir::create(&kept).unwrap().discard();
         assert!(kept.exists(), "the user's directory was removed");
-    }
-}
-
-#[cfg(test)]
-mod pinning_tests {
-    use super::*;
-    use crate::plant::reality::Reality;
-
-    /// The CPU each process's configuration names, with the controller's
-    /// CPU 1 and the planner's CPU 0.
-    fn cpus_of(reality: Option<&str>, model: RobotModel) -> [Option<u64>; 3] {
-        let tmp = tempfile::tempdir().unwrap();
-        let mut cfg = SimConfig::new(
-            "tendril".into(),
-            "robot.toml".into(),
-            super::super::ModelSource::BuiltIn,
-            tmp.path().join("out"),
-        );
-        cfg.plant.params.model = model;
-        cfg.plant.params.reality = reality.map(|r| Reality::builtin(r).unwrap());
-        let dir = RunDir::create(&cfg.out).unwrap();
-        let configs = Configs {
-            cfg: &cfg,
-            dir: &dir,
-            prefix: "t".into(),
-            model: "net.tnet".into(),
-            cpus: (Some(1), Some(0)),
-            chip_socket: None,
-        };
-        let cpu = |role| {
-            let path = configs.write(role, 0).unwrap();
-            let json: serde_json::Value =
-                serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap();
-            json["cpu"].as_u64()
-        };
-        let cpus = [cpu(Role::Controller), cpu(Role::Plant), cpu(Role::Planner)];
-        dir.discard();
-        cpus
-    }
-
-    /// The quasi-static plant shares the controller's CPU; the dynamic rod,
-    /// asked for directly or by a reality, runs beside the planner.
-    #[test]
-    fn the_dynamic_plant_runs_beside_the_planner_the_quasi_static_one_beside_the_controller() {
-        let quasi = [Some(1), Some(1), Some(0)];
-        let dynamic = [Some(1), Some(0), Some(0)];
-        assert_eq!(cpus_of(None, RobotModel::QuasiStatic), quasi);
-        assert_eq!(cpus_of(Some("friction"), RobotModel::QuasiStatic), quasi);
-        assert_eq!(cpus_of(None, RobotModel::Dynamic), dynamic);
-        assert_eq!(
-            cpus_of(Some("everything"), RobotModel::QuasiStatic),
-            dynamic
-        );
     }
 }
