@@ -15,7 +15,7 @@ pub mod generate;
 pub mod ik;
 mod modes;
 mod planner;
-mod plant;
+pub mod plant;
 mod plot;
 mod robustness;
 mod run;

@@ -1,0 +1,207 @@
+"""An independent ROS 2 peer for tendril-ros2's tests: Eclipse Cyclone DDS
+(one of ROS 2's own middlewares, from PyPI) with common_interfaces' types
+written as IDL structs under ROS 2's wire conventions: topics prefixed
+`rt/`, types named `pkg::msg::dds_::Type_`. Nothing here comes from tendril.
+"""
+
+import os
+import pathlib
+import subprocess
+import time
+from dataclasses import dataclass, field
+from typing import List
+
+from cyclonedds.domain import DomainParticipant
+from cyclonedds.idl import IdlStruct
+from cyclonedds.idl.types import float64, int32, sequence, uint8, uint32
+from cyclonedds.pub import DataWriter
+from cyclonedds.qos import Policy, Qos
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+
+
+@dataclass
+class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
+    sec: int32 = 0
+    nanosec: uint32 = 0
+
+
+@dataclass
+class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
+    stamp: Time = field(default_factory=Time)
+    frame_id: str = ""
+
+
+@dataclass
+class JointState(IdlStruct, typename="sensor_msgs::msg::dds_::JointState_"):
+    header: Header = field(default_factory=Header)
+    name: sequence[str] = field(default_factory=list)
+    position: sequence[float64] = field(default_factory=list)
+    velocity: sequence[float64] = field(default_factory=list)
+    effort: sequence[float64] = field(default_factory=list)
+
+
+@dataclass
+class MultiArrayDimension(IdlStruct, typename="std_msgs::msg::dds_::MultiArrayDimension_"):
+    label: str = ""
+    size: uint32 = 0
+    stride: uint32 = 0
+
+
+@dataclass
+class MultiArrayLayout(IdlStruct, typename="std_msgs::msg::dds_::MultiArrayLayout_"):
+    dim: sequence[MultiArrayDimension] = field(default_factory=list)
+    data_offset: uint32 = 0
+
+
+@dataclass
+class Float64MultiArray(IdlStruct, typename="std_msgs::msg::dds_::Float64MultiArray_"):
+    layout: MultiArrayLayout = field(default_factory=MultiArrayLayout)
+    data: sequence[float64] = field(default_factory=list)
+
+
+@dataclass
+class Point(IdlStruct, typename="geometry_msgs::msg::dds_::Point_"):
+    x: float64 = 0.0
+    y: float64 = 0.0
+    z: float64 = 0.0
+
+
+@dataclass
+class Quaternion(IdlStruct, typename="geometry_msgs::msg::dds_::Quaternion_"):
+    x: float64 = 0.0
+    y: float64 = 0.0
+    z: float64 = 0.0
+    w: float64 = 1.0
+
+
+@dataclass
+class Pose(IdlStruct, typename="geometry_msgs::msg::dds_::Pose_"):
+    position: Point = field(default_factory=Point)
+    orientation: Quaternion = field(default_factory=Quaternion)
+
+
+@dataclass
+class PoseStamped(IdlStruct, typename="geometry_msgs::msg::dds_::PoseStamped_"):
+    header: Header = field(default_factory=Header)
+    pose: Pose = field(default_factory=Pose)
+
+
+@dataclass
+class Vector3(IdlStruct, typename="geometry_msgs::msg::dds_::Vector3_"):
+    x: float64 = 0.0
+    y: float64 = 0.0
+    z: float64 = 0.0
+
+
+@dataclass
+class Transform(IdlStruct, typename="geometry_msgs::msg::dds_::Transform_"):
+    translation: Vector3 = field(default_factory=Vector3)
+    rotation: Quaternion = field(default_factory=Quaternion)
+
+
+@dataclass
+class TransformStamped(IdlStruct, typename="geometry_msgs::msg::dds_::TransformStamped_"):
+    header: Header = field(default_factory=Header)
+    child_frame_id: str = ""
+    transform: Transform = field(default_factory=Transform)
+
+
+@dataclass
+class TFMessage(IdlStruct, typename="tf2_msgs::msg::dds_::TFMessage_"):
+    transforms: sequence[TransformStamped] = field(default_factory=list)
+
+
+@dataclass
+class Path(IdlStruct, typename="nav_msgs::msg::dds_::Path_"):
+    header: Header = field(default_factory=Header)
+    poses: sequence[PoseStamped] = field(default_factory=list)
+
+
+@dataclass
+class KeyValue(IdlStruct, typename="diagnostic_msgs::msg::dds_::KeyValue_"):
+    key: str = ""
+    value: str = ""
+
+
+@dataclass
+class DiagnosticStatus(IdlStruct, typename="diagnostic_msgs::msg::dds_::DiagnosticStatus_"):
+    level: uint8 = 0
+    name: str = ""
+    message: str = ""
+    hardware_id: str = ""
+    values: sequence[KeyValue] = field(default_factory=list)
+
+
+@dataclass
+class DiagnosticArray(IdlStruct, typename="diagnostic_msgs::msg::dds_::DiagnosticArray_"):
+    header: Header = field(default_factory=Header)
+    status: sequence[DiagnosticStatus] = field(default_factory=list)
+
+
+# A wrong type on the commands' topic name: a peer that sends one must be
+# refused, not obeyed (same topic name, another type name: DDS itself does
+# not match it) — so the malformed case is a Float64MultiArray whose bytes
+# do not parse, which DDS cannot tell apart; see test_ros2.py.
+
+# ROS 2's QoS profiles (rmw_qos_profile_sensor_data, the default, tf_static).
+SENSOR = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(5), Policy.Durability.Volatile)
+RELIABLE = Qos(
+    Policy.Reliability.Reliable(duration(milliseconds=100)),
+    Policy.History.KeepLast(10),
+    Policy.Durability.Volatile,
+)
+LATCHED = Qos(
+    Policy.Reliability.Reliable(duration(milliseconds=100)),
+    Policy.History.KeepLast(1),
+    Policy.Durability.TransientLocal,
+)
+
+
+def ros2_bin() -> pathlib.Path:
+    """tendril-ros2 built from this checkout: $TENDRIL_ROS2_BIN, else target/debug."""
+    return pathlib.Path(os.environ.get("TENDRIL_ROS2_BIN", ROOT / "target" / "debug" / "tendril-ros2"))
+
+
+class Peer:
+    """One Cyclone DDS participant in `domain` with ROS 2's topic names."""
+
+    def __init__(self, domain: int):
+        self.dp = DomainParticipant(domain)
+
+    def reader(self, name: str, kind, qos):
+        return DataReader(self.dp, Topic(self.dp, "rt/" + name.lstrip("/"), kind), qos=qos)
+
+    def writer(self, name: str, kind, qos):
+        return DataWriter(self.dp, Topic(self.dp, "rt/" + name.lstrip("/"), kind), qos=qos)
+
+
+def start_plant(domain: int, *args: str) -> subprocess.Popen:
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
+    env.pop("RUST_LOG", None)
+    return subprocess.Popen(
+        [str(ros2_bin()), "plant", *args],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def until(deadline_s: float, poll):
+    """Call `poll` every 10 ms until it returns a truthy value or time runs out."""
+    end = time.monotonic() + deadline_s
+    while time.monotonic() < end:
+        got = poll()
+        if got:
+            return got
+        time.sleep(0.01)
+    return None
+
+
+def newest(reader) -> List:
+    return list(reader.take(N=1000))

@@ -1,0 +1,191 @@
+//! `tendril-ros2`: thin shell over the library — parse the command line,
+//! set up the console and signals, run, turn an error into one line on
+//! stderr and a non-zero exit.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Context as _;
+use clap::{Args, Parser, Subcommand};
+use tendril::cli::plant::PlantOpts;
+use tendril::plant::{PlantParams, RobotModel};
+use tendril::robot::Robot;
+use tendril_ros2::node::domain_from_env;
+use tendril_ros2::plant::{self, PlantNodeConfig};
+
+/// tendril on ROS 2: the plant as a robot on the graph of ROS_DOMAIN_ID
+/// (topics, types, QoS and frames: docs/guide/ros2.md).
+#[derive(Parser, Debug)]
+#[command(name = "tendril-ros2", version)]
+struct Cli {
+    /// More output (-v: debug lines).
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    verbose: u8,
+    /// Warnings and errors only.
+    #[arg(short, long, global = true)]
+    quiet: bool,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Be the robot: take tension commands, publish tensions, the tracker's
+    /// tip, the backbone, /tf and /diagnostics.
+    Plant(PlantArgs),
+}
+
+#[derive(Args, Debug)]
+struct PlantArgs {
+    /// Robot description file.
+    #[arg(long, default_value = tendril::robot::DEFAULT_ROBOT)]
+    robot: PathBuf,
+    /// How the real robot differs from its file and how it is seen: a
+    /// reality file or a built-in's name (as `tendril plant --reality`).
+    #[arg(long)]
+    reality: Option<PathBuf>,
+    /// Robot model: quasi-static (statics each step) or dynamic (the rod
+    /// with inertia and damping).
+    #[arg(long = "model", value_enum, default_value_t = PlantParams::default().model)]
+    robot_model: RobotModel,
+    /// Motor time constant, ms [default: 20; a --reality with [motors] sets its own].
+    #[arg(long)]
+    motor_tau_ms: Option<f64>,
+    /// Tip tracker noise (standard deviation), mm [default: 0.02; a
+    /// --reality with a [tracker] sets its own].
+    #[arg(long)]
+    noise_mm: Option<f64>,
+    /// Seed of the tracker's noise.
+    #[arg(long, default_value_t = PlantParams::default().seed)]
+    seed: u64,
+    /// Plant steps and joint states per second.
+    #[arg(long, default_value_t = 200.0)]
+    rate: f64,
+    /// Backbone and /tf messages per second.
+    #[arg(long, default_value_t = 30.0)]
+    scene_hz: f64,
+    /// Points along the published backbone.
+    #[arg(long, default_value_t = 32)]
+    backbone_points: usize,
+    /// Stop after this many seconds (default: until SIGINT or SIGTERM).
+    #[arg(long)]
+    duration: Option<f64>,
+    /// The node's namespace: its relative topics live under it.
+    #[arg(long, default_value = "/")]
+    namespace: String,
+    /// Statistics JSON written at exit (commands taken and refused, steps).
+    #[arg(long)]
+    stats: Option<PathBuf>,
+}
+
+impl PlantArgs {
+    fn config(self) -> anyhow::Result<PlantNodeConfig> {
+        let robot = Robot::load(&self.robot)?;
+        // The same flags as `tendril plant`, checked by the same code.
+        let opts = PlantOpts {
+            motor_tau_ms: self.motor_tau_ms,
+            compliance_tau_ms: PlantParams::default().compliance_tau_s * 1e3,
+            noise_mm: self.noise_mm,
+            seed: self.seed,
+            statics_steps: PlantParams::default().statics_steps,
+            spin: false,
+            stuck: None,
+            drop: None,
+            delay: None,
+            reality: self.reality,
+        };
+        Ok(PlantNodeConfig {
+            robot,
+            params: PlantParams {
+                model: self.robot_model,
+                ..opts.params()?
+            },
+            rate_hz: self.rate,
+            scene_hz: self.scene_hz,
+            backbone_points: self.backbone_points,
+            duration_s: self.duration,
+            domain: domain_from_env()?,
+            namespace: self.namespace,
+            stats: self.stats,
+        })
+    }
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Plant(args) => {
+            let cfg = args.config()?;
+            cfg.validate()?;
+            log::info!(
+                "tendril-ros2 plant: {} ({} tendons) on ROS domain {}, namespace {}, {} Hz",
+                cfg.robot.name,
+                cfg.robot.n_tendons(),
+                cfg.domain,
+                cfg.namespace,
+                cfg.rate_hz
+            );
+            let stats =
+                plant::run(&cfg, tendril::interrupt::stop_flag()).context("tendril-ros2 plant")?;
+            let refused = stats.refused_length + stats.refused_not_finite + stats.refused_malformed;
+            log::info!(
+                "tendril-ros2 plant: {} steps, {} commands applied ({} saturated), {} refused, {} overruns",
+                stats.steps,
+                stats.commands,
+                stats.saturated,
+                refused,
+                stats.overruns
+            );
+            Ok(())
+        }
+    }
+}
+
+/// The console: RUST_LOG wins; else this crate and tendril at info (-q:
+/// warn, -v: debug) and DDS silent (RustDDS logs, at error level, every
+/// sample in flight when its participant closes; what matters reaches
+/// tendril as an error value).
+fn init_console(cli: &Cli) {
+    use std::io::Write;
+    let level = match (cli.quiet, cli.verbose) {
+        (true, _) => log::LevelFilter::Warn,
+        (false, 0) => log::LevelFilter::Info,
+        (false, _) => log::LevelFilter::Debug,
+    };
+    let mut b = env_logger::Builder::new();
+    match std::env::var("RUST_LOG") {
+        Ok(spec) if !spec.is_empty() => {
+            b.parse_filters(&spec);
+        }
+        _ => {
+            b.filter_level(log::LevelFilter::Warn)
+                .filter_module("rustdds", log::LevelFilter::Off)
+                .filter_module("ros2_client", log::LevelFilter::Off)
+                .filter_module("tendril", level)
+                .filter_module("tendril_ros2", level);
+        }
+    }
+    b.format(|buf, r| match r.level() {
+        log::Level::Info => writeln!(buf, "{}", r.args()),
+        l => writeln!(buf, "{}: {}", l.as_str().to_lowercase(), r.args()),
+    })
+    .init();
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    init_console(&cli);
+    if let Err(e) = tendril::interrupt::install(Some(tendril::fsutil::exit_hooks())) {
+        eprintln!("tendril-ros2: error: signal handling: {e}");
+        return ExitCode::FAILURE;
+    }
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!(
+                "tendril-ros2: error: {}",
+                tendril::cli::console::error_line(&e)
+            );
+            ExitCode::FAILURE
+        }
+    }
+}
