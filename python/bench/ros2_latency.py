@@ -1,7 +1,10 @@
-"""tendril-ros2 plant against a Cyclone DDS peer on this machine: discovery
-(plant start → the peer's first joint state; → the plant's first command)
-and the one-way latency of the joint states (the plant's stamp, taken as it
-publishes, → the peer's reception; one clock, one machine).
+"""`tendril-ros2 drive` against a Cyclone DDS robot on this machine (the
+tests' StaticsRobot: drives with a 20 ms lag, the statics' tip as its
+tracker): the seconds from joining to the robot's first answer (discovery),
+the circle's tracking error, and the command's one-way latency (the drive's
+stamp, taken as it publishes `tendon_controller/commanded`, → the peer's
+reception, which blocks on a WaitSet; one clock, one machine; includes the
+Python binding's deserialisation).
 
     python python/bench/ros2_latency.py [--bin target/release/tendril-ros2] [--seconds 10]
 """
@@ -12,46 +15,40 @@ import os
 import pathlib
 import sys
 import tempfile
-import time
 
 import numpy as np
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
-from ros2_peer import RELIABLE, SENSOR, Float64MultiArray, JointState, Peer, start_plant  # noqa: E402
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "python" / "tests"))
+from ros2_peer import Peer, StaticsRobot, start_drive  # noqa: E402
+
+import tendril  # noqa: E402
 
 
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--bin", help="tendril-ros2 binary (default: $TENDRIL_ROS2_BIN or target/debug)")
     ap.add_argument("--seconds", type=float, default=10.0)
-    ap.add_argument("--rate", type=float, default=200.0)
     ap.add_argument("--domain", type=int, default=150)
     a = ap.parse_args()
     if a.bin:
         os.environ["TENDRIL_ROS2_BIN"] = a.bin
-    stats = pathlib.Path(tempfile.mkdtemp()) / "stats.json"
-    t0 = time.time()
-    plant = start_plant(a.domain, "--rate", str(a.rate), "--duration", str(a.seconds + 4),
-                        "--noise-mm", "0", "--stats", str(stats))
-    peer = Peer(a.domain)
-    cmd = peer.writer("tendon_controller/commands", Float64MultiArray, RELIABLE)
-    js = peer.reader("joint_states", JointState, SENSOR)
-    first, lat = None, []
-    end = time.time() + a.seconds + 2
-    while time.time() < end:
-        cmd.write(Float64MultiArray(data=[4.0, 3.0, 0.0, 0.0]))
-        for s in js.take(N=1000):
-            now = time.time()
-            if first is None:
-                first = now - t0
-            lat.append(now - (s.header.stamp.sec + 1e-9 * s.header.stamp.nanosec))
-        time.sleep(0.002)
-    plant.communicate(timeout=30)
-    st = json.loads(stats.read_text())
-    lat_ms = 1e3 * np.array(lat[len(lat) // 10:])  # after the first tenth: matched and warm
-    print(f"plant start → peer's first joint state: {first:.2f} s; → plant's first command: {st['first_command_s']:.2f} s")
-    print(f"joint states received: {len(lat)} ({st['steps']} steps); latency p50 {np.percentile(lat_ms, 50):.3f} ms, "
-          f"p99 {np.percentile(lat_ms, 99):.3f} ms, max {lat_ms.max():.3f} ms; plant overruns {st['overruns']}")
+    stats = pathlib.Path(tempfile.mkdtemp()) / "drive.json"
+    drive = start_drive(a.domain, "--robot", "robots/seed-4t.toml", "--model", "firmware/vectors/default.tnet",
+                        "--duration", str(a.seconds), "--stats", str(stats))
+    robot = StaticsRobot(Peer(a.domain), tendril.Robot.load(ROOT / "robots" / "seed-4t.toml"))
+    robot.serve(a.seconds + 30, until_done=drive)
+    out, err = drive.communicate(timeout=30)
+    if drive.returncode != 0:
+        sys.exit(f"drive failed: {err}")
+    s = json.loads(stats.read_text())
+    lat = 1e3 * np.array(robot.latencies_s[len(robot.latencies_s) // 10:])
+    print(f"joining → the robot's first answer: {s['first_feedback_s']:.2f} s")
+    print(f"circle: tracking {s['tracking_rms_mm']:.3f} mm RMS, max {s['tracking_max_mm']:.3f} mm over "
+          f"{s['tracked_frames']} frames; {s['periods']} periods, {s['overruns']} overruns, "
+          f"{s['hold_periods']} holds, {s['stale_periods']} stale")
+    print(f"command → peer: p50 {np.percentile(lat, 50):.3f} ms, p99 {np.percentile(lat, 99):.3f} ms, "
+          f"max {lat.max():.3f} ms ({len(lat)} commands)")
 
 
 if __name__ == "__main__":

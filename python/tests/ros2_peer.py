@@ -4,6 +4,7 @@ written as IDL structs under ROS 2's wire conventions: topics prefixed
 `rt/`, types named `pkg::msg::dds_::Type_`. Nothing here comes from tendril.
 """
 
+import math
 import os
 import pathlib
 import subprocess
@@ -11,6 +12,9 @@ import time
 from dataclasses import dataclass, field
 from typing import List
 
+import numpy as np
+
+from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.idl import IdlStruct
 from cyclonedds.idl.types import float64, int32, sequence, uint8, uint32
@@ -203,5 +207,92 @@ def until(deadline_s: float, poll):
     return None
 
 
-def newest(reader) -> List:
-    return list(reader.take(N=1000))
+def valid(samples) -> List:
+    """The samples with data (Cyclone also hands out an InvalidSample when
+    a writer goes away)."""
+    return [s for s in samples if not type(s).__name__ == "InvalidSample"]
+
+
+@dataclass
+class NotAnArray(IdlStruct, typename="std_msgs::msg::dds_::Float64MultiArray_"):
+    """Another layout under the commands' type name: DDS matches type names,
+    not layouts (RustDDS sends no type information), so its bytes reach the
+    plant and must fail to parse there."""
+
+    text: str = ""
+
+
+class StaticsRobot:
+    """A robot on the graph, played by the peer: drives that follow the
+    command as a first-order lag of `motor_tau_s` (tendril's plant's default
+    motors; 0: ideal), a noiseless tracker at the tip of tendril's statics
+    for the drives' tensions (`tendril.Robot.fk`, the Python package), in
+    the robot's base frame as `tracker`. It answers each command as it
+    arrives."""
+
+    def __init__(self, peer: "Peer", robot, *, motor_tau_s=0.02):
+        self.robot = robot
+        self.motor_tau_s = motor_tau_s
+        self.motors = None
+        self.last = None
+        self.commands = peer.reader("tendon_controller/commands", Float64MultiArray, RELIABLE)
+        self.commanded = peer.reader("tendon_controller/commanded", JointState, RELIABLE)
+        self.joint_states = peer.writer("joint_states", JointState, SENSOR)
+        self.tip = peer.writer("tip_pose", PoseStamped, SENSOR)
+        self.received = 0
+        self.latencies_s = []
+        # Block until a command arrives (a poll-and-sleep loop would add
+        # its sleep to every latency this peer measures).
+        self.waitset = WaitSet(peer.dp)
+        self.waitset.attach(ReadCondition(self.commands, SampleState.Any | ViewState.Any | InstanceState.Any))
+
+    def serve(self, seconds: float, until_done=None, silent_after_first_s=None):
+        """Answer commands for `seconds`, or until the process `until_done`
+        ends; after `silent_after_first_s` from the first command, take
+        them and say nothing (a robot whose driver and tracker died)."""
+        end = time.monotonic() + seconds
+        first = None
+        while time.monotonic() < end and (until_done is None or until_done.poll() is None):
+            for s in valid(self.commanded.take(N=1000)):
+                stamp = s.header.stamp.sec + 1e-9 * s.header.stamp.nanosec
+                self.latencies_s.append(time.time() - stamp)
+            got = valid(self.commands.take(N=1000))
+            if not got:
+                self.waitset.wait(duration(milliseconds=2))
+                continue
+            first = first or time.monotonic()
+            self.received += len(got)
+            if silent_after_first_s is not None and time.monotonic() - first > silent_after_first_s:
+                continue
+            self.answer(got[-1].data)
+
+    def answer(self, command):
+        """Move the drives towards `command` and publish their tensions and
+        the tip of the statics for them."""
+        cmd = np.array(command, dtype=float)
+        if len(cmd) != self.robot.n_tendons:
+            return
+        now_m = time.monotonic()
+        if self.motors is None or self.motor_tau_s == 0:
+            self.motors = cmd
+        else:
+            a = 1.0 - math.exp(-(now_m - self.last) / self.motor_tau_s)
+            self.motors = self.motors + (cmd - self.motors) * a
+        self.last = now_m
+        poses, _ = self.robot.fk(self.motors[np.newaxis, :])
+        now = time.time()
+        stamp = Time(sec=int(now), nanosec=int((now % 1) * 1e9))
+        self.joint_states.write(JointState(header=Header(stamp=stamp),
+                                           name=[f"tendon_{i}" for i in range(len(cmd))],
+                                           effort=[float(v) for v in self.motors]))
+        p = poses[0]
+        self.tip.write(PoseStamped(header=Header(stamp=stamp, frame_id="tracker"),
+                                   pose=Pose(position=Point(x=p[0], y=p[1], z=p[2]),
+                                             orientation=Quaternion(x=p[4], y=p[5], z=p[6], w=p[3]))))
+
+
+def start_drive(domain, *args: str) -> subprocess.Popen:
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
+    env.pop("RUST_LOG", None)
+    return subprocess.Popen([str(ros2_bin()), "drive", *args], cwd=ROOT, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

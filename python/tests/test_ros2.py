@@ -13,21 +13,28 @@ import numpy as np
 import pytest
 
 import tendril
+from conftest import run_cli
 from ros2_peer import (
     LATCHED,
     RELIABLE,
     SENSOR,
+    ROOT,
     DiagnosticArray,
     Float64MultiArray,
     JointState,
+    NotAnArray,
     Path,
     Peer,
     PoseStamped,
     TFMessage,
+    StaticsRobot,
     ros2_bin,
+    start_drive,
     start_plant,
     until,
 )
+
+ROOT_ROBOTS = ROOT / "robots"
 
 # Discovery over loopback takes a few seconds (SPDP announcements); the
 # plant runs long enough for that and for both commands to settle.
@@ -127,7 +134,7 @@ def test_a_cyclone_dds_controller_drives_the_plant_and_reads_the_statics_tip(
         transforms = until(3.0, lambda: tf.take(N=100))
         assert transforms and transforms[-1].transforms[0].child_frame_id == "tip"
         assert transforms[-1].transforms[0].header.frame_id == "base_link"
-        statics = until(3.0, lambda: tf_static.take(N=10))
+        statics = until(5.0, lambda: tf_static.take(N=10))
         assert statics, "no /tf_static"
         base = statics[-1].transforms[0]
         assert (base.header.frame_id, base.child_frame_id) == ("tracker", "base_link")
@@ -141,8 +148,78 @@ def test_a_cyclone_dds_controller_drives_the_plant_and_reads_the_statics_tip(
     assert plant.returncode == 0, err
     stats = json.loads(stats_path.read_text())
     assert stats["refused_length"] == 1 and stats["refused_not_finite"] == 1, stats
-    assert stats["commands"] > 50 and stats["overruns"] == 0, stats
+    # Beside the real-time tests (scripts/test) a period may start late;
+    # the plant steps by the time that passed, so that costs no accuracy.
+    assert stats["commands"] > 50 and stats["overruns"] < 0.05 * stats["steps"], stats
     assert "2 refused" in err, err
+
+
+def test_bytes_that_do_not_parse_are_refused_and_counted_and_commands_still_work(
+    tmp_path, binary, domain
+):
+    stats_path = tmp_path / "stats.json"
+    plant = start_plant(domain, "--duration", "10", "--stats", str(stats_path))
+    try:
+        good = Peer(domain)
+        cmd = good.writer("tendon_controller/commands", Float64MultiArray, RELIABLE)
+        js = good.reader("joint_states", JointState, SENSOR)
+        # Another layout under the commands' type name, from a participant
+        # of its own (one participant cannot hold both types on one topic).
+        bad = Peer(domain).writer("tendon_controller/commands", NotAnArray, RELIABLE)
+        assert settle(cmd, js, [1.0, 2.0, 0.0, 0.0], timeout_s=6.0) is not None
+        for _ in range(20):
+            bad.write(NotAnArray(text="two newtons, please"))
+            time.sleep(0.02)
+        assert settle(cmd, js, [0.0, 0.0, 2.0, 1.0], timeout_s=3.0) is not None, \
+            "the plant stopped obeying after bytes it could not read"
+    finally:
+        out, err = plant.communicate(timeout=30)
+    assert plant.returncode == 0, err
+    stats = json.loads(stats_path.read_text())
+    assert stats["refused_malformed"] >= 10, stats
+    assert stats["refused_length"] == 0 and stats["refused_not_finite"] == 0, stats
+
+
+def test_the_dynamic_rod_rings_at_its_first_mode_through_dds(tmp_path, binary, domain, cli):
+    """A tension step on the dynamic rod, watched by the peer through the
+    tracker's poses: the ringing's frequency is the first mode that
+    `tendril modes` finds from the model's linearisation (within 5 %, the
+    issue's bound for modes against ringing)."""
+    pre, step = [0.5, 0.5, 0.5, 0.5], [3.0, 0.5, 0.5, 0.5]
+    modes = run_cli(cli, "modes", "--robot", "robots/seed-4t.toml", "--reality",
+                    "dynamic-light-damping", "--at", ",".join(map(str, step)))
+    assert modes.returncode == 0, modes.stderr
+    f1, zeta1 = (float(v) for v in modes.stdout.splitlines()[1].split()[1:3])
+    damped = f1 * math.sqrt(1.0 - zeta1**2)
+    plant = start_plant(domain, "--model", "dynamic", "--reality", "dynamic-light-damping",
+                        "--noise-mm", "0", "--rate", "500", "--duration", "14")
+    try:
+        peer = Peer(domain)
+        cmd = peer.writer("tendon_controller/commands", Float64MultiArray, RELIABLE)
+        js = peer.reader("joint_states", JointState, SENSOR)
+        tip = peer.reader("tip_pose", PoseStamped, SENSOR)
+        assert settle(cmd, js, pre, timeout_s=8.0) is not None
+        time.sleep(1.0)  # the pretension's own ring dies down (ζ 5 %: ~1 s)
+        tip.take(N=10000)
+        cmd.write(Float64MultiArray(data=step))
+        rows, end = [], time.monotonic() + 2.5
+        while time.monotonic() < end:
+            rows += [(s.header.stamp.sec + 1e-9 * s.header.stamp.nanosec, s.pose.position.x)
+                     for s in tip.take(N=1000)]
+            time.sleep(0.01)
+    finally:
+        out, err = plant.communicate(timeout=30)
+    assert plant.returncode == 0, err
+    a = np.array(rows)
+    assert len(a) > 200, f"{len(a)} tip poses in 2.5 s"
+    t, x = a[:, 0] - a[0, 0], a[:, 1]
+    keep = t > 0.3  # after the motors' 20 ms rise and the first swing
+    t, x = t[keep], x[keep] - x[keep][-100:].mean()
+    i = np.where(np.diff(np.sign(x)) != 0)[0]
+    crossings = t[i] - x[i] * (t[i + 1] - t[i]) / (x[i + 1] - x[i])
+    assert len(crossings) >= 8, f"{len(crossings)} zero crossings: no ringing seen"
+    ringing = (len(crossings) - 1) / 2.0 / (crossings[-1] - crossings[0])
+    assert abs(ringing / damped - 1.0) < 0.05, f"rings at {ringing:.3f} Hz, mode {damped:.3f} Hz"
 
 
 def test_bad_settings_are_refused_before_joining_the_graph(binary, domain):
@@ -161,3 +238,50 @@ def test_bad_settings_are_refused_before_joining_the_graph(binary, domain):
     p = start_plant(domain, "--duration", "1")
     out, err = p.communicate(timeout=20)
     assert p.returncode == 0, err
+
+
+def test_tendril_drives_a_robot_on_ros_2_along_its_circle(tmp_path, binary, domain):
+    """`tendril-ros2 drive` closes the loop through DDS: the peer is the
+    robot (drives with the plant's 20 ms lag, the statics' tip as its
+    tracker), tendril's planner and controller send it tensions at 200 Hz.
+    The tip follows the circle as in the iceoryx2 loop on the ideal plant
+    (0.03–0.04 mm there; the issue's bound 0.1 mm)."""
+    stats_path = tmp_path / "drive.json"
+    drive = start_drive(domain, "--robot", "robots/seed-4t.toml", "--model",
+                        "firmware/vectors/default.tnet", "--duration", "6", "--stats", str(stats_path))
+    try:
+        robot = StaticsRobot(Peer(domain), tendril.Robot.load(ROOT_ROBOTS / "seed-4t.toml"))
+        robot.serve(20.0, until_done=drive)
+    finally:
+        out, err = drive.communicate(timeout=30)
+    assert drive.returncode == 0, err
+    s = json.loads(stats_path.read_text())
+    assert s["hold_periods"] == 0 and s["stale_periods"] == 0, s
+    assert s["joint_states_refused"] == 0, s
+    assert s["tracked_frames"] > 0.8 * 6 * 200, s
+    assert s["tracking_rms_mm"] <= 0.1, s
+    assert robot.received >= s["periods"] * 0.9, (robot.received, s)
+
+
+def test_a_robot_that_falls_silent_is_marked_stale_and_no_robot_is_an_error(tmp_path, binary, domain):
+    stats_path = tmp_path / "drive.json"
+    drive = start_drive(domain, "--robot", "robots/seed-4t.toml", "--model",
+                        "firmware/vectors/default.tnet", "--duration", "4", "--stats", str(stats_path))
+    try:
+        robot = StaticsRobot(Peer(domain), tendril.Robot.load(ROOT_ROBOTS / "seed-4t.toml"))
+        # Answer until 1 s into the path (its clock starts at the first
+        # answer, then a 2 s settle), then say nothing: the period's rule
+        # for a silent plant (as over iceoryx2) marks it stale after 20
+        # periods and freezes the correction.
+        robot.serve(25.0, until_done=drive, silent_after_first_s=2.0 + 1.0)
+    finally:
+        out, err = drive.communicate(timeout=30)
+    assert drive.returncode == 0, err
+    s = json.loads(stats_path.read_text())
+    silent_periods = (4.0 - 1.0) * 200
+    assert s["stale_periods"] >= 0.8 * silent_periods, s
+    assert s["stale_periods"] <= silent_periods + 40, s
+    # Nobody there at all: refused after the wait, with what was missing.
+    lonely = start_drive(domain + 1, "--model", "firmware/vectors/default.tnet", "--wait-for-robot", "2")
+    out, err = lonely.communicate(timeout=30)
+    assert lonely.returncode != 0 and "no robot answered" in err and "joint_states" in err, err

@@ -6,8 +6,10 @@
 //! - [`msg`]: the common_interfaces messages used, as serde structs;
 //! - [`topics`]: the one table of topic names, types and QoS, and the frames;
 //! - [`node`]: joining the domain of `ROS_DOMAIN_ID`;
-//! - [`plant`]: `tendril-ros2 plant`, the plant node.
+//! - [`plant`]: `tendril-ros2 plant`, the plant node;
+//! - [`drive`]: `tendril-ros2 drive`, the planner and controller against a robot on ROS 2.
 
+pub mod drive;
 pub mod msg;
 pub mod node;
 pub mod plant;

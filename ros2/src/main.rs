@@ -7,9 +7,15 @@ use std::process::ExitCode;
 
 use anyhow::Context as _;
 use clap::{Args, Parser, Subcommand};
+use tendril::cli::controller::{LoopOpts, OnOff};
+use tendril::cli::planner::TrajectoryOpts;
 use tendril::cli::plant::PlantOpts;
+use tendril::ipc::controller::ControllerConfig;
+use tendril::ipc::planner::PlannerConfig;
+use tendril::plan::LearningChoice;
 use tendril::plant::{PlantParams, RobotModel};
 use tendril::robot::Robot;
+use tendril_ros2::drive::{self, DriveConfig};
 use tendril_ros2::node::domain_from_env;
 use tendril_ros2::plant::{self, PlantNodeConfig};
 
@@ -33,6 +39,75 @@ enum Command {
     /// Be the robot: take tension commands, publish tensions, the tracker's
     /// tip, the backbone, /tf and /diagnostics.
     Plant(PlantArgs),
+    /// Drive a robot on ROS 2: tendril's planner and controller send tension
+    /// commands and read the robot's joint states and the tracker's tip.
+    Drive(Box<DriveArgs>),
+}
+
+#[derive(Args, Debug)]
+struct DriveArgs {
+    /// Robot description file (the controller's model of the robot).
+    #[arg(long, default_value = tendril::robot::DEFAULT_ROBOT)]
+    robot: PathBuf,
+    /// The IK net (.tnet) for this robot (`tendril train` makes one).
+    #[arg(long)]
+    model: PathBuf,
+    /// Seconds on the path after the settle.
+    #[arg(long, default_value_t = 10.0)]
+    duration: f64,
+    #[command(flatten)]
+    path: TrajectoryOpts,
+    /// The controller's options, as `tendril controller`'s, but --rate
+    /// defaults to 200 Hz here (a ROS 2 robot's driver rarely takes more).
+    #[command(flatten)]
+    control: LoopOpts,
+    /// The node's namespace: its relative topics live under it.
+    #[arg(long, default_value = "/")]
+    namespace: String,
+    /// Statistics JSON written at exit (tracking error, holds, feedback).
+    #[arg(long)]
+    stats: Option<PathBuf>,
+    /// How long to wait for the robot's first joint state and tip pose
+    /// (discovery, then its first answer to the rest tensions), s.
+    #[arg(long, default_value_t = 15.0)]
+    wait_for_robot: f64,
+}
+
+/// `drive`'s control rate without `--rate`, Hz.
+const DRIVE_RATE_HZ: f64 = 200.0;
+
+impl DriveArgs {
+    fn config(self) -> anyhow::Result<DriveConfig> {
+        if self.path.learn == OnOff::On {
+            anyhow::bail!(
+                "--learn on: learning for repeated paths runs in `tendril sim`'s planner, not yet in drive"
+            );
+        }
+        let mut controller = ControllerConfig::new(self.robot.clone(), self.model);
+        self.control.apply(&mut controller);
+        if self.control.rate.is_none() {
+            controller.rate_hz = DRIVE_RATE_HZ;
+        }
+        let planner = PlannerConfig {
+            shape: self.path.shape()?,
+            settle_s: self.path.settle,
+            step_shaping: self.path.step_shaping(),
+            start_from_rest: true,
+            dynamic_offset: self.path.dynamic_offset == OnOff::On,
+            learning: LearningChoice::Off,
+            rate_hz: controller.rate_hz,
+            ..PlannerConfig::new(self.robot, self.path.shape()?)
+        };
+        Ok(DriveConfig {
+            planner,
+            controller,
+            duration_s: self.duration,
+            domain: domain_from_env()?,
+            namespace: self.namespace,
+            stats: self.stats,
+            wait_for_robot_s: self.wait_for_robot,
+        })
+    }
 }
 
 #[derive(Args, Debug)]
@@ -113,6 +188,36 @@ impl PlantArgs {
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
+        Command::Drive(args) => {
+            let cfg = (*args).config()?;
+            log::info!(
+                "tendril-ros2 drive: {} at {} Hz on ROS domain {}, namespace {}",
+                cfg.controller.robot.display(),
+                cfg.controller.rate_hz,
+                cfg.domain,
+                cfg.namespace
+            );
+            let s =
+                drive::run(&cfg, tendril::interrupt::stop_flag()).context("tendril-ros2 drive")?;
+            let rms = s
+                .tracking_rms_mm
+                .map_or("no tip on the path".to_string(), |r| {
+                    format!("{r:.3} mm RMS")
+                });
+            log::info!(
+                "tendril-ros2 drive: {} periods, {} holds, {} overruns; tracking {rms} over {} frames",
+                s.periods,
+                s.hold_periods,
+                s.overruns,
+                s.tracked_frames
+            );
+            if s.tracked_frames == 0 {
+                anyhow::bail!(
+                    "no tip pose on the path: is a robot publishing joint_states and tip_pose on this domain?"
+                );
+            }
+            Ok(())
+        }
         Command::Plant(args) => {
             let cfg = args.config()?;
             cfg.validate()?;

@@ -64,6 +64,16 @@ pub const COMMANDS: TopicSpec = TopicSpec {
     what: "tendon tension commands, N, robot file's order",
 };
 
+/// What the drive commanded, as `sensor_msgs/JointState` efforts (N),
+/// stamped as sent: for logging and for the command's latency.
+pub const COMMANDED: TopicSpec = TopicSpec {
+    name: "tendon_controller/commanded",
+    package: "sensor_msgs",
+    type_name: "JointState",
+    qos: Qos::Reliable,
+    what: "the commanded tensions (effort, N), stamped when sent (`drive` only)",
+};
+
 /// Measured tendon tensions as `sensor_msgs/JointState` efforts, N.
 pub const JOINT_STATES: TopicSpec = TopicSpec {
     name: "joint_states",
@@ -129,6 +139,9 @@ pub const PLANT_TOPICS: [TopicSpec; 7] = [
     DIAGNOSTICS,
 ];
 
+/// Every topic `tendril-ros2 drive` uses.
+pub const DRIVE_TOPICS: [TopicSpec; 4] = [COMMANDS, COMMANDED, JOINT_STATES, TIP_POSE];
+
 /// Frame ids (REP 103 units, REP 105 names).
 pub mod frames {
     /// The tracker's fixed frame: every pose tendril reports is in it.
@@ -151,7 +164,7 @@ mod tests {
         names.sort_unstable();
         names.dedup();
         assert_eq!(names.len(), PLANT_TOPICS.len());
-        for t in PLANT_TOPICS {
+        for t in PLANT_TOPICS.iter().chain(&DRIVE_TOPICS) {
             assert!(ros2_client::Name::parse(t.name).is_ok(), "{}", t.name);
         }
         let sensor = JOINT_STATES.qos.policies();

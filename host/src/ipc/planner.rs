@@ -198,15 +198,19 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
 
 /// What the planner works out before it joins the loop (the CPU-heavy
 /// part: the path lifted to reachable poses, the shaping, the learning).
-struct Planned {
-    motion: Motion,
-    learner: Option<Learner>,
+pub struct Planned {
+    /// The path in time: settle, shaped moves, the dynamic offset's inverse.
+    pub motion: Motion,
+    /// Learning for repeated paths, when asked for and accepted.
+    pub learner: Option<Learner>,
     /// The model's `[base]`: the path is planned in its base frame and
     /// published in the tracker's (`docs/design.md` §2.4).
-    base: crate::robot::BasePose,
+    pub base: crate::robot::BasePose,
 }
 
-fn plan(cfg: &PlannerConfig) -> Result<Planned, IpcError> {
+/// Work out `cfg`'s path (the planner process's set-up; `tendril-ros2
+/// drive` plans the same way in-process).
+pub fn plan(cfg: &PlannerConfig) -> Result<Planned, IpcError> {
     if !(cfg.rate_hz > 0.0 && cfg.rate_hz <= 20_000.0 && cfg.settle_s >= 0.0) {
         return Err(IpcError::Config(format!(
             "planner rate {} Hz / settle {} s: rate must be in (0, 20000], settle ≥ 0",
@@ -256,6 +260,60 @@ fn plan(cfg: &PlannerConfig) -> Result<Planned, IpcError> {
         learner: learner(cfg, &robot, shaping)?,
         base: robot.base,
     })
+}
+
+/// The setpoint the planner sends at `t` (s since its start) for `desired`
+/// (`motion.at(t)`), with `learned` (the learning's offset, m) if any: pose,
+/// velocity, tangent, flags and dynamic offset in the model's base frame,
+/// the header left empty. The planner process sends it (after any injected
+/// fault, in the tracker's frame); `tendril-ros2 drive` runs it in-process.
+pub fn setpoint_for(
+    motion: &Motion,
+    t: f64,
+    desired: &crate::plan::Desired,
+    learned: Option<[f64; 3]>,
+) -> Setpoint {
+    let point = &desired.point;
+    let mut flags = 0;
+    for (on, bit) in [
+        (desired.holding, setpoint_flags::HOLD),
+        (desired.moving, setpoint_flags::MOVING),
+        (desired.has_velocity, setpoint_flags::HAS_VELOCITY),
+    ] {
+        if on {
+            flags |= bit;
+        }
+    }
+    let dynamic_offset = match (motion.dynamic_offset(t, desired), learned) {
+        (None, None) => [0.0; 3],
+        (inverse, learned) => {
+            flags |= setpoint_flags::HAS_DYNAMIC_OFFSET;
+            let (a, b) = (inverse.unwrap_or_default(), learned.unwrap_or_default());
+            std::array::from_fn(|k| (a[k] + b[k]) as f32)
+        }
+    };
+    let (tangent, tangent_axes, tangent_dim) = match point.tangent {
+        Some(d) => {
+            flags |= setpoint_flags::HAS_TANGENT;
+            (
+                d.columns.map(|column| column.map(|v| v as f32)),
+                d.family.axes_padded().map(|axis| axis.map(|v| v as f32)),
+                d.family.dim() as u32,
+            )
+        }
+        None => ([[0.0; 7]; 3], [[0.0; 3]; 3], 0),
+    };
+    Setpoint {
+        header: Header::default(),
+        pose: point.pose.map(|v| v as f32),
+        velocity: point.velocity.map(|v| v as f32),
+        tangent,
+        tangent_axes,
+        tangent_dim,
+        flags,
+        dynamic_offset,
+        reserved: 0,
+    }
 }
 
 /// The planner as a [`process::Task`]: each step sleeps to its deadline and
@@ -357,44 +415,20 @@ impl process::Task for PlannerTask<'_> {
         let tick = self.ticker.wait(0);
         let t = (tick.deadline_ns - self.start) as f64 * 1e-9;
         let desired = self.motion.at(t);
-        let point = desired.point;
         let miss = self
             .motion
             .trajectory()
             .feedforward(desired.t_path, &mut self.feedforward);
-        let mut flags = 0;
-        for (on, bit) in [
-            (desired.holding, setpoint_flags::HOLD),
-            (desired.moving, setpoint_flags::MOVING),
-            (desired.has_velocity, setpoint_flags::HAS_VELOCITY),
-        ] {
-            if on {
-                flags |= bit;
-            }
-        }
         let (learned, log_flags) =
             self.learn(desired.t_path, !desired.holding && !desired.moving)?;
-        let dynamic_offset = match (self.motion.dynamic_offset(t, &desired), learned) {
-            (None, None) => [0.0; 3],
-            (inverse, learned) => {
-                flags |= setpoint_flags::HAS_DYNAMIC_OFFSET;
-                let (a, b) = (inverse.unwrap_or_default(), learned.unwrap_or_default());
-                std::array::from_fn(|k| (a[k] + b[k]) as f32)
-            }
-        };
-        let mut pose = point.pose.map(|v| v as f32);
-        let mut velocity = point.velocity.map(|v| v as f32);
-        let (tangent, tangent_axes, tangent_dim) = match point.tangent {
-            Some(d) => {
-                flags |= setpoint_flags::HAS_TANGENT;
-                (
-                    d.columns.map(|column| column.map(|v| v as f32)),
-                    d.family.axes_padded().map(|axis| axis.map(|v| v as f32)),
-                    d.family.dim() as u32,
-                )
-            }
-            None => ([[0.0; 7]; 3], [[0.0; 3]; 3], 0),
-        };
+        let planned = setpoint_for(&self.motion, t, &desired, learned);
+        let (mut pose, mut velocity, mut flags) = (planned.pose, planned.velocity, planned.flags);
+        let (tangent, tangent_axes, tangent_dim, dynamic_offset) = (
+            planned.tangent,
+            planned.tangent_axes,
+            planned.tangent_dim,
+            planned.dynamic_offset,
+        );
         let clean = pose;
         let mut injected = false;
         if self

@@ -1,0 +1,428 @@
+//! `tendril-ros2 drive`: tendril's planner and controller against a robot
+//! that lives on ROS 2 — tension commands out, the robot's measured
+//! tensions and the tracker's tip in (`docs/design.md` §13).
+//!
+//! One process, one period: the planner's setpoint for the period's
+//! deadline ([`tendril::ipc::planner::setpoint_for`], the planner process's
+//! own code), the newest joint state and tip pose from DDS as the plant
+//! state, then the host controller's period ([`Controller::period`]: the
+//! firmware's period, every safety rule of the iceoryx2 loop — a silent
+//! tracker is a hold, a bad command never leaves it) and the command out.
+//! Configured once, allocation-free in the period apart from DDS's own
+//! serialisation.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::SystemTime;
+
+use ros2_client::{Publisher, Subscription};
+use serde::Serialize;
+use tendril::ipc::clock::{now_ns, Ticker};
+use tendril::ipc::controller::{Controller, ControllerConfig, Inbox};
+use tendril::ipc::planner::{plan, setpoint_for, Planned, PlannerConfig};
+use tendril::robot::RigidMap;
+use tendril_shared::messages::{command_status, Header as MsgHeader, PlantState, MAX_TENDONS};
+
+use crate::msg::{Float64MultiArray, Header, JointState, PoseStamped, Time};
+use crate::node::RosNode;
+use crate::topics;
+use crate::Ros2Error;
+
+/// Everything `drive` needs, set once.
+#[derive(Clone, Debug)]
+pub struct DriveConfig {
+    /// The path (its `robot` is the controller's).
+    pub planner: PlannerConfig,
+    /// The controller: robot, net, rate, gains, watchdogs.
+    pub controller: ControllerConfig,
+    /// Seconds on the path after the planner's settle.
+    pub duration_s: f64,
+    /// ROS domain.
+    pub domain: u16,
+    /// Node namespace.
+    pub namespace: String,
+    /// Statistics JSON written at exit.
+    pub stats: Option<PathBuf>,
+    /// How long to wait for the robot's first joint state and tip pose
+    /// before the path starts, s.
+    pub wait_for_robot_s: f64,
+}
+
+/// What the drive measured and counted, written as JSON at exit.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct DriveStats {
+    /// Control periods run.
+    pub periods: u64,
+    /// Periods that ended after the next deadline.
+    pub overruns: u64,
+    /// Periods whose command was a safe hold.
+    pub hold_periods: u64,
+    /// Periods with the robot stale: no joint state or tip pose for the
+    /// period's stale time (20 periods), the correction frozen — the
+    /// iceoryx2 loop's rule for a silent plant (the period's counter, not
+    /// the status bit, which the correction also sets while it waits for
+    /// a tracker frame).
+    pub stale_periods: u64,
+    /// Joint states taken / refused (not one finite value per tendon).
+    pub joint_states: u64,
+    /// Joint states refused.
+    pub joint_states_refused: u64,
+    /// Tip poses taken / refused (not finite).
+    pub tip_poses: u64,
+    /// Tip poses refused.
+    pub tip_poses_refused: u64,
+    /// Seconds from joining the graph to the robot's first joint state and
+    /// tip pose (discovery and the first answer), the rest tensions sent
+    /// meanwhile; the path starts then.
+    pub first_feedback_s: f64,
+    /// Tracking error on the path (after the settle): the tracker's tip
+    /// against the path where the planner was when the tip was sampled.
+    pub tracking_rms_mm: Option<f64>,
+    /// Its largest value.
+    pub tracking_max_mm: Option<f64>,
+    /// Tip poses in the tracking figures.
+    pub tracked_frames: u64,
+}
+
+struct Endpoints {
+    commands: Publisher<Float64MultiArray>,
+    commanded: Publisher<JointState>,
+    joint_states: Subscription<JointState>,
+    tip_pose: Subscription<PoseStamped>,
+}
+
+/// The newest feedback from the robot, as the controller's plant state.
+struct Feedback {
+    tensions: Option<[f32; MAX_TENDONS]>,
+    tip: Option<([f32; 7], u64)>,
+    tip_seq: u32,
+    seq: u64,
+}
+
+/// The drive: set up once, one [`Drive::period`] per tick.
+pub struct Drive {
+    planned: Planned,
+    ctl: Controller,
+    ticker: Ticker,
+    ends: Endpoints,
+    _node: RosNode,
+    n: usize,
+    to_base: RigidMap,
+    to_tracker: RigidMap,
+    settle_s: f64,
+    end_s: f64,
+    feedback: Feedback,
+    overran: bool,
+    names: Vec<String>,
+    sum_sq: f64,
+    stats: DriveStats,
+}
+
+impl Drive {
+    /// Plan the path, load the net, join the graph.
+    pub fn new(cfg: &DriveConfig) -> Result<Drive, Ros2Error> {
+        if !(cfg.duration_s.is_finite() && cfg.duration_s > 0.0) {
+            return Err(Ros2Error::Config(format!(
+                "--duration {}: expected a number of seconds > 0",
+                cfg.duration_s
+            )));
+        }
+        let err = |e: tendril::ipc::IpcError| Ros2Error::Config(e.to_string());
+        let (robot, bytes) = tendril::ipc::controller::load(&cfg.controller).map_err(err)?;
+        let planned = plan(&cfg.planner).map_err(err)?;
+        let mut node = RosNode::new(cfg.domain, &cfg.namespace, "tendril_drive")?;
+        let ends = Endpoints {
+            commands: node.publisher(&topics::COMMANDS)?,
+            commanded: node.publisher(&topics::COMMANDED)?,
+            joint_states: node.subscription(&topics::JOINT_STATES)?,
+            tip_pose: node.subscription(&topics::TIP_POSE)?,
+        };
+        let period_ns = (1e9 / cfg.controller.rate_hz).round() as u64;
+        let start = now_ns() + period_ns;
+        let mut drive = Drive {
+            ctl: Controller::new(&cfg.controller, &robot, &bytes, start).map_err(err)?,
+            ticker: Ticker::new(start, period_ns),
+            ends,
+            _node: node,
+            n: robot.n_tendons(),
+            to_base: robot.base.to_base(),
+            to_tracker: planned.base.to_tracker(),
+            planned,
+            settle_s: cfg.planner.settle_s,
+            end_s: cfg.planner.settle_s + cfg.duration_s,
+            feedback: Feedback {
+                tensions: None,
+                tip: None,
+                tip_seq: 0,
+                seq: 0,
+            },
+            overran: false,
+            names: (0..robot.n_tendons())
+                .map(|i| format!("tendon_{i}"))
+                .collect(),
+            sum_sq: 0.0,
+            stats: DriveStats::default(),
+        };
+        drive.stats.first_feedback_s = drive.wait_for_robot(&robot.min_tensions(), cfg)?;
+        // The path's clock starts now, with the robot heard from.
+        let start = now_ns() + period_ns;
+        drive.ctl = Controller::new(&cfg.controller, &robot, &bytes, start).map_err(err)?;
+        drive.ticker = Ticker::new(start, period_ns);
+        Ok(drive)
+    }
+
+    /// Send the robot's rest tensions (its floors: where the planner's
+    /// approach starts) until it has answered with a joint state and a tip
+    /// pose, as a robot's driver and tracker do once they have discovered
+    /// this node; returns the seconds that took. What they sent is the
+    /// first period's feedback.
+    fn wait_for_robot(&mut self, rest: &[f64], cfg: &DriveConfig) -> Result<f64, Ros2Error> {
+        let start = std::time::Instant::now();
+        while self.feedback.tensions.is_none() || self.feedback.tip.is_none() {
+            if start.elapsed().as_secs_f64() > cfg.wait_for_robot_s {
+                let heard = match (self.feedback.tensions, self.feedback.tip) {
+                    (None, None) => "neither a joint state nor a tip pose",
+                    (Some(_), None) => "joint states but no tip pose",
+                    _ => "tip poses but no joint state",
+                };
+                return Err(Ros2Error::Config(format!(
+                    "no robot answered on ROS domain {} within {} s: {heard} (a driver \
+                     publishing {} and a tracker publishing {}, both taking {})",
+                    cfg.domain,
+                    cfg.wait_for_robot_s,
+                    topics::JOINT_STATES.name,
+                    topics::TIP_POSE.name,
+                    topics::COMMANDS.name
+                )));
+            }
+            let _ = self.ends.commands.publish(Float64MultiArray {
+                data: rest.to_vec(),
+                ..Float64MultiArray::default()
+            });
+            std::thread::sleep(std::time::Duration::from_millis(10));
+            self.take_feedback(now_ns());
+        }
+        // The wait's tips were timed on no path: not tracking figures.
+        self.feedback.seq = 0;
+        self.sum_sq = 0.0;
+        self.stats.tracked_frames = 0;
+        self.stats.tracking_max_mm = None;
+        Ok(start.elapsed().as_secs_f64())
+    }
+
+    /// Seconds since the first period's deadline at monotonic `t_ns`.
+    fn since_start(&self, t_ns: u64) -> f64 {
+        (t_ns as i128 - self.ticker.start_ns() as i128) as f64 * 1e-9
+    }
+
+    /// Take the newest joint state and tip pose; returns the plant state
+    /// when anything new arrived and both kinds have been seen.
+    fn take_feedback(&mut self, t_wake: u64) -> Option<PlantState> {
+        let mut fresh = self.stats.periods == 0;
+        while let Ok(Some((js, _))) = self.ends.joint_states.take() {
+            if js.effort.len() == self.n && js.effort.iter().all(|t| t.is_finite()) {
+                let mut t = [0.0f32; MAX_TENDONS];
+                for (dst, &v) in t.iter_mut().zip(&js.effort) {
+                    *dst = v as f32;
+                }
+                self.feedback.tensions = Some(t);
+                self.stats.joint_states += 1;
+                fresh = true;
+            } else {
+                self.stats.joint_states_refused += 1;
+            }
+        }
+        while let Ok(Some((tip, _))) = self.ends.tip_pose.take() {
+            let p = &tip.pose;
+            let pose = [
+                p.position.x,
+                p.position.y,
+                p.position.z,
+                p.orientation.w,
+                p.orientation.x,
+                p.orientation.y,
+                p.orientation.z,
+            ];
+            if pose.iter().all(|v| v.is_finite()) {
+                let age_ns = wall_age_ns(&tip.header.stamp);
+                self.feedback.tip = Some((pose.map(|v| v as f32), t_wake.saturating_sub(age_ns)));
+                self.feedback.tip_seq += 1;
+                self.stats.tip_poses += 1;
+                fresh = true;
+                self.track(pose, t_wake.saturating_sub(age_ns));
+            } else {
+                self.stats.tip_poses_refused += 1;
+            }
+        }
+        let (tensions, (tip_pose, tip_stamp_ns)) = (self.feedback.tensions?, self.feedback.tip?);
+        if !fresh {
+            return None;
+        }
+        self.feedback.seq += 1;
+        let state = PlantState {
+            header: MsgHeader {
+                seq: self.feedback.seq,
+                stamp_ns: t_wake,
+            },
+            command_seq: 0,
+            tensions,
+            pad: Default::default(),
+            tip_pose,
+            count: self.n as u32,
+            status: 0,
+            tip_seq: self.feedback.tip_seq,
+            tip_stamp_ns,
+        };
+        Some(tendril::ipc::frame::state(&self.to_base, &state))
+    }
+
+    /// The tip (tracker's frame) against the path where the planner was
+    /// when it was sampled, once on the path.
+    fn track(&mut self, tip: [f64; 7], stamp_ns: u64) {
+        let t = self.since_start(stamp_ns);
+        if t < self.settle_s || t > self.end_s {
+            return;
+        }
+        let desired = self.planned.motion.at(t);
+        if desired.holding || desired.moving {
+            return;
+        }
+        let want = self.to_tracker.pose(desired.point.pose);
+        let e = (0..3)
+            .map(|k| (tip[k] - want[k]).powi(2))
+            .sum::<f64>()
+            .sqrt()
+            * 1e3;
+        self.sum_sq += e * e;
+        self.stats.tracked_frames += 1;
+        let max = self.stats.tracking_max_mm.get_or_insert(0.0);
+        *max = max.max(e);
+    }
+
+    /// One period; returns whether the run goes on.
+    pub fn period(&mut self) -> bool {
+        let tick = self.ticker.wait(0);
+        let t_wake = now_ns();
+        let t = self.since_start(tick.deadline_ns);
+        let desired = self.planned.motion.at(t);
+        let mut setpoint = setpoint_for(&self.planned.motion, t, &desired, None);
+        setpoint.header = MsgHeader {
+            seq: tick.index + 1,
+            stamp_ns: t_wake,
+        };
+        let state = self.take_feedback(t_wake);
+        let inbox = Inbox {
+            setpoint: Some(setpoint),
+            setpoints: 1,
+            superseded_nonfinite: 0,
+            state,
+            states: usize::from(state.is_some()),
+            weights: None,
+        };
+        let cmd = self.ctl.period(&tick, t_wake, self.overran, &inbox);
+        if cmd.status & command_status::SAFE_HOLD != 0 {
+            self.stats.hold_periods += 1;
+        }
+        let tensions: Vec<f64> = cmd.tensions[..self.n].iter().map(|&v| v as f64).collect();
+        // A full reliable queue (a peer gone) loses this command; the next
+        // period sends a newer one, and the robot's driver holds the last.
+        let _ = self.ends.commanded.publish(JointState {
+            header: Header::now(""),
+            name: self.names.clone(),
+            effort: tensions.clone(),
+            ..JointState::default()
+        });
+        let _ = self.ends.commands.publish(Float64MultiArray {
+            data: tensions,
+            ..Float64MultiArray::default()
+        });
+        let t_done = now_ns();
+        self.overran = self.ticker.finish(t_done);
+        self.ctl.finish(t_done - t_wake);
+        self.stats.periods += 1;
+        t < self.end_s
+    }
+
+    /// The statistics so far.
+    pub fn stats(&self) -> DriveStats {
+        let mut s = self.stats.clone();
+        let c = self.ctl.stats(&self.ticker);
+        s.overruns = c.overruns;
+        s.stale_periods = c.plant_stale_cycles;
+        if s.tracked_frames > 0 {
+            s.tracking_rms_mm = Some((self.sum_sq / s.tracked_frames as f64).sqrt());
+        }
+        s
+    }
+}
+
+/// How long ago (ns) the wall-clock `stamp` was; 0 for a stamp from the
+/// future (another machine's clock ahead of this one's).
+fn wall_age_ns(stamp: &Time) -> u64 {
+    let now = SystemTime::now()
+        .duration_since(SystemTime::UNIX_EPOCH)
+        .unwrap_or_default();
+    let then = std::time::Duration::new(stamp.sec.max(0) as u64, stamp.nanosec.min(999_999_999));
+    now.saturating_sub(then).as_nanos() as u64
+}
+
+/// Run the drive until the path ends or `stop`; writes the statistics.
+pub fn run(cfg: &DriveConfig, stop: &AtomicBool) -> Result<DriveStats, Ros2Error> {
+    let mut drive = Drive::new(cfg)?;
+    while !stop.load(Ordering::Relaxed) && drive.period() {}
+    let stats = drive.stats();
+    if let Some(path) = &cfg.stats {
+        let json = serde_json::to_vec_pretty(&stats)
+            .map_err(|e| Ros2Error::Config(format!("statistics: {e}")))?;
+        tendril::fsutil::write_atomic(path, &json)
+            .map_err(|e| Ros2Error::Output(format!("{}: {e}", path.display())))?;
+    }
+    Ok(stats)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_stamp_from_the_future_is_no_age_and_one_from_the_past_its_age() {
+        let now = SystemTime::now()
+            .duration_since(SystemTime::UNIX_EPOCH)
+            .unwrap();
+        let past = Time {
+            sec: (now.as_secs() - 2) as i32,
+            nanosec: now.subsec_nanos(),
+        };
+        let age = wall_age_ns(&past) as f64 * 1e-9;
+        assert!((2.0..2.5).contains(&age), "{age}");
+        let future = Time {
+            sec: (now.as_secs() + 60) as i32,
+            nanosec: 0,
+        };
+        assert_eq!(wall_age_ns(&future), 0);
+    }
+
+    #[test]
+    fn a_drive_needs_a_positive_duration() {
+        let cfg = DriveConfig {
+            planner: PlannerConfig::new(
+                "robots/seed-4t.toml".into(),
+                tendril::plan::PathShape::Hold {
+                    center_m: vec![0.0, 0.0],
+                    height_m: None,
+                },
+            ),
+            controller: ControllerConfig::default(),
+            duration_s: 0.0,
+            domain: 0,
+            namespace: "/".into(),
+            stats: None,
+            wait_for_robot_s: 1.0,
+        };
+        let e = Drive::new(&cfg)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(e.contains("--duration"), "{e}");
+    }
+}
