@@ -95,6 +95,12 @@ class PoseStamped(IdlStruct, typename="geometry_msgs::msg::dds_::PoseStamped_"):
 
 
 @dataclass
+class PointStamped(IdlStruct, typename="geometry_msgs::msg::dds_::PointStamped_"):
+    header: Header = field(default_factory=Header)
+    point: Point = field(default_factory=Point)
+
+
+@dataclass
 class Vector3(IdlStruct, typename="geometry_msgs::msg::dds_::Vector3_"):
     x: float64 = 0.0
     y: float64 = 0.0
@@ -235,6 +241,7 @@ class StaticsRobot:
         self.motor_tau_s = motor_tau_s
         self.motors = None
         self.last = None
+        self.last_tip = None
         self.commands = peer.reader("tendon_controller/commands", Float64MultiArray, RELIABLE)
         self.commanded = peer.reader("tendon_controller/commanded", JointState, RELIABLE)
         self.joint_states = peer.writer("joint_states", JointState, SENSOR)
@@ -246,13 +253,18 @@ class StaticsRobot:
         self.waitset = WaitSet(peer.dp)
         self.waitset.attach(ReadCondition(self.commands, SampleState.Any | ViewState.Any | InstanceState.Any))
 
-    def serve(self, seconds: float, until_done=None, silent_after_first_s=None):
+    def serve(self, seconds: float, until_done=None, silent_after_first_s=None, events=()):
         """Answer commands for `seconds`, or until the process `until_done`
         ends; after `silent_after_first_s` from the first command, take
-        them and say nothing (a robot whose driver and tracker died)."""
+        them and say nothing (a robot whose driver and tracker died).
+        `events` are (seconds after the first command, callable) run once
+        each from the loop."""
         end = time.monotonic() + seconds
         first = None
+        pending = sorted(events, key=lambda e: e[0])
         while time.monotonic() < end and (until_done is None or until_done.poll() is None):
+            while first is not None and pending and time.monotonic() - first >= pending[0][0]:
+                pending.pop(0)[1]()
             for s in valid(self.commanded.take(N=1000)):
                 stamp = s.header.stamp.sec + 1e-9 * s.header.stamp.nanosec
                 self.latencies_s.append(time.time() - stamp)
@@ -286,6 +298,7 @@ class StaticsRobot:
                                            name=[f"tendon_{i}" for i in range(len(cmd))],
                                            effort=[float(v) for v in self.motors]))
         p = poses[0]
+        self.last_tip = p
         self.tip.write(PoseStamped(header=Header(stamp=stamp, frame_id="tracker"),
                                    pose=Pose(position=Point(x=p[0], y=p[1], z=p[2]),
                                              orientation=Quaternion(x=p[4], y=p[5], z=p[6], w=p[3]))))

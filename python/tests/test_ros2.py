@@ -17,6 +17,10 @@ from conftest import run_cli
 from ros2_peer import (
     LATCHED,
     RELIABLE,
+    Header,
+    Point,
+    PointStamped,
+    Pose,
     SENSOR,
     ROOT,
     DiagnosticArray,
@@ -32,6 +36,7 @@ from ros2_peer import (
     start_drive,
     start_plant,
     until,
+    valid,
 )
 
 ROOT_ROBOTS = ROOT / "robots"
@@ -250,11 +255,16 @@ def test_tendril_drives_a_robot_on_ros_2_along_its_circle(tmp_path, binary, doma
     drive = start_drive(domain, "--robot", "robots/seed-4t.toml", "--model",
                         "firmware/vectors/default.tnet", "--duration", "6", "--stats", str(stats_path))
     try:
-        robot = StaticsRobot(Peer(domain), tendril.Robot.load(ROOT_ROBOTS / "seed-4t.toml"))
+        peer = Peer(domain)
+        diagnostics = peer.reader("/diagnostics", DiagnosticArray, RELIABLE)
+        robot = StaticsRobot(peer, tendril.Robot.load(ROOT_ROBOTS / "seed-4t.toml"))
         robot.serve(20.0, until_done=drive)
     finally:
         out, err = drive.communicate(timeout=30)
     assert drive.returncode == 0, err
+    status = [d.status[0] for d in valid(diagnostics.take(N=100))]
+    assert status and status[-1].name == "tendril_drive", status
+    assert status[-1].level == 0 and status[-1].message == "tracking", status[-1]
     s = json.loads(stats_path.read_text())
     assert s["hold_periods"] == 0 and s["stale_periods"] == 0, s
     assert s["joint_states_refused"] == 0, s
@@ -263,12 +273,63 @@ def test_tendril_drives_a_robot_on_ros_2_along_its_circle(tmp_path, binary, doma
     assert robot.received >= s["periods"] * 0.9, (robot.received, s)
 
 
+def test_targets_from_a_topic_are_reached_and_bad_ones_refused(tmp_path, binary, domain):
+    """`drive --target-topic`: targets sent as PointStamped and PoseStamped
+    are reached by shaped moves and held; a NaN target, one in another
+    frame and one out of reach are refused, counted, and change nothing."""
+    stats_path = tmp_path / "drive.json"
+    drive = start_drive(domain, "--robot", "robots/seed-4t.toml", "--model",
+                        "firmware/vectors/default.tnet", "--target-topic", "--duration", "7",
+                        "--stats", str(stats_path))
+    a, b = (0.010, 0.005), (-0.008, 0.004)
+    tips = {}
+    try:
+        peer = Peer(domain)
+        points = peer.writer("target_point", PointStamped, RELIABLE)
+        poses = peer.writer("target_pose", PoseStamped, RELIABLE)
+        robot = StaticsRobot(peer, tendril.Robot.load(ROOT_ROBOTS / "seed-4t.toml"))
+
+        def point(x, y, frame="tracker"):
+            points.write(PointStamped(header=Header(frame_id=frame), point=Point(x=x, y=y, z=0.0)))
+
+        def bad_ones():
+            point(math.nan, 0.0)
+            point(0.002, 0.0, frame="map")
+            point(0.5, 0.0)
+
+        def pose_b():
+            poses.write(PoseStamped(header=Header(frame_id="tracker"),
+                                    pose=Pose(position=Point(x=b[0], y=b[1], z=0.0))))
+
+        robot.serve(40.0, until_done=drive, events=[
+            (2.5, lambda: point(*a)),
+            (5.0, lambda: tips.setdefault("a", robot.last_tip.copy())),
+            (5.1, bad_ones),
+            (5.6, lambda: tips.setdefault("a after bad ones", robot.last_tip.copy())),
+            (6.0, pose_b),
+            (8.5, lambda: tips.setdefault("b", robot.last_tip.copy())),
+        ])
+    finally:
+        out, err = drive.communicate(timeout=30)
+    assert drive.returncode == 0, err
+    s = json.loads(stats_path.read_text())
+    assert s["targets"] == 2, s
+    assert (s["targets_refused_not_finite"], s["targets_refused_frame"],
+            s["targets_refused_out_of_reach"]) == (1, 1, 1), s
+    for name, (x, y) in [("a", a), ("a after bad ones", a), ("b", b)]:
+        assert name in tips, tips
+        lateral = math.hypot(tips[name][0] - x, tips[name][1] - y)
+        assert lateral < 5e-5, f"{name}: tip {tips[name][:3]}, {lateral * 1e3:.3f} mm from the target"
+
+
 def test_a_robot_that_falls_silent_is_marked_stale_and_no_robot_is_an_error(tmp_path, binary, domain):
     stats_path = tmp_path / "drive.json"
     drive = start_drive(domain, "--robot", "robots/seed-4t.toml", "--model",
                         "firmware/vectors/default.tnet", "--duration", "4", "--stats", str(stats_path))
     try:
-        robot = StaticsRobot(Peer(domain), tendril.Robot.load(ROOT_ROBOTS / "seed-4t.toml"))
+        peer = Peer(domain)
+        diagnostics = peer.reader("/diagnostics", DiagnosticArray, RELIABLE)
+        robot = StaticsRobot(peer, tendril.Robot.load(ROOT_ROBOTS / "seed-4t.toml"))
         # Answer until 1 s into the path (its clock starts at the first
         # answer, then a 2 s settle), then say nothing: the period's rule
         # for a silent plant (as over iceoryx2) marks it stale after 20
@@ -281,6 +342,8 @@ def test_a_robot_that_falls_silent_is_marked_stale_and_no_robot_is_an_error(tmp_
     silent_periods = (4.0 - 1.0) * 200
     assert s["stale_periods"] >= 0.8 * silent_periods, s
     assert s["stale_periods"] <= silent_periods + 40, s
+    status = [d.status[0] for d in valid(diagnostics.take(N=100))]
+    assert status and status[-1].level == 1 and "silent" in status[-1].message, status[-1:]
     # Nobody there at all: refused after the wait, with what was missing.
     lonely = start_drive(domain + 1, "--model", "firmware/vectors/default.tnet", "--wait-for-robot", "2")
     out, err = lonely.communicate(timeout=30)

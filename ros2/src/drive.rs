@@ -23,8 +23,12 @@ use tendril::ipc::planner::{plan, setpoint_for, Planned, PlannerConfig};
 use tendril::robot::RigidMap;
 use tendril_shared::messages::{command_status, Header as MsgHeader, PlantState, MAX_TENDONS};
 
-use crate::msg::{Float64MultiArray, Header, JointState, PoseStamped, Time};
+use crate::msg::{
+    DiagnosticArray, DiagnosticStatus, Float64MultiArray, Header, JointState, KeyValue,
+    PointStamped, PoseStamped, Time,
+};
 use crate::node::RosNode;
+use crate::targets::{Refusal, TargetFollower};
 use crate::topics;
 use crate::Ros2Error;
 
@@ -46,6 +50,9 @@ pub struct DriveConfig {
     /// How long to wait for the robot's first joint state and tip pose
     /// before the path starts, s.
     pub wait_for_robot_s: f64,
+    /// Follow targets from `target_point` / `target_pose` instead of the
+    /// planner's path ([`crate::targets`]).
+    pub target_topic: bool,
 }
 
 /// What the drive measured and counted, written as JSON at exit.
@@ -82,13 +89,24 @@ pub struct DriveStats {
     pub tracking_max_mm: Option<f64>,
     /// Tip poses in the tracking figures.
     pub tracked_frames: u64,
+    /// Targets taken from the topics (`--target-topic`).
+    pub targets: u64,
+    /// Targets refused: a coordinate not finite.
+    pub targets_refused_not_finite: u64,
+    /// Targets refused: not in the tracker's frame.
+    pub targets_refused_frame: u64,
+    /// Targets refused: out of the robot's reach.
+    pub targets_refused_out_of_reach: u64,
 }
 
 struct Endpoints {
     commands: Publisher<Float64MultiArray>,
     commanded: Publisher<JointState>,
+    diagnostics: Publisher<DiagnosticArray>,
     joint_states: Subscription<JointState>,
     tip_pose: Subscription<PoseStamped>,
+    target_point: Subscription<PointStamped>,
+    target_pose: Subscription<PoseStamped>,
 }
 
 /// The newest feedback from the robot, as the controller's plant state.
@@ -102,6 +120,8 @@ struct Feedback {
 /// The drive: set up once, one [`Drive::period`] per tick.
 pub struct Drive {
     planned: Planned,
+    /// Targets from the topics, when they replace the planner's path.
+    targets: Option<TargetFollower>,
     ctl: Controller,
     ticker: Ticker,
     ends: Endpoints,
@@ -113,6 +133,8 @@ pub struct Drive {
     end_s: f64,
     feedback: Feedback,
     overran: bool,
+    /// Periods between `/diagnostics` messages (one a second).
+    diagnostics_every: u64,
     names: Vec<String>,
     sum_sq: f64,
     stats: DriveStats,
@@ -134,8 +156,15 @@ impl Drive {
         let ends = Endpoints {
             commands: node.publisher(&topics::COMMANDS)?,
             commanded: node.publisher(&topics::COMMANDED)?,
+            diagnostics: node.publisher(&topics::DIAGNOSTICS)?,
             joint_states: node.subscription(&topics::JOINT_STATES)?,
             tip_pose: node.subscription(&topics::TIP_POSE)?,
+            target_point: node.subscription(&topics::TARGET_POINT)?,
+            target_pose: node.subscription(&topics::TARGET_POSE)?,
+        };
+        let targets = match cfg.target_topic {
+            true => Some(TargetFollower::new(&robot, robot.base.to_base())?),
+            false => None,
         };
         let period_ns = (1e9 / cfg.controller.rate_hz).round() as u64;
         let start = now_ns() + period_ns;
@@ -148,6 +177,7 @@ impl Drive {
             to_base: robot.base.to_base(),
             to_tracker: planned.base.to_tracker(),
             planned,
+            targets,
             settle_s: cfg.planner.settle_s,
             end_s: cfg.planner.settle_s + cfg.duration_s,
             feedback: Feedback {
@@ -157,6 +187,7 @@ impl Drive {
                 seq: 0,
             },
             overran: false,
+            diagnostics_every: cfg.controller.rate_hz.round().max(1.0) as u64,
             names: (0..robot.n_tendons())
                 .map(|i| format!("tendon_{i}"))
                 .collect(),
@@ -283,11 +314,19 @@ impl Drive {
         if t < self.settle_s || t > self.end_s {
             return;
         }
-        let desired = self.planned.motion.at(t);
-        if desired.holding || desired.moving {
-            return;
-        }
-        let want = self.to_tracker.pose(desired.point.pose);
+        let want = match &self.targets {
+            Some(f) => match f.holding() {
+                Some(pose) => self.to_tracker.pose(pose),
+                None => return,
+            },
+            None => {
+                let desired = self.planned.motion.at(t);
+                if desired.holding || desired.moving {
+                    return;
+                }
+                self.to_tracker.pose(desired.point.pose)
+            }
+        };
         let e = (0..3)
             .map(|k| (tip[k] - want[k]).powi(2))
             .sum::<f64>()
@@ -304,8 +343,13 @@ impl Drive {
         let tick = self.ticker.wait(0);
         let t_wake = now_ns();
         let t = self.since_start(tick.deadline_ns);
-        let desired = self.planned.motion.at(t);
-        let mut setpoint = setpoint_for(&self.planned.motion, t, &desired, None);
+        let mut setpoint = match self.targets.is_some() {
+            true => self.target_setpoint(t),
+            false => {
+                let desired = self.planned.motion.at(t);
+                setpoint_for(&self.planned.motion, t, &desired, None)
+            }
+        };
         setpoint.header = MsgHeader {
             seq: tick.index + 1,
             stamp_ns: t_wake,
@@ -336,11 +380,84 @@ impl Drive {
             data: tensions,
             ..Float64MultiArray::default()
         });
+        if tick.index.is_multiple_of(self.diagnostics_every) {
+            let _ = self.ends.diagnostics.publish(self.diagnostics(cmd.status));
+        }
         let t_done = now_ns();
         self.overran = self.ticker.finish(t_done);
         self.ctl.finish(t_done - t_wake);
         self.stats.periods += 1;
         t < self.end_s
+    }
+
+    /// Take the targets that arrived (each, in order: a refused one leaves
+    /// the last accepted in force) and return the setpoint at `t`.
+    fn target_setpoint(&mut self, t: f64) -> tendril_shared::messages::Setpoint {
+        let Some(follower) = self.targets.as_mut() else {
+            return Default::default();
+        };
+        let mut offered: Vec<(crate::msg::Point, String)> = Vec::new();
+        while let Ok(Some((p, _))) = self.ends.target_point.take() {
+            offered.push((p.point, p.header.frame_id));
+        }
+        while let Ok(Some((p, _))) = self.ends.target_pose.take() {
+            offered.push((p.pose.position, p.header.frame_id));
+        }
+        for (point, frame) in offered {
+            match follower.offer(&point, &frame, t) {
+                Ok(()) => self.stats.targets += 1,
+                Err(Refusal::NotFinite) => self.stats.targets_refused_not_finite += 1,
+                Err(Refusal::Frame) => self.stats.targets_refused_frame += 1,
+                Err(Refusal::OutOfReach) => self.stats.targets_refused_out_of_reach += 1,
+            }
+        }
+        follower.setpoint(t)
+    }
+
+    /// The period's status and counters for `/diagnostics` (once a second:
+    /// the controller's statistics are gathered here, not in every period).
+    fn diagnostics(&self, status: u32) -> DiagnosticArray {
+        let s = self.stats();
+        let c = self.ctl.stats(&self.ticker);
+        let (level, message) = if status & command_status::SAFE_HOLD != 0 {
+            (DiagnosticStatus::ERROR, "safe hold")
+        } else if status & command_status::PLANT_STALE != 0 && c.plant_stale_cycles > 0 {
+            (
+                DiagnosticStatus::WARN,
+                "the robot is silent: correction frozen",
+            )
+        } else if s.joint_states_refused + s.tip_poses_refused > 0 {
+            (DiagnosticStatus::WARN, "feedback refused")
+        } else {
+            (DiagnosticStatus::OK, "tracking")
+        };
+        let kv = |key: &str, value: String| KeyValue {
+            key: key.into(),
+            value,
+        };
+        let rms = s.tracking_rms_mm.map_or("—".into(), |r| format!("{r:.4}"));
+        DiagnosticArray {
+            header: Header::now(""),
+            status: vec![DiagnosticStatus {
+                level,
+                name: "tendril_drive".into(),
+                message: message.into(),
+                hardware_id: "tendril controller (host period)".into(),
+                values: vec![
+                    kv("status_bits", format!("{status:#x}")),
+                    kv("periods", s.periods.to_string()),
+                    kv("overruns", s.overruns.to_string()),
+                    kv("hold_periods", c.hold_cycles.to_string()),
+                    kv("stale_periods", c.plant_stale_cycles.to_string()),
+                    kv("saturated_periods", c.saturated_cycles.to_string()),
+                    kv("joint_states", s.joint_states.to_string()),
+                    kv("joint_states_refused", s.joint_states_refused.to_string()),
+                    kv("tip_poses", s.tip_poses.to_string()),
+                    kv("tip_poses_refused", s.tip_poses_refused.to_string()),
+                    kv("tracking_rms_mm", rms),
+                ],
+            }],
+        }
     }
 
     /// The statistics so far.
@@ -418,6 +535,7 @@ mod tests {
             namespace: "/".into(),
             stats: None,
             wait_for_robot_s: 1.0,
+            target_topic: false,
         };
         let e = Drive::new(&cfg)
             .err()

@@ -7,12 +7,14 @@
 //! - [`topics`]: the one table of topic names, types and QoS, and the frames;
 //! - [`node`]: joining the domain of `ROS_DOMAIN_ID`;
 //! - [`plant`]: `tendril-ros2 plant`, the plant node;
-//! - [`drive`]: `tendril-ros2 drive`, the planner and controller against a robot on ROS 2.
+//! - [`drive`]: `tendril-ros2 drive`, the planner and controller against a robot on ROS 2;
+//! - [`targets`]: `drive`'s targets from a topic.
 
 pub mod drive;
 pub mod msg;
 pub mod node;
 pub mod plant;
+pub mod targets;
 pub mod topics;
 
 /// What can go wrong on the ROS 2 side.

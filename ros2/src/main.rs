@@ -71,6 +71,12 @@ struct DriveArgs {
     /// (discovery, then its first answer to the rest tensions), s.
     #[arg(long, default_value_t = 15.0)]
     wait_for_robot: f64,
+    /// Follow targets from the topics target_point (PointStamped) and
+    /// target_pose (PoseStamped; its position) in the tracker's frame
+    /// instead of --trajectory: each is reached by a shaped move and held;
+    /// one out of reach, not finite or in another frame is refused.
+    #[arg(long)]
+    target_topic: bool,
 }
 
 /// `drive`'s control rate without `--rate`, Hz.
@@ -106,6 +112,7 @@ impl DriveArgs {
             namespace: self.namespace,
             stats: self.stats,
             wait_for_robot_s: self.wait_for_robot,
+            target_topic: self.target_topic,
         })
     }
 }

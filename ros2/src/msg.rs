@@ -170,6 +170,15 @@ pub struct PoseStamped {
     pub pose: Pose,
 }
 
+/// `geometry_msgs/PointStamped`: a target for the tip.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PointStamped {
+    /// Stamp and frame.
+    pub header: Header,
+    /// The point, m.
+    pub point: Point,
+}
+
 /// `geometry_msgs/Vector3`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Vector3 {
@@ -275,6 +284,7 @@ pub struct DiagnosticArray {
 impl Message for JointState {}
 impl Message for Float64MultiArray {}
 impl Message for PoseStamped {}
+impl Message for PointStamped {}
 impl Message for TfMessage {}
 impl Message for Path {}
 impl Message for DiagnosticArray {}

@@ -125,7 +125,7 @@ pub const DIAGNOSTICS: TopicSpec = TopicSpec {
     package: "diagnostic_msgs",
     type_name: "DiagnosticArray",
     qos: Qos::Reliable,
-    what: "the plant's status and its counters (steps, commands taken and refused)",
+    what: "the node's status and counters (plant: steps, commands taken and refused; drive: the period's holds, stale periods, feedback refused, tracking)",
 };
 
 /// Every topic `tendril-ros2 plant` uses, commands first.
@@ -139,8 +139,34 @@ pub const PLANT_TOPICS: [TopicSpec; 7] = [
     DIAGNOSTICS,
 ];
 
+/// Targets for the tip (`drive --target-topic`), in the tracker's frame.
+pub const TARGET_POINT: TopicSpec = TopicSpec {
+    name: "target_point",
+    package: "geometry_msgs",
+    type_name: "PointStamped",
+    qos: Qos::Reliable,
+    what: "a target for the tip, frame `tracker` (`drive --target-topic`)",
+};
+
+/// Targets as poses: the position is used (`drive --target-topic`).
+pub const TARGET_POSE: TopicSpec = TopicSpec {
+    name: "target_pose",
+    package: "geometry_msgs",
+    type_name: "PoseStamped",
+    qos: Qos::Reliable,
+    what: "a target for the tip as a pose (its position; the orientation follows from the robot), frame `tracker`",
+};
+
 /// Every topic `tendril-ros2 drive` uses.
-pub const DRIVE_TOPICS: [TopicSpec; 4] = [COMMANDS, COMMANDED, JOINT_STATES, TIP_POSE];
+pub const DRIVE_TOPICS: [TopicSpec; 7] = [
+    COMMANDS,
+    COMMANDED,
+    JOINT_STATES,
+    TIP_POSE,
+    TARGET_POINT,
+    TARGET_POSE,
+    DIAGNOSTICS,
+];
 
 /// Frame ids (REP 103 units, REP 105 names).
 pub mod frames {
