@@ -251,9 +251,10 @@ def test_tendril_drives_a_robot_on_ros_2_along_its_circle(tmp_path, binary, doma
     tracker), tendril's planner and controller send it tensions at 200 Hz.
     The tip follows the circle as in the iceoryx2 loop on the ideal plant
     (0.03–0.04 mm there; the issue's bound 0.1 mm)."""
-    stats_path = tmp_path / "drive.json"
+    stats_path, mcap_path = tmp_path / "drive.json", tmp_path / "run.mcap"
     drive = start_drive(domain, "--robot", "robots/seed-4t.toml", "--model",
-                        "firmware/vectors/default.tnet", "--duration", "6", "--stats", str(stats_path))
+                        "firmware/vectors/default.tnet", "--duration", "6", "--stats", str(stats_path),
+                        "--mcap", str(mcap_path))
     try:
         peer = Peer(domain)
         diagnostics = peer.reader("/diagnostics", DiagnosticArray, RELIABLE)
@@ -271,6 +272,16 @@ def test_tendril_drives_a_robot_on_ros_2_along_its_circle(tmp_path, binary, doma
     assert s["tracked_frames"] > 0.8 * 6 * 200, s
     assert s["tracking_rms_mm"] <= 0.1, s
     assert robot.received >= s["periods"] * 0.9, (robot.received, s)
+    # The run log, read by the mcap package (not tendril): one tensions and
+    # one tracking message a period, as the plant logs them in a sim, and
+    # the status (written when it changes or every so often).
+    from mcap.reader import make_reader
+
+    with open(mcap_path, "rb") as f:
+        topics = [channel.topic for _, channel, _ in make_reader(f).iter_messages()]
+    for topic in ("/tensions", "/tracking"):
+        assert topics.count(topic) >= 0.9 * s["periods"], (topic, topics.count(topic), s["periods"])
+    assert topics.count("/status") > 0
 
 
 def test_targets_from_a_topic_are_reached_and_bad_ones_refused(tmp_path, binary, domain):

@@ -21,6 +21,7 @@ use tendril::ipc::clock::{now_ns, Ticker};
 use tendril::ipc::controller::{Controller, ControllerConfig, Inbox};
 use tendril::ipc::planner::{plan, setpoint_for, Planned, PlannerConfig};
 use tendril::robot::RigidMap;
+use tendril::runlog::{RunLog, RunLogConfig, RunLogStats, StepRecord};
 use tendril_shared::messages::{command_status, Header as MsgHeader, PlantState, MAX_TENDONS};
 
 use crate::msg::{
@@ -53,6 +54,11 @@ pub struct DriveConfig {
     /// Follow targets from `target_point` / `target_pose` instead of the
     /// planner's path ([`crate::targets`]).
     pub target_topic: bool,
+    /// The run's MCAP file and live view (`docs/design.md` §12): the
+    /// commanded and measured tensions, the tracker's tip against the
+    /// setpoint, the status — what the plant logs in `tendril sim`, less
+    /// the rod's true shape, which only the robot knows.
+    pub runlog: RunLogConfig,
 }
 
 /// What the drive measured and counted, written as JSON at exit.
@@ -122,6 +128,7 @@ pub struct Drive {
     planned: Planned,
     /// Targets from the topics, when they replace the planner's path.
     targets: Option<TargetFollower>,
+    runlog: Option<RunLog>,
     ctl: Controller,
     ticker: Ticker,
     ends: Endpoints,
@@ -178,6 +185,12 @@ impl Drive {
             to_tracker: planned.base.to_tracker(),
             planned,
             targets,
+            runlog: match cfg.runlog.enabled() {
+                true => {
+                    Some(RunLog::start(&cfg.runlog).map_err(|e| Ros2Error::Output(e.to_string()))?)
+                }
+                false => None,
+            },
             settle_s: cfg.planner.settle_s,
             end_s: cfg.planner.settle_s + cfg.duration_s,
             feedback: Feedback {
@@ -368,6 +381,26 @@ impl Drive {
             self.stats.hold_periods += 1;
         }
         let tensions: Vec<f64> = cmd.tensions[..self.n].iter().map(|&v| v as f64).collect();
+        if let Some(log) = &self.runlog {
+            // The tracker's tip as it came (its frame); the setpoint is in
+            // the model's base frame.
+            let tip = self.feedback.tip.map(|(p, _)| p.map(f64::from));
+            log.step(StepRecord {
+                t_ns: tick.deadline_ns.saturating_sub(self.ticker.start_ns()),
+                command_seq: cmd.header.seq,
+                controller_status: cmd.status,
+                plant_status: 0,
+                commanded: tensions.clone(),
+                measured: self.feedback.tensions.map_or_else(Vec::new, |t| {
+                    t[..self.n].iter().map(|&v| f64::from(v)).collect()
+                }),
+                // The robot's true tip is the robot's own: the tracker's
+                // frame stands for it.
+                tip: tip.unwrap_or([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]),
+                frame: tip,
+                desired: Some(self.to_tracker.pose(setpoint.pose.map(f64::from))),
+            });
+        }
         // A full reliable queue (a peer gone) loses this command; the next
         // period sends a newer one, and the robot's driver holds the last.
         let _ = self.ends.commanded.publish(JointState {
@@ -483,11 +516,24 @@ fn wall_age_ns(stamp: &Time) -> u64 {
     now.saturating_sub(then).as_nanos() as u64
 }
 
-/// Run the drive until the path ends or `stop`; writes the statistics.
+/// Run the drive until the path ends or `stop`; writes the statistics and
+/// closes the run log.
 pub fn run(cfg: &DriveConfig, stop: &AtomicBool) -> Result<DriveStats, Ros2Error> {
     let mut drive = Drive::new(cfg)?;
     while !stop.load(Ordering::Relaxed) && drive.period() {}
     let stats = drive.stats();
+    let logged: Option<RunLogStats> = drive
+        .runlog
+        .take()
+        .map(RunLog::finish)
+        .transpose()
+        .map_err(|e| Ros2Error::Output(e.to_string()))?;
+    if let Some(l) = logged.filter(|l| l.dropped > 0) {
+        log::warn!(
+            "drive: the run log dropped {} records (its writer fell behind)",
+            l.dropped
+        );
+    }
     if let Some(path) = &cfg.stats {
         let json = serde_json::to_vec_pretty(&stats)
             .map_err(|e| Ros2Error::Config(format!("statistics: {e}")))?;
@@ -536,6 +582,7 @@ mod tests {
             stats: None,
             wait_for_robot_s: 1.0,
             target_topic: false,
+            runlog: RunLogConfig::default(),
         };
         let e = Drive::new(&cfg)
             .err()

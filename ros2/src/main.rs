@@ -77,6 +77,10 @@ struct DriveArgs {
     /// one out of reach, not finite or in another frame is refused.
     #[arg(long)]
     target_topic: bool,
+    /// The run's MCAP file (tensions, the tracker's tip against the
+    /// setpoint, status; open it in Foxglove, or `tendril plot`).
+    #[arg(long)]
+    mcap: Option<PathBuf>,
 }
 
 /// `drive`'s control rate without `--rate`, Hz.
@@ -113,6 +117,10 @@ impl DriveArgs {
             stats: self.stats,
             wait_for_robot_s: self.wait_for_robot,
             target_topic: self.target_topic,
+            runlog: tendril::runlog::RunLogConfig {
+                mcap: self.mcap,
+                ..Default::default()
+            },
         })
     }
 }
