@@ -7,6 +7,7 @@ refused and counted."""
 import json
 import math
 import os
+import signal
 import time
 
 import numpy as np
@@ -359,3 +360,9 @@ def test_a_robot_that_falls_silent_is_marked_stale_and_no_robot_is_an_error(tmp_
     lonely = start_drive(domain + 1, "--model", "firmware/vectors/default.tnet", "--wait-for-robot", "2")
     out, err = lonely.communicate(timeout=30)
     assert lonely.returncode != 0 and "no robot answered" in err and "joint_states" in err, err
+    # Ctrl-C while it waits: at once, status 130, said.
+    waiting = start_drive(domain + 2, "--model", "firmware/vectors/default.tnet")
+    time.sleep(1.5)
+    waiting.send_signal(signal.SIGINT)
+    out, err = waiting.communicate(timeout=10)
+    assert waiting.returncode == 130 and "interrupted by SIGINT" in err, (waiting.returncode, err)

@@ -148,8 +148,9 @@ pub struct Drive {
 }
 
 impl Drive {
-    /// Plan the path, load the net, join the graph.
-    pub fn new(cfg: &DriveConfig) -> Result<Drive, Ros2Error> {
+    /// Plan the path, load the net, join the graph, wait for the robot
+    /// (until `stop`).
+    pub fn new(cfg: &DriveConfig, stop: &AtomicBool) -> Result<Drive, Ros2Error> {
         if !(cfg.duration_s.is_finite() && cfg.duration_s > 0.0) {
             return Err(Ros2Error::Config(format!(
                 "--duration {}: expected a number of seconds > 0",
@@ -207,7 +208,7 @@ impl Drive {
             sum_sq: 0.0,
             stats: DriveStats::default(),
         };
-        drive.stats.first_feedback_s = drive.wait_for_robot(&robot.min_tensions(), cfg)?;
+        drive.stats.first_feedback_s = drive.wait_for_robot(&robot.min_tensions(), cfg, stop)?;
         // The path's clock starts now, with the robot heard from.
         let start = now_ns() + period_ns;
         drive.ctl = Controller::new(&cfg.controller, &robot, &bytes, start).map_err(err)?;
@@ -220,9 +221,17 @@ impl Drive {
     /// pose, as a robot's driver and tracker do once they have discovered
     /// this node; returns the seconds that took. What they sent is the
     /// first period's feedback.
-    fn wait_for_robot(&mut self, rest: &[f64], cfg: &DriveConfig) -> Result<f64, Ros2Error> {
+    fn wait_for_robot(
+        &mut self,
+        rest: &[f64],
+        cfg: &DriveConfig,
+        stop: &AtomicBool,
+    ) -> Result<f64, Ros2Error> {
         let start = std::time::Instant::now();
         while self.feedback.tensions.is_none() || self.feedback.tip.is_none() {
+            if stop.load(Ordering::Relaxed) {
+                return Err(Ros2Error::Interrupted("while waiting for the robot".into()));
+            }
             if start.elapsed().as_secs_f64() > cfg.wait_for_robot_s {
                 let heard = match (self.feedback.tensions, self.feedback.tip) {
                     (None, None) => "neither a joint state nor a tip pose",
@@ -519,7 +528,7 @@ fn wall_age_ns(stamp: &Time) -> u64 {
 /// Run the drive until the path ends or `stop`; writes the statistics and
 /// closes the run log.
 pub fn run(cfg: &DriveConfig, stop: &AtomicBool) -> Result<DriveStats, Ros2Error> {
-    let mut drive = Drive::new(cfg)?;
+    let mut drive = Drive::new(cfg, stop)?;
     while !stop.load(Ordering::Relaxed) && drive.period() {}
     let stats = drive.stats();
     let logged: Option<RunLogStats> = drive
@@ -539,6 +548,13 @@ pub fn run(cfg: &DriveConfig, stop: &AtomicBool) -> Result<DriveStats, Ros2Error
             .map_err(|e| Ros2Error::Config(format!("statistics: {e}")))?;
         tendril::fsutil::write_atomic(path, &json)
             .map_err(|e| Ros2Error::Output(format!("{}: {e}", path.display())))?;
+    }
+    if stop.load(Ordering::Relaxed) {
+        // Whole files, of a run cut short: said, and the exit status says it.
+        return Err(Ros2Error::Interrupted(format!(
+            "after {} periods; the statistics and the run log cover them",
+            stats.periods
+        )));
     }
     Ok(stats)
 }
@@ -584,7 +600,7 @@ mod tests {
             target_topic: false,
             runlog: RunLogConfig::default(),
         };
-        let e = Drive::new(&cfg)
+        let e = Drive::new(&cfg, &AtomicBool::new(false))
             .err()
             .map(|e| e.to_string())
             .unwrap_or_default();

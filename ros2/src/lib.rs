@@ -29,4 +29,7 @@ pub enum Ros2Error {
     /// An output could not be written.
     #[error("{0}")]
     Output(String),
+    /// A signal asked to stop before the work began; nothing was written.
+    #[error("interrupted {0}")]
+    Interrupted(String),
 }

@@ -300,6 +300,14 @@ fn main() -> ExitCode {
     }
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
+        Err(e) if tendril::interrupt::stop_requested() => {
+            let by = tendril::interrupt::stopped_by().unwrap_or("a stop request");
+            eprintln!(
+                "tendril-ros2: interrupted by {by}: {}",
+                tendril::cli::console::error_line(&e)
+            );
+            ExitCode::from(tendril::interrupt::EXIT_INTERRUPTED)
+        }
         Err(e) => {
             eprintln!(
                 "tendril-ros2: error: {}",
