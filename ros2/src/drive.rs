@@ -142,6 +142,9 @@ pub struct Drive {
     overran: bool,
     /// Periods between `/diagnostics` messages (one a second).
     diagnostics_every: u64,
+    /// Spin this long before each deadline instead of sleeping, ns
+    /// (`--spin-us`).
+    spin_ns: u64,
     names: Vec<String>,
     sum_sq: f64,
     stats: DriveStats,
@@ -202,6 +205,7 @@ impl Drive {
             },
             overran: false,
             diagnostics_every: cfg.controller.rate_hz.round().max(1.0) as u64,
+            spin_ns: (cfg.controller.spin_us.max(0.0) * 1e3) as u64,
             names: (0..robot.n_tendons())
                 .map(|i| format!("tendon_{i}"))
                 .collect(),
@@ -362,7 +366,7 @@ impl Drive {
 
     /// One period; returns whether the run goes on.
     pub fn period(&mut self) -> bool {
-        let tick = self.ticker.wait(0);
+        let tick = self.ticker.wait(self.spin_ns);
         let t_wake = now_ns();
         let t = self.since_start(tick.deadline_ns);
         let mut setpoint = match self.targets.is_some() {

@@ -45,6 +45,12 @@ enum Command {
 }
 
 #[derive(Args, Debug)]
+#[command(mut_arg("rate", |a| a.help(format!(
+    "Control rate, Hz [default: {DRIVE_RATE_HZ}: a ROS 2 robot's driver rarely takes more]"
+))))]
+#[command(mut_arg("realtime", |a| a.help(
+    "Not for drive: it runs at normal priority beside DDS's threads (given `on`, refused)"
+)))]
 struct DriveArgs {
     /// Robot description file (the controller's model of the robot).
     #[arg(long, default_value = tendril::robot::DEFAULT_ROBOT)]
@@ -57,8 +63,8 @@ struct DriveArgs {
     duration: f64,
     #[command(flatten)]
     path: TrajectoryOpts,
-    /// The controller's options, as `tendril controller`'s, but --rate
-    /// defaults to 200 Hz here (a ROS 2 robot's driver rarely takes more).
+    /// The controller's options, as `tendril controller`'s (--rate: 200 Hz
+    /// here, a ROS 2 robot's driver rarely takes more).
     #[command(flatten)]
     control: LoopOpts,
     /// The node's namespace: its relative topics live under it.
@@ -91,6 +97,12 @@ impl DriveArgs {
         if self.path.learn == OnOff::On {
             anyhow::bail!(
                 "--learn on: learning for repeated paths runs in `tendril sim`'s planner, not yet in drive"
+            );
+        }
+        if self.control.realtime == Some(OnOff::On) {
+            anyhow::bail!(
+                "--realtime on: drive runs at normal priority (its period shares the CPU with \
+                 DDS's threads, which a SCHED_FIFO loop would starve); leave it out"
             );
         }
         let mut controller = ControllerConfig::new(self.robot.clone(), self.model);

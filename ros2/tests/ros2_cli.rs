@@ -17,6 +17,9 @@ fn the_help_names_the_plant_and_bad_settings_are_refused_by_name() {
     let help = ros2(&["--help"]);
     assert!(help.status.success());
     assert!(String::from_utf8_lossy(&help.stdout).contains("plant"));
+    // drive's rate is its own (200 Hz), not `tendril controller`'s 1 kHz.
+    let drive = ros2(&["drive", "--help"]);
+    assert!(String::from_utf8_lossy(&drive.stdout).contains("[default: 200"));
     for (args, named) in [
         (&["plant", "--rate", "5000"][..], "--rate"),
         (&["plant", "--scene-hz", "0"][..], "--scene-hz"),
