@@ -140,6 +140,11 @@ def test_a_cyclone_dds_controller_drives_the_plant_and_reads_the_statics_tip(
         transforms = until(3.0, lambda: tf.take(N=100))
         assert transforms and transforms[-1].transforms[0].child_frame_id == "tip"
         assert transforms[-1].transforms[0].header.frame_id == "base_link"
+        # The robot file has no [base]: base_link is the tracker's frame, so
+        # the tip's transform is the tip the tracker reports.
+        moved = transforms[-1].transforms[0].transform.translation
+        assert np.linalg.norm([moved.x - measured[-1][0], moved.y - measured[-1][1],
+                               moved.z - measured[-1][2]]) < 5e-6
         statics = until(5.0, lambda: tf_static.take(N=10))
         assert statics, "no /tf_static"
         base = statics[-1].transforms[0]

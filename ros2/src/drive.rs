@@ -179,6 +179,8 @@ impl Drive {
         };
         let period_ns = (1e9 / cfg.controller.rate_hz).round() as u64;
         let start = now_ns() + period_ns;
+        // This controller checks the settings before the wait (a bad one is
+        // refused at once); the path's own is made when the robot answers.
         let mut drive = Drive {
             ctl: Controller::new(&cfg.controller, &robot, &bytes, start).map_err(err)?,
             ticker: Ticker::new(start, period_ns),
@@ -275,6 +277,7 @@ impl Drive {
     /// Take the newest joint state and tip pose; returns the plant state
     /// when anything new arrived and both kinds have been seen.
     fn take_feedback(&mut self, t_wake: u64) -> Option<PlantState> {
+        // The first period takes what the wait for the robot took.
         let mut fresh = self.stats.periods == 0;
         while let Ok(Some((js, _))) = self.ends.joint_states.take() {
             if js.effort.len() == self.n && js.effort.iter().all(|t| t.is_finite()) {

@@ -20,15 +20,18 @@ pub struct Time {
 }
 
 impl Time {
-    /// The wall clock now (ROS 2's system time).
-    pub fn now() -> Time {
-        let d = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .unwrap_or_default();
+    /// The wall-clock time `t` (seconds since the epoch; 0 before it).
+    pub fn from_system(t: std::time::SystemTime) -> Time {
+        let d = t.duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
         Time {
             sec: i32::try_from(d.as_secs()).unwrap_or(i32::MAX),
             nanosec: d.subsec_nanos(),
         }
+    }
+
+    /// The wall clock now (ROS 2's system time).
+    pub fn now() -> Time {
+        Time::from_system(std::time::SystemTime::now())
     }
 }
 

@@ -234,14 +234,7 @@ impl PlantNode {
 
     /// The wall-clock stamp of plant time `t_ns`.
     fn stamp(&self, t_ns: u64) -> Time {
-        let wall = self.wall_start + Duration::from_nanos(t_ns);
-        let d = wall
-            .duration_since(SystemTime::UNIX_EPOCH)
-            .unwrap_or_default();
-        Time {
-            sec: i32::try_from(d.as_secs()).unwrap_or(i32::MAX),
-            nanosec: d.subsec_nanos(),
-        }
+        Time::from_system(self.wall_start + Duration::from_nanos(t_ns))
     }
 
     fn publish(&mut self, now: Instant) {
@@ -303,7 +296,7 @@ impl PlantNode {
                 poses,
             });
         }
-        let tip_in_base = relative_pose(&self.model.base_pose(), &self.model.pose());
+        let tip_in_base = self.model.pose_in_base();
         let _ = self.ends.tf.publish(TfMessage {
             transforms: vec![TransformStamped {
                 header: header(frames::BASE),
@@ -352,30 +345,6 @@ impl PlantNode {
     }
 }
 
-/// `b`'s pose in `a`'s frame, both given in one frame as `[p, q(wxyz)]`.
-fn relative_pose(a: &[f64; 7], b: &[f64; 7]) -> [f64; 7] {
-    use nalgebra_glue::{iso, to_pose};
-    to_pose(&(iso(a).inverse() * iso(b)))
-}
-
-/// tendril's `[p, q]` poses as nalgebra isometries and back.
-mod nalgebra_glue {
-    use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
-
-    pub fn iso(p: &[f64; 7]) -> Isometry3<f64> {
-        Isometry3::from_parts(
-            Translation3::new(p[0], p[1], p[2]),
-            UnitQuaternion::from_quaternion(Quaternion::new(p[3], p[4], p[5], p[6])),
-        )
-    }
-
-    pub fn to_pose(i: &Isometry3<f64>) -> [f64; 7] {
-        let q = i.rotation.quaternion();
-        let t = i.translation.vector;
-        [t.x, t.y, t.z, q.w, q.i, q.j, q.k]
-    }
-}
-
 /// Run the plant node until `stop`, the duration, or an error; writes the
 /// statistics if asked.
 pub fn run(cfg: &PlantNodeConfig, stop: &AtomicBool) -> Result<PlantNodeStats, Ros2Error> {
@@ -409,30 +378,6 @@ pub fn run(cfg: &PlantNodeConfig, stop: &AtomicBool) -> Result<PlantNodeStats, R
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn a_pose_relative_to_itself_is_the_identity_and_to_a_shifted_base_the_shift() {
-        let a = [
-            0.1,
-            0.2,
-            0.3,
-            0.9238795325112867,
-            0.0,
-            0.0,
-            0.3826834323650898,
-        ];
-        let r = relative_pose(&a, &a);
-        for (got, want) in r.iter().zip([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]) {
-            assert!((got - want).abs() < 1e-12, "{r:?}");
-        }
-        // A base turned 90° about z: a tip 1 m along the frame's x is 1 m
-        // along the base's −y.
-        let h = std::f64::consts::FRAC_1_SQRT_2;
-        let base = [0.0, 0.0, 0.0, h, 0.0, 0.0, h];
-        let tip = [1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0];
-        let r = relative_pose(&base, &tip);
-        assert!((r[0]).abs() < 1e-12 && (r[1] + 1.0).abs() < 1e-12, "{r:?}");
-    }
 
     fn config() -> PlantNodeConfig {
         PlantNodeConfig {

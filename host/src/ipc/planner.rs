@@ -421,15 +421,8 @@ impl process::Task for PlannerTask<'_> {
             .feedforward(desired.t_path, &mut self.feedforward);
         let (learned, log_flags) =
             self.learn(desired.t_path, !desired.holding && !desired.moving)?;
-        let planned = setpoint_for(&self.motion, t, &desired, learned);
-        let (mut pose, mut velocity, mut flags) = (planned.pose, planned.velocity, planned.flags);
-        let (tangent, tangent_axes, tangent_dim, dynamic_offset) = (
-            planned.tangent,
-            planned.tangent_axes,
-            planned.tangent_dim,
-            planned.dynamic_offset,
-        );
-        let clean = pose;
+        let mut msg = setpoint_for(&self.motion, t, &desired, learned);
+        let clean = msg.pose;
         let mut injected = false;
         if self
             .inject
@@ -437,7 +430,7 @@ impl process::Task for PlannerTask<'_> {
             .iter()
             .any(|&a| t >= a && t < a + 1.0 / self.rate_hz)
         {
-            pose[0] = f32::NAN;
+            msg.pose[0] = f32::NAN;
             injected = true;
             log::warn!("planner: injecting a NaN setpoint at {t:.3} s");
         }
@@ -448,28 +441,18 @@ impl process::Task for PlannerTask<'_> {
             .any(|&a| t >= a && t < a + self.inject.outside_for_s)
         {
             // 1 m sideways: far outside any 0.4 m robot's reach.
-            pose[0] += 1.0;
+            msg.pose[0] += 1.0;
             injected = true;
-            velocity = [0.0; 7];
-            flags &= !(setpoint_flags::HAS_VELOCITY
+            msg.velocity = [0.0; 7];
+            msg.flags &= !(setpoint_flags::HAS_VELOCITY
                 | setpoint_flags::HAS_TANGENT
                 | setpoint_flags::HAS_DYNAMIC_OFFSET);
         }
         self.seq += 1;
         let stamp = now_ns();
-        let msg = Setpoint {
-            header: Header {
-                seq: self.seq,
-                stamp_ns: stamp,
-            },
-            pose,
-            velocity,
-            tangent,
-            tangent_axes,
-            tangent_dim,
-            flags,
-            dynamic_offset,
-            reserved: 0,
+        msg.header = Header {
+            seq: self.seq,
+            stamp_ns: stamp,
         };
         transport::send(
             &self.publisher,
@@ -479,7 +462,7 @@ impl process::Task for PlannerTask<'_> {
         // in the tracker's frame as the plant's log has the tip) and marks
         // injected messages.
         let clean = self.to_tracker.pose(clean.map(f64::from));
-        let log_flags = log_flags | flags | if injected { LOG_INJECTED } else { 0 };
+        let log_flags = log_flags | msg.flags | if injected { LOG_INJECTED } else { 0 };
         let row = &mut self.row;
         row.clear();
         row.extend([stamp as f64, self.seq as f64, log_flags as f64]);

@@ -372,6 +372,12 @@ impl PlantModel {
         self.to_tracker.pose(self.pose)
     }
 
+    /// True tip pose in the robot's own base frame (what `/tf` calls
+    /// `base_link` → `tip`).
+    pub fn pose_in_base(&self) -> [f64; 7] {
+        self.pose
+    }
+
     /// Tendon tensions (N).
     pub fn tensions(&self) -> &[f64] {
         &self.tendon

@@ -268,6 +268,12 @@ fn calibration_truth_is_the_calibration_benchmarks_real_robot() {
             "{tau:?}: {} m off",
             (p - want).norm()
         );
+        // In its own base frame (`/tf`'s base_link → tip): the statics' tip.
+        let in_base = nalgebra::Vector3::from_row_slice(&plant.pose_in_base()[..3]);
+        assert!(
+            (in_base - at).norm() < 1e-8,
+            "{tau:?}: in base {in_base:?}, statics {at:?}"
+        );
         // And it is not the nominal robot (so the check can tell them apart).
         let off = (nominal_statics
             .solve(plant.tensions(), None)
