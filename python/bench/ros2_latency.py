@@ -6,7 +6,7 @@ stamp, taken as it publishes `tendon_controller/commanded`, → the peer's
 reception, which blocks on a WaitSet; one clock, one machine; includes the
 Python binding's deserialisation).
 
-    python python/bench/ros2_latency.py [--bin target/release/tendril-ros2] [--seconds 10]
+    python python/bench/ros2_latency.py [--bin target/release/tendril-ros2] [--seconds 10] [--peer-first 2]
 """
 
 import argparse
@@ -15,6 +15,7 @@ import os
 import pathlib
 import sys
 import tempfile
+import time
 
 import numpy as np
 
@@ -30,13 +31,20 @@ def main():
     ap.add_argument("--bin", help="tendril-ros2 binary (default: $TENDRIL_ROS2_BIN or target/debug)")
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--domain", type=int, default=150)
+    ap.add_argument("--peer-first", type=float, default=None, metavar="SECONDS",
+                    help="the robot joins the graph this long before the drive (default: just after)")
     a = ap.parse_args()
     if a.bin:
         os.environ["TENDRIL_ROS2_BIN"] = a.bin
     stats = pathlib.Path(tempfile.mkdtemp()) / "drive.json"
+    model = tendril.Robot.load(ROOT / "robots" / "seed-4t.toml")
+    if a.peer_first is not None:
+        robot = StaticsRobot(Peer(a.domain), model)
+        time.sleep(a.peer_first)
     drive = start_drive(a.domain, "--robot", "robots/seed-4t.toml", "--model", "firmware/vectors/default.tnet",
                         "--duration", str(a.seconds), "--stats", str(stats))
-    robot = StaticsRobot(Peer(a.domain), tendril.Robot.load(ROOT / "robots" / "seed-4t.toml"))
+    if a.peer_first is None:
+        robot = StaticsRobot(Peer(a.domain), model)
     robot.serve(a.seconds + 30, until_done=drive)
     out, err = drive.communicate(timeout=30)
     if drive.returncode != 0:

@@ -248,17 +248,20 @@ class StaticsRobot:
         self.tip = peer.writer("tip_pose", PoseStamped, SENSOR)
         self.received = 0
         self.latencies_s = []
+        self.silent_commands = []
         # Block until a command arrives (a poll-and-sleep loop would add
         # its sleep to every latency this peer measures).
         self.waitset = WaitSet(peer.dp)
         self.waitset.attach(ReadCondition(self.commands, SampleState.Any | ViewState.Any | InstanceState.Any))
 
-    def serve(self, seconds: float, until_done=None, silent_after_first_s=None, events=()):
+    def serve(self, seconds: float, until_done=None, silent_after_first_s=None, silent_until_s=None,
+              events=()):
         """Answer commands for `seconds`, or until the process `until_done`
-        ends; after `silent_after_first_s` from the first command, take
-        them and say nothing (a robot whose driver and tracker died).
-        `events` are (seconds after the first command, callable) run once
-        each from the loop."""
+        ends; from `silent_after_first_s` after the first command (until
+        `silent_until_s`, if given), take them and say nothing (a robot
+        whose driver and tracker died, or stalled); the commands taken in
+        that silence are kept in `silent_commands`. `events` are (seconds
+        after the first command, callable) run once each from the loop."""
         end = time.monotonic() + seconds
         first = None
         pending = sorted(events, key=lambda e: e[0])
@@ -274,7 +277,10 @@ class StaticsRobot:
                 continue
             first = first or time.monotonic()
             self.received += len(got)
-            if silent_after_first_s is not None and time.monotonic() - first > silent_after_first_s:
+            since = time.monotonic() - first
+            if silent_after_first_s is not None and since > silent_after_first_s and (
+                    silent_until_s is None or since < silent_until_s):
+                self.silent_commands.extend((since, list(c.data)) for c in got)
                 continue
             self.answer(got[-1].data)
 

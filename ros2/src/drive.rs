@@ -8,6 +8,10 @@
 //! state, then the host controller's period ([`Controller::period`]: the
 //! firmware's period, every safety rule of the iceoryx2 loop — a silent
 //! tracker is a hold, a bad command never leaves it) and the command out.
+//! A robot that falls silent (no joint state or tip pose for the period's
+//! stale time) holds the path where it was, so the command holds; it goes
+//! on when the robot answers again, and the run ends with an error when
+//! the silence outlasts `--wait-for-robot`.
 //! Configured once, allocation-free in the period apart from DDS's own
 //! serialisation.
 
@@ -49,7 +53,8 @@ pub struct DriveConfig {
     /// Statistics JSON written at exit.
     pub stats: Option<PathBuf>,
     /// How long to wait for the robot's first joint state and tip pose
-    /// before the path starts, s.
+    /// before the path starts, s; also how long a silent robot is held
+    /// before the run gives up.
     pub wait_for_robot_s: f64,
     /// Follow targets from `target_point` / `target_pose` instead of the
     /// planner's path ([`crate::targets`]).
@@ -76,6 +81,9 @@ pub struct DriveStats {
     /// the status bit, which the correction also sets while it waits for
     /// a tracker frame).
     pub stale_periods: u64,
+    /// Periods the path was held because the robot was silent (its clock
+    /// stopped, so the setpoint and the command held).
+    pub path_held_periods: u64,
     /// Joint states taken / refused (not one finite value per tendon).
     pub joint_states: u64,
     /// Joint states refused.
@@ -139,6 +147,17 @@ pub struct Drive {
     settle_s: f64,
     end_s: f64,
     feedback: Feedback,
+    /// When the robot was last heard from (monotonic ns).
+    last_heard_ns: u64,
+    /// The robot is silent after this long (the period's plant-stale
+    /// time), ns.
+    silent_after_ns: u64,
+    /// A silence this long ends the run, ns.
+    give_up_after_ns: u64,
+    /// How long the path's clock has been held, ns.
+    held_ns: u64,
+    /// Why the run ended early, when it did.
+    gave_up: Option<String>,
     overran: bool,
     /// Periods between `/diagnostics` messages (one a second).
     diagnostics_every: u64,
@@ -205,6 +224,11 @@ impl Drive {
                 tip_seq: 0,
                 seq: 0,
             },
+            last_heard_ns: 0,
+            silent_after_ns: SILENT_AFTER_PERIODS * period_ns,
+            give_up_after_ns: (cfg.wait_for_robot_s.max(0.0) * 1e9) as u64,
+            held_ns: 0,
+            gave_up: None,
             overran: false,
             diagnostics_every: cfg.controller.rate_hz.round().max(1.0) as u64,
             spin_ns: (cfg.controller.spin_us.max(0.0) * 1e3) as u64,
@@ -219,6 +243,7 @@ impl Drive {
         let start = now_ns() + period_ns;
         drive.ctl = Controller::new(&cfg.controller, &robot, &bytes, start).map_err(err)?;
         drive.ticker = Ticker::new(start, period_ns);
+        drive.last_heard_ns = start;
         Ok(drive)
     }
 
@@ -269,9 +294,11 @@ impl Drive {
         Ok(start.elapsed().as_secs_f64())
     }
 
-    /// Seconds since the first period's deadline at monotonic `t_ns`.
+    /// The path's time at monotonic `t_ns`: seconds since the first
+    /// period's deadline, less the time the path was held for a silent
+    /// robot.
     fn since_start(&self, t_ns: u64) -> f64 {
-        (t_ns as i128 - self.ticker.start_ns() as i128) as f64 * 1e-9
+        (t_ns as i128 - self.ticker.start_ns() as i128 - self.held_ns as i128) as f64 * 1e-9
     }
 
     /// Take the newest joint state and tip pose; returns the plant state
@@ -371,6 +398,27 @@ impl Drive {
     pub fn period(&mut self) -> bool {
         let tick = self.ticker.wait(self.spin_ns);
         let t_wake = now_ns();
+        let state = self.take_feedback(t_wake);
+        if state.is_some() {
+            self.last_heard_ns = t_wake;
+        }
+        // A silent robot: the path's clock stops, so the setpoint — and
+        // with the correction frozen by the period's stale rule, the
+        // command — holds where it was until the robot answers.
+        let silence = t_wake.saturating_sub(self.last_heard_ns);
+        if silence > self.silent_after_ns {
+            self.held_ns += self.ticker.period_ns();
+            self.stats.path_held_periods += 1;
+            if silence > self.give_up_after_ns {
+                self.gave_up = Some(format!(
+                    "the robot fell silent for {:.1} s (no joint state or tip pose; \
+                     --wait-for-robot {} s): the last command held",
+                    silence as f64 * 1e-9,
+                    self.give_up_after_ns as f64 * 1e-9
+                ));
+                return false;
+            }
+        }
         let t = self.since_start(tick.deadline_ns);
         let mut setpoint = match self.targets.is_some() {
             true => self.target_setpoint(t),
@@ -383,7 +431,6 @@ impl Drive {
             seq: tick.index + 1,
             stamp_ns: t_wake,
         };
-        let state = self.take_feedback(t_wake);
         let inbox = Inbox {
             setpoint: Some(setpoint),
             setpoints: 1,
@@ -473,7 +520,7 @@ impl Drive {
         } else if status & command_status::PLANT_STALE != 0 && c.plant_stale_cycles > 0 {
             (
                 DiagnosticStatus::WARN,
-                "the robot is silent: correction frozen",
+                "the robot is silent: path held, correction frozen",
             )
         } else if s.joint_states_refused + s.tip_poses_refused > 0 {
             (DiagnosticStatus::WARN, "feedback refused")
@@ -498,6 +545,7 @@ impl Drive {
                     kv("overruns", s.overruns.to_string()),
                     kv("hold_periods", c.hold_cycles.to_string()),
                     kv("stale_periods", c.plant_stale_cycles.to_string()),
+                    kv("path_held_periods", s.path_held_periods.to_string()),
                     kv("saturated_periods", c.saturated_cycles.to_string()),
                     kv("joint_states", s.joint_states.to_string()),
                     kv("joint_states_refused", s.joint_states_refused.to_string()),
@@ -521,6 +569,11 @@ impl Drive {
         s
     }
 }
+
+/// Periods without a joint state or tip pose after which the robot is
+/// silent and the path holds: the period's plant-stale time, so the path
+/// and the correction stop together.
+const SILENT_AFTER_PERIODS: u64 = 20;
 
 /// How long ago (ns) the wall-clock `stamp` was; 0 for a stamp from the
 /// future (another machine's clock ahead of this one's).
@@ -555,6 +608,12 @@ pub fn run(cfg: &DriveConfig, stop: &AtomicBool) -> Result<DriveStats, Ros2Error
             .map_err(|e| Ros2Error::Config(format!("statistics: {e}")))?;
         tendril::fsutil::write_atomic(path, &json)
             .map_err(|e| Ros2Error::Output(format!("{}: {e}", path.display())))?;
+    }
+    if let Some(why) = drive.gave_up {
+        return Err(Ros2Error::RobotSilent(format!(
+            "{why}; after {} periods, the statistics and the run log cover them",
+            stats.periods
+        )));
     }
     if stop.load(Ordering::Relaxed) {
         // Whole files, of a run cut short: said, and the exit status says it.

@@ -29,6 +29,9 @@ pub enum Ros2Error {
     /// An output could not be written.
     #[error("{0}")]
     Output(String),
+    /// The robot stopped answering for longer than the drive waits.
+    #[error("{0}")]
+    RobotSilent(String),
     /// A signal asked to stop before the work began; nothing was written.
     #[error("interrupted {0}")]
     Interrupted(String),

@@ -74,7 +74,9 @@ struct DriveArgs {
     #[arg(long)]
     stats: Option<PathBuf>,
     /// How long to wait for the robot's first joint state and tip pose
-    /// (discovery, then its first answer to the rest tensions), s.
+    /// (discovery, then its first answer to the rest tensions), s; a robot
+    /// that falls silent on the path is held this long before the drive
+    /// gives up (exit status 1).
     #[arg(long, default_value_t = 15.0)]
     wait_for_robot: f64,
     /// Follow targets from the topics target_point (PointStamped) and

@@ -79,7 +79,7 @@ impl RosNode {
             .create_topic(
                 &name,
                 MessageTypeName::new(spec.package, spec.type_name),
-                &spec.qos.policies(),
+                &ros2_client::QosProfile::from(&spec.qos.policies()),
             )
             .map_err(|e| Ros2Error::Dds(format!("topic {}: {e:?}", spec.name)))
     }
@@ -106,7 +106,7 @@ impl RosNode {
 
 /// A topic name made absolute in `namespace` (ROS 2's rule: a name with a
 /// leading `/` is absolute, any other lives in the node's namespace).
-/// Resolved here because ros2-client 0.8 joins the root namespace `/` and a
+/// Resolved here because ros2-client (0.8 to 0.12) joins the root namespace `/` and a
 /// relative name with a second slash (`rt//joint_states`), a topic no other
 /// ROS 2 node would match.
 pub fn resolve(namespace: &str, name: &str) -> String {
