@@ -294,6 +294,11 @@ def test_tendril_drives_a_robot_on_ros_2_along_its_circle(tmp_path, binary, doma
     assert s["tracked_frames"] > 0.8 * 6 * 200, s
     assert s["tracking_rms_mm"] <= 0.1, s
     assert robot.received >= s["periods"] * 0.9, (robot.received, s)
+    # `tendril sim`'s verdicts on the tips: no tone in any 2 s window of
+    # the path, no growth, no problem.
+    v = s["verdicts"]
+    assert v["problems"] == [] and v["oscillation"]["windows"] >= 6, v
+    assert not v["oscillation"]["detected"] and not v["growth"]["growing"], v
     # The run log, read by the mcap package (not tendril): one tensions and
     # one tracking message a period, as the plant logs them in a sim, and
     # the status (written when it changes or every so often).
@@ -304,6 +309,17 @@ def test_tendril_drives_a_robot_on_ros_2_along_its_circle(tmp_path, binary, doma
     for topic in ("/tensions", "/tracking"):
         assert topics.count(topic) >= 0.9 * s["periods"], (topic, topics.count(topic), s["periods"])
     assert topics.count("/status") > 0
+    # A loop that does not track (an integral gain fifty times the
+    # default's against the drives' lag): not clean, exit status 1, why.
+    drive = start_drive(domain, "--robot", "robots/seed-4t.toml", "--model", "firmware/vectors/default.tnet",
+                        "--duration", "3", "--ki", "200", "--stats", str(stats_path))
+    try:
+        StaticsRobot(Peer(domain), tendril.Robot.load(ROOT_ROBOTS / "seed-4t.toml")).serve(20.0, until_done=drive)
+    finally:
+        out, err = drive.communicate(timeout=30)
+    problems = json.loads(stats_path.read_text())["verdicts"]["problems"]
+    assert drive.returncode == 1 and "not clean" in err and "exceeds the bound" in err, (drive.returncode, err)
+    assert len(problems) >= 1 and "--max-rms-mm" in problems[-1], problems
 
 
 def test_targets_from_a_topic_are_reached_and_bad_ones_refused(tmp_path, binary, domain):
@@ -353,6 +369,10 @@ def test_targets_from_a_topic_are_reached_and_bad_ones_refused(tmp_path, binary,
         assert name in tips, tips
         lateral = math.hypot(tips[name][0] - x, tips[name][1] - y)
         assert lateral < 5e-5, f"{name}: tip {tips[name][:3]}, {lateral * 1e3:.3f} mm from the target"
+    # The holds at the targets are the verdicts' steady states.
+    v = s["verdicts"]
+    assert v["problems"] == [] and len(v["steady_states"]) >= 2, v
+    assert max(st["error_mm"] for st in v["steady_states"]) < 0.05, v["steady_states"]
 
 
 def test_a_silent_robot_holds_the_path_a_long_silence_ends_the_run_and_no_robot_is_an_error(

@@ -24,6 +24,9 @@ use serde::Serialize;
 use tendril::ipc::clock::{now_ns, Ticker};
 use tendril::ipc::controller::{Controller, ControllerConfig, Inbox};
 use tendril::ipc::planner::{plan, setpoint_for, Planned, PlannerConfig};
+use tendril::ipc::sim::analysis::{steady_states, Sample};
+use tendril::ipc::sim::oscillation::{self, Growth, Oscillation};
+use tendril::ipc::sim::report::SteadyState;
 use tendril::robot::RigidMap;
 use tendril::runlog::{RunLog, RunLogConfig, RunLogStats, StepRecord};
 use tendril_shared::messages::{command_status, Header as MsgHeader, PlantState, MAX_TENDONS};
@@ -59,6 +62,10 @@ pub struct DriveConfig {
     /// Follow targets from `target_point` / `target_pose` instead of the
     /// planner's path ([`crate::targets`]).
     pub target_topic: bool,
+    /// Bound on the tracking error, mm (`tendril sim`'s `--max-rms-mm`):
+    /// the RMS on a smooth path, the worst steady state on steps and
+    /// targets.
+    pub max_rms_mm: f64,
     /// The run's MCAP file and live view (`docs/design.md` §12): the
     /// commanded and measured tensions, the tracker's tip against the
     /// setpoint, the status — what the plant logs in `tendril sim`, less
@@ -67,7 +74,7 @@ pub struct DriveConfig {
 }
 
 /// What the drive measured and counted, written as JSON at exit.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, Serialize)]
 pub struct DriveStats {
     /// Control periods run.
     pub periods: u64,
@@ -111,6 +118,28 @@ pub struct DriveStats {
     pub targets_refused_frame: u64,
     /// Targets refused: out of the robot's reach.
     pub targets_refused_out_of_reach: u64,
+    /// The sim report's verdicts on the tracker's tips against the path:
+    /// is the loop oscillating (a sustained tone above the path's own
+    /// frequencies), does its error grow, where did steps settle.
+    pub verdicts: Option<Verdicts>,
+}
+
+/// `tendril sim`'s verdicts on a drive's run (`docs/design.md` §6), from
+/// the tracker's tips against the path where the planner was when each was
+/// sampled — the robot's true tip is the robot's own.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Verdicts {
+    /// What `tendril sim` would call a problem of the loop: an
+    /// oscillation, a growing error, a tracking error above the bound.
+    /// Empty: the run is clean.
+    pub problems: Vec<String>,
+    /// The tone test.
+    pub oscillation: Oscillation,
+    /// The error's last third against its first (`None`: too few tips).
+    pub growth: Option<Growth>,
+    /// Every stretch of at least 1 s with a fixed desired position (steps,
+    /// targets): its steady error, settle time and ringing.
+    pub steady_states: Vec<SteadyState>,
 }
 
 struct Endpoints {
@@ -166,6 +195,17 @@ pub struct Drive {
     spin_ns: u64,
     names: Vec<String>,
     sum_sq: f64,
+    /// The tips against the path, for the verdicts (capacity for one a
+    /// period: no allocation in the period).
+    samples: Vec<Sample>,
+    /// The path's fundamental frequency, Hz (the tone test's band starts
+    /// above its harmonics).
+    path_hz: f64,
+    /// Whether the path's RMS is its accuracy (a smooth path) or its
+    /// steady states are (steps, a table, targets: the RMS would be the
+    /// moves' transients).
+    rms_bound: bool,
+    max_rms_mm: f64,
     stats: DriveStats,
 }
 
@@ -177,6 +217,12 @@ impl Drive {
             return Err(Ros2Error::Config(format!(
                 "--duration {}: expected a number of seconds > 0",
                 cfg.duration_s
+            )));
+        }
+        if !(cfg.max_rms_mm.is_finite() && cfg.max_rms_mm > 0.0) {
+            return Err(Ros2Error::Config(format!(
+                "--max-rms-mm {}: expected a bound in mm > 0",
+                cfg.max_rms_mm
             )));
         }
         let err = |e: tendril::ipc::IpcError| Ros2Error::Config(e.to_string());
@@ -236,6 +282,20 @@ impl Drive {
                 .map(|i| format!("tendon_{i}"))
                 .collect(),
             sum_sq: 0.0,
+            samples: Vec::with_capacity(
+                ((cfg.planner.settle_s + cfg.duration_s) * cfg.controller.rate_hz).ceil() as usize
+                    + 1,
+            ),
+            path_hz: match cfg.target_topic {
+                true => 0.0,
+                false => tendril::ipc::sim::assess::trajectory_hz(&cfg.planner.shape),
+            },
+            rms_bound: !cfg.target_topic
+                && !matches!(
+                    cfg.planner.shape,
+                    tendril::plan::PathShape::Steps { .. } | tendril::plan::PathShape::Table { .. }
+                ),
+            max_rms_mm: cfg.max_rms_mm,
             stats: DriveStats::default(),
         };
         drive.stats.first_feedback_s = drive.wait_for_robot(&robot.min_tensions(), cfg, stop)?;
@@ -291,6 +351,7 @@ impl Drive {
         self.sum_sq = 0.0;
         self.stats.tracked_frames = 0;
         self.stats.tracking_max_mm = None;
+        self.samples.clear();
         Ok(start.elapsed().as_secs_f64())
     }
 
@@ -370,19 +431,29 @@ impl Drive {
         if t < self.settle_s || t > self.end_s {
             return;
         }
-        let want = match &self.targets {
+        let (want, hold, moving) = match &self.targets {
             Some(f) => match f.holding() {
-                Some(pose) => self.to_tracker.pose(pose),
+                Some(pose) => (self.to_tracker.pose(pose), false, false),
                 None => return,
             },
             None => {
                 let desired = self.planned.motion.at(t);
-                if desired.holding || desired.moving {
-                    return;
-                }
-                self.to_tracker.pose(desired.point.pose)
+                let want = self.to_tracker.pose(desired.point.pose);
+                (want, desired.holding, desired.moving)
             }
         };
+        if self.samples.len() < self.samples.capacity() {
+            self.samples.push(Sample {
+                t,
+                desired: [want[0], want[1], want[2]],
+                actual: [tip[0], tip[1], tip[2]],
+                hold,
+                moving,
+            });
+        }
+        if hold || moving {
+            return;
+        }
         let e = (0..3)
             .map(|k| (tip[k] - want[k]).powi(2))
             .sum::<f64>()
@@ -568,6 +639,55 @@ impl Drive {
         }
         s
     }
+
+    /// The verdicts on the run so far (at its end: they read every tip),
+    /// by `tendril sim`'s rules.
+    pub fn verdicts(&self, tracking_rms_mm: Option<f64>) -> Verdicts {
+        let oscillation = oscillation::detect(&self.samples, oscillation::band_from(self.path_hz));
+        let growth = oscillation::growth(&self.samples);
+        let steady = steady_states(&self.samples);
+        let mut problems = Vec::new();
+        if let (true, Some(f), Some(r)) = (
+            oscillation.detected,
+            oscillation.frequency_hz,
+            oscillation.tone_rms_mm,
+        ) {
+            problems.push(format!(
+                "the loop oscillates: {f:.2} Hz, {r:.3} mm RMS in the tracking error, in {} of \
+                 {} 2 s windows",
+                oscillation.windows_with_tone, oscillation.windows
+            ));
+        }
+        let max = self.max_rms_mm;
+        if self.rms_bound {
+            if let Some(g) = growth.as_ref().filter(|g| g.growing) {
+                problems.push(format!(
+                    "the tracking error grows ({:.3} mm RMS in the run's first third, {:.3} mm \
+                     in its last)",
+                    g.first_third_rms_mm, g.last_third_rms_mm
+                ));
+            }
+            if let Some(rms) = tracking_rms_mm.filter(|&r| r > max) {
+                problems.push(format!(
+                    "RMS tracking error {rms:.3} mm exceeds the bound {max} mm (--max-rms-mm)"
+                ));
+            }
+        } else if let Some(worst) = (steady.iter())
+            .max_by(|a, b| a.error_mm.total_cmp(&b.error_mm))
+            .filter(|s| s.error_mm > max)
+        {
+            problems.push(format!(
+                "steady-state error {:.3} mm at {:.1} s exceeds the bound {max} mm (--max-rms-mm)",
+                worst.error_mm, worst.t_s
+            ));
+        }
+        Verdicts {
+            problems,
+            oscillation,
+            growth,
+            steady_states: steady,
+        }
+    }
 }
 
 /// Periods without a joint state or tip pose after which the robot is
@@ -590,7 +710,8 @@ fn wall_age_ns(stamp: &Time) -> u64 {
 pub fn run(cfg: &DriveConfig, stop: &AtomicBool) -> Result<DriveStats, Ros2Error> {
     let mut drive = Drive::new(cfg, stop)?;
     while !stop.load(Ordering::Relaxed) && drive.period() {}
-    let stats = drive.stats();
+    let mut stats = drive.stats();
+    stats.verdicts = Some(drive.verdicts(stats.tracking_rms_mm));
     let logged: Option<RunLogStats> = drive
         .runlog
         .take()
@@ -664,6 +785,7 @@ mod tests {
             stats: None,
             wait_for_robot_s: 1.0,
             target_topic: false,
+            max_rms_mm: 2.0,
             runlog: RunLogConfig::default(),
         };
         let e = Drive::new(&cfg, &AtomicBool::new(false))

@@ -79,6 +79,12 @@ struct DriveArgs {
     /// gives up (exit status 1).
     #[arg(long, default_value_t = 15.0)]
     wait_for_robot: f64,
+    /// Bound on the tracking error, mm: the RMS on a smooth path, the worst
+    /// steady state on steps and targets; a run above it, or one whose loop
+    /// oscillates or drifts, is not clean (exit status 1, the reasons said
+    /// and in --stats' verdicts), as in `tendril sim`.
+    #[arg(long, default_value_t = tendril::ipc::sim::DEFAULT_MAX_RMS_MM)]
+    max_rms_mm: f64,
     /// Follow targets from the topics target_point (PointStamped) and
     /// target_pose (PoseStamped; its position) in the tracker's frame
     /// instead of --trajectory: each is reached by a shaped move and held;
@@ -131,6 +137,7 @@ impl DriveArgs {
             stats: self.stats,
             wait_for_robot_s: self.wait_for_robot,
             target_topic: self.target_topic,
+            max_rms_mm: self.max_rms_mm,
             runlog: tendril::runlog::RunLogConfig {
                 mcap: self.mcap,
                 ..Default::default()
@@ -244,6 +251,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 anyhow::bail!(
                     "no tip pose on the path: is a robot publishing joint_states and tip_pose on this domain?"
                 );
+            }
+            let problems = s.verdicts.map(|v| v.problems).unwrap_or_default();
+            if !problems.is_empty() {
+                anyhow::bail!("the run is not clean: {}", problems.join("; "));
             }
             Ok(())
         }

@@ -31,7 +31,7 @@ fn read_json<T: for<'de> serde::Deserialize<'de>>(path: &Path) -> Option<T> {
 /// The highest frequency of the trajectory's own motion, Hz (what the
 /// oscillation test's band starts above): a figure eight moves at twice its
 /// revolution rate, steps at one per dwell; a pose table is taken as slow.
-fn trajectory_hz(shape: &crate::plan::PathShape) -> f64 {
+pub fn trajectory_hz(shape: &crate::plan::PathShape) -> f64 {
     use crate::plan::PathShape as S;
     match shape {
         S::Circle { freq_hz, .. } | S::Helix { freq_hz, .. } | S::Sweep { freq_hz, .. } => *freq_hz,
