@@ -24,9 +24,7 @@ use serde::Serialize;
 use tendril::ipc::clock::{now_ns, Ticker};
 use tendril::ipc::controller::{Controller, ControllerConfig, Inbox};
 use tendril::ipc::planner::{plan, setpoint_for, Planned, PlannerConfig};
-use tendril::ipc::sim::analysis::{steady_states, Sample};
-use tendril::ipc::sim::oscillation::{self, Growth, Oscillation};
-use tendril::ipc::sim::report::SteadyState;
+use tendril::ipc::sim::analysis::Sample;
 use tendril::robot::RigidMap;
 use tendril::runlog::{RunLog, RunLogConfig, RunLogStats, StepRecord};
 use tendril_shared::messages::{command_status, Header as MsgHeader, PlantState, MAX_TENDONS};
@@ -38,6 +36,7 @@ use crate::msg::{
 use crate::node::RosNode;
 use crate::targets::{Refusal, TargetFollower};
 use crate::topics;
+use crate::verdicts::{Bound, Verdicts};
 use crate::Ros2Error;
 
 /// Everything `drive` needs, set once.
@@ -124,24 +123,6 @@ pub struct DriveStats {
     pub verdicts: Option<Verdicts>,
 }
 
-/// `tendril sim`'s verdicts on a drive's run (`docs/design.md` §6), from
-/// the tracker's tips against the path where the planner was when each was
-/// sampled — the robot's true tip is the robot's own.
-#[derive(Clone, Debug, Default, Serialize)]
-pub struct Verdicts {
-    /// What `tendril sim` would call a problem of the loop: an
-    /// oscillation, a growing error, a tracking error above the bound.
-    /// Empty: the run is clean.
-    pub problems: Vec<String>,
-    /// The tone test.
-    pub oscillation: Oscillation,
-    /// The error's last third against its first (`None`: too few tips).
-    pub growth: Option<Growth>,
-    /// Every stretch of at least 1 s with a fixed desired position (steps,
-    /// targets): its steady error, settle time and ringing.
-    pub steady_states: Vec<SteadyState>,
-}
-
 struct Endpoints {
     commands: Publisher<Float64MultiArray>,
     commanded: Publisher<JointState>,
@@ -201,11 +182,8 @@ pub struct Drive {
     /// The path's fundamental frequency, Hz (the tone test's band starts
     /// above its harmonics).
     path_hz: f64,
-    /// Whether the path's RMS is its accuracy (a smooth path) or its
-    /// steady states are (steps, a table, targets: the RMS would be the
-    /// moves' transients).
-    rms_bound: bool,
-    max_rms_mm: f64,
+    /// What the tracking error is held to.
+    bound: Bound,
     stats: DriveStats,
 }
 
@@ -290,12 +268,7 @@ impl Drive {
                 true => 0.0,
                 false => tendril::ipc::sim::assess::trajectory_hz(&cfg.planner.shape),
             },
-            rms_bound: !cfg.target_topic
-                && !matches!(
-                    cfg.planner.shape,
-                    tendril::plan::PathShape::Steps { .. } | tendril::plan::PathShape::Table { .. }
-                ),
-            max_rms_mm: cfg.max_rms_mm,
+            bound: Bound::of(&cfg.planner.shape, cfg.target_topic, cfg.max_rms_mm),
             stats: DriveStats::default(),
         };
         drive.stats.first_feedback_s = drive.wait_for_robot(&robot.min_tensions(), cfg, stop)?;
@@ -643,50 +616,7 @@ impl Drive {
     /// The verdicts on the run so far (at its end: they read every tip),
     /// by `tendril sim`'s rules.
     pub fn verdicts(&self, tracking_rms_mm: Option<f64>) -> Verdicts {
-        let oscillation = oscillation::detect(&self.samples, oscillation::band_from(self.path_hz));
-        let growth = oscillation::growth(&self.samples);
-        let steady = steady_states(&self.samples);
-        let mut problems = Vec::new();
-        if let (true, Some(f), Some(r)) = (
-            oscillation.detected,
-            oscillation.frequency_hz,
-            oscillation.tone_rms_mm,
-        ) {
-            problems.push(format!(
-                "the loop oscillates: {f:.2} Hz, {r:.3} mm RMS in the tracking error, in {} of \
-                 {} 2 s windows",
-                oscillation.windows_with_tone, oscillation.windows
-            ));
-        }
-        let max = self.max_rms_mm;
-        if self.rms_bound {
-            if let Some(g) = growth.as_ref().filter(|g| g.growing) {
-                problems.push(format!(
-                    "the tracking error grows ({:.3} mm RMS in the run's first third, {:.3} mm \
-                     in its last)",
-                    g.first_third_rms_mm, g.last_third_rms_mm
-                ));
-            }
-            if let Some(rms) = tracking_rms_mm.filter(|&r| r > max) {
-                problems.push(format!(
-                    "RMS tracking error {rms:.3} mm exceeds the bound {max} mm (--max-rms-mm)"
-                ));
-            }
-        } else if let Some(worst) = (steady.iter())
-            .max_by(|a, b| a.error_mm.total_cmp(&b.error_mm))
-            .filter(|s| s.error_mm > max)
-        {
-            problems.push(format!(
-                "steady-state error {:.3} mm at {:.1} s exceeds the bound {max} mm (--max-rms-mm)",
-                worst.error_mm, worst.t_s
-            ));
-        }
-        Verdicts {
-            problems,
-            oscillation,
-            growth,
-            steady_states: steady,
-        }
+        crate::verdicts::judge(&self.samples, self.path_hz, self.bound, tracking_rms_mm)
     }
 }
 

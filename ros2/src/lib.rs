@@ -8,7 +8,8 @@
 //! - [`node`]: joining the domain of `ROS_DOMAIN_ID`;
 //! - [`plant`]: `tendril-ros2 plant`, the plant node;
 //! - [`drive`]: `tendril-ros2 drive`, the planner and controller against a robot on ROS 2;
-//! - [`targets`]: `drive`'s targets from a topic.
+//! - [`targets`]: `drive`'s targets from a topic;
+//! - [`verdicts`]: `tendril sim`'s verdicts on a drive's run.
 
 pub mod drive;
 pub mod msg;
@@ -16,6 +17,7 @@ pub mod node;
 pub mod plant;
 pub mod targets;
 pub mod topics;
+pub mod verdicts;
 
 /// What can go wrong on the ROS 2 side.
 #[derive(Debug, thiserror::Error)]
