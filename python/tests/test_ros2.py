@@ -7,6 +7,7 @@ refused and counted."""
 import json
 import math
 import os
+import shutil
 import signal
 import time
 
@@ -14,7 +15,7 @@ import numpy as np
 import pytest
 
 import tendril
-from conftest import run_cli
+from conftest import one_loop_at_a_time, run_cli
 from ros2_peer import (
     LATCHED,
     RELIABLE,
@@ -320,6 +321,43 @@ def test_tendril_drives_a_robot_on_ros_2_along_its_circle(tmp_path, binary, doma
     problems = json.loads(stats_path.read_text())["verdicts"]["problems"]
     assert drive.returncode == 1 and "not clean" in err and "exceeds the bound" in err, (drive.returncode, err)
     assert len(problems) >= 1 and "--max-rms-mm" in problems[-1], problems
+
+
+def test_the_chip_drives_a_robot_on_ros_2_through_its_bridge(tmp_path, binary, domain):
+    """`drive --controller mcu`: the STM32F405 image under QEMU runs the
+    period (its bridge on a thread of the drive), the peer is the robot.
+    The chip installs the run's net, answers, and the circle is tracked
+    at the chip's 100 Hz; its own counts say it ran the periods."""
+    if shutil.which("qemu-system-arm") is None:
+        pytest.skip("qemu-system-arm is not installed (scripts/test-deps mcu)")
+    stats_path = tmp_path / "drive.json"
+    seconds = 5
+    with one_loop_at_a_time():
+        drive = start_drive(domain, "--robot", "robots/seed-4t.toml", "--model",
+                            "firmware/vectors/default.tnet", "--controller", "mcu",
+                            "--duration", str(seconds), "--stats", str(stats_path))
+        try:
+            robot = StaticsRobot(Peer(domain), tendril.Robot.load(ROOT_ROBOTS / "seed-4t.toml"))
+            robot.serve(90.0, until_done=drive)
+        finally:
+            out, err = drive.communicate(timeout=60)
+    assert drive.returncode == 0, err
+    s = json.loads(stats_path.read_text())
+    assert s["chip_start_s"] is not None and s["chip_start_s"] < 20, s
+    periods = (2 + seconds) * 100
+    assert s["chip_periods"] >= 0.9 * periods and s["commands"] >= 0.9 * periods, s
+    # A drive period late by the chip's watchdog (2.5 periods, 25 ms: the
+    # drive runs at normal priority beside the real-time tests) makes the
+    # chip hold for a period; the loop goes on.
+    assert s["hold_periods"] <= 5, s
+    assert s["tracked_frames"] > 0.6 * seconds * 100, s
+    assert s["tracking_rms_mm"] <= 0.25, s
+    assert s["verdicts"]["problems"] == [], s["verdicts"]
+    # A rate the chip's 1 ms ticks cannot make is refused before anything starts.
+    bad = start_drive(domain, "--model", "firmware/vectors/default.tnet", "--controller", "mcu",
+                      "--rate", "300")
+    out, err = bad.communicate(timeout=30)
+    assert bad.returncode != 0 and "whole number of its 1 ms ticks" in err, err
 
 
 def test_targets_from_a_topic_are_reached_and_bad_ones_refused(tmp_path, binary, domain):

@@ -8,9 +8,11 @@
 //! - [`node`]: joining the domain of `ROS_DOMAIN_ID`;
 //! - [`plant`]: `tendril-ros2 plant`, the plant node;
 //! - [`drive`]: `tendril-ros2 drive`, the planner and controller against a robot on ROS 2;
+//! - [`chip`]: `drive --controller mcu`, the STM32F405 image under QEMU as its controller;
 //! - [`targets`]: `drive`'s targets from a topic;
 //! - [`verdicts`]: `tendril sim`'s verdicts on a drive's run.
 
+pub mod chip;
 pub mod drive;
 pub mod msg;
 pub mod node;
@@ -34,6 +36,9 @@ pub enum Ros2Error {
     /// The robot stopped answering for longer than the drive waits.
     #[error("{0}")]
     RobotSilent(String),
+    /// The chip as the controller: its bridge or QEMU failed.
+    #[error("the chip: {0}")]
+    Chip(String),
     /// A signal asked to stop before the work began; nothing was written.
     #[error("interrupted {0}")]
     Interrupted(String),

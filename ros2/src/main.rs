@@ -7,7 +7,7 @@ use std::process::ExitCode;
 
 use anyhow::Context as _;
 use clap::{Args, Parser, Subcommand};
-use tendril::cli::controller::{LoopOpts, OnOff};
+use tendril::cli::controller::{ControllerKind, LoopOpts, OnOff};
 use tendril::cli::planner::TrajectoryOpts;
 use tendril::cli::plant::PlantOpts;
 use tendril::ipc::controller::ControllerConfig;
@@ -70,6 +70,14 @@ struct DriveArgs {
     /// The node's namespace: its relative topics live under it.
     #[arg(long, default_value = "/")]
     namespace: String,
+    /// Who runs the control period: the host (in this process), or the
+    /// STM32F405 controller image under QEMU behind its serial link, as in
+    /// `tendril sim --controller mcu` (--rate then 100 Hz by default).
+    #[arg(long, value_enum, default_value_t = ControllerKind::Host)]
+    controller: ControllerKind,
+    /// With --controller mcu: the image to run (default: built from this checkout).
+    #[arg(long)]
+    mcu_image: Option<PathBuf>,
     /// Statistics JSON written at exit (tracking error, holds, feedback).
     #[arg(long)]
     stats: Option<PathBuf>,
@@ -115,8 +123,25 @@ impl DriveArgs {
         }
         let mut controller = ControllerConfig::new(self.robot.clone(), self.model);
         self.control.apply(&mut controller);
-        if self.control.rate.is_none() {
-            controller.rate_hz = DRIVE_RATE_HZ;
+        match self.controller {
+            ControllerKind::Host => {
+                if self.mcu_image.is_some() {
+                    anyhow::bail!("--mcu-image needs the chip in the loop: add --controller mcu");
+                }
+                if self.control.rate.is_none() {
+                    controller.rate_hz = DRIVE_RATE_HZ;
+                }
+            }
+            ControllerKind::Mcu => {
+                controller.rate_hz = self.control.mcu_rate_hz();
+                tendril::mcu::bridge::check_chip_rate(controller.rate_hz)
+                    .map_err(anyhow::Error::msg)?;
+                controller.mcu = Some(tendril::ipc::controller::McuOptions {
+                    socket: None,
+                    image: self.mcu_image,
+                    garbage_every_ms: None,
+                });
+            }
         }
         let planner = PlannerConfig {
             shape: self.path.shape()?,

@@ -22,6 +22,15 @@ use crate::ipc::controller::defaults;
 /// The control rate without `--rate`, Hz.
 pub const DEFAULT_RATE_HZ: f64 = defaults::RATE_HZ;
 
+/// Who runs the control period (`tendril sim`, `tendril-ros2 drive`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ControllerKind {
+    /// The host controller process.
+    Host,
+    /// The chip (QEMU netduinoplus2), bridged over its serial link.
+    Mcu,
+}
+
 /// Loop and tuning options (shared with `tendril sim`).
 #[derive(Args, Clone, Debug)]
 pub struct LoopOpts {

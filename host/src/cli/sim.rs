@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::Args;
 
-use super::controller::{LoopOpts, OnOff};
+use super::controller::{ControllerKind, LoopOpts, OnOff};
 use super::planner::TrajectoryOpts;
 use super::plant::PlantOpts;
 use crate::ipc::planner::Injections;
@@ -118,15 +118,6 @@ pub struct SimArgs {
     pub no_mcap: bool,
     #[command(flatten)]
     pub runlog: super::plant::RunLogOpts,
-}
-
-/// Who runs the control period in a sim.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum ControllerKind {
-    /// The host controller process.
-    Host,
-    /// The chip (QEMU netduinoplus2), bridged over its serial link.
-    Mcu,
 }
 
 impl SimArgs {

@@ -17,6 +17,9 @@ use super::IpcError;
 /// The iceoryx2 service flavour: inter-process, shared memory.
 pub type Svc = ipc::Service;
 
+/// A process's iceoryx2 node (what owns its ports).
+pub type IpcNode = Node<Svc>;
+
 /// A `shared` message as an iceoryx2 payload. `shared` is `no_std` and knows
 /// nothing of iceoryx2, and the orphan rule forbids implementing iceoryx2's
 /// trait for its types here, hence the transparent wrapper.

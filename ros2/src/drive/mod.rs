@@ -15,23 +15,20 @@
 //! Configured once, allocation-free in the period apart from DDS's own
 //! serialisation.
 
-use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::SystemTime;
 
 use ros2_client::{Publisher, Subscription};
-use serde::Serialize;
 use tendril::ipc::clock::{now_ns, Ticker};
-use tendril::ipc::controller::{Controller, ControllerConfig, Inbox};
-use tendril::ipc::planner::{plan, setpoint_for, Planned, PlannerConfig};
+use tendril::ipc::controller::{Controller, Inbox};
+use tendril::ipc::planner::{plan, setpoint_for, Planned};
 use tendril::ipc::sim::analysis::Sample;
 use tendril::robot::RigidMap;
-use tendril::runlog::{RunLog, RunLogConfig, RunLogStats, StepRecord};
-use tendril_shared::messages::{command_status, Header as MsgHeader, PlantState, MAX_TENDONS};
+use tendril::runlog::{RunLog, RunLogStats, StepRecord};
+use tendril_shared::messages::{command_status, Header as MsgHeader, Setpoint, TensionCommand};
 
+use crate::chip::ChipController;
 use crate::msg::{
-    DiagnosticArray, DiagnosticStatus, Float64MultiArray, Header, JointState, KeyValue,
-    PointStamped, PoseStamped, Time,
+    DiagnosticArray, Float64MultiArray, Header, JointState, PointStamped, PoseStamped,
 };
 use crate::node::RosNode;
 use crate::targets::{Refusal, TargetFollower};
@@ -39,89 +36,13 @@ use crate::topics;
 use crate::verdicts::{Bound, Verdicts};
 use crate::Ros2Error;
 
-/// Everything `drive` needs, set once.
-#[derive(Clone, Debug)]
-pub struct DriveConfig {
-    /// The path (its `robot` is the controller's).
-    pub planner: PlannerConfig,
-    /// The controller: robot, net, rate, gains, watchdogs.
-    pub controller: ControllerConfig,
-    /// Seconds on the path after the planner's settle.
-    pub duration_s: f64,
-    /// ROS domain.
-    pub domain: u16,
-    /// Node namespace.
-    pub namespace: String,
-    /// Statistics JSON written at exit.
-    pub stats: Option<PathBuf>,
-    /// How long to wait for the robot's first joint state and tip pose
-    /// before the path starts, s; also how long a silent robot is held
-    /// before the run gives up.
-    pub wait_for_robot_s: f64,
-    /// Follow targets from `target_point` / `target_pose` instead of the
-    /// planner's path ([`crate::targets`]).
-    pub target_topic: bool,
-    /// Bound on the tracking error, mm (`tendril sim`'s `--max-rms-mm`):
-    /// the RMS on a smooth path, the worst steady state on steps and
-    /// targets.
-    pub max_rms_mm: f64,
-    /// The run's MCAP file and live view (`docs/design.md` §12): the
-    /// commanded and measured tensions, the tracker's tip against the
-    /// setpoint, the status — what the plant logs in `tendril sim`, less
-    /// the rod's true shape, which only the robot knows.
-    pub runlog: RunLogConfig,
-}
+mod config;
+mod diagnostics;
+mod feedback;
 
-/// What the drive measured and counted, written as JSON at exit.
-#[derive(Clone, Debug, Default, Serialize)]
-pub struct DriveStats {
-    /// Control periods run.
-    pub periods: u64,
-    /// Periods that ended after the next deadline.
-    pub overruns: u64,
-    /// Periods whose command was a safe hold.
-    pub hold_periods: u64,
-    /// Periods with the robot stale: no joint state or tip pose for the
-    /// period's stale time (20 periods), the correction frozen — the
-    /// iceoryx2 loop's rule for a silent plant (the period's counter, not
-    /// the status bit, which the correction also sets while it waits for
-    /// a tracker frame).
-    pub stale_periods: u64,
-    /// Periods the path was held because the robot was silent (its clock
-    /// stopped, so the setpoint and the command held).
-    pub path_held_periods: u64,
-    /// Joint states taken / refused (not one finite value per tendon).
-    pub joint_states: u64,
-    /// Joint states refused.
-    pub joint_states_refused: u64,
-    /// Tip poses taken / refused (not finite).
-    pub tip_poses: u64,
-    /// Tip poses refused.
-    pub tip_poses_refused: u64,
-    /// Seconds from joining the graph to the robot's first joint state and
-    /// tip pose (discovery and the first answer), the rest tensions sent
-    /// meanwhile; the path starts then.
-    pub first_feedback_s: f64,
-    /// Tracking error on the path (after the settle): the tracker's tip
-    /// against the path where the planner was when the tip was sampled.
-    pub tracking_rms_mm: Option<f64>,
-    /// Its largest value.
-    pub tracking_max_mm: Option<f64>,
-    /// Tip poses in the tracking figures.
-    pub tracked_frames: u64,
-    /// Targets taken from the topics (`--target-topic`).
-    pub targets: u64,
-    /// Targets refused: a coordinate not finite.
-    pub targets_refused_not_finite: u64,
-    /// Targets refused: not in the tracker's frame.
-    pub targets_refused_frame: u64,
-    /// Targets refused: out of the robot's reach.
-    pub targets_refused_out_of_reach: u64,
-    /// The sim report's verdicts on the tracker's tips against the path:
-    /// is the loop oscillating (a sustained tone above the path's own
-    /// frequencies), does its error grow, where did steps settle.
-    pub verdicts: Option<Verdicts>,
-}
+use feedback::Feedback;
+
+pub use config::{DriveConfig, DriveStats};
 
 struct Endpoints {
     commands: Publisher<Float64MultiArray>,
@@ -133,21 +54,23 @@ struct Endpoints {
     target_pose: Subscription<PoseStamped>,
 }
 
-/// The newest feedback from the robot, as the controller's plant state.
-struct Feedback {
-    tensions: Option<[f32; MAX_TENDONS]>,
-    tip: Option<([f32; 7], u64)>,
-    tip_seq: u32,
-    seq: u64,
-}
-
 /// The drive: set up once, one [`Drive::period`] per tick.
 pub struct Drive {
     planned: Planned,
     /// Targets from the topics, when they replace the planner's path.
     targets: Option<TargetFollower>,
     runlog: Option<RunLog>,
+    /// The host period (with the chip in the loop: the settings' check).
     ctl: Controller,
+    /// The chip as the controller (`--controller mcu`).
+    chip: Option<ChipController>,
+    /// The setpoint last sent to the chip (its commands are logged
+    /// against it).
+    last_setpoint: Setpoint,
+    /// The next period's deadline (monotonic ns).
+    next_deadline_ns: u64,
+    /// Setpoints sent before the path (to the starting chip).
+    seq_base: u64,
     ticker: Ticker,
     ends: Endpoints,
     _node: RosNode,
@@ -167,7 +90,10 @@ pub struct Drive {
     /// How long the path's clock has been held, ns.
     held_ns: u64,
     /// Why the run ended early, when it did.
-    gave_up: Option<String>,
+    gave_up: Option<Ros2Error>,
+    /// The last command sent (with the chip in the loop, a period may
+    /// bring none).
+    last_status: u32,
     overran: bool,
     /// Periods between `/diagnostics` messages (one a second).
     diagnostics_every: u64,
@@ -226,6 +152,10 @@ impl Drive {
         // refused at once); the path's own is made when the robot answers.
         let mut drive = Drive {
             ctl: Controller::new(&cfg.controller, &robot, &bytes, start).map_err(err)?,
+            chip: None,
+            last_setpoint: Setpoint::default(),
+            next_deadline_ns: 0,
+            seq_base: 0,
             ticker: Ticker::new(start, period_ns),
             ends,
             _node: node,
@@ -253,6 +183,7 @@ impl Drive {
             give_up_after_ns: (cfg.wait_for_robot_s.max(0.0) * 1e9) as u64,
             held_ns: 0,
             gave_up: None,
+            last_status: 0,
             overran: false,
             diagnostics_every: cfg.controller.rate_hz.round().max(1.0) as u64,
             spin_ns: (cfg.controller.spin_us.max(0.0) * 1e3) as u64,
@@ -275,9 +206,46 @@ impl Drive {
         // The path's clock starts now, with the robot heard from.
         let start = now_ns() + period_ns;
         drive.ctl = Controller::new(&cfg.controller, &robot, &bytes, start).map_err(err)?;
+        if cfg.controller.mcu.is_some() {
+            drive.start_chip(cfg, period_ns, stop)?;
+        }
+        let start = now_ns() + period_ns;
         drive.ticker = Ticker::new(start, period_ns);
         drive.last_heard_ns = start;
         Ok(drive)
+    }
+
+    /// Start the chip behind its bridge and wait for its first command,
+    /// sending it the path's first setpoint and the robot's state (the rest
+    /// tensions stay on the robot meanwhile).
+    fn start_chip(
+        &mut self,
+        cfg: &DriveConfig,
+        period_ns: u64,
+        stop: &AtomicBool,
+    ) -> Result<(), Ros2Error> {
+        let mut chip = ChipController::start(&cfg.controller)?;
+        let first = match self.targets.as_mut() {
+            Some(f) => f.setpoint(0.0),
+            None => setpoint_for(
+                &self.planned.motion,
+                0.0,
+                &self.planned.motion.at(0.0),
+                None,
+            ),
+        };
+        let setpoint = tendril::ipc::frame::setpoint(&self.to_tracker, &first);
+        let state = self
+            .feedback_state(now_ns())
+            .ok_or_else(|| Ros2Error::Config("no feedback to start the chip with".into()))?;
+        let (waited, seq) = chip.wait_ready(&setpoint, &state, period_ns, stop)?;
+        self.stats.chip_start_s = Some(waited);
+        // The path's messages go on from the wait's: a restart would read
+        // as a new planner and a new plant.
+        self.seq_base = seq;
+        self.feedback.seq = seq;
+        self.chip = Some(chip);
+        Ok(())
     }
 
     /// Send the robot's rest tensions (its floors: where the planner's
@@ -335,112 +303,14 @@ impl Drive {
         (t_ns as i128 - self.ticker.start_ns() as i128 - self.held_ns as i128) as f64 * 1e-9
     }
 
-    /// Take the newest joint state and tip pose; returns the plant state
-    /// when anything new arrived and both kinds have been seen.
-    fn take_feedback(&mut self, t_wake: u64) -> Option<PlantState> {
-        // The first period takes what the wait for the robot took.
-        let mut fresh = self.stats.periods == 0;
-        while let Ok(Some((js, _))) = self.ends.joint_states.take() {
-            if js.effort.len() == self.n && js.effort.iter().all(|t| t.is_finite()) {
-                let mut t = [0.0f32; MAX_TENDONS];
-                for (dst, &v) in t.iter_mut().zip(&js.effort) {
-                    *dst = v as f32;
-                }
-                self.feedback.tensions = Some(t);
-                self.stats.joint_states += 1;
-                fresh = true;
-            } else {
-                self.stats.joint_states_refused += 1;
-            }
-        }
-        while let Ok(Some((tip, _))) = self.ends.tip_pose.take() {
-            let p = &tip.pose;
-            let pose = [
-                p.position.x,
-                p.position.y,
-                p.position.z,
-                p.orientation.w,
-                p.orientation.x,
-                p.orientation.y,
-                p.orientation.z,
-            ];
-            if pose.iter().all(|v| v.is_finite()) {
-                let age_ns = wall_age_ns(&tip.header.stamp);
-                self.feedback.tip = Some((pose.map(|v| v as f32), t_wake.saturating_sub(age_ns)));
-                self.feedback.tip_seq += 1;
-                self.stats.tip_poses += 1;
-                fresh = true;
-                self.track(pose, t_wake.saturating_sub(age_ns));
-            } else {
-                self.stats.tip_poses_refused += 1;
-            }
-        }
-        let (tensions, (tip_pose, tip_stamp_ns)) = (self.feedback.tensions?, self.feedback.tip?);
-        if !fresh {
-            return None;
-        }
-        self.feedback.seq += 1;
-        let state = PlantState {
-            header: MsgHeader {
-                seq: self.feedback.seq,
-                stamp_ns: t_wake,
-            },
-            command_seq: 0,
-            tensions,
-            pad: Default::default(),
-            tip_pose,
-            count: self.n as u32,
-            status: 0,
-            tip_seq: self.feedback.tip_seq,
-            tip_stamp_ns,
-        };
-        Some(tendril::ipc::frame::state(&self.to_base, &state))
-    }
-
-    /// The tip (tracker's frame) against the path where the planner was
-    /// when it was sampled, once on the path.
-    fn track(&mut self, tip: [f64; 7], stamp_ns: u64) {
-        let t = self.since_start(stamp_ns);
-        if t < self.settle_s || t > self.end_s {
-            return;
-        }
-        let (want, hold, moving) = match &self.targets {
-            Some(f) => match f.holding() {
-                Some(pose) => (self.to_tracker.pose(pose), false, false),
-                None => return,
-            },
-            None => {
-                let desired = self.planned.motion.at(t);
-                let want = self.to_tracker.pose(desired.point.pose);
-                (want, desired.holding, desired.moving)
-            }
-        };
-        if self.samples.len() < self.samples.capacity() {
-            self.samples.push(Sample {
-                t,
-                desired: [want[0], want[1], want[2]],
-                actual: [tip[0], tip[1], tip[2]],
-                hold,
-                moving,
-            });
-        }
-        if hold || moving {
-            return;
-        }
-        let e = (0..3)
-            .map(|k| (tip[k] - want[k]).powi(2))
-            .sum::<f64>()
-            .sqrt()
-            * 1e3;
-        self.sum_sq += e * e;
-        self.stats.tracked_frames += 1;
-        let max = self.stats.tracking_max_mm.get_or_insert(0.0);
-        *max = max.max(e);
-    }
-
     /// One period; returns whether the run goes on.
     pub fn period(&mut self) -> bool {
+        if let Err(e) = self.forward_chip_commands() {
+            self.gave_up = Some(e);
+            return false;
+        }
         let tick = self.ticker.wait(self.spin_ns);
+        self.next_deadline_ns = tick.deadline_ns + self.ticker.period_ns();
         let t_wake = now_ns();
         let state = self.take_feedback(t_wake);
         if state.is_some() {
@@ -454,12 +324,12 @@ impl Drive {
             self.held_ns += self.ticker.period_ns();
             self.stats.path_held_periods += 1;
             if silence > self.give_up_after_ns {
-                self.gave_up = Some(format!(
+                self.gave_up = Some(Ros2Error::RobotSilent(format!(
                     "the robot fell silent for {:.1} s (no joint state or tip pose; \
                      --wait-for-robot {} s): the last command held",
                     silence as f64 * 1e-9,
                     self.give_up_after_ns as f64 * 1e-9
-                ));
+                )));
                 return false;
             }
         }
@@ -472,18 +342,71 @@ impl Drive {
             }
         };
         setpoint.header = MsgHeader {
-            seq: tick.index + 1,
+            seq: self.seq_base + tick.index + 1,
             stamp_ns: t_wake,
         };
-        let inbox = Inbox {
-            setpoint: Some(setpoint),
-            setpoints: 1,
-            superseded_nonfinite: 0,
-            state,
-            states: usize::from(state.is_some()),
-            weights: None,
+        let cmd = match self.chip.as_mut() {
+            None => {
+                let state = state.map(|s| tendril::ipc::frame::state(&self.to_base, &s));
+                let inbox = Inbox {
+                    setpoint: Some(setpoint),
+                    setpoints: 1,
+                    superseded_nonfinite: 0,
+                    state,
+                    states: usize::from(state.is_some()),
+                    weights: None,
+                };
+                self.ctl.period(&tick, t_wake, self.overran, &inbox)
+            }
+            // The chip's period runs on its own timer: its commands go to
+            // the robot as they come, between this period and the next.
+            Some(chip) => {
+                let sp = tendril::ipc::frame::setpoint(&self.to_tracker, &setpoint);
+                let offered = match state {
+                    Some(s) => chip.offer(&sp).and_then(|()| chip.offer_state(&s)),
+                    None => chip.offer(&sp),
+                };
+                if let Err(e) = offered {
+                    self.gave_up = Some(e);
+                    return false;
+                }
+                self.last_setpoint = setpoint;
+                return self.end_period(t_wake, t);
+            }
         };
-        let cmd = self.ctl.period(&tick, t_wake, self.overran, &inbox);
+        self.send(&cmd, tick.deadline_ns, &setpoint);
+        self.end_period(t_wake, t)
+    }
+
+    /// With the chip in the loop, until the next period is due: send each
+    /// command it makes to the robot as soon as it comes (polling every
+    /// [`CHIP_POLL_NS`]), not at the next period, which would add up to a
+    /// period to its age. The robot's answers go to the chip once a period,
+    /// with the setpoint: forwarded as they came, the circle tracked 0.09–0.15
+    /// mm RMS against 0.05–0.10 mm (four runs each; BENCHMARKS.md).
+    fn forward_chip_commands(&mut self) -> Result<(), Ros2Error> {
+        let Some(mut chip) = self.chip.take() else {
+            return Ok(());
+        };
+        let result = loop {
+            let now = now_ns();
+            match chip.take_command() {
+                Ok(Some(cmd)) => self.send(&cmd, now, &self.last_setpoint.clone()),
+                Ok(None) if now_ns() + CHIP_POLL_NS < self.next_deadline_ns => {
+                    std::thread::sleep(std::time::Duration::from_nanos(CHIP_POLL_NS))
+                }
+                Ok(None) => break Ok(()),
+                Err(e) => break Err(e),
+            }
+        };
+        self.chip = Some(chip);
+        result
+    }
+
+    /// Send `cmd` to the robot (and as `commanded`), count it, log it at
+    /// `t_ns` (monotonic) against `setpoint`.
+    fn send(&mut self, cmd: &TensionCommand, t_ns: u64, setpoint: &Setpoint) {
+        self.last_status = cmd.status;
         if cmd.status & command_status::SAFE_HOLD != 0 {
             self.stats.hold_periods += 1;
         }
@@ -493,7 +416,7 @@ impl Drive {
             // the model's base frame.
             let tip = self.feedback.tip.map(|(p, _)| p.map(f64::from));
             log.step(StepRecord {
-                t_ns: tick.deadline_ns.saturating_sub(self.ticker.start_ns()),
+                t_ns: t_ns.saturating_sub(self.ticker.start_ns()),
                 command_seq: cmd.header.seq,
                 controller_status: cmd.status,
                 plant_status: 0,
@@ -520,12 +443,20 @@ impl Drive {
             data: tensions,
             ..Float64MultiArray::default()
         });
-        if tick.index.is_multiple_of(self.diagnostics_every) {
-            let _ = self.ends.diagnostics.publish(self.diagnostics(cmd.status));
+        self.stats.commands += 1;
+    }
+
+    /// The period's end: `/diagnostics` once a second, the clock's and the
+    /// host period's books; whether the run goes on after path time `t`.
+    fn end_period(&mut self, t_wake: u64, t: f64) -> bool {
+        if self.stats.periods.is_multiple_of(self.diagnostics_every) {
+            let _ = (self.ends.diagnostics).publish(self.diagnostics(self.last_status));
         }
         let t_done = now_ns();
         self.overran = self.ticker.finish(t_done);
-        self.ctl.finish(t_done - t_wake);
+        if self.chip.is_none() {
+            self.ctl.finish(t_done - t_wake);
+        }
         self.stats.periods += 1;
         t < self.end_s
     }
@@ -554,53 +485,6 @@ impl Drive {
         follower.setpoint(t)
     }
 
-    /// The period's status and counters for `/diagnostics` (once a second:
-    /// the controller's statistics are gathered here, not in every period).
-    fn diagnostics(&self, status: u32) -> DiagnosticArray {
-        let s = self.stats();
-        let c = self.ctl.stats(&self.ticker);
-        let (level, message) = if status & command_status::SAFE_HOLD != 0 {
-            (DiagnosticStatus::ERROR, "safe hold")
-        } else if status & command_status::PLANT_STALE != 0 && c.plant_stale_cycles > 0 {
-            (
-                DiagnosticStatus::WARN,
-                "the robot is silent: path held, correction frozen",
-            )
-        } else if s.joint_states_refused + s.tip_poses_refused > 0 {
-            (DiagnosticStatus::WARN, "feedback refused")
-        } else {
-            (DiagnosticStatus::OK, "tracking")
-        };
-        let kv = |key: &str, value: String| KeyValue {
-            key: key.into(),
-            value,
-        };
-        let rms = s.tracking_rms_mm.map_or("—".into(), |r| format!("{r:.4}"));
-        DiagnosticArray {
-            header: Header::now(""),
-            status: vec![DiagnosticStatus {
-                level,
-                name: "tendril_drive".into(),
-                message: message.into(),
-                hardware_id: "tendril controller (host period)".into(),
-                values: vec![
-                    kv("status_bits", format!("{status:#x}")),
-                    kv("periods", s.periods.to_string()),
-                    kv("overruns", s.overruns.to_string()),
-                    kv("hold_periods", c.hold_cycles.to_string()),
-                    kv("stale_periods", c.plant_stale_cycles.to_string()),
-                    kv("path_held_periods", s.path_held_periods.to_string()),
-                    kv("saturated_periods", c.saturated_cycles.to_string()),
-                    kv("joint_states", s.joint_states.to_string()),
-                    kv("joint_states_refused", s.joint_states_refused.to_string()),
-                    kv("tip_poses", s.tip_poses.to_string()),
-                    kv("tip_poses_refused", s.tip_poses_refused.to_string()),
-                    kv("tracking_rms_mm", rms),
-                ],
-            }],
-        }
-    }
-
     /// The statistics so far.
     pub fn stats(&self) -> DriveStats {
         let mut s = self.stats.clone();
@@ -620,20 +504,13 @@ impl Drive {
     }
 }
 
+/// How often the drive looks for the chip's commands between its periods, ns.
+const CHIP_POLL_NS: u64 = 200_000;
+
 /// Periods without a joint state or tip pose after which the robot is
 /// silent and the path holds: the period's plant-stale time, so the path
 /// and the correction stop together.
 const SILENT_AFTER_PERIODS: u64 = 20;
-
-/// How long ago (ns) the wall-clock `stamp` was; 0 for a stamp from the
-/// future (another machine's clock ahead of this one's).
-fn wall_age_ns(stamp: &Time) -> u64 {
-    let now = SystemTime::now()
-        .duration_since(SystemTime::UNIX_EPOCH)
-        .unwrap_or_default();
-    let then = std::time::Duration::new(stamp.sec.max(0) as u64, stamp.nanosec.min(999_999_999));
-    now.saturating_sub(then).as_nanos() as u64
-}
 
 /// Run the drive until the path ends or `stop`; writes the statistics and
 /// closes the run log.
@@ -641,6 +518,17 @@ pub fn run(cfg: &DriveConfig, stop: &AtomicBool) -> Result<DriveStats, Ros2Error
     let mut drive = Drive::new(cfg, stop)?;
     while !stop.load(Ordering::Relaxed) && drive.period() {}
     let mut stats = drive.stats();
+    if let Some(chip) = drive.chip.take() {
+        // The chip's own counts (its telemetry), not the unused host period's.
+        match chip.finish() {
+            Ok(c) => {
+                stats.overruns = c.skipped;
+                stats.stale_periods = c.plant_stale_cycles;
+                stats.chip_periods = Some(c.cycles);
+            }
+            Err(e) => log::warn!("drive: {e}: the chip's counts are missing"),
+        }
+    }
     stats.verdicts = Some(drive.verdicts(stats.tracking_rms_mm));
     let logged: Option<RunLogStats> = drive
         .runlog
@@ -660,11 +548,12 @@ pub fn run(cfg: &DriveConfig, stop: &AtomicBool) -> Result<DriveStats, Ros2Error
         tendril::fsutil::write_atomic(path, &json)
             .map_err(|e| Ros2Error::Output(format!("{}: {e}", path.display())))?;
     }
-    if let Some(why) = drive.gave_up {
-        return Err(Ros2Error::RobotSilent(format!(
-            "{why}; after {} periods, the statistics and the run log cover them",
+    if let Some(e) = drive.gave_up {
+        log::warn!(
+            "drive: after {} periods; the statistics and the run log cover them",
             stats.periods
-        )));
+        );
+        return Err(e);
     }
     if stop.load(Ordering::Relaxed) {
         // Whole files, of a run cut short: said, and the exit status says it.
@@ -679,24 +568,9 @@ pub fn run(cfg: &DriveConfig, stop: &AtomicBool) -> Result<DriveStats, Ros2Error
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn a_stamp_from_the_future_is_no_age_and_one_from_the_past_its_age() {
-        let now = SystemTime::now()
-            .duration_since(SystemTime::UNIX_EPOCH)
-            .unwrap();
-        let past = Time {
-            sec: (now.as_secs() - 2) as i32,
-            nanosec: now.subsec_nanos(),
-        };
-        let age = wall_age_ns(&past) as f64 * 1e-9;
-        assert!((2.0..2.5).contains(&age), "{age}");
-        let future = Time {
-            sec: (now.as_secs() + 60) as i32,
-            nanosec: 0,
-        };
-        assert_eq!(wall_age_ns(&future), 0);
-    }
+    use tendril::ipc::controller::ControllerConfig;
+    use tendril::ipc::planner::PlannerConfig;
+    use tendril::runlog::RunLogConfig;
 
     #[test]
     fn a_drive_needs_a_positive_duration() {
