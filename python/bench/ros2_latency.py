@@ -6,7 +6,7 @@ stamp, taken as it publishes `tendon_controller/commanded`, → the peer's
 reception, which blocks on a WaitSet; one clock, one machine; includes the
 Python binding's deserialisation).
 
-    python python/bench/ros2_latency.py [--bin target/release/tendril-ros2] [--seconds 10] [--peer-first 2]
+    python python/bench/ros2_latency.py [--bin target/release/tendril-ros2] [--seconds 10] [--peer-first 2] [-- DRIVE FLAGS]
 """
 
 import argparse
@@ -33,6 +33,7 @@ def main():
     ap.add_argument("--domain", type=int, default=150)
     ap.add_argument("--peer-first", type=float, default=None, metavar="SECONDS",
                     help="the robot joins the graph this long before the drive (default: just after)")
+    ap.add_argument("drive_args", nargs="*", help="more flags for the drive, after --: -- --controller mcu")
     a = ap.parse_args()
     if a.bin:
         os.environ["TENDRIL_ROS2_BIN"] = a.bin
@@ -42,7 +43,7 @@ def main():
         robot = StaticsRobot(Peer(a.domain), model)
         time.sleep(a.peer_first)
     drive = start_drive(a.domain, "--robot", "robots/seed-4t.toml", "--model", "firmware/vectors/default.tnet",
-                        "--duration", str(a.seconds), "--stats", str(stats))
+                        "--duration", str(a.seconds), "--stats", str(stats), *a.drive_args)
     if a.peer_first is None:
         robot = StaticsRobot(Peer(a.domain), model)
     robot.serve(a.seconds + 30, until_done=drive)
@@ -55,6 +56,9 @@ def main():
     print(f"circle: tracking {s['tracking_rms_mm']:.3f} mm RMS, max {s['tracking_max_mm']:.3f} mm over "
           f"{s['tracked_frames']} frames; {s['periods']} periods, {s['overruns']} overruns, "
           f"{s['hold_periods']} holds, {s['stale_periods']} stale")
+    if s.get("chip_start_s") is not None:
+        print(f"chip: first command {s['chip_start_s']:.2f} s after its start, {s['chip_periods']} periods")
+    print(f"verdicts: {s['verdicts']['problems'] or 'clean'}")
     print(f"command → peer: p50 {np.percentile(lat, 50):.3f} ms, p99 {np.percentile(lat, 99):.3f} ms, "
           f"max {lat.max():.3f} ms ({len(lat)} commands)")
 

@@ -346,9 +346,11 @@ def test_the_chip_drives_a_robot_on_ros_2_through_its_bridge(tmp_path, binary, d
     assert s["chip_start_s"] is not None and s["chip_start_s"] < 20, s
     periods = (2 + seconds) * 100
     assert s["chip_periods"] >= 0.9 * periods and s["commands"] >= 0.9 * periods, s
-    # A drive period late by the chip's watchdog (2.5 periods, 25 ms: the
-    # drive runs at normal priority beside the real-time tests) makes the
-    # chip hold for a period; the loop goes on.
+    # The path starts after the chip's first unheld answer to a setpoint
+    # (a first version started on its boot commands and began with a
+    # hold). A drive period later than the chip's watchdog (2.5 periods:
+    # the drive runs at normal priority, beside the real-time tests in
+    # scripts/test) would make it hold a period; the loop goes on.
     assert s["hold_periods"] <= 5, s
     assert s["tracked_frames"] > 0.6 * seconds * 100, s
     assert s["tracking_rms_mm"] <= 0.25, s

@@ -17,7 +17,7 @@ use tendril::ipc::clock::now_ns;
 use tendril::ipc::controller::{ControllerConfig, ControllerStats, McuOptions};
 use tendril::ipc::transport::{self, IpcNode, Pub, Services, Sub};
 use tendril::ipc::IpcError;
-use tendril_shared::messages::{Control, PlantState, Setpoint, TensionCommand};
+use tendril_shared::messages::{command_status, Control, PlantState, Setpoint, TensionCommand};
 
 use crate::Ros2Error;
 
@@ -111,10 +111,10 @@ impl ChipController {
         Err(Ros2Error::Chip(format!("the chip's bridge ended: {why}")))
     }
 
-    /// Wait for the chip's first command while sending `setpoint` and
-    /// `state` each `period_ns` (the chip installs the run's net first);
-    /// returns the seconds it took and the sequence number it reached
-    /// (the drive's messages go on from it).
+    /// Wait for the chip's first command that answers a setpoint, unheld,
+    /// while sending `setpoint` and `state` each `period_ns` (the chip
+    /// installs the run's net first); returns the seconds it took and the
+    /// sequence number it reached (the drive's messages go on from it).
     pub fn wait_ready(
         &mut self,
         setpoint: &Setpoint,
@@ -143,7 +143,12 @@ impl ChipController {
             f.header.stamp_ns = s.header.stamp_ns;
             self.offer(&s)?;
             self.offer_state(&f)?;
-            if self.take_command()?.is_some() {
+            // Its first commands answer no setpoint yet (and turn into its
+            // watchdog's hold): ready when one answers a setpoint, unheld.
+            if self
+                .take_command()?
+                .is_some_and(|c| c.setpoint_seq > 0 && c.status & command_status::SAFE_HOLD == 0)
+            {
                 return Ok((waited, seq));
             }
             std::thread::sleep(std::time::Duration::from_nanos(period_ns));
