@@ -3,16 +3,18 @@ tests' StaticsRobot: drives with a 20 ms lag, the statics' tip as its
 tracker): the seconds from joining to the robot's first answer (discovery),
 the circle's tracking error, and the command's one-way latency (the drive's
 stamp, taken as it publishes `tendon_controller/commanded`, → the peer's
-reception, which blocks on a WaitSet; one clock, one machine; includes the
-Python binding's deserialisation).
+reception, which blocks on a WaitSet over both; one clock, one machine;
+includes the Python binding's wake-up and deserialisation).
 
     python python/bench/ros2_latency.py [--bin target/release/tendril-ros2] [--seconds 10] [--peer-first 2] [-- DRIVE FLAGS]
+    python python/bench/ros2_latency.py --baseline
 """
 
 import argparse
 import json
 import os
 import pathlib
+import subprocess
 import sys
 import tempfile
 import time
@@ -21,9 +23,46 @@ import numpy as np
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "python" / "tests"))
-from ros2_peer import Peer, StaticsRobot, start_drive  # noqa: E402
+from ros2_peer import RELIABLE, Header, JointState, Peer, StaticsRobot, Time, start_drive, valid  # noqa: E402
 
 import tendril  # noqa: E402
+
+
+def stamped_joint_state():
+    now = time.time()
+    return JointState(header=Header(stamp=Time(sec=int(now), nanosec=int((now % 1) * 1e9))),
+                      name=[f"tendon_{i}" for i in range(4)], effort=[1.0, 2.0, 3.0, 4.0])
+
+
+def baseline(domain: int, seconds: float, publish: bool):
+    """The peer's own floor: the same stamped JointState, Cyclone DDS from
+    Python on both sides (another process publishing every 5 ms), received
+    as the robot receives tendril's."""
+    topic = "tendon_controller/commanded"
+    if publish:
+        writer = Peer(domain).writer(topic, JointState, RELIABLE)
+        time.sleep(2.0)
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            writer.write(stamped_joint_state())
+            time.sleep(0.005)
+        return
+    from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
+    from cyclonedds.util import duration
+    peer = Peer(domain)
+    reader = peer.reader(topic, JointState, RELIABLE)
+    waitset = WaitSet(peer.dp)
+    waitset.attach(ReadCondition(reader, SampleState.Any | ViewState.Any | InstanceState.Any))
+    pub = subprocess.Popen([sys.executable, __file__, "--baseline-publisher", "--seconds", str(seconds),
+                            "--domain", str(domain)])
+    lat = []
+    while pub.poll() is None:
+        for s in valid(reader.take(N=100)):
+            lat.append(time.time() - (s.header.stamp.sec + 1e-9 * s.header.stamp.nanosec))
+        waitset.wait(duration(milliseconds=2))
+    lat = 1e3 * np.array(lat[len(lat) // 10:])
+    print(f"Cyclone DDS (Python) → Cyclone DDS (Python), the same message: p50 {np.percentile(lat, 50):.3f} ms, "
+          f"p99 {np.percentile(lat, 99):.3f} ms ({len(lat)} messages)")
 
 
 def main():
@@ -33,8 +72,13 @@ def main():
     ap.add_argument("--domain", type=int, default=150)
     ap.add_argument("--peer-first", type=float, default=None, metavar="SECONDS",
                     help="the robot joins the graph this long before the drive (default: just after)")
+    ap.add_argument("--baseline", action="store_true",
+                    help="instead: the peer's own latency floor, Cyclone DDS from Python on both sides")
+    ap.add_argument("--baseline-publisher", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("drive_args", nargs="*", help="more flags for the drive, after --: -- --controller mcu")
     a = ap.parse_args()
+    if a.baseline or a.baseline_publisher:
+        return baseline(a.domain, a.seconds, a.baseline_publisher)
     if a.bin:
         os.environ["TENDRIL_ROS2_BIN"] = a.bin
     stats = pathlib.Path(tempfile.mkdtemp()) / "drive.json"

@@ -252,16 +252,22 @@ class StaticsRobot:
         # Block until a command arrives (a poll-and-sleep loop would add
         # its sleep to every latency this peer measures).
         self.waitset = WaitSet(peer.dp)
-        self.waitset.attach(ReadCondition(self.commands, SampleState.Any | ViewState.Any | InstanceState.Any))
+        any_sample = SampleState.Any | ViewState.Any | InstanceState.Any
+        self.waitset.attach(ReadCondition(self.commands, any_sample))
+        # ... or a stamped copy (`commanded`, sent just before the command):
+        # its latency is measured from its own arrival, not the next message's.
+        self.waitset.attach(ReadCondition(self.commanded, any_sample))
 
     def serve(self, seconds: float, until_done=None, silent_after_first_s=None, silent_until_s=None,
-              events=()):
+              tip_silent_after_first_s=None, events=()):
         """Answer commands for `seconds`, or until the process `until_done`
         ends; from `silent_after_first_s` after the first command (until
         `silent_until_s`, if given), take them and say nothing (a robot
         whose driver and tracker died, or stalled); the commands taken in
-        that silence are kept in `silent_commands`. `events` are (seconds
-        after the first command, callable) run once each from the loop."""
+        that silence are kept in `silent_commands`; from
+        `tip_silent_after_first_s` on, the drives answer and the tracker does
+        not. `events` are (seconds after the first command, callable) run
+        once each from the loop."""
         end = time.monotonic() + seconds
         first = None
         pending = sorted(events, key=lambda e: e[0])
@@ -282,9 +288,9 @@ class StaticsRobot:
                     silent_until_s is None or since < silent_until_s):
                 self.silent_commands.extend((since, list(c.data)) for c in got)
                 continue
-            self.answer(got[-1].data)
+            self.answer(got[-1].data, tip=tip_silent_after_first_s is None or since < tip_silent_after_first_s)
 
-    def answer(self, command):
+    def answer(self, command, tip=True):
         """Move the drives towards `command` and publish their tensions and
         the tip of the statics for them."""
         cmd = np.array(command, dtype=float)
@@ -305,6 +311,8 @@ class StaticsRobot:
                                            effort=[float(v) for v in self.motors]))
         p = poses[0]
         self.last_tip = p
+        if not tip:
+            return
         self.tip.write(PoseStamped(header=Header(stamp=stamp, frame_id="tracker"),
                                    pose=Pose(position=Point(x=p[0], y=p[1], z=p[2]),
                                              orientation=Quaternion(x=p[4], y=p[5], z=p[6], w=p[3]))))

@@ -447,19 +447,20 @@ def test_a_silent_robot_holds_the_path_a_long_silence_ends_the_run_and_no_robot_
     status = [d.status[0] for d in valid(diagnostics.take(N=100))]
     assert any(d.level == 1 and "path held" in d.message for d in status), [d.message for d in status]
     assert status[-1].level == 0, status[-1]
-    # Silent for longer than --wait-for-robot: the drive gives up, exit 1,
-    # said, with its statistics written.
+    # A tracker silent (the drives still answer) for longer than
+    # --wait-for-robot: held from its timeout on (0.25 s), then the drive
+    # gives up, exit 1, said, with its statistics written.
     stats_path.unlink()
     drive = start_drive(domain, "--robot", "robots/seed-4t.toml", "--model", "firmware/vectors/default.tnet",
                         "--duration", "4", "--wait-for-robot", "2", "--stats", str(stats_path))
     try:
         robot = StaticsRobot(Peer(domain), tendril.Robot.load(ROOT_ROBOTS / "seed-4t.toml"))
-        robot.serve(25.0, until_done=drive, silent_after_first_s=3.0)
+        robot.serve(25.0, until_done=drive, tip_silent_after_first_s=3.0)
     finally:
         out, err = drive.communicate(timeout=30)
-    assert drive.returncode == 1 and "fell silent" in err, (drive.returncode, err)
+    assert drive.returncode == 1 and "the tracker fell silent" in err, (drive.returncode, err)
     s = json.loads(stats_path.read_text())
-    assert 0.8 * 2 * 200 <= s["path_held_periods"] <= 2 * 200 + 40, s
+    assert 0.8 * (2 - 0.25) * 200 <= s["path_held_periods"] <= (2 - 0.25) * 200 + 40, s
     # Nobody there at all: refused after the wait, with what was missing.
     lonely = start_drive(domain + 1, "--model", "firmware/vectors/default.tnet", "--wait-for-robot", "2")
     out, err = lonely.communicate(timeout=30)

@@ -33,7 +33,8 @@ pub enum Ros2Error {
     /// An output could not be written.
     #[error("{0}")]
     Output(String),
-    /// The robot stopped answering for longer than the drive waits.
+    /// The robot (or its tracker) stopped answering for longer than the
+    /// drive waits.
     #[error("{0}")]
     RobotSilent(String),
     /// The chip as the controller: its bridge or QEMU failed.

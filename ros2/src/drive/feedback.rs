@@ -52,6 +52,7 @@ impl Drive {
                 let age_ns = wall_age_ns(&tip.header.stamp);
                 self.feedback.tip = Some((pose.map(|v| v as f32), t_wake.saturating_sub(age_ns)));
                 self.feedback.tip_seq += 1;
+                self.last_tip_ns = t_wake;
                 self.stats.tip_poses += 1;
                 fresh = true;
                 self.track(pose, t_wake.saturating_sub(age_ns));

@@ -85,6 +85,11 @@ pub struct Drive {
     /// The robot is silent after this long (the period's plant-stale
     /// time), ns.
     silent_after_ns: u64,
+    /// When the tracker's last tip pose came (monotonic ns).
+    last_tip_ns: u64,
+    /// The tracker is silent after this long (the period's tracker
+    /// timeout, `--tracker-timeout`), ns.
+    tracker_silent_after_ns: u64,
     /// A silence this long ends the run, ns.
     give_up_after_ns: u64,
     /// How long the path's clock has been held, ns.
@@ -181,6 +186,8 @@ impl Drive {
             last_heard_ns: 0,
             silent_after_ns: SILENT_AFTER_PERIODS * period_ns,
             give_up_after_ns: (cfg.wait_for_robot_s.max(0.0) * 1e9) as u64,
+            last_tip_ns: 0,
+            tracker_silent_after_ns: (cfg.controller.tracker_timeout_s.max(0.0) * 1e9) as u64,
             held_ns: 0,
             gave_up: None,
             last_status: 0,
@@ -212,6 +219,7 @@ impl Drive {
         let start = now_ns() + period_ns;
         drive.ticker = Ticker::new(start, period_ns);
         drive.last_heard_ns = start;
+        drive.last_tip_ns = start;
         Ok(drive)
     }
 
@@ -316,17 +324,26 @@ impl Drive {
         if state.is_some() {
             self.last_heard_ns = t_wake;
         }
-        // A silent robot: the path's clock stops, so the setpoint — and
-        // with the correction frozen by the period's stale rule, the
-        // command — holds where it was until the robot answers.
-        let silence = t_wake.saturating_sub(self.last_heard_ns);
-        if silence > self.silent_after_ns {
+        // A silent robot or tracker: the path's clock stops, so the
+        // setpoint — and with the correction frozen by the period's stale
+        // and tracker rules, the command — holds where it was until both
+        // are heard again.
+        let robot = t_wake.saturating_sub(self.last_heard_ns);
+        let tracker = t_wake.saturating_sub(self.last_tip_ns);
+        let silent = if robot > self.silent_after_ns {
+            Some(("robot", "no joint state or tip pose", robot))
+        } else if tracker > self.tracker_silent_after_ns {
+            Some(("tracker", "no tip pose", tracker))
+        } else {
+            None
+        };
+        if let Some((who, what, silence)) = silent {
             self.held_ns += self.ticker.period_ns();
             self.stats.path_held_periods += 1;
             if silence > self.give_up_after_ns {
                 self.gave_up = Some(Ros2Error::RobotSilent(format!(
-                    "the robot fell silent for {:.1} s (no joint state or tip pose; \
-                     --wait-for-robot {} s): the last command held",
+                    "the {who} fell silent for {:.1} s ({what}; --wait-for-robot {} s): the \
+                     last command held",
                     silence as f64 * 1e-9,
                     self.give_up_after_ns as f64 * 1e-9
                 )));
