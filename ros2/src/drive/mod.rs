@@ -94,6 +94,8 @@ pub struct Drive {
     give_up_after_ns: u64,
     /// How long the path's clock has been held, ns.
     held_ns: u64,
+    /// Who is silent now ("robot", "tracker"), the path held for it.
+    silent: Option<&'static str>,
     /// Why the run ended early, when it did.
     gave_up: Option<Ros2Error>,
     /// The last command sent (with the chip in the loop, a period may
@@ -189,6 +191,7 @@ impl Drive {
             last_tip_ns: 0,
             tracker_silent_after_ns: (cfg.controller.tracker_timeout_s.max(0.0) * 1e9) as u64,
             held_ns: 0,
+            silent: None,
             gave_up: None,
             last_status: 0,
             overran: false,
@@ -337,8 +340,11 @@ impl Drive {
         } else {
             None
         };
+        self.silent = silent.map(|(who, _, _)| who);
         if let Some((who, what, silence)) = silent {
-            self.held_ns += self.ticker.period_ns();
+            // The periods the ticker skipped (late by a whole period) are
+            // held time too: the setpoint must not move a period on.
+            self.held_ns += (1 + tick.skipped) * self.ticker.period_ns();
             self.stats.path_held_periods += 1;
             if silence > self.give_up_after_ns {
                 self.gave_up = Some(Ros2Error::RobotSilent(format!(
