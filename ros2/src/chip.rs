@@ -131,7 +131,8 @@ impl ChipController {
             let waited = (now_ns() - start) as f64 * 1e-9;
             if waited > CHIP_START_S {
                 return Err(Ros2Error::Chip(format!(
-                    "the chip sent no command within {CHIP_START_S} s of its start"
+                    "the chip answered no setpoint within {CHIP_START_S} s of its start \
+                     (QEMU's start, the link, the run's net installed)"
                 )));
             }
             seq += 1;
@@ -164,6 +165,17 @@ impl ChipController {
             Some(Ok(stats)) => stats.map_err(|e| Ros2Error::Chip(e.to_string())),
             Some(Err(_)) => Err(Ros2Error::Chip("the bridge's thread panicked".into())),
             None => Err(Ros2Error::Chip("the bridge had ended".into())),
+        }
+    }
+}
+
+impl Drop for ChipController {
+    /// A drive that ends by an error (the chip never ready, the robot
+    /// silent) stops the bridge too, and with it QEMU; `finish` has sent
+    /// this already on the ordinary path.
+    fn drop(&mut self) {
+        if self.bridge.is_some() {
+            let _ = tendril::ipc::send_stop(&self.control);
         }
     }
 }

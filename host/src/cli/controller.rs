@@ -25,7 +25,8 @@ pub const DEFAULT_RATE_HZ: f64 = defaults::RATE_HZ;
 /// Who runs the control period (`tendril sim`, `tendril-ros2 drive`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum ControllerKind {
-    /// The host controller process.
+    /// The host runs the period (its own process in `tendril sim`, the
+    /// drive's process in `tendril-ros2 drive`).
     Host,
     /// The chip (QEMU netduinoplus2), bridged over its serial link.
     Mcu,

@@ -213,13 +213,12 @@ impl Drive {
             stats: DriveStats::default(),
         };
         drive.stats.first_feedback_s = drive.wait_for_robot(&robot.min_tensions(), cfg, stop)?;
-        // The path's clock starts now, with the robot heard from.
-        let start = now_ns() + period_ns;
-        drive.ctl = Controller::new(&cfg.controller, &robot, &bytes, start).map_err(err)?;
         if cfg.controller.mcu.is_some() {
             drive.start_chip(cfg, period_ns, stop)?;
         }
+        // The path's clock starts now, with the robot (and the chip) heard from.
         let start = now_ns() + period_ns;
+        drive.ctl = Controller::new(&cfg.controller, &robot, &bytes, start).map_err(err)?;
         drive.ticker = Ticker::new(start, period_ns);
         drive.last_heard_ns = start;
         drive.last_tip_ns = start;
@@ -414,7 +413,10 @@ impl Drive {
         let result = loop {
             let now = now_ns();
             match chip.take_command() {
-                Ok(Some(cmd)) => self.send(&cmd, now, &self.last_setpoint.clone()),
+                Ok(Some(cmd)) => {
+                    let setpoint = self.last_setpoint;
+                    self.send(&cmd, now, &setpoint)
+                }
                 Ok(None) if now_ns() + CHIP_POLL_NS < self.next_deadline_ns => {
                     std::thread::sleep(std::time::Duration::from_nanos(CHIP_POLL_NS))
                 }
