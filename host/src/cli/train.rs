@@ -107,8 +107,7 @@ pub struct TrainArgs {
     /// Hidden-unit cap (at most the controllers' capacity, tendril_shared::MAX_HIDDEN = 64).
     #[arg(long, default_value_t = tendril_shared::MAX_HIDDEN)]
     pub max_hidden: usize,
-    /// Candidates trained per installed unit (in parallel) [default: 8; 16 for a robot with
-    /// more than two bending degrees of freedom].
+    /// Candidates trained per installed unit (in parallel) [default: 8].
     #[arg(long)]
     pub pool: Option<usize>,
     /// Candidate objective.
@@ -170,12 +169,12 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = 3)]
     pub pilot_units: usize,
     /// Candidates train on a seeded random subset of this many training rows per unit (0 = all)
-    /// [default: 3000; 10000 for a robot with more than two bending degrees of freedom].
+    /// [default: 3000].
     #[arg(long)]
     pub cand_patterns: Option<usize>,
     /// Polish: after growth, train every weight together by L-BFGS for at
     /// most this many steps, keeping the best validation net (0 = off)
-    /// [default: 0; 10,000 for a robot with more than two bending degrees of freedom].
+    /// [default: 0; 4,000 for a robot with more than two bending degrees of freedom].
     #[arg(long, value_name = "STEPS")]
     pub polish: Option<usize>,
     /// Polish: what it minimises — the tip displacement the tension error causes
@@ -189,6 +188,9 @@ pub struct TrainArgs {
     /// Polish: stop after this many steps without a better validation RMSE.
     #[arg(long, default_value_t = 200)]
     pub polish_patience: usize,
+    /// Polish: curvature pairs L-BFGS keeps [default: the library's].
+    #[arg(long, value_name = "PAIRS")]
+    pub polish_memory: Option<usize>,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
@@ -259,6 +261,7 @@ impl TrainArgs {
                 max_iterations: self.polish.unwrap_or(d.polish.max_iterations),
                 patience: self.polish_patience,
                 robust: self.polish_robust.unwrap_or(d.polish.robust),
+                memory: self.polish_memory.unwrap_or(d.polish.memory),
                 loss: match self.polish_loss {
                     PolishLossArg::Tip => cascor::PolishLoss::Tip,
                     PolishLossArg::Plain => cascor::PolishLoss::Plain,

@@ -113,6 +113,7 @@ pub fn fine_tune_with_stop(
             vx.nrows()
         )));
     }
+    opts.polish.check()?;
     let d = Data {
         y,
         vy,

@@ -11,6 +11,7 @@
 //! - [`train`]: the grow-and-freeze loop, the choice of output configuration,
 //!   stopping and progress;
 //! - [`polish`]: every weight trained together after growth;
+//! - `lbfgs`: the polish's curvature pairs and quasi-Newton direction;
 //! - [`fine_tune`]: a trained net polished on other rows (measured ones);
 //! - `batch`: the polish's loss and gradient over tiles of rows;
 //! - [`tip_metric`]: what an output error costs at the tip, the polish's weights;
@@ -25,6 +26,7 @@ mod error;
 pub mod export;
 pub mod fine_tune;
 mod growth;
+mod lbfgs;
 pub mod net;
 pub mod options;
 mod outputs;

@@ -22,6 +22,7 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 use super::batch::{self, sum_blocks, Batch};
+use super::lbfgs::{dot, Memory};
 use super::net::{hidden_prime, GrowingNet, OutputKind};
 
 /// What the polish minimises.
@@ -59,8 +60,28 @@ impl Default for PolishOptions {
             loss: PolishLoss::Tip,
             robust: 0.0,
             patience: 200,
-            memory: 12,
+            memory: super::options::POLISH_MEMORY,
         }
+    }
+}
+
+impl PolishOptions {
+    /// Refuse what no polish can run with: a memory of no pairs, a robust
+    /// scale that is not a finite number ≥ 0.
+    pub fn check(&self) -> Result<(), crate::learn::LearnError> {
+        let bad = |name, why: &str| {
+            Err(crate::learn::LearnError::BadParameter {
+                name,
+                why: why.into(),
+            })
+        };
+        if self.memory == 0 {
+            return bad("polish memory", "must be at least 1 curvature pair");
+        }
+        if !(self.robust.is_finite() && self.robust >= 0.0) {
+            return bad("polish robust scale", "must be a finite number ≥ 0");
+        }
+        Ok(())
     }
 }
 
@@ -373,10 +394,6 @@ pub fn gauss_newton_diagonal(net: &GrowingNet, rows: Rows<'_>) -> Vec<f64> {
     diag
 }
 
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
-}
-
 /// Polish every weight of `net` on the `train` rows, keeping the weights
 /// with the lowest RMSE (in the metric's units) on the `valid` rows (empty:
 /// the training RMSE decides).
@@ -406,39 +423,20 @@ pub fn polish(
     // Once, at the start: re-evaluating it every 1,000 steps on the
     // two-segment robot changed the validation RMSE by 1 % (not better).
     let inv_d = inverse_diagonal(&gauss_newton_diagonal(&work, train));
-    let mut pairs: std::collections::VecDeque<(Vec<f64>, Vec<f64>, f64)> = Default::default();
+    let mut memory = Memory::new(opts.memory);
     let mut iterations = 0;
     for it in 1..=opts.max_iterations {
         if stop.load(Ordering::SeqCst) || !f.is_finite() {
             break;
         }
-        // Two-loop recursion: d = −H·g.
-        let mut q = g.clone();
-        let mut alphas = Vec::with_capacity(pairs.len());
-        for (s, yv, rho) in pairs.iter().rev() {
-            let a = rho * dot(s, &q);
-            q.iter_mut().zip(yv).for_each(|(qi, yi)| *qi -= a * yi);
-            alphas.push(a);
-        }
         // H₀ = γ · diag(1/d), d the Gauss–Newton diagonal: the weights'
         // curvatures differ by orders of magnitude (|w| from 0.01 to 200),
         // and a scalar H₀ leaves L-BFGS crawling along the flat ones.
-        let gamma = match pairs.back() {
-            Some((s, yv, _)) => {
-                dot(s, yv) / yv.iter().zip(&inv_d).map(|(y, i)| y * y * i).sum::<f64>()
-            }
-            None => 1.0,
-        };
-        q.iter_mut().zip(&inv_d).for_each(|(v, i)| *v *= gamma * i);
-        for ((s, yv, rho), a) in pairs.iter().zip(alphas.iter().rev()) {
-            let b = rho * dot(yv, &q);
-            q.iter_mut().zip(s).for_each(|(qi, si)| *qi += (a - b) * si);
-        }
-        let mut d: Vec<f64> = q.iter().map(|v| -v).collect();
+        let mut d = memory.direction(&g, &inv_d);
         let mut slope = dot(&g, &d);
         if slope >= 0.0 {
             // Not a descent direction (curvature lost): restart from −g.
-            pairs.clear();
+            memory.clear();
             let scale = 1.0 / dot(&g, &g).sqrt().max(1e-300);
             d = g.iter().map(|v| -v * scale).collect();
             slope = dot(&g, &d);
@@ -461,13 +459,7 @@ pub fn polish(
         };
         let s: Vec<f64> = trial.iter().zip(&theta).map(|(a, b)| a - b).collect();
         let yv: Vec<f64> = gt.iter().zip(&g).map(|(a, b)| a - b).collect();
-        let sy = dot(&s, &yv);
-        if sy > 1e-12 * dot(&yv, &yv).sqrt() * dot(&s, &s).sqrt() {
-            pairs.push_back((s, yv, 1.0 / sy));
-            if pairs.len() > opts.memory.max(1) {
-                pairs.pop_front();
-            }
-        }
+        memory.push(&s, &yv);
         log::trace!("polish step {it}: loss {f:e} → {ft:e}, step {step:e}, slope {slope:e}");
         theta = trial;
         f = ft;
@@ -496,6 +488,28 @@ pub fn polish(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_options_refuse_a_memory_of_no_pairs_and_a_bad_robust_scale() {
+        assert!(PolishOptions::default().check().is_ok());
+        for bad in [
+            PolishOptions {
+                memory: 0,
+                ..PolishOptions::default()
+            },
+            PolishOptions {
+                robust: -1.0,
+                ..PolishOptions::default()
+            },
+            PolishOptions {
+                robust: f64::NAN,
+                ..PolishOptions::default()
+            },
+        ] {
+            let e = bad.check().unwrap_err().to_string();
+            assert!(e.contains("polish"), "{e}");
+        }
+    }
 
     fn toy_net(kind: OutputKind) -> GrowingNet {
         GrowingNet {

@@ -205,6 +205,7 @@ pub fn train_with_stop(
             why: "must be at least 1".into(),
         });
     }
+    opts.polish.check()?;
     if opts.output_kinds.is_empty() || opts.output_solvers.is_empty() {
         return Err(LearnError::BadParameter {
             name: "output",
