@@ -266,7 +266,6 @@ impl TrainArgs {
                     PolishLossArg::Tip => cascor::PolishLoss::Tip,
                     PolishLossArg::Plain => cascor::PolishLoss::Plain,
                 },
-                ..d.polish.clone()
             },
             ..d
         }

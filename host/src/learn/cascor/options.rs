@@ -121,21 +121,12 @@ impl Default for CascorOptions {
 }
 
 /// Polish steps of [`CascorOptions::for_robot`] past two bending degrees of
-/// freedom. With [`POLISH_MEMORY`] pairs the two-segment robot's validation
+/// freedom. With [`super::polish::POLISH_MEMORY`] pairs the two-segment robot's validation
 /// error reaches in 2,000 steps what 12 pairs reached in 10,000; 3,000
 /// left split seed 3's held-out p95 at 0.256 mm, over its 0.25 mm target
 /// (`docs/design.md` §4, "Polish"). Each step costs about one pass of the
 /// training rows forward and back.
 pub const POLISH_STEPS: usize = 4_000;
-
-/// Curvature pairs the polish's L-BFGS keeps. A 7-64-6 net has ≈ 3,000
-/// weights whose curvatures span orders of magnitude even after the
-/// Gauss–Newton diagonal; a short memory forgets the directions it has
-/// learned. On the two-segment robot (1,500 steps from the same grown net,
-/// validation RMSE ×100): 12 pairs 0.0197, 40 0.0177, 100 0.0162, 250
-/// 0.0152, 600 0.0142, 1,200 0.0139; 600 pairs cost ≈ 2 ms a step on top
-/// of the ≈ 21 ms loss and gradient (`super::lbfgs`).
-pub const POLISH_MEMORY: usize = 600;
 
 /// The robust loss's δ, in median row errors, of [`CascorOptions::for_robot`]
 /// past four bending degrees of freedom (three segments).
