@@ -98,6 +98,31 @@ fn train_test_fraction_outside_its_range_is_refused() {
 }
 
 #[test]
+fn train_polish_settings_no_polish_can_run_with_are_refused() {
+    let dir = with_data(100);
+    for (flag, bad, needle) in [
+        ("--polish-memory", "0", "--polish-memory must be at least 1"),
+        (
+            "--polish-robust",
+            "-1",
+            "--polish-robust must be a finite number",
+        ),
+        (
+            "--polish-robust",
+            "NaN",
+            "--polish-robust must be a finite number",
+        ),
+    ] {
+        let out = tendril(
+            dir.path(),
+            &["train", "--data", "data.csv", "--out", "m.tnet", flag, bad],
+        );
+        refused(&out, needle);
+    }
+    assert!(!dir.path().join("m.tnet").exists());
+}
+
+#[test]
 fn train_log_over_its_own_model_is_refused_and_the_model_kept() {
     let dir = with_model();
     let model = std::fs::read(dir.path().join("m.tnet")).unwrap();

@@ -107,7 +107,8 @@ pub struct TrainArgs {
     /// Hidden-unit cap (at most the controllers' capacity, tendril_shared::MAX_HIDDEN = 64).
     #[arg(long, default_value_t = tendril_shared::MAX_HIDDEN)]
     pub max_hidden: usize,
-    /// Candidates trained per installed unit (in parallel) [default: 8].
+    /// Candidates trained per installed unit (in parallel) [default: 8; 16 for a robot with
+    /// more than four bending degrees of freedom].
     #[arg(long)]
     pub pool: Option<usize>,
     /// Candidate objective.
@@ -169,7 +170,7 @@ pub struct TrainArgs {
     #[arg(long, default_value_t = 3)]
     pub pilot_units: usize,
     /// Candidates train on a seeded random subset of this many training rows per unit (0 = all)
-    /// [default: 3000].
+    /// [default: 3000; 10000 for a robot with more than four bending degrees of freedom].
     #[arg(long)]
     pub cand_patterns: Option<usize>,
     /// Polish: after growth, train every weight together by L-BFGS for at
@@ -183,7 +184,7 @@ pub struct TrainArgs {
     pub polish_loss: PolishLossArg,
     /// Polish: a robust loss, pseudo-Huber with δ = K × the median row error at the start
     /// (0 = squared) [default: 0; 3 for a robot with more than four bending degrees of freedom].
-    #[arg(long, value_name = "K")]
+    #[arg(long, value_name = "K", allow_hyphen_values = true)]
     pub polish_robust: Option<f64>,
     /// Polish: stop after this many steps without a better validation RMSE.
     #[arg(long, default_value_t = 200)]
@@ -392,6 +393,15 @@ pub fn run(a: TrainArgs) -> anyhow::Result<()> {
     )?;
     if let Some(plot) = &a.plot {
         super::common::refuse_stdout("--plot", plot, "a PNG is drawn into a file")?;
+    }
+    if a.polish_memory == Some(0) {
+        anyhow::bail!("--polish-memory must be at least 1 (L-BFGS curvature pairs), got 0");
+    }
+    if let Some(k) = a.polish_robust.filter(|k| !(k.is_finite() && *k >= 0.0)) {
+        anyhow::bail!(
+            "--polish-robust must be a finite number ≥ 0 (0: squared loss), got {}",
+            crate::units::given(k)
+        );
     }
     if !(a.target_rmse.is_finite() && a.target_rmse >= 0.0) {
         anyhow::bail!(
