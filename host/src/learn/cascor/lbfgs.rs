@@ -50,8 +50,15 @@ impl Memory {
     /// when their curvature sᵀy is positive (else the pair would make the
     /// inverse Hessian indefinite); the oldest pair goes when full.
     pub(super) fn push(&mut self, s: &[f64], y: &[f64]) {
-        let sy = dot(s, y);
-        if sy <= 1e-12 * dot(y, y).sqrt() * dot(s, s).sqrt() {
+        // Judged as stored (f32), so a pair kept always has a positive
+        // curvature and a finite 1 / sᵀy.
+        let rounded = |v: f64| f64::from(v as f32);
+        let sy: f64 = s
+            .iter()
+            .zip(y)
+            .map(|(a, b)| rounded(*a) * rounded(*b))
+            .sum();
+        if !(sy > 1e-12 * dot(y, y).sqrt() * dot(s, s).sqrt() && (1.0 / sy).is_finite()) {
             return;
         }
         let mut pair = if self.pairs.len() >= self.capacity {
@@ -68,7 +75,7 @@ impl Memory {
         pair.y.clear();
         pair.y.extend(y.iter().map(|&v| v as f32));
         // The curvature of the pair as stored, so each pair keeps sᵀH y = sᵀs.
-        pair.rho = 1.0 / dot_f32(&pair.s, &pair.y);
+        pair.rho = 1.0 / sy;
         self.pairs.push_back(pair);
     }
 
@@ -142,14 +149,6 @@ fn dot_mixed(a: &[f32], b: &[f64]) -> f64 {
     acc.iter().sum::<f64>() + tail
 }
 
-/// aᵀb of two stored f32 vectors, in f64.
-fn dot_f32(a: &[f32], b: &[f32]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|(&x, &y)| f64::from(x) * f64::from(y))
-        .sum()
-}
-
 /// y += a x for a stored pair's f32 `x`.
 fn axpy(a: f64, x: &[f32], y: &mut [f64]) {
     y.iter_mut()
@@ -189,6 +188,9 @@ mod tests {
     fn the_memory_keeps_the_newest_pairs_and_refuses_negative_curvature() {
         let mut m = Memory::new(2);
         m.push(&[1.0, 0.0], &[-1.0, 0.0]);
+        assert_eq!(m.pairs.len(), 0);
+        // Positive in f64, nothing left in f32 (1e-50 rounds to 0).
+        m.push(&[1e-50, 0.0], &[1e-50, 0.0]);
         assert_eq!(m.pairs.len(), 0);
         m.push(&[1.0, 0.0], &[2.0, 0.0]);
         m.push(&[0.0, 1.0], &[0.0, 4.0]);
