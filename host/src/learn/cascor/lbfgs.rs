@@ -85,7 +85,7 @@ impl Memory {
         let mut q = g.to_vec();
         self.alphas.clear();
         for p in self.pairs.iter().rev() {
-            let a = p.rho * dot_mixed(&p.s, &q);
+            let a = p.rho * dot(&p.s, &q);
             axpy(-a, &p.y, &mut q);
             self.alphas.push(a);
         }
@@ -102,7 +102,7 @@ impl Memory {
         };
         q.iter_mut().zip(inv_d).for_each(|(v, i)| *v *= gamma * i);
         for (p, a) in self.pairs.iter().zip(self.alphas.iter().rev()) {
-            let b = p.rho * dot_mixed(&p.y, &q);
+            let b = p.rho * dot(&p.y, &q);
             axpy(a - b, &p.s, &mut q);
         }
         q.iter_mut().for_each(|v| *v = -*v);
@@ -113,37 +113,20 @@ impl Memory {
 /// Lanes of [`dot`]: independent sums the compiler keeps in vector registers.
 const LANES: usize = 8;
 
-/// aᵀb, summed in [`LANES`] interleaved partial sums (a fixed order).
-pub(super) fn dot(a: &[f64], b: &[f64]) -> f64 {
+/// aᵀb, summed in f64 in [`LANES`] interleaved partial sums (a fixed
+/// order); `a` in f64, or a stored pair's f32.
+pub(super) fn dot<T: Copy + Into<f64>>(a: &[T], b: &[f64]) -> f64 {
     let mut acc = [0.0; LANES];
     let (ca, cb) = (a.chunks_exact(LANES), b.chunks_exact(LANES));
     let tail: f64 = ca
         .remainder()
         .iter()
         .zip(cb.remainder())
-        .map(|(x, y)| x * y)
+        .map(|(&x, y)| x.into() * y)
         .sum();
     for (x, y) in ca.zip(cb) {
         for k in 0..LANES {
-            acc[k] += x[k] * y[k];
-        }
-    }
-    acc.iter().sum::<f64>() + tail
-}
-
-/// aᵀb for a stored pair's f32 `a`, summed in f64 as [`dot`].
-fn dot_mixed(a: &[f32], b: &[f64]) -> f64 {
-    let mut acc = [0.0; LANES];
-    let (ca, cb) = (a.chunks_exact(LANES), b.chunks_exact(LANES));
-    let tail: f64 = ca
-        .remainder()
-        .iter()
-        .zip(cb.remainder())
-        .map(|(&x, y)| f64::from(x) * y)
-        .sum();
-    for (x, y) in ca.zip(cb) {
-        for k in 0..LANES {
-            acc[k] += f64::from(x[k]) * y[k];
+            acc[k] += x[k].into() * y[k];
         }
     }
     acc.iter().sum::<f64>() + tail
