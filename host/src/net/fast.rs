@@ -306,54 +306,8 @@ mod tests {
     //! The fast path against the firmware's `infer`, bit for bit: a wrong
     //! weight index, a dropped or reordered product changes the bits of
     //! nearly every query.
-    use rand::{Rng, SeedableRng};
-    use rand_chacha::ChaCha8Rng;
-
     use super::*;
-
-    fn tnet(name: &str) -> Box<McuNet> {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../firmware/vectors")
-            .join(name);
-        crate::net::read_tnet(&path).unwrap()
-    }
-
-    /// A random 7-64-4 net (the benchmark's size), symmetric-sigmoid hidden units.
-    fn random_64() -> Box<McuNet> {
-        use crate::learn::cascor::export::{to_bytes, Ranges};
-        use crate::learn::cascor::{GrowingNet, OutputKind};
-        let mut rng = ChaCha8Rng::seed_from_u64(5);
-        let mut row =
-            |n: usize| -> Vec<f64> { (0..n).map(|_| rng.random_range(-1.0..1.0)).collect() };
-        let net = GrowingNet {
-            n_inputs: 7,
-            n_outputs: 4,
-            hidden: (0..64).map(|k| row(8 + k)).collect(),
-            outputs: (0..4).map(|_| row(8 + 64)).collect(),
-            output_kind: OutputKind::Sigmoid,
-        };
-        let ranges = Ranges {
-            input_lo: vec![-0.1, -0.1, 0.2, 0.8, -0.3, -0.3, -0.01],
-            input_hi: vec![0.1, 0.1, 0.4, 1.0, 0.3, 0.3, 0.01],
-            output_lo: vec![0.0; 4],
-            output_hi: vec![10.0; 4],
-        };
-        crate::net::decode(&to_bytes(&net, &ranges).unwrap()).unwrap()
-    }
-
-    /// Poses spread a little past the net's input box (extrapolation too).
-    fn poses(net: &McuNet, n: usize, seed: u64) -> Vec<[f32; POSE_DIM]> {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let (lo, hi) = (net.input_lo(), net.input_hi());
-        (0..n)
-            .map(|_| {
-                std::array::from_fn(|i| match (lo.get(i), hi.get(i)) {
-                    (Some(&l), Some(&h)) => l + (h - l) * rng.random_range(-0.2f32..1.2),
-                    _ => rng.random_range(-1.0..1.0),
-                })
-            })
-            .collect()
-    }
+    use crate::net::test_nets::{exact, poses, random_64, shipped as tnet};
 
     fn check_bits(net: &McuNet, seed: u64) {
         let fast = HostNet::new(net);
@@ -395,39 +349,6 @@ mod tests {
                 assert_eq!(g.to_bits(), w.to_bits(), "row {r}: {g} vs firmware {w}");
             }
         }
-    }
-
-    /// The net's own weights evaluated in `f64` with the exact sigmoids:
-    /// what both `f32` paths approximate.
-    fn exact(net: &McuNet, pose: &[f32; POSE_DIM]) -> Vec<f64> {
-        let act = |a: Activation, s: f64| match a {
-            Activation::Linear => s,
-            Activation::Sigmoid => 1.0 / (1.0 + (-s).exp()),
-            Activation::SymmetricSigmoid => 1.0 / (1.0 + (-s).exp()) - 0.5,
-        };
-        let sh = net.shape();
-        let mut f = vec![1.0f64];
-        for (i, &x) in pose.iter().enumerate() {
-            f.push(match (net.input_lo().get(i), net.input_hi().get(i)) {
-                (Some(&lo), Some(&hi)) if i < sh.inputs => {
-                    (f64::from(x) - f64::from(lo)) / f64::from(hi - lo)
-                }
-                _ => 0.0,
-            });
-        }
-        let dot = |w: &[f32], f: &[f64]| -> f64 {
-            w.iter().zip(f).map(|(&w, &x)| f64::from(w) * x).sum()
-        };
-        for k in 0..sh.hidden {
-            let s = dot(net.hidden_row(k).unwrap(), &f);
-            f.push(act(net.hidden_activation(), s));
-        }
-        (0..sh.outputs)
-            .map(|o| {
-                let (lo, hi) = (f64::from(net.output_lo()[o]), f64::from(net.output_hi()[o]));
-                lo + act(net.output_activation(), dot(net.output_row(o).unwrap(), &f)) * (hi - lo)
-            })
-            .collect()
     }
 
     /// The largest distance from the exact evaluation over random poses, as

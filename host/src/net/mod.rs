@@ -30,6 +30,8 @@ mod ranges;
 pub mod read;
 mod relaxed;
 pub mod robot_check;
+#[cfg(test)]
+mod test_nets;
 
 pub use fast::HostNet;
 pub use guarded::{read_poses, solve_csv, BatchSummary, GuardedNet, IkAnswer, IkError};
