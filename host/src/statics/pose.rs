@@ -31,7 +31,7 @@ pub fn orthonormalise(r: &Matrix3<f64>) -> Matrix3<f64> {
             if err <= NEWTON_SCHULZ_DONE {
                 return x;
             }
-            if !(err < NEWTON_SCHULZ_START) {
+            if err.is_nan() || err >= NEWTON_SCHULZ_START {
                 break;
             }
             x -= x * e * 0.5;
