@@ -5,36 +5,39 @@
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion};
 
 /// How far from orthogonal (largest entry of RᵀR − I) an input may be for
-/// the Newton–Schulz iteration; farther, the SVD. At 0.1 each step squares
-/// the error at most 10-fold smaller, so the iteration converges.
+/// the Newton–Schulz iteration; farther, the SVD. From 0.1 each step takes
+/// the error e to about ¾ e², so the iteration converges.
 const NEWTON_SCHULZ_START: f64 = 0.1;
-/// Where the iteration stops: RᵀR is I to within rounding (a product of
-/// orthonormal 3×3 matrices is orthonormal to a few 1e-16).
-const NEWTON_SCHULZ_DONE: f64 = 1e-14;
-/// Steps before falling back to the SVD (from 0.1: 0.0075, 4e-5, 1e-9,
-/// 1e-18).
+/// A step from an error this small is the last: it leaves ¾ e² ≤ 1e-16,
+/// RᵀR = I to rounding. Stopping one step earlier, at RᵀR = I to 1e-14,
+/// is not enough: the rotation between two nearby solves' R, turned into an
+/// angle through its trace, amplifies that 1e-14 to 1e-9 rad (the tip
+/// Jacobian's difference test saw it).
+const NEWTON_SCHULZ_LAST: f64 = 1e-8;
+/// Steps before falling back to the SVD (from 0.1: 7.5e-3, 4e-5, 1.3e-9,
+/// then the last).
 const NEWTON_SCHULZ_STEPS: usize = 5;
 
 /// Nearest rotation to `r`: the orthogonal factor of its polar
-/// decomposition, U Vᵀ from r = U Σ Vᵀ. An integrated R drifts from a
-/// rotation by ~1e-10, and from there the Newton–Schulz iteration
-/// X ← X (3I − XᵀX)/2, which converges quadratically to the same polar
-/// factor, takes one or two 3×3 products (≈ 0.05 µs against the SVD's
-/// 0.54 µs on the VM's Zen 1; every statics solve pays it). A matrix far
-/// from a rotation, or a reflection, takes the SVD.
+/// decomposition, U Vᵀ from r = U Σ Vᵀ. RK4 leaves an integrated R off a
+/// rotation by ~1e-7 (the default robot, 16 steps), and from there the
+/// Newton–Schulz iteration X ← X (3I − XᵀX)/2, which converges
+/// quadratically to the same polar factor, takes two 3×3 steps (≈ 0.05 µs
+/// against the SVD's 0.54 µs on the VM's Zen 1; every statics solve pays
+/// it). A matrix far from a rotation, or a reflection, takes the SVD.
 pub fn orthonormalise(r: &Matrix3<f64>) -> Matrix3<f64> {
     if r.determinant() > 0.0 {
         let mut x = *r;
         for _ in 0..NEWTON_SCHULZ_STEPS {
             let e = x.transpose() * x - Matrix3::identity();
             let err = e.amax();
-            if err <= NEWTON_SCHULZ_DONE {
-                return x;
-            }
             if err.is_nan() || err >= NEWTON_SCHULZ_START {
                 break;
             }
             x -= x * e * 0.5;
+            if err <= NEWTON_SCHULZ_LAST {
+                return x;
+            }
         }
     }
     orthonormalise_svd(r)
@@ -108,8 +111,8 @@ mod tests {
         assert!(o.determinant() > 0.0);
     }
 
-    /// The iteration's answer is the SVD's polar factor, to rounding, for
-    /// drifts from an integrator's 1e-10 to the iteration's start bound;
+    /// The iteration's answer is the SVD's polar factor, and orthogonal, to
+    /// rounding, for drifts from none past an integrator's 1e-7 to 0.02;
     /// far from a rotation both paths are the SVD.
     #[test]
     fn newton_schulz_gives_the_polar_factor() {
