@@ -98,6 +98,13 @@ pub struct TrajectoryOpts {
     /// --shape-steps on.
     #[arg(long, value_enum, default_value_t = super::controller::OnOff::Off)]
     pub learn: super::controller::OnOff,
+    /// Estimate from the tracker's frames how much stiffer or softer the
+    /// backbone is than the robot file says, and offset every pose by what
+    /// that moves the tip (one number for the whole path and every step
+    /// target; docs/design.md §6.5). Off by default: with the controller
+    /// at 100 Hz it reads an ideal plant as 3–5 % stiffer.
+    #[arg(long, value_enum, default_value_t = super::controller::OnOff::Off)]
+    pub adapt_stiffness: super::controller::OnOff,
 }
 
 impl TrajectoryOpts {
@@ -317,6 +324,7 @@ impl PlannerArgs {
             start_from_rest: self.from_rest,
             dynamic_offset: self.traj.dynamic_offset == super::controller::OnOff::On,
             learning: self.traj.learning(),
+            adapt_stiffness: self.traj.adapt_stiffness == super::controller::OnOff::On,
             rate_hz: self
                 .traj
                 .planner_rate

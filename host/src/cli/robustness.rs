@@ -35,6 +35,10 @@ pub struct RobustnessArgs {
     /// Only the corrected runs (half the time).
     #[arg(long)]
     pub corrected_only: bool,
+    /// The planner's stiffness adaptation (docs/design.md §6.5; off by
+    /// default, as in `tendril sim`).
+    #[arg(long, value_enum, default_value_t = super::controller::OnOff::Off)]
+    pub adapt_stiffness: super::controller::OnOff,
     /// Run nothing: redraw the table and figure from these robustness.json
     /// files (a later file's rows replace an earlier one's of the same
     /// reality), e.g. to join a full table with a re-run of some realities.
@@ -133,6 +137,7 @@ fn table(
             realities,
             quick_s: args.quick,
             net_alone: !args.corrected_only,
+            adapt_stiffness: args.adapt_stiffness == super::controller::OnOff::On,
         };
         robustness::run(&cfg)?
     } else {

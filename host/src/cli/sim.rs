@@ -139,6 +139,9 @@ impl SimArgs {
         cfg.planner.step_shaping = self.traj.step_shaping();
         cfg.planner.dynamic_offset = self.traj.dynamic_offset == super::controller::OnOff::On;
         cfg.planner.learning = self.traj.learning();
+        // The net alone is the net without feedback: no adaptation either.
+        cfg.planner.adapt_stiffness = self.traj.adapt_stiffness == super::controller::OnOff::On
+            && self.tuning.correction == super::controller::OnOff::On;
         let rate = match self.controller {
             ControllerKind::Host => self.tuning.rate_hz(),
             ControllerKind::Mcu => {

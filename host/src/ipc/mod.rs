@@ -301,6 +301,11 @@ mod tests {
             start_from_rest: true,
             dynamic_offset: true,
             learning: crate::plan::LearningChoice::Off,
+            adapt_stiffness: true,
+            controller_gains: Some(crate::plan::IntegralGains {
+                ki_per_s: 4.0,
+                filter_tau_s: 0.08,
+            }),
             rate_hz: 1000.0,
             settle_s: 2.0,
             duration_s: None,

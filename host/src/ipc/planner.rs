@@ -15,7 +15,8 @@ use super::transport::{self, Services};
 use super::IpcError;
 use crate::plan::learning::PassOutcome;
 use crate::plan::{
-    along_axes, Learner, LearningChoice, Motion, PathShape, ShapingChoice, Trajectory,
+    along_axes, Desired, Learner, LearningChoice, Motion, PathShape, ShapingChoice,
+    StiffnessAdaptation, Trajectory,
 };
 use crate::robot::Robot;
 use crate::statics::{SolverSettings, Statics};
@@ -90,6 +91,18 @@ pub struct PlannerConfig {
     /// the dynamic offset).
     #[serde(default)]
     pub learning: LearningChoice,
+    /// Estimate, from the tracker's frames, how much stiffer or softer the
+    /// backbone is than its file, and send the pose offset that makes up for
+    /// it along the whole path (`docs/design.md` §6.5; sent with the
+    /// dynamic offset).
+    #[serde(default)]
+    pub adapt_stiffness: bool,
+    /// The controller's integral gains (after its scaling to the mode) that
+    /// the stiffness adaptation's loop model assumes (None: the
+    /// controller's defaults for the robot; a launcher that knows the
+    /// controller's own passes them).
+    #[serde(default)]
+    pub controller_gains: Option<crate::plan::IntegralGains>,
     /// Bad setpoints to inject.
     #[serde(default)]
     pub inject: Injections,
@@ -131,6 +144,8 @@ impl PlannerConfig {
             start_from_rest: false,
             dynamic_offset: false,
             learning: LearningChoice::default(),
+            adapt_stiffness: false,
+            controller_gains: None,
             inject: Injections::default(),
             peer_timeout_s: Some(2.0),
             peer_start_grace_s: None,
@@ -161,13 +176,14 @@ pub const LOG_HEADER: &str = "t_ns,seq,flags,px,py,pz,qw,qx,qy,qz";
 /// setpoint, then the exact IK's feed-forward tensions `ff0..` (N) for it and
 /// `ff_miss_m`, the distance from the setpoint's position to the tip those
 /// tensions give (0 on the reachable path; > 0 for a pose-table row out of
-/// reach, whose reference is the closest reachable pose; NaN without one).
+/// reach, whose reference is the closest reachable pose; NaN without one),
+/// then `stiffness`, the stiffness adaptation's κ̂ applied (NaN when off).
 pub fn log_header(tendons: usize) -> String {
     let mut header = LOG_HEADER.to_string();
     for i in 0..tendons {
         header.push_str(&format!(",ff{i}"));
     }
-    header.push_str(",ff_miss_m");
+    header.push_str(",ff_miss_m,stiffness");
     header
 }
 
@@ -203,6 +219,8 @@ pub struct Planned {
     pub motion: Motion,
     /// Learning for repeated paths, when asked for and accepted.
     pub learner: Option<Learner>,
+    /// The stiffness adaptation, when asked for.
+    pub stiffness: Option<StiffnessAdaptation>,
     /// The model's `[base]`: the path is planned in its base frame and
     /// published in the tracker's (`docs/design.md` §2.4).
     pub base: crate::robot::BasePose,
@@ -255,15 +273,28 @@ pub fn plan(cfg: &PlannerConfig) -> Result<Planned, IpcError> {
     let inverse = shaping
         .filter(|_| cfg.dynamic_offset && cfg.shape.is_smooth())
         .map(|s| s.modal_inverse());
+    let stiffness = match cfg.adapt_stiffness {
+        true => Some(StiffnessAdaptation::new(
+            &traj,
+            &robot,
+            cfg.controller_gains
+                .unwrap_or_else(|| controller_gains(&robot)),
+            super::controller::correction::SETTLE_AFTER_JUMP_S,
+            shaping.map(|s| s.mode_hz),
+        )?),
+        false => None,
+    };
     Ok(Planned {
         motion: Motion::new(traj, cfg.settle_s, rest, inverse),
         learner: learner(cfg, &robot, shaping)?,
+        stiffness,
         base: robot.base,
     })
 }
 
 /// The setpoint the planner sends at `t` (s since its start) for `desired`
-/// (`motion.at(t)`), with `learned` (the learning's offset, m) if any: pose,
+/// (`motion.at(t)`), with `learned` (the learning's and the stiffness
+/// adaptation's offsets, m along the tangent axes) if any: pose,
 /// velocity, tangent, flags and dynamic offset in the model's base frame,
 /// the header left empty. The planner process sends it (after any injected
 /// fault, in the tracker's frame); `tendril-ros2 drive` runs it in-process.
@@ -331,7 +362,8 @@ struct PlannerTask<'a> {
     to_base: crate::robot::RigidMap,
     /// The controller's commands say it is alive (the peers-lost rule).
     commands: transport::Sub<TensionCommand>,
-    /// The tracker's frames, for the learning only.
+    stiffness: Option<StiffnessAdaptation>,
+    /// The tracker's frames, for the learning and the stiffness adaptation.
     states: Option<transport::Sub<PlantState>>,
     last_frame: u32,
     feedforward: Vec<f64>,
@@ -353,10 +385,11 @@ impl<'a> PlannerTask<'a> {
         Ok(PlannerTask {
             inject: &cfg.inject,
             rate_hz: cfg.rate_hz,
-            states: match planned.learner {
-                Some(_) => Some(transport::subscriber(&services.plant_state)?),
-                None => None,
+            states: match planned.learner.is_some() || planned.stiffness.is_some() {
+                true => Some(transport::subscriber(&services.plant_state)?),
+                false => None,
             },
+            stiffness: planned.stiffness,
             motion: planned.motion,
             learner: planned.learner,
             publisher: transport::publisher(&services.setpoint)?,
@@ -365,26 +398,42 @@ impl<'a> PlannerTask<'a> {
             commands: transport::subscriber(&services.tension_cmd)?,
             last_frame: 0,
             feedforward: Vec::with_capacity(tendons),
-            row: Vec::with_capacity(10 + tendons + 1),
+            row: Vec::with_capacity(10 + tendons + 2),
             ticker: Ticker::new(start, period_ns),
             start,
             seq: 0,
         })
     }
 
-    /// Learn from the tracker's newest frame, close a pass when the path
-    /// wraps; returns the offset learned for `t_path` (s on the path) and
-    /// the log's learning flags.
-    fn learn(&mut self, t_path: f64, on_path: bool) -> Result<(Option<[f64; 3]>, u32), IpcError> {
-        let (Some(learner), Some(states)) = (self.learner.as_mut(), self.states.as_ref()) else {
-            return Ok((None, 0));
+    /// The tracker's newest frame in the model's base frame, once.
+    fn new_frame(&mut self) -> Result<Option<PlantState>, IpcError> {
+        let Some(states) = self.states.as_ref() else {
+            return Ok(None);
+        };
+        let (state, _): (Option<PlantState>, usize) = transport::latest(states)?;
+        Ok(state
+            .filter(|s| s.tip_seq != 0 && s.tip_seq != self.last_frame)
+            .map(|state| {
+                self.last_frame = state.tip_seq;
+                super::frame::state(&self.to_base, &state)
+            }))
+    }
+
+    /// Learn from `frame`, close a pass when the path wraps; returns the
+    /// offset learned for `t_path` (s on the path) and the log's learning
+    /// flags.
+    fn learn(
+        &mut self,
+        frame: Option<&PlantState>,
+        t_path: f64,
+        on_path: bool,
+    ) -> (Option<[f64; 3]>, u32) {
+        let Some(learner) = self.learner.as_mut() else {
+            return (None, 0);
         };
         let mut log_flags = 0;
-        let (state, _): (Option<PlantState>, usize) = transport::latest(states)?;
-        if let Some(state) = state.filter(|s| s.tip_seq != 0 && s.tip_seq != self.last_frame) {
-            self.last_frame = state.tip_seq;
-            let state = super::frame::state(&self.to_base, &state);
-            learn_from(learner, &self.motion, &state, self.start);
+        if let Some(state) = frame {
+            learn_from(learner, &self.motion, state, self.start);
         }
         if let Some(outcome) = learner.advance(t_path) {
             say(&outcome);
@@ -396,7 +445,19 @@ impl<'a> PlannerTask<'a> {
         if learned.is_some() {
             log_flags |= LOG_LEARNED;
         }
-        Ok((learned, log_flags))
+        (learned, log_flags)
+    }
+
+    /// The stiffness adaptation's tick at `t` with `frame`: its offset
+    /// (None when off).
+    fn adapt(&mut self, frame: Option<&PlantState>, t: f64, desired: &Desired) -> Option<[f64; 3]> {
+        let adaptation = self.stiffness.as_mut()?;
+        if let Some(state) = frame {
+            let t_frame = (state.tip_stamp_ns as i128 - self.start as i128) as f64 * 1e-9;
+            let tip = [0, 1, 2].map(|k| state.tip_pose[k] as f64);
+            adaptation.frame(&self.motion, t_frame, tip);
+        }
+        Some(adaptation.step(self.motion.trajectory(), t, desired))
     }
 }
 
@@ -419,9 +480,21 @@ impl process::Task for PlannerTask<'_> {
             .motion
             .trajectory()
             .feedforward(desired.t_path, &mut self.feedforward);
-        let (learned, log_flags) =
-            self.learn(desired.t_path, !desired.holding && !desired.moving)?;
-        let mut msg = setpoint_for(&self.motion, t, &desired, learned);
+        let frame = self.new_frame()?;
+        let (learned, log_flags) = self.learn(
+            frame.as_ref(),
+            desired.t_path,
+            !desired.holding && !desired.moving,
+        );
+        let adapted = self.adapt(frame.as_ref(), t, &desired);
+        let offset = match (learned, adapted) {
+            (None, None) => None,
+            (a, b) => {
+                let (a, b) = (a.unwrap_or_default(), b.unwrap_or_default());
+                Some(std::array::from_fn(|k| a[k] + b[k]))
+            }
+        };
+        let mut msg = setpoint_for(&self.motion, t, &desired, offset);
         let clean = msg.pose;
         let mut injected = false;
         if self
@@ -469,6 +542,7 @@ impl process::Task for PlannerTask<'_> {
         row.extend(clean);
         row.extend_from_slice(&self.feedforward);
         row.push(miss);
+        row.push(self.stiffness.as_ref().map_or(f64::NAN, |s| s.applied()));
         log.row(row)?;
         let (command, _): (Option<TensionCommand>, usize) = transport::latest(&self.commands)?;
         Ok(Stepped {
@@ -494,15 +568,10 @@ fn learner(
     robot: &Robot,
     shaping: Option<crate::plan::StepShaping>,
 ) -> Result<Option<Learner>, IpcError> {
-    // The controller's defaults: a launcher that knows the controller's
-    // own gains designs with them and passes the design.
-    let gains = super::controller::correction::applied(
-        robot,
-        super::controller::correction::KI_PER_S,
-        super::controller::correction::FILTER_TAU_S,
-        true,
-    );
-    match cfg.learning.resolve(shaping, cfg.shape.period_s(), gains) {
+    match cfg
+        .learning
+        .resolve(shaping, cfg.shape.period_s(), controller_gains(robot))
+    {
         Ok(Some(design)) => {
             log::info!(
                 "planner: learning the {:.2} s path's harmonics up to {:.2} Hz (worst contraction {:.2} a pass)",
@@ -521,6 +590,18 @@ fn learner(
             Ok(None)
         }
     }
+}
+
+/// The integral correction's gains of a controller at its defaults for
+/// `robot`: a launcher that knows the controller's own gains designs the
+/// learning with them and passes the design.
+fn controller_gains(robot: &Robot) -> crate::plan::IntegralGains {
+    super::controller::correction::applied(
+        robot,
+        super::controller::correction::KI_PER_S,
+        super::controller::correction::FILTER_TAU_S,
+        true,
+    )
 }
 
 /// One tracker frame to the learner: the error of the tip against the

@@ -295,7 +295,8 @@ pub enum LearningChoice {
 
 /// The controller's integral correction as the learning models it (its
 /// gain and error filter after any scaling to the robot's mode).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct IntegralGains {
     /// k_i, 1/s.
     pub ki_per_s: f64,

@@ -11,6 +11,9 @@
 //!   shaper on the rod's first mode, [`StepShaping`]);
 //! - [`learning`]: learning for repeated paths (iterative learning control
 //!   on the path's harmonics, its design and convergence check, [`Learner`]);
+//! - [`stiffness`]: adapting to a backbone stiffer or softer than its file
+//!   (the tip's direction of a stiffness change, the estimate from the
+//!   tracker, [`StiffnessEstimator`]);
 //! - [`motion`]: what the planner asks for at each instant: the settle
 //!   hold or the approach from rest, the trajectory on its eased clock, the
 //!   dynamic offset ([`Motion`]);
@@ -37,6 +40,7 @@ pub mod runs;
 pub mod shape;
 pub mod shaping;
 pub mod stand_in;
+pub mod stiffness;
 pub mod table;
 pub mod trajectory;
 
@@ -49,6 +53,7 @@ pub use motion::{along_axes, Desired, Motion};
 pub use runs::{default_loop_runs, LoopRun};
 pub use shape::{PathShape, PoseRow};
 pub use shaping::{ModalInverse, ShapingChoice, StepShaping};
+pub use stiffness::{StiffnessAdaptation, StiffnessDirections, StiffnessEstimator};
 pub use table::read_pose_csv;
 pub use trajectory::{PosePoint, Trajectory};
 

@@ -71,6 +71,15 @@ impl Trajectory {
         self.steps_under_way(self.local_time(t)).next().is_some()
     }
 
+    /// How far the newest shaped step under way at path time `t` (s) has
+    /// got, 0 to 1 along its shaped profile (None: no step under way, or
+    /// not a stepwise trajectory).
+    pub fn step_progress(&self, t: f64) -> Option<f64> {
+        self.steps_under_way(self.local_time(t))
+            .last()
+            .map(|(_, left, _)| 1.0 - left)
+    }
+
     /// The path time to sample at `t` s after the motion starts, and how
     /// fast it runs (the factor on [`PosePoint::velocity`]): a shaped path
     /// eases in ([`StepShaping::eased_time`]); otherwise (t, 1).
@@ -123,24 +132,44 @@ impl Trajectory {
     /// poses, into `out` (resized to the tendons); returns the tip's
     /// distance from the path there (m, see [`Trajectory::tendons`]).
     pub fn feedforward(&self, t: f64, out: &mut Vec<f64>) -> f64 {
+        self.blend(&self.feedforward, t, out);
         let (i, f) = self.segment(t);
-        let a = &self.feedforward[i];
-        out.clear();
         if f == 0.0 {
-            out.extend_from_slice(a);
             let mut miss = self.feedforward_miss[i];
-            for (j, left, _) in self.steps_under_way(self.local_time(t)) {
-                let (to, from) = (&self.feedforward[j], &self.feedforward[j - 1]);
-                for (o, (b, a)) in out.iter_mut().zip(to.iter().zip(from)) {
-                    *o -= left * (b - a);
-                }
+            for (j, _, _) in self.steps_under_way(self.local_time(t)) {
                 miss = miss.max(self.feedforward_miss[j - 1]);
             }
             return miss;
         }
-        let b = &self.feedforward[i + 1];
-        out.extend(a.iter().zip(b).map(|(a, b)| a + f * (b - a)));
         self.feedforward_miss[i].max(self.feedforward_miss[i + 1])
+    }
+
+    /// A table with one row per pose (the feed-forward tensions, or any
+    /// column set tabulated beside them) at time `t` (s), interpolated as
+    /// the poses are: linearly between a path's rows, and along each
+    /// shaped step under way between a stepwise trajectory's targets.
+    pub fn blend(&self, rows: &[Vec<f64>], t: f64, out: &mut Vec<f64>) {
+        let (i, f) = self.segment(t);
+        let a = &rows[i];
+        out.clear();
+        if f == 0.0 {
+            out.extend_from_slice(a);
+            for (j, left, _) in self.steps_under_way(self.local_time(t)) {
+                let (to, from) = (&rows[j], &rows[j - 1]);
+                for (o, (b, a)) in out.iter_mut().zip(to.iter().zip(from)) {
+                    *o -= left * (b - a);
+                }
+            }
+            return;
+        }
+        let b = &rows[i + 1];
+        out.extend(a.iter().zip(b).map(|(a, b)| a + f * (b - a)));
+    }
+
+    /// The feed-forward tensions, one set per pose (N; NaN where the
+    /// exact IK gave none).
+    pub fn feedforward_rows(&self) -> &[Vec<f64>] {
+        &self.feedforward
     }
 
     /// `t` within one pass of a periodic trajectory.

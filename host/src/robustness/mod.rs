@@ -37,6 +37,8 @@ pub struct RobustnessConfig {
     pub quick_s: Option<f64>,
     /// Also run each with the net alone.
     pub net_alone: bool,
+    /// The planner's stiffness adaptation on (`docs/design.md` §6.5).
+    pub adapt_stiffness: bool,
 }
 
 /// One row: one run against one reality.
@@ -48,8 +50,9 @@ pub struct Row {
     pub run: String,
     /// With the integral correction.
     pub correction: bool,
-    /// Which of the planner's answers to the rod's mass were on (the step
-    /// shaping, the dynamic offset, the learning).
+    /// Which of the planner's answers to the rod's mass and its model's
+    /// error were on (the step shaping, the dynamic offset, the learning,
+    /// the stiffness adaptation).
     #[serde(default)]
     pub planner: String,
     /// RMS tracking error (true tip), mm.
@@ -116,6 +119,7 @@ pub fn run(cfg: &RobustnessConfig) -> Result<Vec<Row>, SimError> {
                     .quick_s
                     .map_or(run.duration_s, |q| q.min(run.duration_s));
                 sim.planner.shape = run.shape.clone();
+                sim.planner.adapt_stiffness = cfg.adapt_stiffness;
                 sim.set_correction(correction);
                 sim.plant.params.reality = Some(reality.clone());
                 sim.label = format!(

@@ -29,6 +29,9 @@ pub struct SetpointRow {
     pub position: [f64; 3],
     /// Planner generation that sent it.
     pub generation: usize,
+    /// The stiffness adaptation's κ̂ applied (NaN when off, or a log
+    /// without the column).
+    pub stiffness: f64,
 }
 
 /// One plant step.
@@ -117,11 +120,13 @@ impl Logs {
                 column(&f.header, "flags", &f.path)?,
                 column(&f.header, "px", &f.path)?,
             );
+            let istiff = f.header.iter().position(|h| h == "stiffness");
             logs.setpoints.extend(f.rows.iter().map(|r| SetpointRow {
                 t_ns: r[it],
                 flags: r[ifl] as u32,
                 position: [r[ix], r[ix + 1], r[ix + 2]],
                 generation: f.generation,
+                stiffness: istiff.map_or(f64::NAN, |i| r[i]),
             }));
         }
         logs.setpoints.sort_by(|a, b| a.t_ns.total_cmp(&b.t_ns));
@@ -242,6 +247,15 @@ impl Logs {
             }
         }
         (seen, bad)
+    }
+
+    /// The stiffness adaptation's κ̂ when the planner stopped (None: off).
+    pub fn stiffness_adapted(&self) -> Option<f64> {
+        self.setpoints
+            .iter()
+            .rev()
+            .map(|s| s.stiffness)
+            .find(|k| k.is_finite())
     }
 
     /// When the planner's log first says learning stopped (monotonic ns).

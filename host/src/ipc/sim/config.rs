@@ -181,6 +181,9 @@ impl SimConfig {
     /// Switch the firmware's integral correction on (default gain) or off (IK alone).
     pub fn set_correction(&mut self, on: bool) {
         self.controller.ki_per_s = if on { DEFAULT_KI_PER_S } else { 0.0 };
+        // The net alone is the net without feedback: no stiffness
+        // adaptation either (`docs/design.md` §6.5).
+        self.planner.adapt_stiffness &= on;
     }
 
     /// Reject what cannot be a run, before anything starts.

@@ -43,6 +43,11 @@ pub struct SimReport {
     /// When learning stopped on a growing error (the fault event), s.
     #[serde(default)]
     pub learning_stopped_at_s: Option<f64>,
+    /// The stiffness adaptation's estimate at the end, κ̂ (the tip's share
+    /// of a stiffness error: 0.091 for a backbone 10 % stiffer than its
+    /// file; `null`: off; `docs/design.md` §6.5).
+    #[serde(default)]
+    pub stiffness_adapted: Option<f64>,
     /// The tracking error's RMS over each whole period of a repeated path
     /// after the settle hold, mm (empty for a path that does not repeat):
     /// what learning lowers pass after pass.
@@ -313,9 +318,9 @@ fn us(v: &Option<Summary>, pick: fn(&Summary) -> f64) -> String {
 }
 
 impl SimReport {
-    /// Which of the planner's answers to the rod's mass were on, in words
-    /// (`docs/design.md` §6.4): the step shaping, the dynamic offset, the
-    /// learning.
+    /// Which of the planner's answers to the rod's mass and to its model's
+    /// error were on, in words (`docs/design.md` §6.4, §6.5): the step
+    /// shaping, the dynamic offset, the learning, the stiffness adaptation.
     pub fn dynamics_summary(&self) -> String {
         let shaping = match &self.step_shaping {
             Some(s) => format!("shaped for {:.2} Hz", s.mode_hz),
@@ -330,7 +335,11 @@ impl SimReport {
             Some(l) => format!("learning to {:.1} Hz", l.harmonics() as f64 / l.period_s),
             None => "no learning".into(),
         };
-        format!("{shaping}; {offset}; {learning}")
+        let stiffness = match self.stiffness_adapted {
+            Some(k) => format!("stiffness κ̂ {k:+.3}"),
+            None => "stiffness not adapted".into(),
+        };
+        format!("{shaping}; {offset}; {learning}; {stiffness}")
     }
 
     /// `report.md`: the headline numbers, each with what it covers.
@@ -394,6 +403,12 @@ impl SimReport {
                     format!("{t:.2}"),
                 );
             }
+        }
+        if let Some(k) = self.stiffness_adapted {
+            row(
+                "stiffness adaptation: κ̂ at the end (the backbone E × 1/(1 − κ̂) of its file's)",
+                format!("{k:+.4} (× {:.3})", 1.0 / (1.0 - k)),
+            );
         }
         if !self.pass_rms_mm.is_empty() {
             let passes: Vec<String> = self.pass_rms_mm.iter().map(|v| format!("{v:.3}")).collect();
