@@ -362,6 +362,7 @@ struct PlannerTask<'a> {
     to_base: crate::robot::RigidMap,
     /// The controller's commands say it is alive (the peers-lost rule).
     commands: transport::Sub<TensionCommand>,
+    /// The stiffness adaptation, when asked for (`docs/design.md` §6.5).
     stiffness: Option<StiffnessAdaptation>,
     /// The tracker's frames, for the learning and the stiffness adaptation.
     states: Option<transport::Sub<PlantState>>,
