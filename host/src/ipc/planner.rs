@@ -454,9 +454,8 @@ impl<'a> PlannerTask<'a> {
     fn adapt(&mut self, frame: Option<&PlantState>, t: f64, desired: &Desired) -> Option<[f64; 3]> {
         let adaptation = self.stiffness.as_mut()?;
         if let Some(state) = frame {
-            let t_frame = (state.tip_stamp_ns as i128 - self.start as i128) as f64 * 1e-9;
             let tip = [0, 1, 2].map(|k| state.tip_pose[k] as f64);
-            adaptation.frame(&self.motion, t_frame, tip);
+            adaptation.frame(&self.motion, frame_time(state, self.start), tip);
         }
         Some(adaptation.step(self.motion.trajectory(), t, desired))
     }
@@ -609,7 +608,7 @@ fn controller_gains(robot: &Robot) -> crate::plan::IntegralGains {
 /// path where the planner was when the frame was taken, along the path's
 /// tangent axes. Frames of holds and shaped moves are not the path's.
 fn learn_from(learner: &mut Learner, motion: &Motion, state: &PlantState, start_ns: u64) {
-    let t = (state.tip_stamp_ns as i128 - start_ns as i128) as f64 * 1e-9;
+    let t = frame_time(state, start_ns);
     let then = motion.at(t);
     if then.holding || then.moving {
         return;
@@ -617,6 +616,12 @@ fn learn_from(learner: &mut Learner, motion: &Motion, state: &PlantState, start_
     let p = &then.point.pose;
     let error = [0, 1, 2].map(|k| p[k] - state.tip_pose[k] as f64);
     learner.measure(then.t_path, along_axes(&then.point, error));
+}
+
+/// When a tracker frame was measured, s on the planner's clock (which
+/// started at `start_ns`): its stamp, so the tracker's latency costs nothing.
+fn frame_time(state: &PlantState, start_ns: u64) -> f64 {
+    (state.tip_stamp_ns as i128 - start_ns as i128) as f64 * 1e-9
 }
 
 /// A pass's outcome on the console: the stop is a fault event.

@@ -1,17 +1,19 @@
 //! Adapting the plan to a backbone stiffer or softer than its robot file
 //! (`docs/design.md` §6.5).
 //!
-//! The net gives the tensions that put the *model's* tip on a pose. A real
-//! backbone whose E and G are (1 + κ) times the file's puts its tip, at the
-//! same tensions, at the model's tip plus κ g to first order, where
+//! The net gives the tensions that put the *model's* tip on a pose. At the
+//! same tensions a real backbone whose E and G are (1 + s) times the
+//! file's puts its tip at the model's tip plus κ g, where
 //!
-//!   g = ∂tip/∂κ at the path's feed-forward tensions τ_d (m),
+//!   g = ∂tip/∂(ln E) at the path's feed-forward tensions τ_d (m),
 //!
 //! tabulated once per trajectory row from two statics solves with E and G
-//! scaled by 1 ± 1 % ([`StiffnessDirections`]). On the default robot a
-//! 10 % stiffer backbone moves the tip by 0.1 |g| ≈ 1.36 mm along the 30 mm
-//! circle: the net-alone error of that reality, all of it in this one
-//! direction. The controller's integral removes such an error only as fast
+//! scaled by 1 ± 1 % ([`StiffnessDirections`]), and κ = s / (1 + s): a
+//! linear-elastic deflection goes with the compliance 1/E, so κ is the
+//! share of it a stiffer backbone does not make (0.091 for 10 % stiffer,
+//! −0.111 for 10 % softer). On the default robot 10 % stiffer moves the tip
+//! by 1.2–1.4 mm along the 30 mm circle: the net-alone error of that
+//! reality, all of it in this one direction. The controller's integral removes such an error only as fast
 //! as its mode-capped gain lets it, and on a circle the error turns with
 //! the path; but κ does not turn. The planner estimates κ from the tracker
 //! and asks for the pose offset −κ̂ g, which holds everywhere on the path
@@ -47,8 +49,8 @@ use crate::statics::{SolverSettings, Statics};
 /// The relative change of E and G of the central difference for g.
 const DIFFERENCE: f64 = 0.01;
 
-/// The largest relative stiffness error estimated: a file whose E is off by
-/// more than this wants calibration (`tendril calibrate`), not a loop.
+/// The largest |κ̂| estimated (E off by −23 % to +43 %): a file further off
+/// wants calibration (`tendril calibrate`), not a loop.
 pub const MAX_STIFFNESS_ERROR: f64 = 0.3;
 
 /// The least Σ|φ|² (m²) before the estimate is used: with a tracker whose
@@ -157,8 +159,8 @@ struct Tick {
     fitted: bool,
 }
 
-/// The estimate of κ, the backbone's stiffness relative to its file less
-/// one, from the tracker's frames (module docs).
+/// The estimate of κ, the share of the model's deflection a backbone of
+/// another stiffness does not make (module docs), from the tracker's frames.
 #[derive(Clone, Debug)]
 pub struct StiffnessEstimator {
     gains: IntegralGains,
@@ -291,7 +293,8 @@ impl StiffnessEstimator {
         }
     }
 
-    /// The relative stiffness error applied now (κ̂: 0.1 = 10 % stiffer).
+    /// κ̂ applied now: the backbone is 1/(1 − κ̂) times as stiff as its file
+    /// (0.091 for 10 % stiffer).
     pub fn applied(&self) -> f64 {
         self.applied
     }
@@ -355,7 +358,7 @@ impl StiffnessAdaptation {
             .frame(t, std::array::from_fn(|k| asked[k] - tip[k]));
     }
 
-    /// The relative stiffness error applied now (see [`StiffnessEstimator`]).
+    /// κ̂ applied now ([`StiffnessEstimator::applied`]).
     pub fn applied(&self) -> f64 {
         self.estimator.applied()
     }

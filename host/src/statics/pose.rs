@@ -4,7 +4,8 @@
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion};
 
-/// Nearest rotation to `r` (polar decomposition via SVD: R U Vᵀ).
+/// Nearest rotation to `r`: the orthogonal factor U Vᵀ of its polar
+/// decomposition, from the SVD r = U Σ Vᵀ.
 pub fn orthonormalise(r: &Matrix3<f64>) -> Matrix3<f64> {
     let svd = r.svd(true, true);
     match (svd.u, svd.v_t) {
