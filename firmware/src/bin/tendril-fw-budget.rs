@@ -484,6 +484,7 @@ mod mcu {
                 pose: WirePose::from_pose(&pose),
                 velocity: Some(LinkSetpoint::wire_velocity(&vel)),
                 tangent: Some(tangent),
+                age_us: 4_000,
             });
             // The motors follow the last command with τ = 20 ms; the tip
             // lags the setpoint by 0.5 mm (inside the correction window).

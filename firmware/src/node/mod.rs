@@ -61,6 +61,8 @@ struct Pending {
     /// When the newest feedback arrived, ns on the board's clock: on the
     /// timer it waits up to a period for it, and ages meanwhile.
     feedback_received_ns: u64,
+    /// When the newest setpoint arrived, ns on the board's clock (likewise).
+    setpoint_received_ns: u64,
 }
 
 /// The node's state besides the frame decoder (split so a decoded payload,
@@ -137,6 +139,7 @@ impl<const U: usize> Node<U> {
                     },
                     hello_asked: false,
                     feedback_received_ns: 0,
+                    setpoint_received_ns: 0,
                 },
                 last_tangent: None,
                 refused_events: 0,
@@ -252,6 +255,11 @@ impl<const U: usize> Core<U> {
             // later than the frame shows, and integrates the difference.
             let waited = t0.saturating_sub(self.pending.feedback_received_ns);
             f.tip_age_ns = f.tip_age_ns.saturating_add(waited);
+        }
+        if let Some(s) = input.setpoint.as_mut() {
+            // The setpoint likewise: the period leads it by its age.
+            let waited = t0.saturating_sub(self.pending.setpoint_received_ns);
+            s.age_ns = s.age_ns.saturating_add(waited);
         }
         self.run_pending(board, store, frames, t0);
     }
@@ -408,7 +416,7 @@ impl<const U: usize> Core<U> {
         match msg {
             Down::Hello { .. } => self.pending.hello_asked = true,
             Down::Setup(s) => self.configure(s, now_ns),
-            Down::Setpoint(s) => self.setpoint(s),
+            Down::Setpoint(s) => self.setpoint(s, now_ns),
             // Taken by `Node::tick`, which has the board and the store.
             Down::Step { .. } => {}
             Down::Feedback(f) => self.feedback(f, now_ns),
@@ -466,7 +474,8 @@ impl<const U: usize> Core<U> {
     // `setpoint` and `feedback` are not inlined: what they build (up to
     // 200 B) would otherwise sit in `receive`'s frame under a Setup too.
     #[inline(never)]
-    fn setpoint(&mut self, s: &LinkSetpoint) {
+    fn setpoint(&mut self, s: &LinkSetpoint, now_ns: u64) {
+        self.pending.setpoint_received_ns = now_ns;
         if let Some(t) = &s.tangent {
             self.last_tangent = Some(tangent_in(t));
         }
@@ -486,6 +495,7 @@ impl<const U: usize> Core<U> {
             pose: s.pose.pose(),
             velocity: s.velocity(),
             tangent: self.last_tangent,
+            age_ns: u64::from(s.age_us) * 1000,
         });
     }
 

@@ -175,6 +175,7 @@ fn setpoint(seq: u32) -> Down<'static> {
         pose: WirePose::from_pose(&pose()),
         velocity: None,
         tangent: None,
+        age_us: 0,
     })
 }
 
@@ -273,13 +274,20 @@ fn the_same_inputs_in_lock_step_give_the_same_commands_whatever_the_board_clock(
     assert_eq!(a, b);
 }
 
+/// How a period's inputs reach the chip: `waits` ticks before the next
+/// period (9: the tick after the period before; 0: in the period's own
+/// tick), with the age `age_us` the host gave it when it sent it.
+#[derive(Clone, Copy)]
+struct Arrival {
+    waits: u32,
+    age_us: u32,
+}
+
 /// A 100 Hz loop on the 1 kHz board with the integral loop on, a setpoint
 /// that says it moves at 50 mm/s along x, and the tip seen where the
-/// setpoint is. Each period's setpoint arrives the tick after the period
-/// before; its tracker frame arrives `waits` ticks before the next period
-/// (9: with the setpoint; 0: in the period's own tick) with the age
-/// `age_us` the host gave it when it sent it. The commands.
-fn frames_waiting(waits: u32, age_us: u32) -> Vec<LinkCommand> {
+/// setpoint is, the tracker frame arriving as `frame` says, the setpoint as
+/// `setpoint` says. The commands.
+fn frames_waiting(frame: Arrival, setpoint: Arrival) -> Vec<LinkCommand> {
     let mut r = Rig::new();
     let mut s = setup();
     s.period_ns = 10 * TICK;
@@ -293,24 +301,25 @@ fn frames_waiting(waits: u32, age_us: u32) -> Vec<LinkCommand> {
     let mut out: Vec<LinkCommand> = Vec::new();
     let mut since_period = None;
     for k in 0..600u32 {
-        if since_period == Some(0) {
+        if since_period == Some(9 - setpoint.waits) {
             let seq = out.len() as u32;
-            let Down::Setpoint(mut sp) = setpoint(seq + 1) else {
+            let Down::Setpoint(mut sp) = self::setpoint(seq + 1) else {
                 unreachable!()
             };
             sp.velocity = Some(LinkSetpoint::wire_velocity(&[
                 0.05, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
             ]));
+            sp.age_us = setpoint.age_us;
             r.send(&Down::Setpoint(sp));
         }
-        if since_period == Some(9 - waits) {
+        if since_period == Some(9 - frame.waits) {
             let seq = out.len() as u32;
             let Down::Feedback(mut f) = feedback(seq, out.last().map_or(0, |c| c.seq)) else {
                 unreachable!()
             };
             let p = pose();
             f.tip = [0, 1, 2].map(|i| (p[i] * 1e6).round() as i32);
-            f.tip_age_us = age_us;
+            f.tip_age_us = frame.age_us;
             r.send(&Down::Feedback(f));
         }
         let c = commands(&r.tick());
@@ -325,19 +334,32 @@ fn frames_waiting(waits: u32, age_us: u32) -> Vec<LinkCommand> {
     out
 }
 
+/// Arrived at once, or `waits` ms old just before the period.
+fn at_once(waits: u32) -> Arrival {
+    Arrival { waits, age_us: 0 }
+}
+
+fn on_host(waits: u32) -> Arrival {
+    Arrival {
+        waits: 0,
+        age_us: waits * 1000,
+    }
+}
+
 #[test]
 fn a_frame_that_waits_for_the_period_ages_meanwhile() {
     // Sampled one tick after a period, the frame is compared with the path
     // where the robot was then, whether it waited nine ticks here (sent at
     // once) or on the host (sent nine ticks old, just before the period).
-    let waited_here = frames_waiting(9, 0);
-    let waited_on_host = frames_waiting(0, 9_000);
+    // The setpoint is as new as the period.
+    let waited_here = frames_waiting(at_once(9), at_once(0));
+    let waited_on_host = frames_waiting(on_host(9), at_once(0));
     let first_difference =
         |a: &[LinkCommand], b: &[LinkCommand]| a.iter().zip(b).position(|(x, y)| x != y);
     assert_eq!(waited_here.len(), 60);
     assert_eq!(first_difference(&waited_here, &waited_on_host), None);
     // The age matters: a frame as new as the period is another sample.
-    let fresh = frames_waiting(0, 0);
+    let fresh = frames_waiting(at_once(0), at_once(0));
     assert!(first_difference(&waited_on_host, &fresh).is_some());
     let corrected = |cs: &[LinkCommand]| {
         cs.iter()
@@ -345,6 +367,30 @@ fn a_frame_that_waits_for_the_period_ages_meanwhile() {
             .count()
     };
     assert!(corrected(&waited_on_host) > 30, "the loop integrated");
+    assert_eq!(corrected(&fresh), 0, "a frame of the setpoint's own time");
+}
+
+#[test]
+fn a_setpoint_that_waits_for_the_period_ages_meanwhile() {
+    // The setpoint sent the tick after a period: led along its path by its
+    // age whether it waited nine ticks here or on the host. A frame taken
+    // with it then shows the tip where the path was: no error to integrate;
+    // a setpoint as new as the period is led less, and the loop integrates.
+    let waited_here = frames_waiting(at_once(9), at_once(9));
+    let waited_on_host = frames_waiting(at_once(9), on_host(9));
+    assert_eq!(waited_here.len(), 60);
+    assert_eq!(waited_here, waited_on_host);
+    let corrected = |cs: &[LinkCommand]| {
+        cs.iter()
+            .filter(|c| c.status & tendril_shared::messages::command_status::CORRECTION != 0)
+            .count()
+    };
+    assert_eq!(
+        corrected(&waited_here),
+        0,
+        "the setpoint was led by its age"
+    );
+    assert!(corrected(&frames_waiting(at_once(9), at_once(0))) > 30);
 }
 
 #[test]

@@ -8,8 +8,10 @@
 //! 2. one bounded slice of a weight update's check or install
 //!    ([`update`]: the old net runs until the new one is whole and checked);
 //! 3. setpoint acceptance: the sender's sequence (gaps counted, a restart =
-//!    a new planner), the motor-lag *lead* (`pose + velocity · lead`), then
-//!    the step's own NaN/∞, quaternion and workspace rules;
+//!    a new planner), the *lead* by the motor lag and the setpoint's own
+//!    age (`pose + velocity · (lead + age)`: the tip is asked for where the
+//!    path is now, not where it was when the planner sent it), then the
+//!    step's own NaN/∞, quaternion and workspace rules;
 //! 4. plant feedback: its sequence (gaps, restarts), commands the plant had
 //!    not applied, the stuck-motor detector ([`stuck`]) and its latched
 //!    hold; and the tracker's tip, only when a new frame arrived (a tracker
@@ -107,6 +109,11 @@ pub fn credited_interval(since_previous_ns: u64, previous_credit_ns: u64) -> u64
 /// extrapolating along the path further would be a guess).
 pub const MAX_TIP_AGE_NS: u64 = 200_000_000;
 
+/// Largest setpoint age the lead compensates, ns: an older setpoint is led
+/// as if it were this old (a link slower than this is broken; leading along
+/// the path further would be a guess).
+pub const MAX_SETPOINT_AGE_NS: u64 = 50_000_000;
+
 /// A setpoint as the period takes it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SetpointIn {
@@ -118,6 +125,13 @@ pub struct SetpointIn {
     pub velocity: Option<[f32; POSE_DIM]>,
     /// The reachable poses about it (for the integral loop), if sent.
     pub tangent: Option<ControlTangent>,
+    /// How long before this period the planner sent it, ns (0: not known).
+    /// A controller at 100 Hz takes a setpoint up to a period after it was
+    /// sent (the chip another half over its link): uncompensated, the tip
+    /// trails the path by that much, a lag that changes from run to run
+    /// with the phase between planner and controller (2.3–6.8 ms on the
+    /// host at 100 Hz, 0.04–0.13 mm on the default circle).
+    pub age_ns: u64,
 }
 
 /// Plant feedback as the period takes it.
@@ -475,8 +489,9 @@ impl Period {
         self.local_sp_seq += 1;
         let mut pose = s.pose;
         if let Some(v) = s.velocity {
+            let lead_s = self.cfg.lead_s + s.age_ns.min(MAX_SETPOINT_AGE_NS) as f32 * 1e-9;
             for (p, v) in pose.iter_mut().zip(&v) {
-                *p += v * self.cfg.lead_s;
+                *p += v * lead_s;
             }
         }
         self.last_sp = Some((s.seq, s.velocity));

@@ -97,6 +97,7 @@ fn sp(seq: u64) -> SetpointIn {
         pose: pose(),
         velocity: None,
         tangent: None,
+        age_ns: 0,
     }
 }
 
@@ -363,6 +364,46 @@ fn the_lead_advances_setpoint_and_measured_tip_alike() {
         let a = led.run(&mut *st, &with_sp(k, s));
         let b = plain.run(&mut *st, &with_sp(k, ahead));
         assert_eq!(a.command.tensions, b.command.tensions, "period {k}");
+    }
+}
+
+/// A setpoint taken 8 ms after it was sent is led by its age beside the
+/// motors' lag: as a setpoint 28 ms ahead on its path with no age; an age
+/// beyond [`MAX_SETPOINT_AGE_NS`] counts as that.
+#[test]
+fn a_setpoint_is_led_by_its_age() {
+    let mut st = store(1);
+    let mut cfg = config();
+    cfg.lead_s = 0.02;
+    let v = [0.5, -0.25, 0.0, 0.0, 0.0, 0.0, 0.0];
+    for (age_ns, ahead_s) in [
+        (8_000_000, 0.028),
+        (
+            10 * MAX_SETPOINT_AGE_NS,
+            0.02 + MAX_SETPOINT_AGE_NS as f32 * 1e-9,
+        ),
+    ] {
+        let mut led = P::new(cfg, 0);
+        let mut plain = P::new(config(), 0);
+        let mut s = sp(1);
+        s.velocity = Some(v);
+        s.age_ns = age_ns;
+        let mut ahead = sp(1);
+        let lead_s = cfg.lead_s + age_ns.min(MAX_SETPOINT_AGE_NS) as f32 * 1e-9;
+        assert!((lead_s - ahead_s).abs() < 1e-6);
+        for (p, vv) in ahead.pose.iter_mut().zip(&v) {
+            *p += vv * lead_s;
+        }
+        for k in 1..=40 {
+            s.seq = k;
+            ahead.seq = k;
+            let a = led.run(&mut *st, &with_sp(k, s));
+            let b = plain.run(&mut *st, &with_sp(k, ahead));
+            assert_eq!(
+                a.command.tensions, b.command.tensions,
+                "age {age_ns} ns, period {k}"
+            );
+        }
     }
 }
 

@@ -299,7 +299,7 @@ impl Bridge {
             // dynamic offset is applied here, as the host controller does.
             let (s, shift) = crate::ipc::controller::with_dynamic_offset(&s);
             self.tip_shift = shift;
-            let msg = link_setpoint(&s, count, superseded, &mut self.last_tangent);
+            let msg = link_setpoint(&s, count, superseded, &mut self.last_tangent, now);
             self.chip.send(&Down::Setpoint(msg)).map_err(other)?;
             self.in_flight.push_back((msg.seq, now));
             if self.in_flight.len() > 64 {

@@ -26,13 +26,15 @@ pub fn setup_for(cfg: &ControllerConfig, robot: &Robot) -> Result<Setup, IpcErro
     Ok(setup_of(&p))
 }
 
-/// The planner's setpoint as a link message; the tangent only when it
-/// differs from `last` (the chip keeps the last one).
+/// The planner's setpoint as a link message sent at `now_ns` (its age is
+/// measured to it); the tangent only when it differs from `last` (the chip
+/// keeps the last one).
 pub fn link_setpoint(
     s: &Setpoint,
     count: usize,
     superseded_nonfinite: usize,
     last: &mut Option<LinkTangent>,
+    now_ns: u64,
 ) -> LinkSetpoint {
     let tangent = (s.flags & setpoint_flags::HAS_TANGENT != 0).then_some(LinkTangent {
         dim: s.tangent_dim.min(3) as u8,
@@ -55,6 +57,7 @@ pub fn link_setpoint(
         velocity: (s.flags & setpoint_flags::HAS_VELOCITY != 0)
             .then(|| LinkSetpoint::wire_velocity(&s.velocity)),
         tangent: if send_tangent { tangent } else { None },
+        age_us: (now_ns.saturating_sub(s.header.stamp_ns) / 1000).min(u64::from(u32::MAX)) as u32,
     }
 }
 

@@ -560,6 +560,9 @@ pub fn synthetic(setup: &Setup, update: &[u8], periods: usize, seed: u64) -> Res
                     pose: WirePose::from_pose(&pose),
                     velocity: Some(LinkSetpoint::wire_velocity(&vel)),
                     tangent,
+                    // Taken 1–9 ms after the planner sent it (the period
+                    // leads the pose by that).
+                    age_us: 1_000 + (k % 7) as u32 * 1_300,
                 }));
             }
             // Feedback: the plant follows the last command with the

@@ -38,7 +38,10 @@ use crate::MAX_TENDONS;
 /// (0.11 mm max), the whole gap between the chip and the host controller on
 /// the circle. Same bytes on the wire (a unit quaternion's components in
 /// 1e-6 are 3-byte varints, as they were in 1e-4).
-pub const PROTOCOL_VERSION: u16 = 4;
+///
+/// 5: [`LinkSetpoint::age_us`], the setpoint's age when the host sent it
+/// (the period leads the pose by it; 1–3 bytes on the wire).
+pub const PROTOCOL_VERSION: u16 = 5;
 
 /// The chip sends [`Up::Telemetry`] every this many ticks of its timer
 /// (100 ms at 1 kHz), and a Hello as often while unconfigured.
@@ -243,6 +246,9 @@ pub struct LinkSetpoint {
     /// for the setpoints that come without: it changes slowly along a path
     /// and costs 120 of the link's bytes).
     pub tangent: Option<LinkTangent>,
+    /// Its age when the host sent this message (since the planner sent
+    /// it), µs (saturating): the period leads the pose by it.
+    pub age_us: u32,
 }
 
 impl LinkSetpoint {
@@ -444,6 +450,7 @@ mod tests {
                 columns: [[f32::MAX; 7]; 3],
                 axes: [[f32::MAX; 3]; 3],
             }),
+            age_us: u32::MAX,
         }
     }
 
@@ -578,6 +585,7 @@ mod tests {
                 0.019, 0.004, -0.001, -0.01, 0.03, 0.02, 0.0,
             ])),
             tangent: None,
+            age_us: 12_000,
         });
         let fb = Down::Feedback(Feedback {
             seq: 123_400,

@@ -38,10 +38,12 @@ pub struct Inbox<'a> {
     pub weights: Option<&'a WeightUpdate>,
 }
 
-/// The firmware's setpoint from the planner's message.
-pub fn setpoint_in(s: &Setpoint) -> SetpointIn {
+/// The firmware's setpoint from the planner's message, for a period at
+/// `now_ns` (its age is measured to it).
+pub fn setpoint_in(s: &Setpoint, now_ns: u64) -> SetpointIn {
     SetpointIn {
         seq: s.header.seq,
+        age_ns: now_ns.saturating_sub(s.header.stamp_ns),
         pose: s.pose,
         velocity: (s.flags & setpoint_flags::HAS_VELOCITY != 0).then_some(s.velocity),
         // The planner's tangent, for the firmware's integral loop (which
@@ -360,7 +362,7 @@ impl Controller {
             } else {
                 0
             },
-            setpoint: shifted.as_ref().map(setpoint_in),
+            setpoint: shifted.as_ref().map(|s| setpoint_in(s, tick.deadline_ns)),
             setpoints: inbox.setpoints as u32,
             superseded_nonfinite: inbox.superseded_nonfinite as u32,
             feedback: state.as_ref().map(|f| feedback_in(f, tick.deadline_ns)),
