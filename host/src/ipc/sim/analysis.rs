@@ -284,8 +284,12 @@ impl Logs {
     }
 }
 
-/// Join each plant step with the setpoint in force (none if the planner
-/// has been silent for over 50 ms); times in s since `t0_ns`.
+/// Join each plant step with the planner's path at its instant: the
+/// setpoint in force, moved on towards the next one as far as the step is
+/// between their send times (a planner at 100 Hz holds each setpoint for
+/// 10 ms, 0.19 mm along the 30 mm circle: a tip exactly on the path would
+/// otherwise read up to that far ahead of it). None if the planner has
+/// been silent for over 50 ms; times in s since `t0_ns`.
 pub fn join(logs: &Logs, t0_ns: u64) -> Vec<Sample> {
     let sp = &logs.setpoints;
     let mut samples = Vec::new();
@@ -295,18 +299,38 @@ pub fn join(logs: &Logs, t0_ns: u64) -> Vec<Sample> {
             j += 1;
         }
         let Some(s) = sp.get(j) else { continue };
-        if s.t_ns > row.t_ns || row.t_ns - s.t_ns > 50e6 {
+        if s.t_ns > row.t_ns || row.t_ns - s.t_ns > SILENT_NS {
             continue;
         }
         samples.push(Sample {
             t: (row.t_ns - t0_ns as f64) * 1e-9,
-            desired: s.position,
+            desired: path_at(s, sp.get(j + 1), row.t_ns),
             actual: row.position,
             hold: s.flags & (setpoint_flags::HOLD | LOG_INJECTED) != 0,
             moving: s.flags & setpoint_flags::MOVING != 0,
         });
     }
     samples
+}
+
+/// A planner silent this long has no path in force, ns.
+const SILENT_NS: f64 = 50e6;
+
+/// The planner's path at `t_ns`, between the setpoint in force `s` and the
+/// one after it (its position at `t_ns` on the line between them); `s`'s
+/// own position when there is no next one from the same planner within
+/// [`SILENT_NS`], or either was injected.
+fn path_at(s: &SetpointRow, next: Option<&SetpointRow>, t_ns: f64) -> [f64; 3] {
+    let Some(n) = next.filter(|n| {
+        n.generation == s.generation
+            && n.t_ns > s.t_ns
+            && n.t_ns - s.t_ns <= SILENT_NS
+            && (s.flags | n.flags) & LOG_INJECTED == 0
+    }) else {
+        return s.position;
+    };
+    let w = ((t_ns - s.t_ns) / (n.t_ns - s.t_ns)).clamp(0.0, 1.0);
+    std::array::from_fn(|k| s.position[k] + w * (n.position[k] - s.position[k]))
 }
 
 /// Tracking statistics over the samples outside holds.
@@ -371,9 +395,9 @@ pub const PATH_WINDOW_S: f64 = 0.2;
 /// RMS distance from the true tip to the planner's path, mm, over the
 /// samples outside holds: the contour error of machining. The path is the
 /// polyline through the setpoints issued within ±[`PATH_WINDOW_S`] of the
-/// sample. The tracking error compares the tip with the setpoint in force
-/// at the same instant, so on a moving setpoint it includes the delay from
-/// planner to tip (speed × latency: 0.19 mm per 10 ms on the 30 mm circle);
+/// sample. The tracking error compares the tip with the path at the same
+/// instant, so on a moving setpoint it includes the delay from planner to
+/// tip (speed × latency: 0.19 mm per 10 ms on the 30 mm circle);
 /// this one does not, and so separates what the controller computes from
 /// how fast its commands arrive (reported on its own: setpoint → command).
 pub fn path_error_rms(samples: &[Sample]) -> Option<f64> {
@@ -590,6 +614,32 @@ mod tests {
                 }
             })
             .collect()
+    }
+
+    fn row(t_ms: f64, x: f64, generation: usize, flags: u32) -> SetpointRow {
+        SetpointRow {
+            t_ns: t_ms * 1e6,
+            flags,
+            position: [x, 0.0, 0.2],
+            generation,
+            stiffness: f64::NAN,
+        }
+    }
+
+    /// A planner at 100 Hz along x at 20 mm/s: between two setpoints the
+    /// path is where the planner was at that instant, not where it was at
+    /// the last send; across a restart, an injection or a silence, the
+    /// setpoint in force.
+    #[test]
+    fn the_path_between_setpoints_is_where_the_planner_was_then() {
+        let (a, b) = (row(10.0, 0.0002, 1, 0), row(20.0, 0.0004, 1, 0));
+        let at = |next: &SetpointRow, t_ms: f64| path_at(&a, Some(next), t_ms * 1e6)[0];
+        assert!((at(&b, 14.0) - 0.00028).abs() < 1e-12, "{}", at(&b, 14.0));
+        assert_eq!(at(&b, 10.0), 0.0002);
+        assert_eq!(path_at(&a, None, 14e6)[0], 0.0002);
+        assert_eq!(at(&row(20.0, 0.0004, 2, 0), 14.0), 0.0002);
+        assert_eq!(at(&row(20.0, 0.0004, 1, LOG_INJECTED), 14.0), 0.0002);
+        assert_eq!(at(&row(70.0, 0.0004, 1, 0), 14.0), 0.0002);
     }
 
     #[test]
