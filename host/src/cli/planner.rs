@@ -101,9 +101,8 @@ pub struct TrajectoryOpts {
     /// Estimate from the tracker's frames how much stiffer or softer the
     /// backbone is than the robot file says, and offset every pose by what
     /// that moves the tip (one number for the whole path and every step
-    /// target; docs/design.md §6.5). Off by default: with the controller
-    /// at 100 Hz it reads an ideal plant as 3–5 % stiffer.
-    #[arg(long, value_enum, default_value_t = super::controller::OnOff::Off)]
+    /// target; docs/design.md §6.5).
+    #[arg(long, value_enum, default_value_t = super::controller::OnOff::On)]
     pub adapt_stiffness: super::controller::OnOff,
 }
 
@@ -304,6 +303,12 @@ pub struct PlannerArgs {
     /// pose by a shaped move during the settle hold (with --shape-steps on).
     #[arg(long)]
     pub from_rest: bool,
+    /// How long the loop below takes to put a setpoint on the tip, ms (the
+    /// stiffness adaptation matches frames against it; docs/design.md
+    /// §6.5): 0 for the host controller (the default), 1.4 for the chip
+    /// over its link.
+    #[arg(long)]
+    pub loop_delay_ms: Option<f64>,
 }
 
 impl PlannerArgs {
@@ -318,6 +323,14 @@ impl PlannerArgs {
         let of = self.outside_for;
         check("--outside-for", of, of > 0.0, "a number of seconds > 0")?;
         let (peer_timeout_s, peer_start_grace_s) = peer_timeout(self.peer_timeout)?;
+        if let Some(d) = self.loop_delay_ms {
+            check(
+                "--loop-delay-ms",
+                d,
+                (0.0..=1000.0).contains(&d),
+                "a number of ms in 0–1000",
+            )?;
+        }
         Ok(PlannerConfig {
             prefix: self.prefix,
             step_shaping: self.traj.step_shaping(),
@@ -325,6 +338,7 @@ impl PlannerArgs {
             dynamic_offset: self.traj.dynamic_offset == super::controller::OnOff::On,
             learning: self.traj.learning(),
             adapt_stiffness: self.traj.adapt_stiffness == super::controller::OnOff::On,
+            loop_delay_s: self.loop_delay_ms.map(|ms| ms * 1e-3),
             rate_hz: self
                 .traj
                 .planner_rate
@@ -368,13 +382,15 @@ mod tests {
     /// Every default the command line shows is the configuration's own: a
     /// `tendril planner` without flags follows `PlannerConfig::new`'s path
     /// on the default robot, with the command line's own choices said in
-    /// its help (the dynamic offset on, the peers' timeout).
+    /// its help (the dynamic offset and the stiffness adaptation on, the
+    /// peers' timeout).
     #[test]
     fn a_planner_without_flags_is_the_configurations_defaults() {
         let given = Cli::parse_from(["planner"]).args.config().unwrap();
         let mut expected =
             PlannerConfig::new(crate::robot::DEFAULT_ROBOT.into(), given.shape.clone());
         expected.dynamic_offset = true;
+        expected.adapt_stiffness = true;
         expected.peer_timeout_s = given.peer_timeout_s;
         expected.peer_start_grace_s = given.peer_start_grace_s;
         assert_eq!(given, expected);

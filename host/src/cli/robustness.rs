@@ -35,9 +35,9 @@ pub struct RobustnessArgs {
     /// Only the corrected runs (half the time).
     #[arg(long)]
     pub corrected_only: bool,
-    /// The planner's stiffness adaptation (docs/design.md §6.5; off by
+    /// The planner's stiffness adaptation (docs/design.md §6.5; on by
     /// default, as in `tendril sim`).
-    #[arg(long, value_enum, default_value_t = super::controller::OnOff::Off)]
+    #[arg(long, value_enum, default_value_t = super::controller::OnOff::On)]
     pub adapt_stiffness: super::controller::OnOff,
     /// Run nothing: redraw the table and figure from these robustness.json
     /// files (a later file's rows replace an earlier one's of the same

@@ -306,6 +306,7 @@ mod tests {
                 ki_per_s: 4.0,
                 filter_tau_s: 0.08,
             }),
+            loop_delay_s: Some(0.0),
             rate_hz: 1000.0,
             settle_s: 2.0,
             duration_s: None,

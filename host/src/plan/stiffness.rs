@@ -34,7 +34,13 @@
 //! then a least-squares fit of z = ψ − e on φ over the frames, with
 //! exponential forgetting; it is used once the frames' φ carry enough
 //! excitation that a 0.2 mm tracker leaves it within ±0.01, and bounded to
-//! ±[`MAX_STIFFNESS_ERROR`]. A new estimate changes the offset, which is a
+//! ±[`MAX_STIFFNESS_ERROR`]. Each frame is matched with what the planner
+//! asked for, and with the regressors, the loop's delay before it was
+//! measured: on a circle the integral leaves a stiffness error mostly along
+//! the path, where a late loop leaves its own, so an uncounted 10 ms reads
+//! as κ̂ ≈ 0.04 (the controller leads each setpoint by its age, so the
+//! host's loop is on time; the chip's command comes back over its link
+//! 1.4 ms late). A new estimate changes the offset, which is a
 //! step of its own: on a path it is applied through a first-order lag of a
 //! few of the rod's periods; between step targets it is taken up on the
 //! next shaped move, along the move's own profile, so that neither rings
@@ -164,6 +170,7 @@ struct Tick {
 #[derive(Clone, Debug)]
 pub struct StiffnessEstimator {
     gains: IntegralGains,
+    loop_delay_s: f64,
     quiet_after_move_s: f64,
     apply_lag_s: f64,
     phi_loop: ModelLoop,
@@ -184,11 +191,13 @@ pub struct StiffnessEstimator {
 impl StiffnessEstimator {
     /// An estimator for a controller of `gains` that integrates no frame
     /// during a shaped move and `quiet_after_move_s` after it, on a rod
-    /// whose first mode is `mode_hz` (None: unknown).
+    /// whose first mode is `mode_hz` (None: unknown), in a loop that puts
+    /// a setpoint on the tip `loop_delay_s` after the planner sent it.
     pub fn new(
         gains: IntegralGains,
         quiet_after_move_s: f64,
         mode_hz: Option<f64>,
+        loop_delay_s: f64,
     ) -> StiffnessEstimator {
         let apply_lag_s = mode_hz
             .filter(|f| *f > 0.0)
@@ -196,6 +205,11 @@ impl StiffnessEstimator {
             .max(MIN_APPLY_LAG_S);
         StiffnessEstimator {
             gains,
+            loop_delay_s: if loop_delay_s.is_finite() {
+                loop_delay_s.max(0.0)
+            } else {
+                0.0
+            },
             quiet_after_move_s,
             apply_lag_s,
             phi_loop: ModelLoop::default(),
@@ -267,10 +281,18 @@ impl StiffnessEstimator {
         }
     }
 
-    /// A tracker frame measured at `t` (s on the planner's clock): the
-    /// desired position then less the tip's, `error` (m, base frame).
-    pub fn frame(&mut self, t: f64, error: [f64; 3]) {
-        if error.iter().any(|v| !v.is_finite()) || self.last_frame.is_some_and(|t0| t <= t0) {
+    /// A tracker frame: the tip at `tip` (m, base frame) measured at `t`
+    /// (s on the planner's clock); `asked(t)`: the position the planner
+    /// asked for at `t`. The frame is matched with what the planner asked
+    /// for, and with the model's regressors, the loop's delay earlier.
+    pub fn frame(&mut self, t: f64, tip: [f64; 3], asked: impl Fn(f64) -> [f64; 3]) {
+        let t = t - self.loop_delay_s;
+        if tip.iter().any(|v| !v.is_finite()) || self.last_frame.is_some_and(|t0| t <= t0) {
+            return;
+        }
+        let asked = asked(t);
+        let error: [f64; 3] = std::array::from_fn(|k| asked[k] - tip[k]);
+        if error.iter().any(|v| !v.is_finite()) {
             return;
         }
         // The newest tick at or before the frame (a frame is never from
@@ -324,17 +346,19 @@ impl StiffnessAdaptation {
     /// For `traj` on `robot` (the directions: two statics solves a row),
     /// below a controller of `gains` that integrates nothing over a shaped
     /// move and `quiet_after_move_s` after it, on a rod whose first mode is
-    /// `mode_hz`.
+    /// `mode_hz`, in a loop that puts a setpoint on the tip `loop_delay_s`
+    /// after the planner sent it.
     pub fn new(
         traj: &Trajectory,
         robot: &Robot,
         gains: IntegralGains,
         quiet_after_move_s: f64,
         mode_hz: Option<f64>,
+        loop_delay_s: f64,
     ) -> Result<StiffnessAdaptation, PlanError> {
         Ok(StiffnessAdaptation {
             directions: StiffnessDirections::new(traj, robot)?,
-            estimator: StiffnessEstimator::new(gains, quiet_after_move_s, mode_hz),
+            estimator: StiffnessEstimator::new(gains, quiet_after_move_s, mode_hz, loop_delay_s),
             scratch: Vec::new(),
         })
     }
@@ -353,9 +377,10 @@ impl StiffnessAdaptation {
     /// A tracker frame: the tip at `tip` (m, base frame) measured at `t`
     /// (s on the planner's clock), against what `motion` asked for then.
     pub fn frame(&mut self, motion: &Motion, t: f64, tip: [f64; 3]) {
-        let asked = motion.at(t).point.pose;
-        self.estimator
-            .frame(t, std::array::from_fn(|k| asked[k] - tip[k]));
+        self.estimator.frame(t, tip, |t| {
+            let p = motion.at(t).point.pose;
+            [p[0], p[1], p[2]]
+        });
     }
 
     /// κ̂ applied now ([`StiffnessEstimator::applied`]).

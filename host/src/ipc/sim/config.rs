@@ -150,6 +150,7 @@ impl SimConfig {
                 prefix: String::new(),
                 start_from_rest: true,
                 dynamic_offset: true,
+                adapt_stiffness: true,
                 peer_timeout_s: controller.peer_timeout_s,
                 supervised: true,
                 realtime: true,
