@@ -101,8 +101,9 @@ fn the_dynamic_plant_at_a_gain_outside_its_bound_oscillates_and_the_run_is_not_c
 /// The dynamic plant stays clean — here on a robot 10 % off its file (E,
 /// G, density) with a 0.14 mm tracker, on the circle at twice its default
 /// speed, with learning for repeated paths on (issue 43, docs/design.md
-/// §6.4) and the controller's error map off, so that the learning is the
-/// only thing that learns. The independent fact is the same run without
+/// §6.4) and the controller's error map and the planner's stiffness
+/// adaptation (§6.5) off, so that the learning is the only thing that
+/// learns. The independent fact is the same run without
 /// learning: its error's RMS per period of the path is flat (0.82, 0.91,
 /// 0.90, 0.91 mm, BENCHMARKS.md), so a last pass under three quarters of
 /// the first is the learning's doing (measured: 0.81, 0.90, 0.66, 0.31 mm).
@@ -132,6 +133,8 @@ fn the_dynamic_plant_stays_clean_and_learning_lowers_a_fast_circles_error() {
             "on",
             "--correction-map-gain",
             "0",
+            "--adapt-stiffness",
+            "off",
         ],
     );
     assert!(o.status.success(), "{}", stderr(&o));
