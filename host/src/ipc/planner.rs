@@ -6,7 +6,9 @@
 use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
-use tendril_shared::messages::{setpoint_flags, Header, PlantState, Setpoint, TensionCommand};
+use tendril_shared::messages::{
+    command_status, setpoint_flags, Header, PlantState, Setpoint, TensionCommand,
+};
 
 use super::clock::{now_ns, Ticker};
 use super::process::{self, Process, Scheduling, Stepped};
@@ -367,8 +369,11 @@ struct PlannerTask<'a> {
     /// logged, and back, for the frames the learning reads.
     to_tracker: crate::robot::RigidMap,
     to_base: crate::robot::RigidMap,
-    /// The controller's commands say it is alive (the peers-lost rule).
+    /// The controller's commands say it is alive (the peers-lost rule)
+    /// and whether it follows the setpoints (the stiffness adaptation).
     commands: transport::Sub<TensionCommand>,
+    /// When the newest command was heard (ns), and its status.
+    last_command: Option<(u64, u32)>,
     /// The stiffness adaptation, when asked for (`docs/design.md` §6.5).
     stiffness: Option<StiffnessAdaptation>,
     /// The tracker's frames, for the learning and the stiffness adaptation.
@@ -404,6 +409,7 @@ impl<'a> PlannerTask<'a> {
             to_tracker: planned.base.to_tracker(),
             to_base: planned.base.to_base(),
             commands: transport::subscriber(&services.tension_cmd)?,
+            last_command: None,
             last_frame: 0,
             feedforward: Vec::with_capacity(tendons),
             row: Vec::with_capacity(10 + tendons + 2),
@@ -456,15 +462,21 @@ impl<'a> PlannerTask<'a> {
         (learned, log_flags)
     }
 
-    /// The stiffness adaptation's tick at `t` with `frame`: its offset
-    /// (None when off).
-    fn adapt(&mut self, frame: Option<&PlantState>, t: f64, desired: &Desired) -> Option<[f64; 3]> {
+    /// The stiffness adaptation's tick at `t` with `frame`, the loop below
+    /// `following` the setpoints or not: its offset (None when off).
+    fn adapt(
+        &mut self,
+        frame: Option<&PlantState>,
+        t: f64,
+        desired: &Desired,
+        following: bool,
+    ) -> Option<[f64; 3]> {
         let adaptation = self.stiffness.as_mut()?;
         if let Some(state) = frame {
             let tip = [0, 1, 2].map(|k| state.tip_pose[k] as f64);
             adaptation.frame(&self.motion, frame_time(state, self.start), tip);
         }
-        Some(adaptation.step(self.motion.trajectory(), t, desired))
+        Some(adaptation.step(self.motion.trajectory(), t, desired, following))
     }
 }
 
@@ -493,7 +505,15 @@ impl process::Task for PlannerTask<'_> {
             desired.t_path,
             !desired.holding && !desired.moving,
         );
-        let adapted = self.adapt(frame.as_ref(), t, &desired);
+        let (command, _): (Option<TensionCommand>, usize) = transport::latest(&self.commands)?;
+        if let Some(c) = &command {
+            self.last_command = Some((tick.deadline_ns, c.status));
+        }
+        let following = self.last_command.is_some_and(|(heard, status)| {
+            tick.deadline_ns.saturating_sub(heard) <= FOLLOWING_SILENCE_NS
+                && status & command_status::SAFE_HOLD == 0
+        });
+        let adapted = self.adapt(frame.as_ref(), t, &desired, following);
         let offset = match (learned, adapted) {
             (None, None) => None,
             (a, b) => {
@@ -551,7 +571,6 @@ impl process::Task for PlannerTask<'_> {
         row.push(miss);
         row.push(self.stiffness.as_ref().map_or(f64::NAN, |s| s.applied()));
         log.row(row)?;
-        let (command, _): (Option<TensionCommand>, usize) = transport::latest(&self.commands)?;
         Ok(Stepped {
             t_ns: tick.deadline_ns,
             heard: command.is_some(),
@@ -642,6 +661,13 @@ pub fn loop_delay_s(chip: bool) -> f64 {
 
 /// The chip's command's way back over the link, s (measured, above).
 const CHIP_COMMAND_RETURN_S: f64 = 0.0014;
+
+/// The loop below follows the setpoints while a controller's command came
+/// within this long (ns) and did not say it holds: a controller in its safe
+/// hold, or a chip whose link is cut, leaves the tip where it was while the
+/// path moves on, which no stiffness explains (the chip's commands come every
+/// 10 ms).
+const FOLLOWING_SILENCE_NS: u64 = 50_000_000;
 
 /// When a tracker frame was measured, s on the planner's clock (which
 /// started at `start_ns`): its stamp, so the tracker's latency costs nothing.

@@ -74,6 +74,9 @@ struct Case<'a> {
     steps: &'a dyn Fn(f64) -> Option<Option<f64>>,
     kappa: f64,
     lag: (f64, f64),
+    /// The controller holds (the tip stays where it was) over this span,
+    /// s, and the estimator is told so (`.1`) or not.
+    hold: Option<((f64, f64), bool)>,
     duration_s: f64,
     last_s: f64,
 }
@@ -91,9 +94,11 @@ fn run_loop(case: Case) -> (f64, f64, f64) {
         steps,
         kappa,
         lag: (lag_s, modelled_lag_s),
+        hold,
         duration_s,
         last_s,
     } = case;
+    let holding = |t: f64| hold.is_some_and(|((a, b), _)| t >= a && t < b);
     let mut result = (0.0, 0.0, 0.0);
     for adapt in [true, false] {
         let (frame_hz, latency_s, jitter_m, dt) = (40.0, 0.02, 0.14e-3, 1e-3);
@@ -114,12 +119,16 @@ fn run_loop(case: Case) -> (f64, f64, f64) {
             s * jitter_m * 3f64.sqrt()
         };
         let (mut sum, mut n) = (0.0, 0);
+        let mut held_tip = [0.0; 3];
         let mut quiet_until = f64::NEG_INFINITY;
         let ticks = (duration_s / dt) as usize;
         for i in 0..ticks {
             let t = i as f64 * dt;
             let gt = g(t);
             let mv = moving(t);
+            if holding(t) && hold.is_some_and(|(_, told)| told) {
+                est.hold(t);
+            }
             est.tick(t, gt, mv, false, steps(t));
             let offset = if adapt { est.offset(gt) } else { [0.0; 3] };
             // The net puts the model's tip at x_d + c + offset; the motors
@@ -129,7 +138,12 @@ fn run_loop(case: Case) -> (f64, f64, f64) {
                 motor[k] += dt / 0.02 * (command - motor[k]);
             }
             let late = path(t - lag_s);
-            let tip: [f64; 3] = std::array::from_fn(|k| late[k] + motor[k] + kappa * gt[k]);
+            let mut tip: [f64; 3] = std::array::from_fn(|k| late[k] + motor[k] + kappa * gt[k]);
+            if holding(t) {
+                tip = held_tip;
+            } else {
+                held_tip = tip;
+            }
             if t >= duration_s - last_s {
                 sum += (0..3).map(|k| (tip[k] - late[k]).powi(2)).sum::<f64>();
                 n += 1;
@@ -149,13 +163,13 @@ fn run_loop(case: Case) -> (f64, f64, f64) {
                 if mv {
                     quiet_until = t + 0.3;
                 }
-                if t >= quiet_until && !mv {
+                if t >= quiet_until && !mv && !holding(t) {
                     for k in 0..3 {
                         f[k] += (1.0 / frame_hz) / GAINS.filter_tau_s * (error[k] - f[k]);
                     }
                 }
             }
-            if !mv && t >= quiet_until {
+            if !mv && t >= quiet_until && !holding(t) {
                 for k in 0..3 {
                     c[k] += dt * GAINS.ki_per_s * f[k];
                 }
@@ -193,6 +207,7 @@ fn on_the_circle(kappa: f64, lag: (f64, f64), duration_s: f64) -> Case<'static> 
         steps: &|_| None,
         kappa,
         lag,
+        hold: None,
         duration_s,
         last_s: 5.0,
     }
@@ -213,6 +228,27 @@ fn a_late_loop_is_not_read_as_stiffness() {
     assert!(aware.abs() < 0.005, "κ̂ {aware} with the lag modelled");
     assert!((stiffer - 0.1).abs() < 0.01, "κ̂ {stiffer} for κ 0.1");
     assert!(with < 0.2 * without, "{with} m with, {without} m without");
+}
+
+/// A controller that holds for a second (its safe hold, a cut link) leaves
+/// the tip where it was while the circle moves on: told so, the estimator
+/// fits none of it and still finds κ = 0.1; not told, it reads the held tip
+/// as stiffness.
+#[test]
+fn a_held_loop_is_not_read_as_stiffness() {
+    let with_hold = |told: bool| {
+        let mut case = on_the_circle(0.1, (0.0, 0.0), 15.0);
+        case.hold = Some(((7.0, 8.0), told));
+        run_loop(case)
+    };
+    let (told, with, without) = with_hold(true);
+    let (untold, _, _) = with_hold(false);
+    eprintln!("held 1 s: κ̂ {told:.4} told, {untold:.4} not told ({with:.2e} / {without:.2e} m)");
+    assert!((told - 0.1).abs() < 0.01, "κ̂ {told} told of the hold");
+    assert!(
+        (untold - 0.1).abs() > 0.05,
+        "the hold did not show: κ̂ {untold}"
+    );
 }
 
 /// On the circle a backbone 10 % stiffer than its file is found to within
@@ -253,6 +289,7 @@ fn steps_find_the_stiffness_from_their_transients() {
         steps: &progress,
         kappa: 0.1,
         lag: (0.0, 0.0),
+        hold: None,
         duration_s: 16.0,
         last_s: 2.0,
     });
