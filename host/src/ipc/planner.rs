@@ -107,7 +107,7 @@ pub struct PlannerConfig {
     pub controller_gains: Option<crate::plan::IntegralGains>,
     /// How long the loop below takes to put a setpoint on the tip, s: what
     /// the stiffness adaptation matches the tracker's frames against (None:
-    /// the host controller's, [`loop_delay_s`]).
+    /// the host controller's, [`super::controller::loop_delay_s`]).
     #[serde(default)]
     pub loop_delay_s: Option<f64>,
     /// Bad setpoints to inject.
@@ -289,7 +289,8 @@ pub fn plan(cfg: &PlannerConfig) -> Result<Planned, IpcError> {
                 .unwrap_or_else(|| controller_gains(&robot)),
             super::controller::correction::SETTLE_AFTER_JUMP_S,
             shaping.map(|s| s.mode_hz),
-            cfg.loop_delay_s.unwrap_or_else(|| loop_delay_s(false)),
+            cfg.loop_delay_s
+                .unwrap_or_else(|| super::controller::loop_delay_s(false)),
         )?),
         false => None,
     };
@@ -643,24 +644,6 @@ fn learn_from(learner: &mut Learner, motion: &Motion, state: &PlantState, start_
     let error = [0, 1, 2].map(|k| p[k] - state.tip_pose[k] as f64);
     learner.measure(then.t_path, along_axes(&then.point, error));
 }
-
-/// How long the loop below takes to put the planner's setpoint on the tip,
-/// s, beyond what the controller's period makes up for: the period leads
-/// each setpoint by its age (`tendril_firmware::period::SetpointIn::age_ns`),
-/// so the host controller puts it on the tip in time at any rate (the tip
-/// against the planner's path shifted in time, ideal plant, the default
-/// circle: −0.2 ms at 1 kHz and at 100 Hz); the chip's command still
-/// crosses the link back after its period (1.3–1.5 ms at 100 Hz). On a
-/// circle an uncounted delay reads as stiffness: 1 ms is κ̂ ≈ 0.01.
-pub fn loop_delay_s(chip: bool) -> f64 {
-    match chip {
-        true => CHIP_COMMAND_RETURN_S,
-        false => 0.0,
-    }
-}
-
-/// The chip's command's way back over the link, s (measured, above).
-const CHIP_COMMAND_RETURN_S: f64 = 0.0014;
 
 /// The loop below follows the setpoints while a controller's command came
 /// within this long (ns) and did not say it holds: a controller in its safe

@@ -275,6 +275,24 @@ impl ControllerConfig {
 /// The controller's defaults, each written once: [`ControllerConfig::new`]
 /// uses them and the command line's flags show them (a test checks that a
 /// command line without flags gives `new`'s configuration).
+/// How long the loop below takes to put the planner's setpoint on the tip,
+/// s, beyond what the controller's period makes up for: the period leads
+/// each setpoint by its age (`tendril_firmware::period::SetpointIn::age_ns`),
+/// so the host controller puts it on the tip in time at any rate (the tip
+/// against the planner's path shifted in time, ideal plant, the default
+/// circle: −0.2 ms at 1 kHz and at 100 Hz); the chip's command still
+/// crosses the link back after its period (1.3–1.8 ms at 100 Hz, six runs). On a
+/// circle an uncounted delay reads as stiffness: 1 ms is κ̂ ≈ 0.01.
+pub fn loop_delay_s(chip: bool) -> f64 {
+    match chip {
+        true => CHIP_COMMAND_RETURN_S,
+        false => 0.0,
+    }
+}
+
+/// The chip's command's way back over the link, s (measured, above).
+const CHIP_COMMAND_RETURN_S: f64 = 0.0014;
+
 pub mod defaults {
     /// Control rate, Hz.
     pub const RATE_HZ: f64 = 1000.0;

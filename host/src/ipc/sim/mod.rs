@@ -172,7 +172,7 @@ pub fn run(cfg: &SimConfig) -> Result<SimReport, SimError> {
     };
     resolved.planner.learning = learning(cfg, &robot, shaping)?;
     resolved.planner.controller_gains = Some(controller_gains(cfg, &robot));
-    resolved.planner.loop_delay_s = Some(crate::ipc::planner::loop_delay_s(cfg.mcu.is_some()));
+    resolved.planner.loop_delay_s = Some(crate::ipc::controller::loop_delay_s(cfg.mcu.is_some()));
     let cfg = &resolved;
     budget::check(
         cfg,
