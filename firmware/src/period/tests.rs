@@ -344,38 +344,47 @@ fn a_motor_that_does_not_follow_is_detected_and_the_hold_latches() {
     assert_eq!(p.counters().stuck_motor_holds, 1);
 }
 
-#[test]
-fn the_lead_advances_setpoint_and_measured_tip_alike() {
+/// A setpoint with velocity `v`, aged `age_ns`, under a lead of `lead_s`
+/// gives, period after period, the commands of an unled, unaged setpoint
+/// moved `ahead_s` along `v`.
+fn assert_led_as_ahead(lead_s: f32, age_ns: u64, ahead_s: f32) {
     let mut st = store(1);
     let mut cfg = config();
-    cfg.lead_s = 0.02;
+    cfg.lead_s = lead_s;
     let mut led = P::new(cfg, 0);
     let mut plain = P::new(config(), 0);
     let v = [0.5, -0.25, 0.0, 0.0, 0.0, 0.0, 0.0];
     let mut s = sp(1);
     s.velocity = Some(v);
+    s.age_ns = age_ns;
     let mut ahead = sp(1);
     for (p, vv) in ahead.pose.iter_mut().zip(&v) {
-        *p += vv * 0.02;
+        *p += vv * ahead_s;
     }
     for k in 1..=40 {
         s.seq = k;
         ahead.seq = k;
         let a = led.run(&mut *st, &with_sp(k, s));
         let b = plain.run(&mut *st, &with_sp(k, ahead));
-        assert_eq!(a.command.tensions, b.command.tensions, "period {k}");
+        assert_eq!(
+            a.command.tensions, b.command.tensions,
+            "age {age_ns} ns, period {k}"
+        );
     }
+}
+
+#[test]
+fn the_lead_advances_setpoint_and_measured_tip_alike() {
+    assert_led_as_ahead(0.02, 0, 0.02);
 }
 
 /// A setpoint taken 8 ms after it was sent is led by its age beside the
 /// motors' lag: as a setpoint 28 ms ahead on its path with no age; an age
-/// beyond [`MAX_SETPOINT_AGE_NS`] counts as that.
+/// beyond [`MAX_SETPOINT_AGE_NS`] counts as that. (The period adds the two
+/// in f32, so the setpoint ahead is moved by that sum, checked against the
+/// intended time first.)
 #[test]
 fn a_setpoint_is_led_by_its_age() {
-    let mut st = store(1);
-    let mut cfg = config();
-    cfg.lead_s = 0.02;
-    let v = [0.5, -0.25, 0.0, 0.0, 0.0, 0.0, 0.0];
     for (age_ns, ahead_s) in [
         (8_000_000, 0.028),
         (
@@ -383,27 +392,9 @@ fn a_setpoint_is_led_by_its_age() {
             0.02 + MAX_SETPOINT_AGE_NS as f32 * 1e-9,
         ),
     ] {
-        let mut led = P::new(cfg, 0);
-        let mut plain = P::new(config(), 0);
-        let mut s = sp(1);
-        s.velocity = Some(v);
-        s.age_ns = age_ns;
-        let mut ahead = sp(1);
-        let lead_s = cfg.lead_s + age_ns.min(MAX_SETPOINT_AGE_NS) as f32 * 1e-9;
+        let lead_s = 0.02 + age_ns.min(MAX_SETPOINT_AGE_NS) as f32 * 1e-9;
         assert!((lead_s - ahead_s).abs() < 1e-6);
-        for (p, vv) in ahead.pose.iter_mut().zip(&v) {
-            *p += vv * lead_s;
-        }
-        for k in 1..=40 {
-            s.seq = k;
-            ahead.seq = k;
-            let a = led.run(&mut *st, &with_sp(k, s));
-            let b = plain.run(&mut *st, &with_sp(k, ahead));
-            assert_eq!(
-                a.command.tensions, b.command.tensions,
-                "age {age_ns} ns, period {k}"
-            );
-        }
+        assert_led_as_ahead(0.02, age_ns, lead_s);
     }
 }
 

@@ -57,7 +57,7 @@ pub fn link_setpoint(
         velocity: (s.flags & setpoint_flags::HAS_VELOCITY != 0)
             .then(|| LinkSetpoint::wire_velocity(&s.velocity)),
         tangent: if send_tangent { tangent } else { None },
-        age_us: (now_ns.saturating_sub(s.header.stamp_ns) / 1000).min(u64::from(u32::MAX)) as u32,
+        age_us: age_us(now_ns, s.header.stamp_ns),
     }
 }
 
@@ -89,7 +89,7 @@ pub fn link_feedback(f: &PlantState, count: usize, n: usize, now_ns: u64) -> Fee
         tensions,
         tip: [0, 1, 2].map(|i| units::to_i32(f.tip_pose[i], units::POSITION_M)),
         tip_seq: f.tip_seq,
-        tip_age_us: (now_ns.saturating_sub(f.tip_stamp_ns) / 1000).min(u64::from(u32::MAX)) as u32,
+        tip_age_us: age_us(now_ns, f.tip_stamp_ns),
     }
 }
 
@@ -211,4 +211,10 @@ impl ChipLink {
     pub fn bytes(&self) -> (u64, u64) {
         (self.link.bytes_sent(), self.link.bytes_received())
     }
+}
+
+/// How long before `now_ns` something stamped `stamp_ns` was sent or
+/// measured, µs (saturating): the ages the link carries.
+fn age_us(now_ns: u64, stamp_ns: u64) -> u32 {
+    (now_ns.saturating_sub(stamp_ns) / 1000).min(u64::from(u32::MAX)) as u32
 }

@@ -59,14 +59,9 @@ fn the_direction_is_how_far_a_stiffer_backbone_moves_the_tip() {
     }
 }
 
-/// A loop the estimator does not model exactly: motors lagging by 20 ms,
-/// a tracker at `frame_hz` with `latency_s` and Gaussian-like scatter of
-/// `jitter_m` per axis, the controller's integral on its filtered,
-/// delayed frames, and a backbone `kappa` stiffer than its file, the tip
-/// then off by κ g(t); the tip follows the planner's `path` `lag.0` s late
-/// (the controller does not see that), the estimator is told `lag.1`.
-/// Returns (the estimate applied at the end, the tracking RMS about the
-/// late path over the last `last_s`, with adaptation; the same without).
+/// One run of [`run_loop`]: the planner's `path`, g along it, its shaped
+/// moves and step progress, the backbone's κ, the loop's lag along the path
+/// (`.0`) and the lag the estimator is told (`.1`).
 struct Case<'a> {
     path: &'a dyn Fn(f64) -> [f64; 3],
     g: &'a dyn Fn(f64) -> [f64; 3],
@@ -86,6 +81,14 @@ fn still(_: f64) -> [f64; 3] {
     [0.0; 3]
 }
 
+/// A loop the estimator does not model exactly: motors lagging by 20 ms,
+/// a tracker at `frame_hz` with `latency_s` and Gaussian-like scatter of
+/// `jitter_m` per axis, the controller's integral on its filtered,
+/// delayed frames, and a backbone `kappa` stiffer than its file, the tip
+/// then off by κ g(t); the tip follows the planner's `path` `lag.0` s late
+/// (the controller does not see that), the estimator is told `lag.1`.
+/// Returns (the estimate applied at the end, the tracking RMS about the
+/// late path over the last `last_s`, with adaptation; the same without).
 fn run_loop(case: Case) -> (f64, f64, f64) {
     let Case {
         path,
