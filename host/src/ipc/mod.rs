@@ -14,6 +14,7 @@
 
 pub mod clock;
 pub mod controller;
+pub mod following;
 pub mod frame;
 pub mod planner;
 pub mod plant;

@@ -6,11 +6,10 @@
 use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
-use tendril_shared::messages::{
-    command_status, setpoint_flags, Header, PlantState, Setpoint, TensionCommand,
-};
+use tendril_shared::messages::{setpoint_flags, Header, PlantState, Setpoint, TensionCommand};
 
 use super::clock::{now_ns, Ticker};
+use super::following::Following;
 use super::process::{self, Process, Scheduling, Stepped};
 use super::stats::CsvLog;
 use super::transport::{self, Services};
@@ -373,8 +372,8 @@ struct PlannerTask<'a> {
     /// The controller's commands say it is alive (the peers-lost rule)
     /// and whether it follows the setpoints (the stiffness adaptation).
     commands: transport::Sub<TensionCommand>,
-    /// When the newest command was heard (ns), and its status.
-    last_command: Option<(u64, u32)>,
+    /// Whether the loop follows, from the commands heard.
+    following: Following,
     /// The stiffness adaptation, when asked for (`docs/design.md` §6.5).
     stiffness: Option<StiffnessAdaptation>,
     /// The tracker's frames, for the learning and the stiffness adaptation.
@@ -410,7 +409,7 @@ impl<'a> PlannerTask<'a> {
             to_tracker: planned.base.to_tracker(),
             to_base: planned.base.to_base(),
             commands: transport::subscriber(&services.tension_cmd)?,
-            last_command: None,
+            following: Following::default(),
             last_frame: 0,
             feedforward: Vec::with_capacity(tendons),
             row: Vec::with_capacity(10 + tendons + 2),
@@ -508,12 +507,9 @@ impl process::Task for PlannerTask<'_> {
         );
         let (command, _): (Option<TensionCommand>, usize) = transport::latest(&self.commands)?;
         if let Some(c) = &command {
-            self.last_command = Some((tick.deadline_ns, c.status));
+            self.following.heard(tick.deadline_ns, c.status);
         }
-        let following = self.last_command.is_some_and(|(heard, status)| {
-            tick.deadline_ns.saturating_sub(heard) <= FOLLOWING_SILENCE_NS
-                && status & command_status::SAFE_HOLD == 0
-        });
+        let following = self.following.follows(tick.deadline_ns);
         let adapted = self.adapt(frame.as_ref(), t, &desired, following);
         let offset = match (learned, adapted) {
             (None, None) => None,
@@ -644,13 +640,6 @@ fn learn_from(learner: &mut Learner, motion: &Motion, state: &PlantState, start_
     let error = [0, 1, 2].map(|k| p[k] - state.tip_pose[k] as f64);
     learner.measure(then.t_path, along_axes(&then.point, error));
 }
-
-/// The loop below follows the setpoints while a controller's command came
-/// within this long (ns) and did not say it holds: a controller in its safe
-/// hold, or a chip whose link is cut, leaves the tip where it was while the
-/// path moves on, which no stiffness explains (the chip's commands come every
-/// 10 ms).
-const FOLLOWING_SILENCE_NS: u64 = 50_000_000;
 
 /// When a tracker frame was measured, s on the planner's clock (which
 /// started at `start_ns`): its stamp, so the tracker's latency costs nothing.
