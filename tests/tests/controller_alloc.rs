@@ -83,12 +83,7 @@ fn two_hundred_seconds_of_controller_periods_allocate_nothing() {
     let mut cfg = ControllerConfig::new(robot_path, model_path);
     cfg.ki_per_s = 10.0;
     let statics = Statics::new(&robot, SolverSettings::default());
-    let shape = PathShape::Circle {
-        center_m: [0.0, 0.0],
-        radius_m: 0.015,
-        freq_hz: 0.2,
-        height_m: None,
-    };
+    let shape = PathShape::default_circle();
     let traj = Trajectory::new(&shape, &statics).unwrap();
     let valid = WeightUpdate::from_bytes(
         Header {

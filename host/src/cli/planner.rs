@@ -394,9 +394,6 @@ mod tests {
         expected.peer_timeout_s = given.peer_timeout_s;
         expected.peer_start_grace_s = given.peer_start_grace_s;
         assert_eq!(given, expected);
-        assert!(matches!(
-            given.shape,
-            PathShape::Circle { radius_m, freq_hz, .. } if radius_m == 0.015 && freq_hz == 0.2
-        ));
+        assert_eq!(given.shape, PathShape::default_circle());
     }
 }

@@ -178,12 +178,7 @@ mod tests {
 
     fn circle_motion(inverse: Option<ModalInverse>) -> Motion {
         let s = repo_statics("seed-4t.toml");
-        let shape = PathShape::Circle {
-            center_m: [0.0, 0.0],
-            radius_m: 0.015,
-            freq_hz: 0.2,
-            height_m: None,
-        };
+        let shape = PathShape::default_circle();
         let shaping = StepShaping::for_mode(3.6, 0.05).unwrap();
         let traj = Trajectory::new(&shape, &s)
             .unwrap()

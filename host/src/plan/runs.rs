@@ -44,12 +44,7 @@ pub fn default_loop_runs(statics: &Statics) -> Result<Vec<LoopRun>, PlanError> {
             LoopRun {
                 name: "circle",
                 label: "30 mm circle at 0.2 Hz".into(),
-                shape: PathShape::Circle {
-                    center_m: [0.0, 0.0],
-                    radius_m: 0.015,
-                    freq_hz: 0.2,
-                    height_m: None,
-                },
+                shape: PathShape::default_circle(),
                 duration_s: 10.0,
             },
             LoopRun {
@@ -203,14 +198,6 @@ mod tests {
             }
         }
         let four = default_loop_runs(&statics_of("seed-4t.toml")).unwrap();
-        assert_eq!(
-            four[0].shape,
-            PathShape::Circle {
-                center_m: [0.0, 0.0],
-                radius_m: 0.015,
-                freq_hz: 0.2,
-                height_m: None
-            }
-        );
+        assert_eq!(four[0].shape, PathShape::default_circle());
     }
 }

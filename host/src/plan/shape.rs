@@ -92,6 +92,19 @@ pub enum PathShape {
 }
 
 impl PathShape {
+    /// The 30 mm circle (radius 15 mm) at 0.2 Hz about the axis, at the
+    /// robot's mid height where it reaches a volume: the path `tendril sim`
+    /// and `tendril planner` follow unless told, and the main job's first
+    /// loop run.
+    pub fn default_circle() -> PathShape {
+        PathShape::Circle {
+            center_m: [0.0, 0.0],
+            radius_m: 0.015,
+            freq_hz: 0.2,
+            height_m: None,
+        }
+    }
+
     /// Whether the path has an acceleration everywhere (a circle, a figure
     /// eight, a sweep, a helix, whose height turns back on a parabola):
     /// what the dynamic offset needs, r̈ (steps and pose tables jump or
@@ -220,15 +233,7 @@ mod tests {
     fn shapes_without_a_height_still_deserialise() {
         let text = r#"{"kind":"circle","center_m":[0.0,0.0],"radius_m":0.015,"freq_hz":0.2}"#;
         let shape: PathShape = serde_json::from_str(text).unwrap();
-        assert_eq!(
-            shape,
-            PathShape::Circle {
-                center_m: [0.0, 0.0],
-                radius_m: 0.015,
-                freq_hz: 0.2,
-                height_m: None
-            }
-        );
+        assert_eq!(shape, PathShape::default_circle());
         let text = r#"{"kind":"steps","targets_m":[[0.01,0.0]],"dwell_s":2.0}"#;
         assert!(serde_json::from_str::<PathShape>(text).is_ok());
     }

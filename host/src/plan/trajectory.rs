@@ -286,12 +286,7 @@ mod tests {
     #[test]
     fn circle_samples_lie_on_the_circle_with_tangent_velocity() {
         let s = statics();
-        let shape = PathShape::Circle {
-            center_m: [0.0, 0.0],
-            radius_m: 0.015,
-            freq_hz: 0.2,
-            height_m: None,
-        };
+        let shape = PathShape::default_circle();
         let traj = Trajectory::new(&shape, &s).unwrap();
         for t in [0.0, 0.37, 1.3, 4.99, 6.1] {
             let p = traj.sample(t);

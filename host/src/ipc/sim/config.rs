@@ -154,15 +154,7 @@ impl SimConfig {
                 peer_timeout_s: controller.peer_timeout_s,
                 supervised: true,
                 realtime: true,
-                ..PlannerConfig::new(
-                    robot.clone(),
-                    PathShape::Circle {
-                        center_m: [0.0, 0.0],
-                        radius_m: 0.015,
-                        freq_hz: 0.2,
-                        height_m: None,
-                    },
-                )
+                ..PlannerConfig::new(robot.clone(), PathShape::default_circle())
             },
             controller,
             plant: PlantConfig {

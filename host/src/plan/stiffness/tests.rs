@@ -11,12 +11,7 @@ const GAINS: IntegralGains = IntegralGains {
 /// The default robot's 30 mm circle.
 fn circle() -> (Trajectory, Robot) {
     let statics = repo_statics("seed-4t.toml");
-    let shape = PathShape::Circle {
-        center_m: [0.0, 0.0],
-        radius_m: 0.015,
-        freq_hz: 0.2,
-        height_m: None,
-    };
+    let shape = PathShape::default_circle();
     let traj = Trajectory::new(&shape, &statics).unwrap();
     (traj, statics.robot().clone())
 }
