@@ -323,6 +323,37 @@ def test_tendril_drives_a_robot_on_ros_2_along_its_circle(tmp_path, binary, doma
     assert len(problems) >= 1 and "--max-rms-mm" in problems[-1], problems
 
 
+def test_the_drive_finds_a_backbone_stiffer_than_its_file(tmp_path, binary, domain):
+    """The stiffness adaptation (design §6.5) runs in `tendril-ros2 drive`
+    too: the robot on the graph (the peer's statics) has a backbone 10 %
+    stiffer than the file the drive plans with (E and G). With the
+    adaptation on, the drive's default, it reads κ̂ near 1 − 1/1.1 = 0.091
+    and tracks the circle closer than with it off (in the iceoryx2 loop:
+    0.32 → 0.13 mm)."""
+    text = (ROOT_ROBOTS / "seed-4t.toml").read_text()
+    stiffer = text.replace("youngs_modulus = 207e9", "youngs_modulus = 227.7e9").replace(
+        "shear_modulus = 79.6e9", "shear_modulus = 87.56e9")
+    assert stiffer.count("e9") == text.count("e9") and stiffer != text
+    (tmp_path / "stiffer.toml").write_text(stiffer)
+    robot = tendril.Robot.load(tmp_path / "stiffer.toml")
+    runs = {}
+    for adapt in ("off", "on"):
+        stats_path = tmp_path / f"drive-{adapt}.json"
+        drive = start_drive(domain, "--robot", "robots/seed-4t.toml", "--model",
+                            "firmware/vectors/default.tnet", "--duration", "10",
+                            "--adapt-stiffness", adapt, "--stats", str(stats_path))
+        try:
+            StaticsRobot(Peer(domain), robot).serve(40.0, until_done=drive)
+        finally:
+            out, err = drive.communicate(timeout=30)
+        assert drive.returncode == 0, err
+        runs[adapt] = json.loads(stats_path.read_text())
+    off, on = runs["off"], runs["on"]
+    assert off["stiffness_applied"] is None, off
+    assert 0.06 <= on["stiffness_applied"] <= 0.12, on
+    assert on["tracking_rms_mm"] < 0.7 * off["tracking_rms_mm"], (on["tracking_rms_mm"], off["tracking_rms_mm"])
+
+
 def test_the_chip_drives_a_robot_on_ros_2_through_its_bridge(tmp_path, binary, domain):
     """`drive --controller mcu`: the STM32F405 image under QEMU runs the
     period (its bridge on a thread of the drive), the peer is the robot.

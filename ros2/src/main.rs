@@ -150,6 +150,11 @@ impl DriveArgs {
             start_from_rest: true,
             dynamic_offset: self.path.dynamic_offset == OnOff::On,
             learning: LearningChoice::Off,
+            // Targets from a topic have no path to fit along.
+            adapt_stiffness: self.path.adapt_stiffness == OnOff::On && !self.target_topic,
+            loop_delay_s: Some(tendril::ipc::controller::loop_delay_s(
+                controller.mcu.is_some(),
+            )),
             rate_hz: controller.rate_hz,
             ..PlannerConfig::new(self.robot, self.path.shape()?)
         };

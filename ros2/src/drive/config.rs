@@ -87,6 +87,10 @@ pub struct DriveStats {
     pub tracking_max_mm: Option<f64>,
     /// Tip poses in the tracking figures.
     pub tracked_frames: u64,
+    /// The stiffness adaptation's estimate at the end, κ̂ (the backbone
+    /// 1/(1 − κ̂) times as stiff as its file; `docs/design.md` §6.5); None
+    /// when it is off (`--adapt-stiffness off`, `--target-topic`).
+    pub stiffness_applied: Option<f64>,
     /// Targets taken from the topics (`--target-topic`).
     pub targets: u64,
     /// Targets refused: a coordinate not finite.

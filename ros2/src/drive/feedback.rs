@@ -3,6 +3,7 @@
 
 use std::time::SystemTime;
 
+use tendril::ipc::planner::Planned;
 use tendril::ipc::sim::analysis::Sample;
 use tendril_shared::messages::{Header as MsgHeader, PlantState, MAX_TENDONS};
 
@@ -91,6 +92,16 @@ impl Drive {
     /// when it was sampled, once on the path.
     fn track(&mut self, tip: [f64; 7], stamp_ns: u64) {
         let t = self.since_start(stamp_ns);
+        // Every frame of the path (not the wait for the robot's, timed on
+        // no path) to the stiffness adaptation, in the model's base frame,
+        // at the path time it was sampled, as the planner process gives it
+        // its frames.
+        let Planned {
+            motion, stiffness, ..
+        } = &mut self.planned;
+        if let Some(s) = stiffness.as_mut().filter(|_| self.stats.periods > 0) {
+            s.frame(motion, t, self.to_base.point([tip[0], tip[1], tip[2]]));
+        }
         if t < self.settle_s || t > self.end_s {
             return;
         }

@@ -19,7 +19,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use ros2_client::{Publisher, Subscription};
 use tendril::ipc::clock::{now_ns, Ticker};
-use tendril::ipc::controller::{Controller, Inbox};
+use tendril::ipc::controller::{correction, Controller, Inbox};
+use tendril::ipc::following::Following;
 use tendril::ipc::planner::{plan, setpoint_for, Planned};
 use tendril::ipc::sim::analysis::Sample;
 use tendril::robot::RigidMap;
@@ -101,6 +102,9 @@ pub struct Drive {
     /// The last command sent (with the chip in the loop, a period may
     /// bring none).
     last_status: u32,
+    /// Whether the loop follows the path, from the commands sent: the
+    /// stiffness adaptation fits nothing while it does not.
+    following: Following,
     overran: bool,
     /// Periods between `/diagnostics` messages (one a second).
     diagnostics_every: u64,
@@ -138,7 +142,16 @@ impl Drive {
         }
         let err = |e: tendril::ipc::IpcError| Ros2Error::Config(e.to_string());
         let (robot, bytes) = tendril::ipc::controller::load(&cfg.controller).map_err(err)?;
-        let planned = plan(&cfg.planner).map_err(err)?;
+        // The stiffness adaptation models this controller's own integral.
+        let mut planner = cfg.planner.clone();
+        let c = &cfg.controller;
+        planner.controller_gains.get_or_insert(correction::applied(
+            &robot,
+            c.ki_per_s,
+            c.correction_filter_tau_s,
+            c.scale_gains_to_mode,
+        ));
+        let planned = plan(&planner).map_err(err)?;
         let mut node = RosNode::new(cfg.domain, &cfg.namespace, "tendril_drive")?;
         let ends = Endpoints {
             commands: node.publisher(&topics::COMMANDS)?,
@@ -194,6 +207,7 @@ impl Drive {
             silent: None,
             gave_up: None,
             last_status: 0,
+            following: Following::default(),
             overran: false,
             diagnostics_every: cfg.controller.rate_hz.round().max(1.0) as u64,
             spin_ns: (cfg.controller.spin_us.max(0.0) * 1e3) as u64,
@@ -360,7 +374,15 @@ impl Drive {
             true => self.target_setpoint(t),
             false => {
                 let desired = self.planned.motion.at(t);
-                setpoint_for(&self.planned.motion, t, &desired, None)
+                // A silent robot, a held controller: nothing to fit.
+                let following = self.silent.is_none() && self.following.follows(t_wake);
+                let Planned {
+                    motion, stiffness, ..
+                } = &mut self.planned;
+                let adapted = stiffness
+                    .as_mut()
+                    .map(|s| s.step(motion.trajectory(), t, &desired, following));
+                setpoint_for(motion, t, &desired, adapted)
             }
         };
         setpoint.header = MsgHeader {
@@ -432,6 +454,7 @@ impl Drive {
     /// `t_ns` (monotonic) against `setpoint`.
     fn send(&mut self, cmd: &TensionCommand, t_ns: u64, setpoint: &Setpoint) {
         self.last_status = cmd.status;
+        self.following.heard(t_ns, cmd.status);
         if cmd.status & command_status::SAFE_HOLD != 0 {
             self.stats.hold_periods += 1;
         }
@@ -516,6 +539,7 @@ impl Drive {
         let c = self.ctl.stats(&self.ticker);
         s.overruns = c.overruns;
         s.stale_periods = c.plant_stale_cycles;
+        s.stiffness_applied = self.planned.stiffness.as_ref().map(|a| a.applied());
         if s.tracked_frames > 0 {
             s.tracking_rms_mm = Some((self.sum_sq / s.tracked_frames as f64).sqrt());
         }
