@@ -45,10 +45,16 @@ impl ChipController {
         tendril::mcu::bridge::check_chip_rate(cfg.rate_hz).map_err(Ros2Error::Config)?;
         let mut cfg = cfg.clone();
         cfg.prefix = format!("{}-ros2", tendril::ipc::sim::unique_prefix());
-        let image = cfg.mcu.take().and_then(|m| m.image);
+        // Built here, before the chip's start is timed: a first run on a
+        // checkout builds the image (a minute), which the 20 s the chip
+        // has to answer must not include.
+        let image = match cfg.mcu.take().and_then(|m| m.image) {
+            Some(image) => image,
+            None => tendril::mcu::locate_image().map_err(|e| Ros2Error::Chip(e.to_string()))?,
+        };
         cfg.mcu = Some(McuOptions {
             socket: None,
-            image,
+            image: Some(image),
             garbage_every_ms: None,
         });
         // The drive stops it (a STOP on the control service) or dies with it.
