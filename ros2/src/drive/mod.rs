@@ -19,7 +19,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use ros2_client::{Publisher, Subscription};
 use tendril::ipc::clock::{now_ns, Ticker};
-use tendril::ipc::controller::{correction, Controller, Inbox};
+use tendril::ipc::controller::{correction, Controller, ControllerConfig, Inbox};
 use tendril::ipc::following::Following;
 use tendril::ipc::planner::{plan, setpoint_for, Planned};
 use tendril::ipc::sim::analysis::Sample;
@@ -152,6 +152,14 @@ impl Drive {
             c.scale_gains_to_mode,
         ));
         let planned = plan(&planner).map_err(err)?;
+        // The chip's image, built (a checkout's first run: a minute) before
+        // the drive joins the graph: a robot found before would get no
+        // command meanwhile.
+        let mut controller = cfg.controller.clone();
+        if let Some(m) = controller.mcu.as_mut().filter(|m| m.image.is_none()) {
+            m.image =
+                Some(tendril::mcu::locate_image().map_err(|e| Ros2Error::Chip(e.to_string()))?);
+        }
         let mut node = RosNode::new(cfg.domain, &cfg.namespace, "tendril_drive")?;
         let ends = Endpoints {
             commands: node.publisher(&topics::COMMANDS)?,
@@ -227,8 +235,8 @@ impl Drive {
             stats: DriveStats::default(),
         };
         drive.stats.first_feedback_s = drive.wait_for_robot(&robot.min_tensions(), cfg, stop)?;
-        if cfg.controller.mcu.is_some() {
-            drive.start_chip(cfg, period_ns, stop)?;
+        if controller.mcu.is_some() {
+            drive.start_chip(&controller, period_ns, stop)?;
         }
         // The path's clock starts now, with the robot (and the chip) heard from.
         let start = now_ns() + period_ns;
@@ -244,11 +252,11 @@ impl Drive {
     /// tensions stay on the robot meanwhile).
     fn start_chip(
         &mut self,
-        cfg: &DriveConfig,
+        controller: &ControllerConfig,
         period_ns: u64,
         stop: &AtomicBool,
     ) -> Result<(), Ros2Error> {
-        let mut chip = ChipController::start(&cfg.controller)?;
+        let mut chip = ChipController::start(controller)?;
         let first = match self.targets.as_mut() {
             Some(f) => f.setpoint(0.0),
             None => setpoint_for(
@@ -617,7 +625,6 @@ pub fn run(cfg: &DriveConfig, stop: &AtomicBool) -> Result<DriveStats, Ros2Error
 #[cfg(test)]
 mod tests {
     use super::*;
-    use tendril::ipc::controller::ControllerConfig;
     use tendril::ipc::planner::PlannerConfig;
     use tendril::runlog::RunLogConfig;
 
