@@ -39,22 +39,18 @@ pub struct ChipController {
 impl ChipController {
     /// Open the services under a prefix of this run's own and start the
     /// bridge on a thread: it starts QEMU with `cfg.mcu`'s image (or the
-    /// image this checkout builds).
+    /// image this checkout builds — the drive builds it before it joins the
+    /// graph, so neither the robot's wait nor [`ChipController::wait_ready`]'s
+    /// start counts the build).
     pub fn start(cfg: &ControllerConfig) -> Result<Self, Ros2Error> {
         let ipc = |e: IpcError| Ros2Error::Chip(e.to_string());
         tendril::mcu::bridge::check_chip_rate(cfg.rate_hz).map_err(Ros2Error::Config)?;
         let mut cfg = cfg.clone();
         cfg.prefix = format!("{}-ros2", tendril::ipc::sim::unique_prefix());
-        // Built here, before the chip's start is timed: a first run on a
-        // checkout builds the image (a minute), which the 20 s the chip
-        // has to answer must not include.
-        let image = match cfg.mcu.take().and_then(|m| m.image) {
-            Some(image) => image,
-            None => tendril::mcu::locate_image().map_err(|e| Ros2Error::Chip(e.to_string()))?,
-        };
+        let image = cfg.mcu.take().and_then(|m| m.image);
         cfg.mcu = Some(McuOptions {
             socket: None,
-            image: Some(image),
+            image,
             garbage_every_ms: None,
         });
         // The drive stops it (a STOP on the control service) or dies with it.

@@ -19,7 +19,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use ros2_client::{Publisher, Subscription};
 use tendril::ipc::clock::{now_ns, Ticker};
-use tendril::ipc::controller::{correction, Controller, ControllerConfig, Inbox};
+use tendril::ipc::controller::{Controller, ControllerConfig, Inbox};
 use tendril::ipc::following::Following;
 use tendril::ipc::planner::{plan, setpoint_for, Planned};
 use tendril::ipc::sim::analysis::Sample;
@@ -144,13 +144,7 @@ impl Drive {
         let (robot, bytes) = tendril::ipc::controller::load(&cfg.controller).map_err(err)?;
         // The stiffness adaptation models this controller's own integral.
         let mut planner = cfg.planner.clone();
-        let c = &cfg.controller;
-        planner.controller_gains.get_or_insert(correction::applied(
-            &robot,
-            c.ki_per_s,
-            c.correction_filter_tau_s,
-            c.scale_gains_to_mode,
-        ));
+        (planner.controller_gains).get_or_insert(cfg.controller.integral_gains(&robot));
         let planned = plan(&planner).map_err(err)?;
         // The chip's image, built (a checkout's first run: a minute) before
         // the drive joins the graph: a robot found before would get no

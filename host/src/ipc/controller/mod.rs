@@ -270,11 +270,20 @@ impl ControllerConfig {
             mcu: None,
         }
     }
+
+    /// This controller's integral correction as the planner's learning and
+    /// stiffness adaptation model it: its gain and error filter after the
+    /// scaling to `robot`'s mode.
+    pub fn integral_gains(&self, robot: &Robot) -> crate::plan::IntegralGains {
+        correction::applied(
+            robot,
+            self.ki_per_s,
+            self.correction_filter_tau_s,
+            self.scale_gains_to_mode,
+        )
+    }
 }
 
-/// The controller's defaults, each written once: [`ControllerConfig::new`]
-/// uses them and the command line's flags show them (a test checks that a
-/// command line without flags gives `new`'s configuration).
 /// How long the loop below takes to put the planner's setpoint on the tip,
 /// s, beyond what the controller's period makes up for: the period leads
 /// each setpoint by its age (`tendril_firmware::period::SetpointIn::age_ns`),
@@ -293,6 +302,9 @@ pub fn loop_delay_s(chip: bool) -> f64 {
 /// The chip's command's way back over the link, s (measured, above).
 const CHIP_COMMAND_RETURN_S: f64 = 0.0014;
 
+/// The controller's defaults, each written once: [`ControllerConfig::new`]
+/// uses them and the command line's flags show them (a test checks that a
+/// command line without flags gives `new`'s configuration).
 pub mod defaults {
     /// Control rate, Hz.
     pub const RATE_HZ: f64 = 1000.0;

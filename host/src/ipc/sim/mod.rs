@@ -171,7 +171,7 @@ pub fn run(cfg: &SimConfig) -> Result<SimReport, SimError> {
         None => crate::plan::ShapingChoice::Off,
     };
     resolved.planner.learning = learning(cfg, &robot, shaping)?;
-    resolved.planner.controller_gains = Some(controller_gains(cfg, &robot));
+    resolved.planner.controller_gains = Some(cfg.controller.integral_gains(&robot));
     resolved.planner.loop_delay_s = Some(crate::ipc::controller::loop_delay_s(cfg.mcu.is_some()));
     let cfg = &resolved;
     budget::check(
@@ -204,7 +204,7 @@ fn learning(
     shaping: Option<crate::plan::StepShaping>,
 ) -> Result<crate::plan::LearningChoice, SimError> {
     use crate::plan::LearningChoice;
-    let gains = controller_gains(cfg, robot);
+    let gains = cfg.controller.integral_gains(robot);
     match cfg
         .planner
         .learning
@@ -220,19 +220,6 @@ fn learning(
             Ok(LearningChoice::Off)
         }
     }
-}
-
-/// The run's controller's integral gains, scaled to the mode as the
-/// controller scales them: what the planner's learning and stiffness
-/// adaptation model.
-fn controller_gains(cfg: &SimConfig, robot: &crate::robot::Robot) -> crate::plan::IntegralGains {
-    let c = &cfg.controller;
-    crate::ipc::controller::correction::applied(
-        robot,
-        c.ki_per_s,
-        c.correction_filter_tau_s,
-        c.scale_gains_to_mode,
-    )
 }
 
 /// Refuse a `--model` file trained for another robot before anything is
