@@ -10,7 +10,6 @@ use std::process::Command;
 
 use serde_json::Value;
 use tendril::plan::default_loop_runs;
-use tendril::plan::Lifter;
 use tendril::plan::PathShape;
 use tendril::robot::Robot;
 use tendril::statics::{repo_statics, SolverSettings, Statics};
@@ -45,16 +44,6 @@ fn f(v: &Value) -> f64 {
 fn statics(file: &str) -> Statics {
     let name = file.trim_start_matches("robots/");
     repo_statics(name)
-}
-
-/// The two-segment robot's mid height for a circle of radius 10 mm, mm.
-fn mid_height_mm() -> f64 {
-    let s = statics(TWO_SEGMENT);
-    Lifter::new(&s)
-        .unwrap()
-        .mid_height([0.0, 0.0], 0.01)
-        .unwrap()
-        * 1e3
 }
 
 /// Periods of the controller's log (after the first setpoint) in which the
@@ -144,13 +133,27 @@ fn two_segment_correction_removes_a_model_error() {
     );
 }
 
-/// 3-D steps (± 8 mm sideways, ± 2 mm in height about the mid height):
-/// each target held to ≤ 0.05 mm steady state (mean true error over the
-/// last 0.5 s of its dwell).
+/// The main job's 3-D steps (± 8 mm sideways and up and down about the mid
+/// height, inside the heights that keep every tendon's headroom,
+/// `plan::headroom`): each target held to ≤ 0.05 mm steady state (mean
+/// true error over the last 0.5 s of its dwell).
 #[test]
 fn two_segment_3d_steps_settle_to_fifty_microns() {
-    let z = mid_height_mm();
-    let targets = format!("8,0,{z};0,8,{};-8,0,{};0,-8,{z}", z + 2.0, z - 2.0);
+    let runs = tendril::plan::default_loop_runs(&statics(TWO_SEGMENT)).unwrap();
+    let steps = runs.iter().find(|r| r.name == "steps").unwrap();
+    let tendril::plan::PathShape::Steps { targets_m, .. } = &steps.shape else {
+        panic!("the main job's steps are not steps: {:?}", steps.shape);
+    };
+    let targets = targets_m
+        .iter()
+        .map(|t| {
+            t.iter()
+                .map(|v| format!("{}", v * 1e3))
+                .collect::<Vec<_>>()
+                .join(",")
+        })
+        .collect::<Vec<_>>()
+        .join(";");
     let (r, _dir) = sim(
         TWO_SEGMENT,
         &[

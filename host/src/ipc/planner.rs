@@ -17,7 +17,7 @@ use super::IpcError;
 use crate::plan::learning::PassOutcome;
 use crate::plan::{
     along_axes, Desired, Learner, LearningChoice, Motion, PathShape, ShapingChoice,
-    StiffnessAdaptation, Trajectory,
+    StiffnessAdaptation, Trajectory, TENSION_HEADROOM,
 };
 use crate::robot::Robot;
 use crate::statics::{SolverSettings, Statics};
@@ -257,6 +257,20 @@ pub fn plan(cfg: &PlannerConfig) -> Result<Planned, IpcError> {
         );
     }
     let traj = Trajectory::new(&cfg.shape, &statics)?.with_shaping(shaping);
+    if let Some(h) = traj
+        .tension_headroom(&robot)
+        .filter(|h| h.fraction < TENSION_HEADROOM)
+    {
+        log::warn!(
+            "planner: the path asks tendon {} for {:.3} N, {:.0} % of its range below its {:.3} N \
+             limit (the built-in paths keep {:.0} %): little room there for the correction",
+            h.tendon,
+            h.tension_n,
+            h.fraction * 1e2,
+            robot.max_tensions()[h.tendon],
+            TENSION_HEADROOM * 1e2
+        );
+    }
     let rest = match shaping {
         Some(s) if cfg.start_from_rest => {
             if s.length_s() > cfg.settle_s {

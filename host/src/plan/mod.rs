@@ -5,6 +5,8 @@
 //!   and whether a robot's family can follow it;
 //! - [`family`]: the robot's family of reachable tip positions ([`Family`]);
 //! - [`path`]: pure path geometry (points on the family over time);
+//! - [`headroom`]: how far a path's tensions stay below their limits, and
+//!   the heights that keep a stated share of the range free;
 //! - [`lift`]: lifting tip coordinates on the family to a reachable pose with
 //!   its tangent on the exact IK ([`Lifter`], [`FamilyTangent`]);
 //! - [`shaping`]: steps that excite no mode (minimum-jerk move and ZVD
@@ -32,6 +34,7 @@
 pub mod bend;
 mod build;
 pub mod family;
+pub mod headroom;
 pub mod learning;
 pub mod lift;
 pub mod motion;
@@ -46,6 +49,7 @@ pub mod trajectory;
 
 pub use bend::bend_tensions;
 pub use family::Family;
+pub use headroom::{headroom, Headroom, TENSION_HEADROOM};
 pub use learning::IntegralGains;
 pub use learning::{Learner, LearningChoice, LearningDesign, LoopModel};
 pub use lift::{FamilyTangent, Lifted, Lifter};

@@ -3,7 +3,7 @@
 
 use serde::Serialize;
 
-use super::{Lifter, PathShape, PlanError};
+use super::{Lifter, PathShape, PlanError, TENSION_HEADROOM};
 use crate::statics::Statics;
 
 /// One closed-loop run the main job does on a robot ([`default_loop_runs`]).
@@ -27,8 +27,9 @@ pub struct LoopRun {
 /// - k = 3 (a volume): a 20 mm circle (radius 10 mm) at the robot's mid
 ///   height ([`Lifter::mid_height`]), 3-D steps of ± 8 mm sideways and
 ///   ± 2 mm in height about it, and a helix of radius 10 mm rising 4 mm
-///   about it in one turn and back; where the reachable band of heights
-///   ([`Lifter::height_band`]) is narrower than 8 mm, the height moves
+///   about it in one turn and back; where the band of heights with
+///   [`TENSION_HEADROOM`] ([`Lifter::headroom_band`]; the reachable band
+///   where no height has it) is narrower than 8 mm, the height moves
 ///   shrink to a quarter of it;
 /// - k = 1 (a curve): a sweep along the axis between where 10 % and 50 %
 ///   of every tendon's maximum tension puts the tip.
@@ -64,7 +65,12 @@ pub fn default_loop_runs(statics: &Statics) -> Result<Vec<LoopRun>, PlanError> {
             },
         ],
         3 => {
-            let (lo, hi) = lifter.height_band([0.0, 0.0], 0.01)?;
+            // The heights with headroom, else the reachable ones (the
+            // planner then says how little room the paths leave).
+            let (lo, hi) = match lifter.headroom_band([0.0, 0.0], 0.01, TENSION_HEADROOM)? {
+                Some(band) => band,
+                None => lifter.height_band([0.0, 0.0], 0.01)?,
+            };
             let z = 0.5 * (lo + hi);
             // ± 2 mm in height, or a quarter of the band where it is
             // narrower (a long robot resolved by least tension reaches only
@@ -195,6 +201,13 @@ mod tests {
                 let traj = Trajectory::new(&run.shape, &s)
                     .unwrap_or_else(|e| panic!("{file} {}: {e}", run.name));
                 assert!(traj.duration() > 0.0 && run.duration_s > 0.0);
+                // The volume's runs are planned with headroom (the band's
+                // ends are bisected to an eighth of a scan cell: a little
+                // slack).
+                if file == "tdcr-2seg.toml" {
+                    let h = traj.tension_headroom(s.robot()).unwrap();
+                    assert!(h.fraction > TENSION_HEADROOM - 0.02, "{}: {h:?}", run.name);
+                }
             }
         }
         let four = default_loop_runs(&statics_of("seed-4t.toml")).unwrap();
