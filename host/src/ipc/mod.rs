@@ -276,6 +276,35 @@ mod tests {
         assert!(!PeerWatch::new(Some(3.0), Some(1.0), 0).lost(2 * s));
     }
 
+    /// The planner knows how close its path comes to the tendons' limits:
+    /// the two-segment robot's circle at the bottom of its reachable band
+    /// (392 mm: a tendon at its 5 N limit) has no headroom, the one at the
+    /// default height (the headroom band's middle) keeps the built-in
+    /// paths' share (`plan::headroom`).
+    #[test]
+    fn the_planner_reports_how_close_its_path_comes_to_the_limits() {
+        let robot =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../robots/tdcr-2seg.toml");
+        let circle = |height_m| crate::plan::PathShape::Circle {
+            center_m: [0.0, 0.0],
+            radius_m: 0.01,
+            freq_hz: 0.2,
+            height_m,
+        };
+        let headroom = |height_m| {
+            let cfg = planner::PlannerConfig::new(robot.clone(), circle(height_m));
+            planner::plan(&cfg).unwrap().headroom.unwrap()
+        };
+        let low = headroom(Some(0.392));
+        assert!(low.fraction < 0.01, "{low:?}");
+        assert!((low.tension_n - 5.0).abs() < 0.05, "{low:?}");
+        let default = headroom(None);
+        assert!(
+            default.fraction >= crate::plan::TENSION_HEADROOM - 0.01,
+            "{default:?}"
+        );
+    }
+
     #[test]
     fn process_configs_round_trip_through_json_with_named_units() {
         let ctl = controller::ControllerConfig::new("r.toml".into(), "m.tnet".into());

@@ -231,6 +231,9 @@ pub struct Planned {
     /// The model's `[base]`: the path is planned in its base frame and
     /// published in the tracker's (`docs/design.md` §2.4).
     pub base: crate::robot::BasePose,
+    /// The least tension headroom along the path (warned about below
+    /// [`TENSION_HEADROOM`]); `None` without feed-forward tensions.
+    pub headroom: Option<crate::plan::Headroom>,
 }
 
 /// Work out `cfg`'s path (the planner process's set-up; `tendril-ros2
@@ -257,10 +260,8 @@ pub fn plan(cfg: &PlannerConfig) -> Result<Planned, IpcError> {
         );
     }
     let traj = Trajectory::new(&cfg.shape, &statics)?.with_shaping(shaping);
-    if let Some(h) = traj
-        .tension_headroom(&robot)
-        .filter(|h| h.fraction < TENSION_HEADROOM)
-    {
+    let headroom = traj.tension_headroom(&robot);
+    if let Some(h) = headroom.filter(|h| h.fraction < TENSION_HEADROOM) {
         log::warn!(
             "planner: the path asks tendon {} for {:.3} N, {:.0} % of its range below its {:.3} N \
              limit (the built-in paths keep {:.0} %): little room there for the correction",
@@ -312,6 +313,7 @@ pub fn plan(cfg: &PlannerConfig) -> Result<Planned, IpcError> {
         learner: learner(cfg, &robot, shaping)?,
         stiffness,
         base: robot.base,
+        headroom,
     })
 }
 
