@@ -263,8 +263,8 @@ pub fn plan(cfg: &PlannerConfig) -> Result<Planned, IpcError> {
     let headroom = traj.tension_headroom(&robot);
     if let Some(h) = headroom.filter(|h| h.fraction < TENSION_HEADROOM) {
         log::warn!(
-            "planner: the path asks tendon {} for {:.3} N, {:.0} % of its range below its {:.3} N \
-             limit (the built-in paths keep {:.0} %): little room there for the correction",
+            "planner: the path has tendon {} commanded at {:.3} N, {:.0} % of its range below its \
+             {:.3} N limit (the built-in paths keep {:.0} %): little room there for the correction",
             h.tendon,
             h.tension_n,
             h.fraction * 1e2,

@@ -14,6 +14,7 @@
 //! [`TENSION_HEADROOM`] of its range below its limit, and the planner says
 //! when a path it was given does not.
 
+use super::lift::HEIGHT_SAMPLES;
 use super::{Lifter, PlanError, Trajectory};
 use crate::dataset::resolve::slacken;
 use crate::robot::Robot;
@@ -29,8 +30,23 @@ pub const TENSION_HEADROOM: f64 = 0.2;
 const BAND_SCAN: usize = 12;
 /// Bisections refining each end of the headroom band past the scan.
 const BAND_BISECTIONS: usize = 3;
-/// Lateral directions at which a circle's headroom is sampled.
-const CIRCLE_SAMPLES: usize = 8;
+
+/// The heights a lateral path of a robot that reaches a volume is planned
+/// in ([`Lifter::planning_band`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlanningBand {
+    /// The heights reachable all round the circle, m ([`Lifter::height_band`]).
+    pub reachable: (f64, f64),
+    /// Those with the headroom asked for, m; `None` where no height has it.
+    pub with_headroom: Option<(f64, f64)>,
+}
+
+impl PlanningBand {
+    /// The heights with headroom, else the reachable ones.
+    pub fn heights(&self) -> (f64, f64) {
+        self.with_headroom.unwrap_or(self.reachable)
+    }
+}
 
 /// The least headroom of a set of tensions.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -48,9 +64,11 @@ pub struct Headroom {
 /// co-contraction set shifted down to its floor first ([`slacken`]: the
 /// firmware's command stage does the same to the net's output, and the
 /// least-bending lift leaves co-contraction wherever its first phase did).
-/// `None` without tendons or with a non-finite tension.
+/// A tendon whose floor is its limit (held at one tension: nothing to
+/// correct with, nothing to leave) does not count. `None` without a
+/// tendon that counts or with a non-finite tension.
 pub fn headroom(robot: &Robot, tau: &[f64]) -> Option<Headroom> {
-    if tau.is_empty() || tau.iter().any(|t| !t.is_finite()) {
+    if tau.iter().any(|t| !t.is_finite()) {
         return None;
     }
     let mut commanded = tau.to_vec();
@@ -59,6 +77,7 @@ pub fn headroom(robot: &Robot, tau: &[f64]) -> Option<Headroom> {
     commanded
         .iter()
         .enumerate()
+        .filter(|&(k, _)| hi[k] > lo[k])
         .map(|(k, &t)| Headroom {
             fraction: (hi[k] - t) / (hi[k] - lo[k]),
             tendon: k,
@@ -79,25 +98,64 @@ impl Trajectory {
 }
 
 impl Lifter {
-    /// The heights (m) at which a circle of `radius` (m) about lateral
-    /// `center` (m) lifts with at least `margin` headroom at every one of
-    /// [`CIRCLE_SAMPLES`] points around it: within the reachable band
-    /// ([`Lifter::height_band`]), the longest run of heights of a
-    /// [`BAND_SCAN`]-point scan that keep it, each end refined by
-    /// bisection. `None` when no scanned height keeps it (the caller falls
-    /// back to the reachable band and says so).
+    /// The robot's mid height for a circle of `radius` (m) about lateral
+    /// `center` (m): the middle of its [`Lifter::planning_band`] (the
+    /// heights with [`TENSION_HEADROOM`] below every
+    /// tendon's limit, else the reachable ones).
+    pub fn mid_height(&self, center: [f64; 2], radius: f64) -> Result<f64, PlanError> {
+        let (lo, hi) = self
+            .planning_band(center, radius, TENSION_HEADROOM)?
+            .heights();
+        Ok(0.5 * (lo + hi))
+    }
+
+    /// The band a circle of `radius` (m) about lateral `center` (m) is
+    /// planned in: the reachable heights, and within them those with
+    /// `margin` headroom ([`Lifter::headroom_band`]); where none has it, a
+    /// warning says the reachable band is used instead.
+    pub fn planning_band(
+        &self,
+        center: [f64; 2],
+        radius: f64,
+        margin: f64,
+    ) -> Result<PlanningBand, PlanError> {
+        let reachable = self.height_band(center, radius)?;
+        let with_headroom = self.headroom_band(center, radius, margin, reachable);
+        if with_headroom.is_none() {
+            log::warn!(
+                "lift: no height keeps {:.0} % of every tendon's range below its limit on a \
+                 {:.1} mm circle: the middle of the reachable heights instead",
+                margin * 1e2,
+                radius * 2e3
+            );
+        }
+        Ok(PlanningBand {
+            reachable,
+            with_headroom,
+        })
+    }
+
+    /// The heights (m) within the reachable band `(lo, hi)` at which a
+    /// circle of `radius` (m) about lateral `center` (m) lifts with at
+    /// least `margin` headroom at every one of [`HEIGHT_SAMPLES`] points
+    /// around it (one point for a circle of radius 0): the longest run of
+    /// heights of a [`BAND_SCAN`]-point scan that keep it, each end refined
+    /// by bisection. Each height is lifted from a cold start and then warm
+    /// around the circle, as a path is. `None` when no scanned height
+    /// keeps it.
     pub fn headroom_band(
         &self,
         center: [f64; 2],
         radius: f64,
         margin: f64,
-    ) -> Result<Option<(f64, f64)>, PlanError> {
-        let (lo, hi) = self.height_band(center, radius)?;
-        let mut lifter = self.fresh();
+        (lo, hi): (f64, f64),
+    ) -> Option<(f64, f64)> {
         let robot = self.ik().robot().clone();
-        let mut keeps = |z: f64| -> bool {
-            (0..CIRCLE_SAMPLES).all(|i| {
-                let a = std::f64::consts::TAU * i as f64 / CIRCLE_SAMPLES as f64;
+        let samples = if radius > 0.0 { HEIGHT_SAMPLES } else { 1 };
+        let keeps = |z: f64| -> bool {
+            let mut lifter = self.fresh();
+            (0..samples).all(|i| {
+                let a = std::f64::consts::TAU * i as f64 / samples as f64;
                 let u = [
                     center[0] + radius * a.cos(),
                     center[1] + radius * a.sin(),
@@ -117,7 +175,8 @@ impl Lifter {
             .map(|i| lo + (i as f64 + 0.5) * step)
             .collect();
         let ok: Vec<bool> = heights.iter().map(|&z| keeps(z)).collect();
-        // The longest run of consecutive heights that keep the margin.
+        // The longest run of consecutive heights that keep the margin (the
+        // pass at BAND_SCAN closes a run that reaches the top).
         let mut best: Option<(usize, usize)> = None;
         let mut start = None;
         for i in 0..=BAND_SCAN {
@@ -132,12 +191,10 @@ impl Lifter {
                 _ => {}
             }
         }
-        let Some((first, last)) = best else {
-            return Ok(None);
-        };
+        let (first, last) = best?;
         // Each end between the last height that keeps the margin and the
         // next that does not (or the band's end).
-        let mut refine = |inside: f64, outside: f64| {
+        let refine = |inside: f64, outside: f64| {
             let (mut inside, mut outside) = (inside, outside);
             for _ in 0..BAND_BISECTIONS {
                 let z = 0.5 * (inside + outside);
@@ -155,9 +212,7 @@ impl Lifter {
         } else {
             heights[last + 1]
         };
-        let bottom = refine(heights[first], below);
-        let top = refine(heights[last], above);
-        Ok(Some((bottom, top)))
+        Some((refine(heights[first], below), refine(heights[last], above)))
     }
 }
 
@@ -197,21 +252,29 @@ mod tests {
         assert!((headroom(&robot, &pulled).unwrap().fraction - plain.fraction).abs() < 1e-12);
         tau[0] = f64::NAN;
         assert!(headroom(&robot, &tau).is_none());
+        // A tendon held at one tension (floor = limit) does not count.
+        let mut held = robot.clone();
+        held.tendons[1].min_tension = held.tendons[1].max_tension;
+        let mut tau = held.min_tensions();
+        tau[4] = 0.5 * hi[4];
+        let h = headroom(&held, &tau).unwrap();
+        assert_eq!(h.tendon, 4, "{h:?}");
     }
 
     /// On the two-segment robot the band is a part of the reachable band,
     /// a circle lifted anywhere in it keeps the margin, and just below it
     /// one does not (the band's lower end is where the margin runs out,
-    /// to the bisection's resolution).
+    /// to the bisection's resolution, an eighth of a scan cell).
     #[test]
     fn a_circle_in_the_headroom_band_keeps_its_margin() {
         let s = statics_of("tdcr-2seg.toml");
         let lifter = Lifter::new(&s).unwrap();
-        let (lo, hi) = lifter.height_band([0.0, 0.0], 0.01).unwrap();
-        let (bottom, top) = lifter
-            .headroom_band([0.0, 0.0], 0.01, TENSION_HEADROOM)
-            .unwrap()
+        let band = lifter
+            .planning_band([0.0, 0.0], 0.01, TENSION_HEADROOM)
             .unwrap();
+        let (lo, hi) = band.reachable;
+        let (bottom, top) = band.with_headroom.unwrap();
+        assert_eq!(band.heights(), (bottom, top));
         assert!(
             lo < bottom && bottom < top && top < hi,
             "{lo} {bottom} {top} {hi}"
@@ -232,8 +295,9 @@ mod tests {
         for z in [bottom, 0.5 * (bottom + top), top] {
             assert!(circle(z) >= TENSION_HEADROOM - 0.01, "{z}: {}", circle(z));
         }
-        // One scan cell under the bottom the margin is gone.
-        let below = bottom - (hi - lo) / BAND_SCAN as f64;
+        // A quarter of a scan cell under the bottom (bisected to an
+        // eighth) the margin is gone.
+        let below = bottom - 0.25 * (hi - lo) / BAND_SCAN as f64;
         assert!(
             circle(below) < TENSION_HEADROOM,
             "{below}: {}",

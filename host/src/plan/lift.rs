@@ -73,8 +73,9 @@ const RANK_RATIO: f64 = 1e-6;
 const DIFFERENCE_STEP: f64 = 1e-4;
 /// Resolution of the height range search (m).
 const HEIGHT_TOLERANCE: f64 = 1e-4;
-/// Lateral directions at which [`Lifter::mid_height`] samples a circle.
-const HEIGHT_SAMPLES: usize = 8;
+/// Lateral directions at which a circle's heights are sampled
+/// ([`Lifter::height_band`], [`Lifter::headroom_band`]).
+pub(super) const HEIGHT_SAMPLES: usize = 8;
 
 impl Lifter {
     /// A lifter for `statics`' robot on its own family ([`Family::of`]).
@@ -377,30 +378,6 @@ impl Lifter {
             *end = inside.0;
         }
         Some((ends[1], ends[0]))
-    }
-
-    /// The robot's mid height for a circle of `radius` (m) about lateral
-    /// `center` (m): the middle of the heights where the circle lifts with
-    /// [`super::headroom::TENSION_HEADROOM`] below every tendon's limit
-    /// ([`Lifter::headroom_band`]), else, where no height keeps it, of
-    /// the heights reachable at every one of [`HEIGHT_SAMPLES`] points
-    /// around the circle (the intersection of their
-    /// [`Lifter::height_range`]s).
-    pub fn mid_height(&self, center: [f64; 2], radius: f64) -> Result<f64, PlanError> {
-        let margin = super::headroom::TENSION_HEADROOM;
-        let (lo, hi) = match self.headroom_band(center, radius, margin)? {
-            Some(band) => band,
-            None => {
-                log::warn!(
-                    "lift: no height keeps {:.0} % of every tendon's range below its limit \
-                     on a {:.1} mm circle: the middle of the reachable heights instead",
-                    margin * 1e2,
-                    radius * 2e3
-                );
-                self.height_band(center, radius)?
-            }
-        };
-        Ok(0.5 * (lo + hi))
     }
 
     /// The heights (m) a circle of `radius` (m) about lateral `center` (m)

@@ -28,7 +28,7 @@ pub struct LoopRun {
 ///   height ([`Lifter::mid_height`]), 3-D steps of ± 8 mm sideways and
 ///   ± 2 mm in height about it, and a helix of radius 10 mm rising 4 mm
 ///   about it in one turn and back; where the band of heights with
-///   [`TENSION_HEADROOM`] ([`Lifter::headroom_band`]; the reachable band
+///   [`TENSION_HEADROOM`] ([`Lifter::planning_band`]; the reachable band
 ///   where no height has it) is narrower than 8 mm, the height moves
 ///   shrink to a quarter of it;
 /// - k = 1 (a curve): a sweep along the axis between where 10 % and 50 %
@@ -67,10 +67,9 @@ pub fn default_loop_runs(statics: &Statics) -> Result<Vec<LoopRun>, PlanError> {
         3 => {
             // The heights with headroom, else the reachable ones (the
             // planner then says how little room the paths leave).
-            let (lo, hi) = match lifter.headroom_band([0.0, 0.0], 0.01, TENSION_HEADROOM)? {
-                Some(band) => band,
-                None => lifter.height_band([0.0, 0.0], 0.01)?,
-            };
+            let (lo, hi) = lifter
+                .planning_band([0.0, 0.0], 0.01, TENSION_HEADROOM)?
+                .heights();
             let z = 0.5 * (lo + hi);
             // ± 2 mm in height, or a quarter of the band where it is
             // narrower (a long robot resolved by least tension reaches only
@@ -201,12 +200,14 @@ mod tests {
                 let traj = Trajectory::new(&run.shape, &s)
                     .unwrap_or_else(|e| panic!("{file} {}: {e}", run.name));
                 assert!(traj.duration() > 0.0 && run.duration_s > 0.0);
-                // The volume's runs are planned with headroom (the band's
-                // ends are bisected to an eighth of a scan cell: a little
-                // slack).
+                // The volume's runs are planned with headroom (the band
+                // is sampled at 8 points of the circle, the path at 500:
+                // a little slack). On the two-segment robot only: the
+                // three-segment robot's runs take a minute to lift in a
+                // release build (the main job's run checks them).
                 if file == "tdcr-2seg.toml" {
                     let h = traj.tension_headroom(s.robot()).unwrap();
-                    assert!(h.fraction > TENSION_HEADROOM - 0.02, "{}: {h:?}", run.name);
+                    assert!(h.fraction > TENSION_HEADROOM - 0.01, "{}: {h:?}", run.name);
                 }
             }
         }

@@ -223,8 +223,8 @@ mod tests {
             .unwrap();
         let points = [
             vec![0.01, 0.0, z],
-            vec![-0.006, 0.007, z + 0.002],
-            vec![0.0, -0.008, z - 0.002],
+            vec![-0.006, 0.007, z + 0.001],
+            vec![0.0, -0.008, z - 0.001],
         ];
         check_quick_net_for("tdcr-2seg.toml", &points, 2e-3);
     }
