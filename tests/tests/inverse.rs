@@ -572,7 +572,21 @@ fn evaluate_reports_net_alone_and_exact_refinement_side_by_side() {
     let refined = r["refined_tip_error_mm"]["max"].as_f64().unwrap();
     let net = r["net_tip_error_mm"]["mean"].as_f64().unwrap();
     assert!(refined <= 1e-3, "refined max {refined} mm");
-    assert!(net > refined, "net alone {net} mm vs refined {refined} mm");
+    // Side by side over the same rows: the refinement's "net alone" is the
+    // evaluation's own tip error of the net. (The built-in net, the main
+    // job's since 2026-12-07, is already within the exact IK's 1e-7 m
+    // tolerance: 58 nm mean held out; so no claim that the refinement
+    // lowers it.)
+    assert_eq!(
+        r["net_tip_error_mm"], v["metrics"]["position_mm"],
+        "net alone {net} mm"
+    );
+    // The shipped net is the accurate one (the copy before erred 22 µm
+    // mean, 0.12 mm at worst, and rang the rod on its first step).
+    assert!(
+        net <= 1e-3,
+        "the built-in net alone errs {net} mm on average"
+    );
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("net + exact IK"), "{stdout}");
 }
@@ -700,12 +714,17 @@ fn a_pose_far_outside_the_training_range_is_refused_or_clamped_when_allowed() {
 }
 
 #[test]
-fn outputs_beyond_the_tendon_limit_are_shifted_into_range_beside_the_raw_value() {
-    // Just past the training range in px: the net asks for ~31 N of a 10 N
-    // tendon and ~22 N of its opposite; the command stage lowers the pair
-    // together (keeping its bend) instead of clipping one.
+fn outputs_beyond_the_tendon_limit_are_brought_into_range_beside_the_raw_value() {
+    // Past the training range in px: the net's pair (tendon 0 and its
+    // opposite 2) bends by raw₀ − raw₂ ≈ 11.3 N, more than the 10 N tendon
+    // can pull. The command stage pulls tendon 0 to its limit, leaves its
+    // opposite slack, and says it clipped; `raw` keeps the net's answer.
+    // (That the stage lowers a co-contracted pair together, keeping its
+    // bend, is `command_stage`'s unit tests': the built-in net, the main
+    // job's since 2026-12-07, answers each pair as a difference and never
+    // co-contracts.)
     let pose = [
-        0.17,
+        0.14,
         -0.08,
         0.34,
         0.9021620048402939,
@@ -717,14 +736,11 @@ fn outputs_beyond_the_tendon_limit_are_shifted_into_range_beside_the_raw_value()
     assert!(ok, "{err}");
     let json = json.unwrap();
     let (t, raw) = (numbers(&json["tensions"]), numbers(&json["raw"]));
-    assert!(raw.iter().any(|&x| x > MAX_TENSION), "{raw:?}");
+    assert!(raw[0] - raw[2] > MAX_TENSION, "{raw:?}");
     assert!(t.iter().all(|x| (0.0..=MAX_TENSION).contains(x)), "{t:?}");
     assert!(same(&t, &staged(&raw)), "{t:?} vs {raw:?}");
-    assert!(
-        ((t[0] - t[2]) - (raw[0] - raw[2])).abs() < 1e-5 && t[0] == MAX_TENSION,
-        "{t:?} vs {raw:?}"
-    );
-    assert!(!err.contains("clipped"), "{err}");
+    assert!(t[0] == MAX_TENSION && t[2] == 0.0, "{t:?} vs {raw:?}");
+    assert!(err.contains("clipped"), "{err}");
     // Plain output prints the staged tensions.
     let arg = pose_arg(&pose);
     let out = tendril(&["ik", "--model", MODEL, "--allow-extrapolation", &arg]);
