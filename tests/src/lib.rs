@@ -111,18 +111,7 @@ pub fn json(path: &Path) -> serde_json::Value {
 /// `tendril evaluate` of `model` on the test split of `data` (both relative
 /// to `dir`), tips through `robot`'s statics: the held-out tip error's mean, mm.
 pub fn held_out_tip_mean_mm(dir: &Path, model: &str, data: &str, robot: &Path) -> f64 {
-    held_out_tip_mean_mm_with(dir, model, data, robot, &[])
-}
-
-/// [`held_out_tip_mean_mm`] with more `evaluate` arguments (`extra`).
-pub fn held_out_tip_mean_mm_with(
-    dir: &Path,
-    model: &str,
-    data: &str,
-    robot: &Path,
-    extra: &[&str],
-) -> f64 {
-    tip_mean_mm_on(dir, model, data, robot, "test", extra)
+    tip_mean_mm_on(dir, model, data, robot, "test", &[])
 }
 
 /// `tendril evaluate --rows ROWS` of `model` on `data` in `dir` (with more
