@@ -17,7 +17,7 @@ use std::path::Path;
 
 use tendril::dynamics::Damping;
 use tendril::robot::repo_robot;
-use tendril_tests::{col, csv, run_sim};
+use tendril_tests::{col, csv, json, run_sim};
 
 /// The default exported net (what the MCU build embeds).
 const DEFAULT_NET: &str = "firmware/vectors/default.tnet";
@@ -170,9 +170,7 @@ fn ten_millimetre_step_settles_within_the_first_modes_decay_time() {
     // (docs/design.md §6.4; the ZVD's damped period and the minimum-jerk
     // move of the design the report names): 0.414 s in four runs, against
     // 0.50–0.68 s with the built-in net of 2026-11-22 (bound 0.62 s).
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("report.json")).unwrap())
-            .unwrap();
+    let report = json(&dir.path().join("report.json"));
     let shaping: tendril::plan::StepShaping =
         serde_json::from_value(report["step_shaping"].clone()).expect("the step was shaped");
     let stepped = report["steady_state"]

@@ -18,7 +18,7 @@ use tendril::inverse::{tip_jacobian, ExactIk, IkSettings, InverseError, Redundan
 use tendril::robot::{repo_robot as robot, Robot};
 use tendril::statics::rod::Rod;
 use tendril::statics::{SolverSettings, Statics};
-use tendril_tests::{tendril, workspace_root};
+use tendril_tests::{assert_ok, json as json_file, tendril, workspace_root};
 
 // --- the exact IK of the library -------------------------------------------
 
@@ -549,13 +549,11 @@ fn evaluate_built_in_net(
     ]
     .concat();
     let out = tendril(&args);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v = serde_json::from_str(&std::fs::read_to_string(&json_out).unwrap()).unwrap();
-    (v, String::from_utf8_lossy(&out.stdout).into_owned())
+    assert_ok(&out, "evaluate the built-in net");
+    (
+        json_file(&json_out),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+    )
 }
 
 /// `evaluate` refines the net's answers with exact IK beside the net alone.
@@ -581,12 +579,7 @@ fn evaluate_reports_net_alone_and_exact_refinement_side_by_side() {
         }
         let out = dir.path().join(data);
         args.extend(["--out", out.to_str().unwrap()]);
-        let gen = tendril(&args);
-        assert!(
-            gen.status.success(),
-            "{}",
-            String::from_utf8_lossy(&gen.stderr)
-        );
+        assert_ok(&tendril(&args), &format!("generate {data}"));
     }
     let close = |a: &serde_json::Value, b: &serde_json::Value| {
         ["mean", "rms", "p95", "max"].iter().all(|k| {
