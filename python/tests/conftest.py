@@ -36,11 +36,13 @@ def run_cli(cli: pathlib.Path, *args: str) -> subprocess.CompletedProcess:
 
 @contextlib.contextmanager
 def one_loop_at_a_time():
-    """Hold the machine-wide lock the Rust tests' closed loops take
-    (tests/src/lib.rs, `loop_lock_path`: the same file, flock'ed): scripts/test
-    runs these tests beside the Rust real-time ones, and two closed loops must
-    not share the CPUs (each measures its own periods)."""
-    path = pathlib.Path(tempfile.gettempdir()) / "tendril-realtime-tests.lock"
+    """Hold the lock the Rust tests' closed loops take on the CPU a loop
+    started from here runs on, the last one this process may use
+    (tests/src/lib.rs, `loop_lock_path`: the same file, flock'ed):
+    scripts/test runs these tests beside the Rust real-time ones, and two
+    closed loops must not share a CPU (each measures its own periods)."""
+    cpu = max(os.sched_getaffinity(0), default=0)
+    path = pathlib.Path(tempfile.gettempdir()) / f"tendril-realtime-tests-cpu{cpu}.lock"
     with open(path, "a") as f:
         fcntl.flock(f, fcntl.LOCK_EX)
         try:

@@ -147,19 +147,32 @@ pub fn tip_mean_mm_on(
         .expect("evaluate reports the tip error's mean")
 }
 
-/// One closed loop at a time: each sim is three real-time processes pinned
-/// to one CPU, and the timing assertions (periods kept, watchdog within
-/// three periods) measure the loop, not how many other loops share the
-/// machine.
+/// One closed loop at a time per CPU: each sim pins its controller and
+/// plant to one CPU, and the timing assertions (periods kept, watchdog
+/// within three periods) measure the loop, not how many other loops share
+/// that CPU.
 static ONE_LOOP_AT_A_TIME: Mutex<()> = Mutex::new(());
 
-/// The machine-wide lock file of [`one_loop_at_a_time`].
+/// The CPU a closed loop started from this process runs on: the last one
+/// this process may use, where `tendril sim` pins its controller and plant
+/// (`host/src/ipc/sim`). scripts/test runs a second stream of real-time
+/// tests under `taskset -c 0` beside the first, whose loops sit on the
+/// last CPU: the two never share a CPU, and each stream's lock is its own.
+pub fn loop_cpu() -> usize {
+    tendril::ipc::clock::allowed_cpus()
+        .last()
+        .copied()
+        .unwrap_or(0)
+}
+
+/// The lock file of [`one_loop_at_a_time`]: one per CPU a loop can run on
+/// (python/tests/conftest.py takes the same file).
 pub fn loop_lock_path() -> PathBuf {
-    std::env::temp_dir().join("tendril-realtime-tests.lock")
+    std::env::temp_dir().join(format!("tendril-realtime-tests-cpu{}.lock", loop_cpu()))
 }
 
 /// Held while a test runs a closed loop: this test binary's mutex and an
-/// exclusive lock on [`loop_lock_path`].
+/// exclusive lock on [`loop_lock_path`], its loop CPU's.
 pub struct LoopGuard {
     _mutex: MutexGuard<'static, ()>,
     _file: Option<std::fs::File>,

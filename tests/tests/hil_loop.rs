@@ -106,7 +106,7 @@ fn assert_loop_kept_its_period(report: &Value, dir: &Path, secs: f64) {
     );
 }
 
-/// Real-time loops are serialised machine-wide: while one test holds the
+/// Real-time loops are serialised per CPU: while one test holds its CPU's
 /// loop lock, no other process can take it (so a loop's skipped periods
 /// measure the loop, not a second loop pinned to the same CPU).
 #[test]
@@ -122,6 +122,44 @@ fn a_held_loop_lock_keeps_other_processes_out() {
     );
     drop(guard);
     assert!(other.try_lock().is_ok(), "the lock outlived its guard");
+}
+
+/// The lock a loop takes is the lock of the CPU it runs on: a thread
+/// allowed only the first CPU (as scripts/test's second stream, under
+/// `taskset`) names that CPU's lock, and a sim it starts pins its controller
+/// there; with the machine's CPUs, the last one's. On a machine of one CPU
+/// the two are the same lock.
+#[test]
+fn the_loop_lock_is_the_lock_of_the_cpu_the_loop_runs_on() {
+    let cpus = tendril::ipc::clock::allowed_cpus();
+    let (first, last) = (
+        cpus[0],
+        *cpus.last().expect("this process may run somewhere"),
+    );
+    let lock_name = |cpu: usize| format!("tendril-realtime-tests-cpu{cpu}.lock");
+    assert!(tendril_tests::loop_lock_path().ends_with(lock_name(last)));
+    let (lock, controller) = std::thread::spawn(move || {
+        // A child process inherits the forking thread's CPUs.
+        assert!(tendril::ipc::clock::pin_to_cpu(first), "pin to CPU {first}");
+        let lock = tendril_tests::loop_lock_path();
+        let (dir, _) = run_sim(&[
+            "--model",
+            DEFAULT_NET,
+            "--settle",
+            "0.3",
+            "--duration",
+            "0.5",
+        ]);
+        (lock, tendril_tests::controller_cpu(dir.path()))
+    })
+    .join()
+    .expect("the pinned thread's sim ran");
+    assert!(lock.ends_with(lock_name(first)), "{}", lock.display());
+    assert_eq!(
+        controller,
+        Some(first),
+        "the sim's controller is on the lock's CPU"
+    );
 }
 
 /// What the correction's own noise may add to a steady state, mm: the
