@@ -16,21 +16,32 @@
 //! reality, all of it in this one direction. The controller's integral removes such an error only as fast
 //! as its mode-capped gain lets it, and on a circle the error turns with
 //! the path; but κ does not turn. The planner estimates κ from the tracker
-//! and asks for the pose offset −κ̂ g, which holds everywhere on the path
-//! and at every step target at once.
+//! and asks for a pose offset that supplies −κ̂ g, which holds everywhere
+//! on the path and at every step target at once.
 //!
 //! The estimate ([`StiffnessEstimator`]). The loop below the planner is
 //! modelled quasi-statically: the controller's correction c integrates its
 //! low-passed error, ċ = k_i f, τ_f ḟ = e − f, and the tip is the command
 //! plus a disturbance d, so e = −(c + d) = −S[d] with
-//! S(s) = s (τ_f s + 1) / (τ_f s² + s + k_i). With the offset −κ̂ g the
-//! disturbance is (κ − κ̂) g, so a frame's error is
+//! S(s) = s (τ_f s + 1) / (τ_f s² + s + k_i). With the offset o the
+//! disturbance is κ g + o, so a frame's error is
 //!
-//!   e = −κ S[g] + S[κ̂ g] = −κ φ + ψ,
+//!   e = −κ S[g] + S[−o] = −κ φ + ψ,
 //!
-//! linear in κ with the regressor φ = S[g] and the known ψ = S[κ̂ g], both
+//! linear in κ with the regressor φ = S[g] and the known ψ = S[−o], both
 //! simulated on the planner's clock, the integral frozen where the
-//! controller freezes it (a shaped move and the settle after it). κ is
+//! controller freezes it (a shaped move and the settle after it).
+//!
+//! The offset. By the same model the controller's integral holds
+//! κ c_φ − c_ψ of the stiffness error (c_φ, c_ψ: the model integral's
+//! states in φ and ψ), so the offset sent is −κ̂ g less the estimate of
+//! that, o = −κ̂ g − (κ̂ c_φ − c_ψ) = −κ̂ φ + c_ψ, and with κ̂ = κ the error
+//! is 0 whatever the integral learned before. With one κ̂ from the start
+//! this is −κ̂ g; when κ̂ changes, the integral keeps what it learned and
+//! the offset supplies the rest. A first version sent −κ̂ g, which counted
+//! the error twice where κ̂ was first applied: the integral still held the
+//! last target's correction and unwound it at the next (`tdcr-2seg` 10 %
+//! off its file: the third step's steady state 0.060 mm, now 0.026). κ is
 //! then a least-squares fit of z = ψ − e on φ over the frames, with
 //! exponential forgetting; it is used once the frames' φ carry enough
 //! excitation that a 0.2 mm tracker leaves it within ±0.01, and bounded to
@@ -190,6 +201,8 @@ pub struct StiffnessEstimator {
     den: f64,
     fitted: f64,
     applied: f64,
+    /// The offset sent after the last tick, m, base frame.
+    offset: [f64; 3],
 }
 
 impl StiffnessEstimator {
@@ -227,6 +240,7 @@ impl StiffnessEstimator {
             den: 0.0,
             fitted: 0.0,
             applied: 0.0,
+            offset: [0.0; 3],
         }
     }
 
@@ -271,9 +285,12 @@ impl StiffnessEstimator {
         }
         let g = g.map(|v| if v.is_finite() { v } else { 0.0 });
         let phi = self.phi_loop.step(&self.gains, g, dt, quiet);
+        // The offset net of what the controller's integral already holds
+        // of the stiffness error (module docs): −κ̂ φ + c_ψ.
+        self.offset = std::array::from_fn(|k| -self.applied * phi[k] + self.psi_loop.c[k]);
         let psi = self
             .psi_loop
-            .step(&self.gains, g.map(|v| self.applied * v), dt, quiet);
+            .step(&self.gains, self.offset.map(|o| -o), dt, quiet);
         self.history.push_back(Tick {
             t,
             phi,
@@ -335,15 +352,11 @@ impl StiffnessEstimator {
         self.applied
     }
 
-    /// The pose offset for the direction `g` (m, base frame): −κ̂ g.
-    pub fn offset(&self, g: [f64; 3]) -> [f64; 3] {
-        g.map(|v| {
-            if v.is_finite() {
-                -self.applied * v
-            } else {
-                0.0
-            }
-        })
+    /// The pose offset to send after the last [`tick`](Self::tick) (m,
+    /// base frame): −κ̂ g less what the controller's integral holds of the
+    /// stiffness error already, −κ̂ φ + c_ψ (module docs).
+    pub fn offset(&self) -> [f64; 3] {
+        self.offset
     }
 }
 
@@ -396,7 +409,7 @@ impl StiffnessAdaptation {
         let steps = traj.stepwise.then(|| traj.step_progress(desired.t_path));
         self.estimator
             .tick(t, g, desired.moving, desired.holding, steps);
-        along_axes(&desired.point, self.estimator.offset(g))
+        along_axes(&desired.point, self.estimator.offset())
     }
 
     /// A tracker frame: the tip at `tip` (m, base frame) measured at `t`
