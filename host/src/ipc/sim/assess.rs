@@ -11,7 +11,7 @@ use super::analysis::{
 };
 use super::faults::Action;
 use super::oscillation;
-use super::realtime::{link_problems, real_time_problems};
+use super::realtime::{link_problems, run_problems, MachineTook};
 use super::report::{
     FaultKind, FaultRecord, ModelUsed, PathPoint, PlantSummary, Series, SimReport, TensionPoint,
     Verdict,
@@ -97,7 +97,7 @@ pub fn build_report(
     events: &[Event],
     prefix: &str,
     model: ModelUsed,
-    steal_ms: Option<u64>,
+    machine: MachineTook,
 ) -> Result<SimReport, SimError> {
     let planners = children.started(Role::Planner);
     let plants = children.started(Role::Plant);
@@ -222,7 +222,7 @@ pub fn build_report(
     }
     match controller.as_ref() {
         None => problems.push("the controller wrote no statistics".into()),
-        Some(c) => problems.extend(real_time_problems(c, cfg.controller.rate_hz, steal_ms)),
+        Some(c) => problems.extend(run_problems(c, cfg.controller.rate_hz, machine, &logs)),
     }
     let dropped: u64 = (plant.generations.iter())
         .filter_map(|g| g.runlog.as_ref())
@@ -323,7 +323,7 @@ pub fn build_report(
         max_rms_waived_because: bound.rms_waived_because(),
         oscillation,
         growth,
-        controller_cpu_steal_ms: steal_ms,
+        controller_cpu_steal_ms: machine.steal_ms,
         steady_state: steady,
         controller,
         ipc_latency_us,

@@ -463,7 +463,17 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
     }
 
     let report = assess::build_report(
-        cfg, dir, t0, &children, &events, &prefix, model_used, steal_ms,
+        cfg,
+        dir,
+        t0,
+        &children,
+        &events,
+        &prefix,
+        model_used,
+        realtime::MachineTook {
+            steal_ms,
+            planner_on_another_cpu: cpus.0.is_some() && cpus.1.is_some(),
+        },
     )?;
     write_json(&dir.file("report.json"), &report)?;
     crate::fsutil::write_atomic(&dir.file("report.md"), report.markdown().as_bytes()).map_err(
