@@ -11,7 +11,7 @@ use super::analysis::{
 };
 use super::faults::Action;
 use super::oscillation;
-use super::realtime::{link_problems, run_problems, MachineTook};
+use super::realtime::{link_problems, run_problems, shared_stall, MachineTook};
 use super::report::{
     FaultKind, FaultRecord, ModelUsed, PathPoint, PlantSummary, Series, SimReport, TensionPoint,
     Verdict,
@@ -324,6 +324,7 @@ pub fn build_report(
         oscillation,
         growth,
         controller_cpu_steal_ms: machine.steal_ms,
+        stall_shared_with_planner_periods: shared_stall(machine, &logs, cfg.controller.rate_hz),
         steady_state: steady,
         controller,
         ipc_latency_us,

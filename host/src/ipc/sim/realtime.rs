@@ -24,12 +24,17 @@ pub(super) fn run_problems(
     machine: MachineTook,
     logs: &Logs,
 ) -> Vec<String> {
-    let period_ns = 1e9 / rate_hz.max(1.0);
-    let shared = match machine.planner_on_another_cpu {
-        true => stall_shared_with_planner(&logs.controller, &logs.setpoints, period_ns),
-        false => 0.0,
-    };
+    let shared = shared_stall(machine, logs, rate_hz).unwrap_or(0.0);
     real_time_problems(c, rate_hz, machine.steal_ms, shared)
+}
+
+/// [`stall_shared_with_planner`] for a run at `rate_hz` on `machine`;
+/// None when the planner did not run on another CPU.
+pub(super) fn shared_stall(machine: MachineTook, logs: &Logs, rate_hz: f64) -> Option<f64> {
+    let period_ns = 1e9 / rate_hz.max(1.0);
+    machine
+        .planner_on_another_cpu
+        .then(|| stall_shared_with_planner(&logs.controller, &logs.setpoints, period_ns))
 }
 
 /// How many periods of the controller's longest stall (the longest gap

@@ -101,6 +101,12 @@ pub struct SimReport {
     /// kernel does not say.
     #[serde(default)]
     pub controller_cpu_steal_ms: Option<u64>,
+    /// Periods of the controller's longest stall the machine took as the
+    /// planner on another CPU shows (it stopped too: a pause of the whole
+    /// machine, `realtime::stall_shared_with_planner`); `null` when the
+    /// planner shared the controller's CPU or was not pinned.
+    #[serde(default)]
+    pub stall_shared_with_planner_periods: Option<f64>,
     /// Every stretch of ≥ 1 s with one target: mean true error over its last 0.5 s.
     pub steady_state: Vec<SteadyState>,
     /// Worst of `steady_state`, mm; `null` when there was no such stretch.
@@ -464,6 +470,12 @@ impl SimReport {
             row(
                 "hypervisor steal on the controller's CPU (ms)",
                 ms.to_string(),
+            );
+        }
+        if let Some(p) = self.stall_shared_with_planner_periods.filter(|p| *p > 0.0) {
+            row(
+                "periods of the longest stall the planner (another CPU) stopped for too",
+                format!("{p:.0}"),
             );
         }
         match &self.controller {
