@@ -147,16 +147,16 @@ pub fn tip_mean_mm_on(
         .expect("evaluate reports the tip error's mean")
 }
 
-/// One closed loop at a time per CPU: each sim pins its controller and
-/// plant to one CPU, and the timing assertions (periods kept, watchdog
-/// within three periods) measure the loop, not how many other loops share
-/// that CPU.
+/// One closed loop at a time in this test binary (across binaries, one
+/// per CPU: [`loop_lock_path`]): each sim pins its controller and plant to
+/// one CPU, and the timing assertions (periods kept, watchdog within three
+/// periods) measure the loop, not how many other loops share that CPU.
 static ONE_LOOP_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 /// The CPU a closed loop started from this process runs on: the last one
 /// this process may use, where `tendril sim` pins its controller and plant
 /// (`host/src/ipc/sim`). scripts/test runs a second stream of real-time
-/// tests under `taskset -c 0` beside the first, whose loops sit on the
+/// tests under `taskset -c <first CPU>` beside the first, whose loops sit on the
 /// last CPU: the two never share a CPU, and each stream's lock is its own.
 pub fn loop_cpu() -> usize {
     tendril::ipc::clock::allowed_cpus()

@@ -11,7 +11,7 @@ use super::analysis::{
 };
 use super::faults::Action;
 use super::oscillation;
-use super::realtime::{link_problems, run_problems, shared_stall, MachineTook};
+use super::realtime::{link_problems, real_time_problems, MachineTook};
 use super::report::{
     FaultKind, FaultRecord, ModelUsed, PathPoint, PlantSummary, Series, SimReport, TensionPoint,
     Verdict,
@@ -220,9 +220,10 @@ pub fn build_report(
         }
         Bound::Waived(_) => {}
     }
+    let machine = machine.with_shared_stall(&logs, cfg.controller.rate_hz);
     match controller.as_ref() {
         None => problems.push("the controller wrote no statistics".into()),
-        Some(c) => problems.extend(run_problems(c, cfg.controller.rate_hz, machine, &logs)),
+        Some(c) => problems.extend(real_time_problems(c, cfg.controller.rate_hz, machine)),
     }
     let dropped: u64 = (plant.generations.iter())
         .filter_map(|g| g.runlog.as_ref())
@@ -324,7 +325,7 @@ pub fn build_report(
         oscillation,
         growth,
         controller_cpu_steal_ms: machine.steal_ms,
-        stall_shared_with_planner_periods: shared_stall(machine, &logs, cfg.controller.rate_hz),
+        stall_shared_with_planner_periods: machine.shared_stall_periods,
         steady_state: steady,
         controller,
         ipc_latency_us,

@@ -473,6 +473,7 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
         realtime::MachineTook {
             steal_ms,
             planner_on_another_cpu: cpus.0.is_some() && cpus.1.is_some(),
+            shared_stall_periods: None,
         },
     )?;
     write_json(&dir.file("report.json"), &report)?;

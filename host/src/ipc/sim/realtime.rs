@@ -14,27 +14,25 @@ pub struct MachineTook {
     /// The planner ran pinned to another CPU than the controller's
     /// ([`stall_shared_with_planner`] applies).
     pub planner_on_another_cpu: bool,
+    /// Periods of the controller's longest stall the planner on another CPU
+    /// stopped for too ([`MachineTook::with_shared_stall`]); None until
+    /// counted, or when the planner shared the controller's CPU.
+    pub shared_stall_periods: Option<f64>,
 }
 
-/// The real-time problems of a run ([`real_time_problems`]) from its
-/// controller's statistics and logs, at `rate_hz`, on `machine`.
-pub(super) fn run_problems(
-    c: &ControllerStats,
-    rate_hz: f64,
-    machine: MachineTook,
-    logs: &Logs,
-) -> Vec<String> {
-    let shared = shared_stall(machine, logs, rate_hz).unwrap_or(0.0);
-    real_time_problems(c, rate_hz, machine.steal_ms, shared)
-}
-
-/// [`stall_shared_with_planner`] for a run at `rate_hz` on `machine`;
-/// None when the planner did not run on another CPU.
-pub(super) fn shared_stall(machine: MachineTook, logs: &Logs, rate_hz: f64) -> Option<f64> {
-    let period_ns = 1e9 / rate_hz.max(1.0);
-    machine
-        .planner_on_another_cpu
-        .then(|| stall_shared_with_planner(&logs.controller, &logs.setpoints, period_ns))
+impl MachineTook {
+    /// This, with [`stall_shared_with_planner`] counted from the run's
+    /// `logs` at the controller's `rate_hz` when the planner ran on another
+    /// CPU.
+    pub(super) fn with_shared_stall(self, logs: &Logs, rate_hz: f64) -> MachineTook {
+        let period_ns = 1e9 / rate_hz.max(1.0);
+        MachineTook {
+            shared_stall_periods: self
+                .planner_on_another_cpu
+                .then(|| stall_shared_with_planner(&logs.controller, &logs.setpoints, period_ns)),
+            ..self
+        }
+    }
 }
 
 /// How many periods of the controller's longest stall (the longest gap
@@ -93,8 +91,8 @@ pub fn stall_shared_with_planner(
 /// without a CPU): at most [`MAX_SKIPPED_FRACTION`] of its periods
 /// skipped (the hardware-in-the-loop tests' bound), at most
 /// [`MAX_OVERRUN_FRACTION`] overrun, no stall longer than
-/// [`MAX_STALL_PERIODS`] (beyond, too, the `shared` periods of it the
-/// planner on another CPU stopped for: [`stall_shared_with_planner`]).
+/// [`MAX_STALL_PERIODS`] (beyond, too, the periods of it the
+/// planner on another CPU stopped for: [`MachineTook::shared_stall_periods`]).
 pub const MAX_SKIPPED_FRACTION: f64 = 0.02;
 /// See [`MAX_SKIPPED_FRACTION`].
 pub const MAX_OVERRUN_FRACTION: f64 = 0.05;
@@ -103,14 +101,14 @@ pub const MAX_OVERRUN_FRACTION: f64 = 0.05;
 pub const MAX_STALL_PERIODS: u64 = 50;
 
 /// The ways the controller missed real time (see [`MAX_SKIPPED_FRACTION`]).
-fn real_time_problems(
+pub(super) fn real_time_problems(
     c: &ControllerStats,
     rate_hz: f64,
-    steal_ms: Option<u64>,
-    shared: f64,
+    machine: MachineTook,
 ) -> Vec<String> {
     let period_ms = 1e3 / rate_hz.max(1.0);
-    let stolen = steal_ms.map_or(0.0, |ms| ms as f64 / period_ms);
+    let stolen = machine.steal_ms.map_or(0.0, |ms| ms as f64 / period_ms);
+    let shared = machine.shared_stall_periods.unwrap_or(0.0);
     let excused = stolen + c.skipped_waiting_for_cpu as f64;
     let took_text = format!(
         "the machine took {stolen:.0} periods (hypervisor) and {} (waiting for a CPU)",
@@ -193,28 +191,36 @@ mod tests {
         }
     }
 
+    fn took(steal_ms: Option<u64>, shared: f64) -> MachineTook {
+        MachineTook {
+            steal_ms,
+            planner_on_another_cpu: true,
+            shared_stall_periods: Some(shared),
+        }
+    }
+
     #[test]
     fn misses_beyond_the_bounds_make_problems_unless_the_machine_took_them() {
         // The careless user's run: 567 overruns, 115 skipped, a 53-period stall.
         let c = stats(7000, 115, 567, 53);
-        let found = real_time_problems(&c, 1000.0, Some(0), 0.0);
+        let found = real_time_problems(&c, 1000.0, took(Some(0), 0.0));
         assert_eq!(found.len(), 2, "{found:?}");
         assert!(found
             .iter()
             .any(|p| p.contains("567 of 7000 periods overran")));
         assert!(found.iter().any(|p| p.contains("53 periods at once")));
         // The same, with 600 ms stolen by the hypervisor: the machine's.
-        assert!(real_time_problems(&c, 1000.0, Some(600), 0.0).is_empty());
+        assert!(real_time_problems(&c, 1000.0, took(Some(600), 0.0)).is_empty());
         // Skipping 3 % of the periods.
-        let skipped = real_time_problems(&stats(7000, 210, 10, 5), 1000.0, None, 0.0);
+        let skipped = real_time_problems(&stats(7000, 210, 10, 5), 1000.0, took(None, 0.0));
         assert_eq!(skipped.len(), 1, "{skipped:?}");
         assert!(skipped[0].contains("skipped 210 of 7000"));
-        assert!(real_time_problems(&stats(7000, 100, 10, 5), 1000.0, None, 0.0).is_empty());
+        assert!(real_time_problems(&stats(7000, 100, 10, 5), 1000.0, took(None, 0.0)).is_empty());
         // The 53-period stall, all of it shared by the planner on another
         // CPU: the machine's; 2 periods shared: still the controller's.
         let c = stats(7000, 60, 10, 53);
-        assert!(real_time_problems(&c, 1000.0, Some(0), 53.0).is_empty());
-        let found = real_time_problems(&c, 1000.0, Some(0), 2.0);
+        assert!(real_time_problems(&c, 1000.0, took(Some(0), 53.0)).is_empty());
+        let found = real_time_problems(&c, 1000.0, took(Some(0), 2.0));
         assert!(
             found.iter().any(|p| p.contains("53 periods at once")),
             "{found:?}"

@@ -211,6 +211,44 @@ fn on_the_circle(kappa: f64, lag: (f64, f64), duration_s: f64) -> Case<'static> 
     }
 }
 
+/// g at four step targets, 2 s each.
+fn step_targets(t: f64) -> [f64; 3] {
+    const TARGETS: [[f64; 3]; 4] = [
+        [0.012, 0.0, 0.001],
+        [0.0, 0.013, 0.001],
+        [-0.011, 0.0, 0.0],
+        [0.0, -0.012, 0.001],
+    ];
+    TARGETS[((t / 2.0) as usize) % TARGETS.len()]
+}
+
+/// The shaped move onto each target after the first (its first 0.4 s).
+fn step_moving(t: f64) -> bool {
+    t % 2.0 < 0.4 && t > 1.0
+}
+
+/// The progress of the shaped move under way, if any.
+fn step_progress(t: f64) -> Option<Option<f64>> {
+    Some(step_moving(t).then_some((t % 2.0) / 0.4))
+}
+
+/// The planner at rest while g jumps between [`step_targets`] on shaped
+/// moves, a backbone 10 % stiffer (κ 0.1), for `duration_s`, the last
+/// `last_s` measured.
+fn on_steps(duration_s: f64, last_s: f64) -> Case<'static> {
+    Case {
+        path: &still,
+        g: &step_targets,
+        moving: &step_moving,
+        steps: &step_progress,
+        kappa: 0.1,
+        lag: (0.0, 0.0),
+        hold: None,
+        duration_s,
+        last_s,
+    }
+}
+
 /// A loop that puts the path on the tip 10 ms late (a controller at
 /// 100 Hz behind a link): on a circle that lag is along the path, where
 /// the integral leaves most of a stiffness error too, so an estimator
@@ -271,26 +309,7 @@ fn a_stiffer_or_softer_backbone_is_found_on_a_circle() {
 /// start closer.
 #[test]
 fn steps_find_the_stiffness_from_their_transients() {
-    let targets = [
-        [0.012, 0.0, 0.001],
-        [0.0, 0.013, 0.001],
-        [-0.011, 0.0, 0.0],
-        [0.0, -0.012, 0.001],
-    ];
-    let g = |t: f64| targets[((t / 2.0) as usize) % targets.len()];
-    let moving = |t: f64| t % 2.0 < 0.4 && t > 1.0;
-    let progress = |t: f64| Some(moving(t).then_some((t % 2.0) / 0.4));
-    let (found, with, without) = run_loop(Case {
-        path: &still,
-        g: &g,
-        moving: &moving,
-        steps: &progress,
-        kappa: 0.1,
-        lag: (0.0, 0.0),
-        hold: None,
-        duration_s: 16.0,
-        last_s: 2.0,
-    });
+    let (found, with, without) = run_loop(on_steps(16.0, 2.0));
     eprintln!("steps: found {found:.4}; last step {with:.2e} / {without:.2e} m");
     assert!((found - 0.1).abs() < 0.02, "found {found}");
 }
@@ -302,31 +321,12 @@ fn steps_find_the_stiffness_from_their_transients() {
 /// the integral holds starts the new target as close as κ̂ allows.
 #[test]
 fn the_first_applied_estimate_does_not_count_what_the_integral_holds() {
-    let targets = [
-        [0.012, 0.0, 0.001],
-        [0.0, 0.013, 0.001],
-        [-0.011, 0.0, 0.0],
-        [0.0, -0.012, 0.001],
-    ];
-    let g = |t: f64| targets[((t / 2.0) as usize) % targets.len()];
-    let moving = |t: f64| t % 2.0 < 0.4 && t > 1.0;
-    let progress = |t: f64| Some(moving(t).then_some((t % 2.0) / 0.4));
     // The second target, from the end of its move's quiet time (2.7 s) to
     // the next move: the first estimate (fitted from the first target's
     // transient) is taken up on the move to it. With an offset of −κ̂ g
     // the error there was 0.68 of the error without any adaptation
     // (3.9e-4 against 5.8e-4 m); net of the integral, 0.12.
-    let (found, with, without) = run_loop(Case {
-        path: &still,
-        g: &g,
-        moving: &moving,
-        steps: &progress,
-        kappa: 0.1,
-        lag: (0.0, 0.0),
-        hold: None,
-        duration_s: 4.0,
-        last_s: 1.3,
-    });
+    let (found, with, without) = run_loop(on_steps(4.0, 1.3));
     eprintln!("second target: κ̂ {found:.4}; RMS {with:.2e} / {without:.2e} m");
     assert!((found - 0.1).abs() < 0.01, "found {found}");
     assert!(
