@@ -20,7 +20,8 @@
 //!    own age* (so the integral loop integrates `p_desired(t) −
 //!    p_measured(t)` for the time the frame was taken), with the time
 //!    since the previous frame as its integration interval, at most twice
-//!    the previous frame's ([`credited_interval`]: a gap is no jump);
+//!    the previous frame's (25 ms after the first:
+//!    [`credited_interval`], a gap is no jump);
 //! 5. plant-stale: no feedback for [`PeriodConfig::plant_stale_ns`];
 //! 6. the control step (watchdog → safe hold, integral correction,
 //!    inference, command stage, slew); in the period that installed a
@@ -82,9 +83,17 @@ pub struct PeriodConfig {
     pub commands_in_flight: u8,
 }
 
+/// The longest interval the second frame is credited with, ns (the first
+/// is credited nothing: there is no interval before it): a 40 Hz
+/// tracker's, the slowest the loop's gains are designed for
+/// (docs/design.md §6.3), so such a tracker counts its full 25 ms from its
+/// second frame on.
+pub const FIRST_INTERVAL_BOUND_NS: u64 = 25_000_000;
+
 /// The time a new frame is integrated over (the feedback's `interval_s`):
 /// the time since the frame before, but at most twice that frame's own
-/// credit (`previous_credit_ns`; 0 for the second frame: no bound).
+/// credit (`previous_credit_ns`), and at most [`FIRST_INTERVAL_BOUND_NS`]
+/// after a frame credited nothing (the first).
 ///
 /// Why a bound: after a gap in the frames — a tracker that lost the
 /// marker, or the frames held back while the robot was on a shaped move —
@@ -96,12 +105,21 @@ pub struct PeriodConfig {
 /// stays independent of the tracker's (a 40 Hz tracker's frame still
 /// counts 25 ms), a dropped frame still counts twice, and a tracker that
 /// slows down is followed within a few frames.
+///
+/// Why the second frame is bounded too: a planner that starts with a
+/// shaped approach from rest holds the frames back from the first on, so
+/// the second frame the period sees comes after the approach and its
+/// quiet, ≈ 0.7 s later. Unbounded, it was credited the tracker timeout:
+/// on the default robot 10 % off its file the correction jumped 1.3–1.8 mm
+/// at once and the rod rang for 3 s at the first target, in the runs where
+/// no second frame slipped through before the approach began.
 pub fn credited_interval(since_previous_ns: u64, previous_credit_ns: u64) -> u64 {
-    if previous_credit_ns == 0 {
-        since_previous_ns
+    let bound = if previous_credit_ns == 0 {
+        FIRST_INTERVAL_BOUND_NS
     } else {
-        since_previous_ns.min(previous_credit_ns.saturating_mul(2))
-    }
+        previous_credit_ns.saturating_mul(2)
+    };
+    since_previous_ns.min(bound)
 }
 
 /// Largest frame age the lead compensates, ns: an older frame is led as if

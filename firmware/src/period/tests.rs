@@ -668,6 +668,49 @@ fn the_first_frame_after_a_gap_counts_twice_the_frame_interval_not_the_gap() {
     }
 }
 
+/// A planner's shaped approach from rest holds the frames back from the
+/// first on, so the second frame the period sees comes 700 ms after it.
+/// It counts a 40 Hz tracker's 25 ms at most, not the wait (the tracker
+/// timeout's worth once: a correction that jumped 1.3–1.8 mm at once and
+/// rang a rod with mass for 3 s).
+#[test]
+fn the_second_frame_after_a_held_first_counts_a_slow_trackers_interval_not_the_wait() {
+    let mut st = store(1);
+    let mut p = P::new(integral_config(), 0);
+    let mut steps = Vec::new();
+    let mut before = p.period.correction().0[0];
+    // Frame 1 at 1000 ms, held to 1700 ms; then a frame every period.
+    for k in 1000..=1705u64 {
+        let mut f = fb(k, k.saturating_sub(1), [0.0; MAX_TENDONS]);
+        f.tip = [pose()[0] - 1e-3, pose()[1], pose()[2]];
+        let (seq, taken) = if k < 1700 {
+            (1, 1000)
+        } else {
+            ((k - 1698) as u32, k)
+        };
+        f.tip_seq = seq;
+        f.tip_age_ns = (k - taken) * T;
+        let input = Inputs {
+            feedback: Some(f),
+            feedbacks: 1,
+            ..with_sp(k, sp(k))
+        };
+        p.run(&mut *st, &input);
+        let now = p.period.correction().0[0];
+        if now != before {
+            steps.push(now - before);
+        }
+        before = now;
+    }
+    // 10 /s × 1 mm × 25 ms = 0.25 mm (not 7 mm, nor the 0.01 m bound),
+    // then 10 /s × 1 mm × 1 ms a frame.
+    assert_eq!(steps.len(), 6, "{steps:?}");
+    assert!((steps[0] - 0.25e-3).abs() < 1e-7, "{steps:?}");
+    for s in &steps[1..] {
+        assert!((s - 0.01e-3).abs() < 1e-8, "{steps:?}");
+    }
+}
+
 #[test]
 fn credited_intervals_follow_a_slower_tracker_within_a_few_frames() {
     use crate::period::credited_interval;
