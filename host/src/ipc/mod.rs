@@ -336,6 +336,8 @@ mod tests {
             controller_gains: Some(crate::plan::IntegralGains {
                 ki_per_s: 4.0,
                 filter_tau_s: 0.08,
+                map_gain_per_s: 2.0,
+                map_scale_m: 0.01,
             }),
             loop_delay_s: Some(0.0),
             rate_hz: 1000.0,

@@ -639,6 +639,7 @@ fn controller_gains(robot: &Robot) -> crate::plan::IntegralGains {
         robot,
         super::controller::correction::KI_PER_S,
         super::controller::correction::FILTER_TAU_S,
+        super::controller::correction::MAP_GAIN_PER_S,
         true,
     )
 }

@@ -293,8 +293,9 @@ pub enum LearningChoice {
     Designed(LearningDesign),
 }
 
-/// The controller's integral correction as the learning models it (its
-/// gain and error filter after any scaling to the robot's mode).
+/// The controller's integral correction as the planner models it (its
+/// gains and error filter after any scaling to the robot's mode): the
+/// learning uses k_i and τ_f, the stiffness adaptation the error map too.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct IntegralGains {
@@ -302,6 +303,18 @@ pub struct IntegralGains {
     pub ki_per_s: f64,
     /// τ_f, s.
     pub filter_tau_s: f64,
+    /// The error map's adaptation gain, 1/s (0: no map; the firmware's
+    /// `IntegralConfig::map_gain`).
+    #[serde(default)]
+    pub map_gain_per_s: f64,
+    /// The map's normalisation length, m (`IntegralConfig::map_scale`).
+    #[serde(default = "default_map_scale_m")]
+    pub map_scale_m: f64,
+}
+
+/// The map's normalisation length of a configuration that names none, m.
+fn default_map_scale_m() -> f64 {
+    0.01
 }
 
 /// The motors' time constant the model assumes, s (the plant's default).
@@ -833,6 +846,8 @@ mod tests {
         let gains = IntegralGains {
             ki_per_s: 4.0,
             filter_tau_s: 0.08,
+            map_gain_per_s: 0.0,
+            map_scale_m: 0.01,
         };
         let right = LearningChoice::Auto
             .resolve(Some(shaping), Some(2.5), gains)

@@ -20,17 +20,29 @@
 //! on the path and at every step target at once.
 //!
 //! The estimate ([`StiffnessEstimator`]). The loop below the planner is
-//! modelled quasi-statically: the controller's correction c integrates its
-//! low-passed error, ċ = k_i f, τ_f ḟ = e − f, and the tip is the command
-//! plus a disturbance d, so e = −(c + d) = −S[d] with
-//! S(s) = s (τ_f s + 1) / (τ_f s² + s + k_i). With the offset o the
+//! modelled quasi-statically: the controller's correction c + M x
+//! integrates its low-passed error, ċ = k_i f, τ_f ḟ = e − f, its error
+//! map learning as the firmware's does, Ṁ = k_M f x̃ᵀ / (ℓ² + |x̃|²), and
+//! the tip is the command plus a disturbance d, so e = −(c + M x + d) =
+//! −S[d], linear in d for the setpoints sent (without the map,
+//! S(s) = s (τ_f s + 1) / (τ_f s² + s + k_i)). With the offset o the
 //! disturbance is κ g + o, so a frame's error is
 //!
 //!   e = −κ S[g] + S[−o] = −κ φ + ψ,
 //!
 //! linear in κ with the regressor φ = S[g] and the known ψ = S[−o], both
 //! simulated on the planner's clock, the integral frozen where the
-//! controller freezes it (a shaped move and the settle after it).
+//! controller freezes it (a shaped move and the settle after it, its hold).
+//!
+//! The settle hold. Its frames are fitted, the first target then has an
+//! estimate, unless the robot's weight bends it: at one pose a stiffer
+//! backbone and a lighter one move the tip alike (the default robot's
+//! first step target, where g and the density's h = ∂tip/∂(ln ρ) both lie
+//! along x), and the integral starts from nothing there, so the hold's
+//! error mixes both; at later targets the integral has taken the mixed
+//! constant part and the transients tell κ alone. On the default robot
+//! with E, G and ρ 10 % off, the hold gave κ̂ 0.063 for 0.091, and the
+//! second target began worse than with no estimate at all.
 //!
 //! The offset. By the same model the controller's integral holds
 //! κ c_φ − c_ψ of the stiffness error (c_φ, c_ψ: the model integral's
@@ -62,6 +74,7 @@ use std::collections::VecDeque;
 use super::{along_axes, Desired, IntegralGains, Motion, PlanError, Trajectory};
 use crate::robot::Robot;
 use crate::statics::{SolverSettings, Statics};
+use tendril_firmware::control::MAP_MEAN_TAU_S;
 
 /// The relative change of E and G of the central difference for g.
 const DIFFERENCE: f64 = 0.01;
@@ -86,9 +99,22 @@ const APPLY_LAG_PERIODS: f64 = 3.0;
 /// See [`APPLY_LAG_PERIODS`], s.
 const MIN_APPLY_LAG_S: f64 = 0.5;
 
-/// Frames are not fitted for this long after the loop below stopped
-/// following the setpoints, s: it brings the tip back to the path first.
+/// Frames are not fitted for this many times as long as the loop below did
+/// not follow the setpoints, after it follows again (and for at most
+/// [`AFTER_HOLD_S`]): it brings the tip back to the path first. A planner
+/// a few periods late trips the controller's watchdog for as long (3–10
+/// times a run on the project's shared VM); its tip moved by a few
+/// periods' worth of path, and a whole second without fitting after each
+/// left a step target unfitted.
+const AFTER_HOLD_FACTOR: f64 = 10.0;
+
+/// See [`AFTER_HOLD_FACTOR`], s: after a long hold (a cut link), a second.
 const AFTER_HOLD_S: f64 = 1.0;
+
+/// The settle hold's frames are fitted where the tip's sensitivity to the
+/// backbone's density at the first pose is at most this share of its
+/// sensitivity to stiffness (module docs).
+const SEPARABLE_WEIGHT_SHARE: f64 = 0.1;
 
 /// How long the model's regressors are kept for frames that arrive late, s
 /// (the built-in trackers deliver within 50 ms).
@@ -100,41 +126,55 @@ const HISTORY_S: f64 = 0.5;
 #[derive(Clone, Debug)]
 pub struct StiffnessDirections {
     rows: Vec<Vec<f64>>,
+    /// Whether one pose tells the stiffness from the weight there (module
+    /// docs): the settle hold's frames are fitted only then.
+    hold_tells_stiffness: bool,
 }
 
 impl StiffnessDirections {
     /// The directions along `traj` for `robot`: a central difference of
     /// two statics solves per row, E and G scaled by 1 ± 1 %, warm-started
     /// along the rows. A row without feed-forward tensions gets 0 (no
-    /// adaptation there).
+    /// adaptation there). Where gravity acts, two more solves at the first
+    /// row, the density scaled by 1 ± 1 %, tell whether the settle hold
+    /// can be fitted.
     pub fn new(traj: &Trajectory, robot: &Robot) -> Result<StiffnessDirections, PlanError> {
-        let scaled = |factor: f64| {
+        let stiffer = |factor: f64| {
             let mut r = robot.clone();
             r.youngs_modulus *= factor;
             r.shear_modulus *= factor;
-            Statics::new(&r, SolverSettings::default())
+            r
         };
-        let (up, down) = (scaled(1.0 + DIFFERENCE), scaled(1.0 - DIFFERENCE));
-        let (mut warm_up, mut warm_down) = (None, None);
-        let mut rows = Vec::with_capacity(traj.feedforward_rows().len());
-        for tensions in traj.feedforward_rows() {
-            if tensions.iter().any(|v| !v.is_finite()) {
-                rows.push(vec![0.0; 3]);
-                continue;
+        let rows = sensitivities(
+            traj.feedforward_rows(),
+            (&stiffer(1.0 + DIFFERENCE), &stiffer(1.0 - DIFFERENCE)),
+            "stiffness",
+        )?;
+        let first = traj
+            .feedforward_rows()
+            .iter()
+            .position(|t| t.iter().all(|v| v.is_finite()));
+        let hold_tells_stiffness = match first {
+            Some(i) if robot.gravity.norm() > 0.0 => {
+                let heavier = |factor: f64| {
+                    let mut r = robot.clone();
+                    r.density *= factor;
+                    r
+                };
+                let h = sensitivities(
+                    &traj.feedforward_rows()[i..=i],
+                    (&heavier(1.0 + DIFFERENCE), &heavier(1.0 - DIFFERENCE)),
+                    "density",
+                )?;
+                let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+                norm(&h[0]) <= SEPARABLE_WEIGHT_SHARE * norm(&rows[i])
             }
-            let stiffer = up.solve(tensions, warm_up.as_ref());
-            let softer = down.solve(tensions, warm_down.as_ref());
-            let (stiffer, softer) = stiffer.and_then(|a| Ok((a, softer?))).map_err(|e| {
-                PlanError::Statics(format!(
-                    "the tip's sensitivity to stiffness at {tensions:?} N: {e}"
-                ))
-            })?;
-            let g = (stiffer.position - softer.position) / (2.0 * DIFFERENCE);
-            rows.push(g.as_slice().to_vec());
-            warm_up = Some(stiffer.warm);
-            warm_down = Some(softer.warm);
-        }
-        Ok(StiffnessDirections { rows })
+            _ => true,
+        };
+        Ok(StiffnessDirections {
+            rows,
+            hold_tells_stiffness,
+        })
     }
 
     /// g at time `t` (s on the trajectory), blended as the poses are.
@@ -142,31 +182,111 @@ impl StiffnessDirections {
         traj.blend(&self.rows, t, scratch);
         [scratch[0], scratch[1], scratch[2]]
     }
+
+    /// Whether the settle hold's frames tell the stiffness (module docs):
+    /// no gravity, or its share h = ∂tip/∂(ln ρ) at the first pose at most
+    /// [`SEPARABLE_WEIGHT_SHARE`] of g there.
+    pub fn hold_tells_stiffness(&self) -> bool {
+        self.hold_tells_stiffness
+    }
+}
+
+/// ∂tip/∂(ln p) at each of `rows` (tensions, N) by a central difference
+/// between the robots `(up, down)`, p scaled by 1 ± [`DIFFERENCE`],
+/// warm-started along the rows; a row with a non-finite tension gets 0.
+fn sensitivities(
+    rows: &[Vec<f64>],
+    (up, down): (&Robot, &Robot),
+    what: &str,
+) -> Result<Vec<Vec<f64>>, PlanError> {
+    let (up, down) = (
+        Statics::new(up, SolverSettings::default()),
+        Statics::new(down, SolverSettings::default()),
+    );
+    let (mut warm_up, mut warm_down) = (None, None);
+    let mut out = Vec::with_capacity(rows.len());
+    for tensions in rows {
+        if tensions.iter().any(|v| !v.is_finite()) {
+            out.push(vec![0.0; 3]);
+            continue;
+        }
+        let more = up.solve(tensions, warm_up.as_ref());
+        let less = down.solve(tensions, warm_down.as_ref());
+        let (more, less) = more.and_then(|a| Ok((a, less?))).map_err(|e| {
+            PlanError::Statics(format!(
+                "the tip's sensitivity to {what} at {tensions:?} N: {e}"
+            ))
+        })?;
+        out.push(
+            ((more.position - less.position) / (2.0 * DIFFERENCE))
+                .as_slice()
+                .to_vec(),
+        );
+        warm_up = Some(more.warm);
+        warm_down = Some(less.warm);
+    }
+    Ok(out)
 }
 
 /// The controller's correction as the planner models it for one input d
-/// (module docs): e = −(c + d), τ_f ḟ = e − f, ċ = k_i f, per axis.
+/// (module docs): e = −(c + M x + d), τ_f ḟ = e − f, ċ = k_i f, and the
+/// error map Ṁ = k_M f x̃ᵀ / (ℓ² + |x̃|²) (x the setpoint from where
+/// tracking began, x̃ from its running mean: the firmware's
+/// `IntegralConfig`), in the base frame.
 #[derive(Clone, Copy, Debug, Default)]
 struct ModelLoop {
     c: [f64; 3],
     f: [f64; 3],
+    map: [[f64; 3]; 3],
+}
+
+/// Where the controller's error map is evaluated and learns: the setpoint
+/// from the map's origin (x) and from its running mean (x̃), m.
+#[derive(Clone, Copy, Debug)]
+struct MapPlace {
+    x: [f64; 3],
+    x_tilde: [f64; 3],
 }
 
 impl ModelLoop {
-    /// Advance by `dt` with input `d`, the integral frozen when `quiet`;
-    /// returns S[d] = −e = c + d after the step.
-    fn step(&mut self, gains: &IntegralGains, d: [f64; 3], dt: f64, quiet: bool) -> [f64; 3] {
-        for ((c, f), d) in self.c.iter_mut().zip(&mut self.f).zip(d) {
-            let e = -(*c + d);
-            if !quiet {
+    /// The correction at `x`: c + M x.
+    fn correction(&self, x: &[f64; 3]) -> [f64; 3] {
+        std::array::from_fn(|j| self.c[j] + (0..3).map(|i| self.map[j][i] * x[i]).sum::<f64>())
+    }
+
+    /// Advance by `dt` with input `d` at `place`, the integral (and the
+    /// map) frozen when `quiet`; returns S[d] = −e = c + M x + d after the
+    /// step.
+    fn step(
+        &mut self,
+        gains: &IntegralGains,
+        d: [f64; 3],
+        place: &MapPlace,
+        dt: f64,
+        quiet: bool,
+    ) -> [f64; 3] {
+        if !quiet {
+            let held = self.correction(&place.x);
+            for (k, (c, f)) in self.c.iter_mut().zip(&mut self.f).enumerate() {
+                let e = -(held[k] + d[k]);
                 // Semi-implicit Euler: stable for dt ≪ τ_f, 1/k_i (1 ms
                 // against 80 ms and 250 ms).
                 // A controller without the filter (τ_f = 0) integrates e.
                 *f += (dt / gains.filter_tau_s).min(1.0) * (e - *f);
                 *c += dt * gains.ki_per_s * *f;
             }
+            if gains.map_gain_per_s > 0.0 {
+                let x2: f64 = place.x_tilde.iter().map(|v| v * v).sum();
+                let rate = gains.map_gain_per_s * dt / (gains.map_scale_m.powi(2) + x2);
+                for (row, f) in self.map.iter_mut().zip(self.f) {
+                    for (m, xi) in row.iter_mut().zip(place.x_tilde) {
+                        *m += rate * f * xi;
+                    }
+                }
+            }
         }
-        std::array::from_fn(|k| self.c[k] + d[k])
+        let held = self.correction(&place.x);
+        std::array::from_fn(|k| held[k] + d[k])
     }
 }
 
@@ -190,9 +310,17 @@ pub struct StiffnessEstimator {
     apply_lag_s: f64,
     phi_loop: ModelLoop,
     psi_loop: ModelLoop,
+    /// The controller's map origin (its first setpoint) and the running
+    /// mean the map learns about, m, base frame.
+    map_origin: Option<[f64; 3]>,
+    map_mean: [f64; 3],
     history: VecDeque<Tick>,
     last_tick: Option<f64>,
     quiet_until: f64,
+    /// No frame is fitted before this (after a hold), s.
+    fit_after: f64,
+    /// The loop below not following: its first and latest tick, s.
+    held: Option<(f64, f64)>,
     last_frame: Option<f64>,
     /// The applied estimate before and after the shaped move under way.
     taking_up: Option<(f64, f64)>,
@@ -201,6 +329,8 @@ pub struct StiffnessEstimator {
     den: f64,
     fitted: f64,
     applied: f64,
+    /// The settle hold's frames are fitted.
+    fit_hold: bool,
     /// The offset sent after the last tick, m, base frame.
     offset: [f64; 3],
 }
@@ -231,36 +361,48 @@ impl StiffnessEstimator {
             apply_lag_s,
             phi_loop: ModelLoop::default(),
             psi_loop: ModelLoop::default(),
+            map_origin: None,
+            map_mean: [0.0; 3],
             history: VecDeque::new(),
             last_tick: None,
             quiet_until: f64::NEG_INFINITY,
+            fit_after: f64::NEG_INFINITY,
+            held: None,
             last_frame: None,
             taking_up: None,
             num: 0.0,
             den: 0.0,
             fitted: 0.0,
             applied: 0.0,
+            fit_hold: true,
             offset: [0.0; 3],
         }
     }
 
-    /// The planner's tick at `t` (s on its clock) with the direction `g`
-    /// there (m), whether a shaped move is under way, and whether the
-    /// planner holds its first pose; `steps`: the trajectory is stepwise,
-    /// with the progress (0–1) of the shaped step under way if any. The
-    /// settle hold's frames are not fitted (the model loop still runs
-    /// through it, as the controller's integral does): after the approach
-    /// from rest the controller's error map (which the model leaves out)
-    /// takes the error 2–4× faster than the model's integral and
-    /// overshoots, so those frames contradict each other — fitted, they
-    /// gave the default robot 10 % softer a first estimate of the wrong
-    /// sign on steps (+0.04), though the right one on the circle.
+    /// Whether the settle hold's frames are fitted (module docs; yes
+    /// unless told otherwise): the model loop runs through the hold as the
+    /// controller's integral and error map do, but where the robot's weight
+    /// bends it, one pose cannot tell a stiffer backbone from a lighter one
+    /// ([`StiffnessDirections::hold_tells_stiffness`]).
+    pub fn fits_the_settle_hold(mut self, fit: bool) -> StiffnessEstimator {
+        self.fit_hold = fit;
+        self
+    }
+
+    /// The planner's tick at `t` (s on its clock) asking for the position
+    /// `setpoint` (m, base frame) with the direction `g` there (m),
+    /// whether a shaped move is under way, and whether the planner holds
+    /// its first pose (`holding_first`: the settle hold, fitted only where
+    /// [`fits_the_settle_hold`](Self::fits_the_settle_hold)); `steps`: the
+    /// trajectory is stepwise, with the progress (0–1) of the shaped step
+    /// under way if any.
     pub fn tick(
         &mut self,
         t: f64,
+        setpoint: [f64; 3],
         g: [f64; 3],
         moving: bool,
-        holding: bool,
+        holding_first: bool,
         steps: Option<Option<f64>>,
     ) {
         let dt = self.last_tick.map_or(0.0, |t0| (t - t0).clamp(0.0, 0.05));
@@ -268,7 +410,16 @@ impl StiffnessEstimator {
         if moving {
             self.quiet_until = t + self.quiet_after_move_s;
         }
-        let quiet = moving || t < self.quiet_until;
+        // The controller integrates nothing while it holds; once it
+        // follows again it does, and frames are fitted a while later.
+        let stopped = self.held.is_some_and(|(_, latest)| latest >= t);
+        if !stopped {
+            if let Some((first, _)) = self.held.take() {
+                let recovery = (AFTER_HOLD_FACTOR * (t - first)).min(AFTER_HOLD_S);
+                self.fit_after = self.fit_after.max(t + recovery);
+            }
+        }
+        let quiet = moving || t < self.quiet_until || stopped;
         match steps {
             Some(Some(progress)) => {
                 let (from, to) = *self.taking_up.get_or_insert((self.applied, self.fitted));
@@ -283,22 +434,49 @@ impl StiffnessEstimator {
                 self.applied += (self.fitted - self.applied) * (dt / self.apply_lag_s).min(1.0);
             }
         }
+        let place = self.map_place(setpoint, dt, quiet);
         let g = g.map(|v| if v.is_finite() { v } else { 0.0 });
-        let phi = self.phi_loop.step(&self.gains, g, dt, quiet);
+        let phi = self.phi_loop.step(&self.gains, g, &place, dt, quiet);
         // The offset net of what the controller's integral already holds
         // of the stiffness error (module docs): −κ̂ φ + c_ψ.
-        self.offset = std::array::from_fn(|k| -self.applied * phi[k] + self.psi_loop.c[k]);
+        let held = self.psi_loop.correction(&place.x);
+        self.offset = std::array::from_fn(|k| -self.applied * phi[k] + held[k]);
         let psi = self
             .psi_loop
-            .step(&self.gains, self.offset.map(|o| -o), dt, quiet);
+            .step(&self.gains, self.offset.map(|o| -o), &place, dt, quiet);
         self.history.push_back(Tick {
             t,
             phi,
             psi,
-            fitted: !quiet && !holding,
+            fitted: !quiet && t >= self.fit_after && (self.fit_hold || !holding_first),
         });
         while self.history.front().is_some_and(|h| h.t < t - HISTORY_S) {
             self.history.pop_front();
+        }
+    }
+
+    /// The error map's place for the setpoint `setpoint` after `dt`: its
+    /// running mean moves as the controller's does, only while it
+    /// integrates (it sees no frame in a move's quiet), by backward Euler
+    /// with the firmware's time constant.
+    fn map_place(&mut self, setpoint: [f64; 3], dt: f64, quiet: bool) -> MapPlace {
+        let setpoint = setpoint.map(|v| if v.is_finite() { v } else { 0.0 });
+        let origin = match self.map_origin {
+            Some(origin) => origin,
+            None => {
+                self.map_mean = setpoint;
+                *self.map_origin.insert(setpoint)
+            }
+        };
+        if !quiet {
+            let a = dt / (f64::from(MAP_MEAN_TAU_S) + dt);
+            for (m, p) in self.map_mean.iter_mut().zip(setpoint) {
+                *m += a * (p - *m);
+            }
+        }
+        MapPlace {
+            x: std::array::from_fn(|k| setpoint[k] - origin[k]),
+            x_tilde: std::array::from_fn(|k| setpoint[k] - self.map_mean[k]),
         }
     }
 
@@ -337,13 +515,15 @@ impl StiffnessEstimator {
     }
 
     /// The loop below does not follow the setpoints at `t` (the controller
-    /// holds, or its commands stopped): no frame is fitted until
-    /// [`AFTER_HOLD_S`] after the last such tick, and the model's integral
-    /// is frozen meanwhile. A tip held while the path moves on is an error
-    /// no stiffness explains; fitted, a 1 s cut link on the circle took the
-    /// estimate to its bound (+0.30) and the tip 1.35 mm RMS off the path after.
+    /// holds, or its commands stopped), told before the tick at `t`: the
+    /// model's integral is frozen while it holds, as the controller's is,
+    /// and no frame is fitted until [`AFTER_HOLD_FACTOR`] times the hold's
+    /// length after it (at most [`AFTER_HOLD_S`]). A tip held while the
+    /// path moves on is an error no stiffness explains; fitted, a 1 s cut
+    /// link on the circle took the estimate to its bound (+0.30) and the
+    /// tip 1.35 mm RMS off the path after.
     pub fn hold(&mut self, t: f64) {
-        self.quiet_until = self.quiet_until.max(t + AFTER_HOLD_S);
+        self.held = Some((self.held.map_or(t, |(first, _)| first), t));
     }
 
     /// κ̂ applied now: the backbone is 1/(1 − κ̂) times as stiff as its file
@@ -383,9 +563,11 @@ impl StiffnessAdaptation {
         mode_hz: Option<f64>,
         loop_delay_s: f64,
     ) -> Result<StiffnessAdaptation, PlanError> {
+        let directions = StiffnessDirections::new(traj, robot)?;
         Ok(StiffnessAdaptation {
-            directions: StiffnessDirections::new(traj, robot)?,
-            estimator: StiffnessEstimator::new(gains, quiet_after_move_s, mode_hz, loop_delay_s),
+            estimator: StiffnessEstimator::new(gains, quiet_after_move_s, mode_hz, loop_delay_s)
+                .fits_the_settle_hold(directions.hold_tells_stiffness()),
+            directions,
             scratch: Vec::new(),
         })
     }
@@ -407,8 +589,15 @@ impl StiffnessAdaptation {
         }
         let g = self.directions.at(traj, desired.t_path, &mut self.scratch);
         let steps = traj.stepwise.then(|| traj.step_progress(desired.t_path));
-        self.estimator
-            .tick(t, g, desired.moving, desired.holding, steps);
+        let p = desired.point.pose;
+        self.estimator.tick(
+            t,
+            [p[0], p[1], p[2]],
+            g,
+            desired.moving,
+            desired.holding,
+            steps,
+        );
         along_axes(&desired.point, self.estimator.offset())
     }
 

@@ -80,14 +80,15 @@ pub mod correction {
         (f1 / REFERENCE_MODE_HZ).min(1.0)
     }
 
-    /// The integral's gain and error filter as `task::period_config`
-    /// scales them on `robot` ([`mode_scale`] when `scale_to_mode`): what
-    /// the planner's learning models, for the sim's launcher and a planner
-    /// alone alike.
+    /// The integral's gain, error filter and error map as
+    /// `task::period_config` scales them on `robot` ([`mode_scale`] when
+    /// `scale_to_mode`): what the planner's learning and stiffness
+    /// adaptation model, for the sim's launcher and a planner alone alike.
     pub fn applied(
         robot: &crate::robot::Robot,
         ki_per_s: f64,
         filter_tau_s: f64,
+        map_gain_per_s: f64,
         scale_to_mode: bool,
     ) -> crate::plan::IntegralGains {
         let scale = if scale_to_mode {
@@ -98,6 +99,13 @@ pub mod correction {
         crate::plan::IntegralGains {
             ki_per_s: ki_per_s * scale,
             filter_tau_s: filter_tau_s / scale,
+            // The map learns only where the integral does (ki > 0).
+            map_gain_per_s: if ki_per_s > 0.0 {
+                map_gain_per_s * scale
+            } else {
+                0.0
+            },
+            map_scale_m: MAP_SCALE_M,
         }
     }
 }
@@ -279,6 +287,7 @@ impl ControllerConfig {
             robot,
             self.ki_per_s,
             self.correction_filter_tau_s,
+            self.correction_map_gain_per_s,
             self.scale_gains_to_mode,
         )
     }
