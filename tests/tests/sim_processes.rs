@@ -226,6 +226,33 @@ fn iceoryx2_nodes() -> Vec<PathBuf> {
     }
 }
 
+/// The process a node entry belongs to, while it runs: the entry's node id
+/// (its directory, or the digits of its monitor files' names) names a
+/// directory whose `iox2_node.details` says `process = PID`. None for an
+/// entry whose process is gone (a leak) or that says no process.
+fn live_owner(entry: &std::path::Path) -> Option<u32> {
+    let name = entry.file_name()?.to_str()?;
+    let id: String = name
+        .trim_start_matches("iox2_")
+        .chars()
+        .take_while(|c| c.is_ascii_digit())
+        .collect();
+    let details =
+        std::fs::read_to_string(entry.with_file_name(id).join("iox2_node.details")).ok()?;
+    let pid: u32 = details.lines().find_map(|l| {
+        l.trim()
+            .strip_prefix("process")?
+            .trim()
+            .strip_prefix('=')?
+            .trim()
+            .parse()
+            .ok()
+    })?;
+    std::path::Path::new(&format!("/proc/{pid}"))
+        .exists()
+        .then_some(pid)
+}
+
 #[test]
 fn a_child_that_fails_at_start_fails_the_run_and_leaves_no_iceoryx2_nodes() {
     let _one = one_sim_at_a_time();
@@ -254,16 +281,23 @@ fn a_child_that_fails_at_start_fails_the_run_and_leaves_no_iceoryx2_nodes() {
         err.contains("controller exited before the loop started"),
         "{err}"
     );
-    // Other tests may run sims at the same time: only entries that appeared
-    // during this run and are still there count, and a live sim's entries
-    // disappear when it ends; so wait a little and look again.
+    // Other tests may run sims at the same time (the second real-time
+    // stream of `scripts/test`, whose sims last up to a minute): only
+    // entries that appeared during this run, are still there a little
+    // later, and whose process is gone count.
     let new: Vec<PathBuf> = iceoryx2_nodes()
         .into_iter()
         .filter(|p| !before.contains(p))
         .collect();
     std::thread::sleep(Duration::from_secs(3));
-    let left: Vec<&PathBuf> = new.iter().filter(|p| p.exists()).collect();
-    assert!(left.is_empty(), "iceoryx2 node entries left: {left:?}");
+    let left: Vec<&PathBuf> = new
+        .iter()
+        .filter(|p| p.exists() && live_owner(p).is_none())
+        .collect();
+    assert!(
+        left.is_empty(),
+        "iceoryx2 node entries left by no live process: {left:?}"
+    );
     assert!(!out.join(".sim-run").exists(), "work directory left");
 }
 
