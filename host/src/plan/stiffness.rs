@@ -83,6 +83,15 @@ const DIFFERENCE: f64 = 0.01;
 /// wants calibration (`tendril calibrate`), not a loop.
 pub const MAX_STIFFNESS_ERROR: f64 = 0.3;
 
+/// The smallest |κ̂| applied; a fit within it is taken as 0 (the file is
+/// right). It is the fit's own noise bound at the least excitation
+/// ([`MIN_EXCITATION_M2`]), and about what a net's or a robot's other
+/// static errors read as stiffness: at one pose any constant error along
+/// g does (`tdcr-2seg`'s settle hold on a rod as stiff as its file gave
+/// −0.006, and the second step target then settled in 1.1 s, not 0.62).
+/// An error of 1 % moves the tip ≈ 0.1 mm, which the integral holds.
+const MIN_STIFFNESS_ERROR: f64 = 0.01;
+
 /// The least Σ|φ|² (m²) before the estimate is used: with a tracker whose
 /// frames scatter by 0.2 mm per axis, the fit's standard error is then at
 /// most 0.2 mm / √(4e-4 m²) = 0.01.
@@ -510,7 +519,12 @@ impl StiffnessEstimator {
         self.num = forget * self.num + dot(&tick.phi, &z);
         self.den = forget * self.den + dot(&tick.phi, &tick.phi);
         if self.den >= MIN_EXCITATION_M2 {
-            self.fitted = (self.num / self.den).clamp(-MAX_STIFFNESS_ERROR, MAX_STIFFNESS_ERROR);
+            let fit = (self.num / self.den).clamp(-MAX_STIFFNESS_ERROR, MAX_STIFFNESS_ERROR);
+            self.fitted = if fit.abs() < MIN_STIFFNESS_ERROR {
+                0.0
+            } else {
+                fit
+            };
         }
     }
 

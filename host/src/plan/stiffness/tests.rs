@@ -353,6 +353,24 @@ fn steps_find_the_stiffness_from_their_transients() {
     assert!((found - 0.1).abs() < 0.02, "found {found}");
 }
 
+/// A backbone 0.5 % stiffer than its file is within the fit's noise bound
+/// (and the size of what a net's own error reads as stiffness at one pose):
+/// it is taken as the file, nothing applied; 2 % is applied.
+#[test]
+fn an_estimate_within_the_noise_bound_is_not_applied() {
+    for (kappa, applied) in [(0.005, false), (0.02, true)] {
+        let mut case = on_steps(16.0, 2.0);
+        case.kappa = kappa;
+        let (found, _, _) = run_loop(case);
+        eprintln!("κ {kappa}: applied {found:.4}");
+        if applied {
+            assert!((found - kappa).abs() < 0.005, "κ {kappa}: found {found}");
+        } else {
+            assert_eq!(found, 0.0, "κ {kappa}: applied {found}");
+        }
+    }
+}
+
 /// The step on which the estimate is first applied: the controller's
 /// integral holds the stiffness error of the target before, and an offset
 /// of −κ̂ g on top of it would count that error twice (the integral then
