@@ -632,33 +632,12 @@ fn a_tracker_frame_is_integrated_once_over_the_time_since_the_last() {
 /// the gap's worth at once (which rang a rod with mass).
 #[test]
 fn the_first_frame_after_a_gap_counts_twice_the_frame_interval_not_the_gap() {
-    let mut st = store(1);
-    let mut p = P::new(integral_config(), 0);
-    let mut steps = Vec::new();
-    let mut before = p.period.correction().0[0];
     // Frames every 10 ms, then none for 300 ms, then every 10 ms again.
     let frames: Vec<u64> = (0..5).chain(35..38).map(|j| 1000 + 10 * j).collect();
-    let mut frame = 0u32;
-    for k in 1000..=1370u64 {
-        let mut f = fb(k, k.saturating_sub(1), [0.0; MAX_TENDONS]);
-        f.tip = [pose()[0] - 1e-3, pose()[1], pose()[2]];
-        if let Some(j) = frames.iter().rposition(|&t| t <= k) {
-            frame = j as u32 + 1;
-        }
-        f.tip_seq = frame;
-        f.tip_age_ns = (k - frames[frame as usize - 1]) * T;
-        let input = Inputs {
-            feedback: Some(f),
-            feedbacks: 1,
-            ..with_sp(k, sp(k))
-        };
-        p.run(&mut *st, &input);
-        let now = p.period.correction().0[0];
-        if now != before {
-            steps.push(now - before);
-        }
-        before = now;
-    }
+    let steps = correction_steps(1000..=1370, |k| {
+        let j = frames.iter().rposition(|&t| t <= k).unwrap_or(0);
+        (j as u32 + 1, frames[j])
+    });
     // 10 /s × 1 mm × 10 ms = 0.1 mm per frame; the first frame after the
     // gap 0.2 mm (twice), not 3 mm (the 300 ms gap).
     assert_eq!(steps.len(), 7, "{steps:?}");
@@ -675,19 +654,40 @@ fn the_first_frame_after_a_gap_counts_twice_the_frame_interval_not_the_gap() {
 /// rang a rod with mass for 3 s).
 #[test]
 fn the_second_frame_after_a_held_first_counts_a_slow_trackers_interval_not_the_wait() {
+    // Frame 1 at 1000 ms, held to 1700 ms; then a frame every period.
+    let steps = correction_steps(1000..=1705, |k| {
+        if k < 1700 {
+            (1, 1000)
+        } else {
+            ((k - 1698) as u32, k)
+        }
+    });
+    // 10 /s × 1 mm × 25 ms = 0.25 mm (not 7 mm, nor the 0.01 m bound),
+    // then 10 /s × 1 mm × 1 ms a frame.
+    assert_eq!(steps.len(), 6, "{steps:?}");
+    assert!((steps[0] - 0.25e-3).abs() < 1e-7, "{steps:?}");
+    for s in &steps[1..] {
+        assert!((s - 0.01e-3).abs() < 1e-8, "{steps:?}");
+    }
+}
+
+/// The changes of the integral's correction (x, m) over the periods `ks`
+/// (ms) of a period with the loop on ([`integral_config`]), the tip 1 mm
+/// short in x and the plant reporting every period; `frame(k)`: the
+/// tracker's newest frame at period k, (its sequence number, the period it
+/// was taken in).
+fn correction_steps(
+    ks: std::ops::RangeInclusive<u64>,
+    frame: impl Fn(u64) -> (u32, u64),
+) -> Vec<f32> {
     let mut st = store(1);
     let mut p = P::new(integral_config(), 0);
     let mut steps = Vec::new();
     let mut before = p.period.correction().0[0];
-    // Frame 1 at 1000 ms, held to 1700 ms; then a frame every period.
-    for k in 1000..=1705u64 {
+    for k in ks {
         let mut f = fb(k, k.saturating_sub(1), [0.0; MAX_TENDONS]);
         f.tip = [pose()[0] - 1e-3, pose()[1], pose()[2]];
-        let (seq, taken) = if k < 1700 {
-            (1, 1000)
-        } else {
-            ((k - 1698) as u32, k)
-        };
+        let (seq, taken) = frame(k);
         f.tip_seq = seq;
         f.tip_age_ns = (k - taken) * T;
         let input = Inputs {
@@ -702,13 +702,7 @@ fn the_second_frame_after_a_held_first_counts_a_slow_trackers_interval_not_the_w
         }
         before = now;
     }
-    // 10 /s × 1 mm × 25 ms = 0.25 mm (not 7 mm, nor the 0.01 m bound),
-    // then 10 /s × 1 mm × 1 ms a frame.
-    assert_eq!(steps.len(), 6, "{steps:?}");
-    assert!((steps[0] - 0.25e-3).abs() < 1e-7, "{steps:?}");
-    for s in &steps[1..] {
-        assert!((s - 0.01e-3).abs() < 1e-8, "{steps:?}");
-    }
+    steps
 }
 
 #[test]

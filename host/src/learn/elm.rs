@@ -227,10 +227,9 @@ impl Learner for Elm {
             let fv = layer.features(valid.x);
             let g = gram(&f);
             let c = cross(&f, train.y);
-            let cands: Vec<(usize, f64)> = self
-                .hiddens
-                .iter()
-                .flat_map(|&h| self.ridges.iter().map(move |&r| (h, r)))
+            // (width's index, ridge).
+            let cands: Vec<(usize, f64)> = (0..self.hiddens.len())
+                .flat_map(|i| self.ridges.iter().map(move |&r| (i, r)))
                 .collect();
             // Leading block: the first h units plus the bias (last column).
             let block = |h: usize| -> Vec<usize> { (0..h).chain(std::iter::once(h_max)).collect() };
@@ -238,32 +237,28 @@ impl Learner for Elm {
             // W = Fᵀ (F Fᵀ + λ s I)⁻¹ Y, the same ridge solution (s still the
             // mean diagonal of FᵀF): an n × n system instead of an
             // (h + 1)-square one that has rank n at most (262 rows and
-            // widths to 2,000: 9.5 s of a quick comparison's 11 s).
+            // widths to 2,000: 9.5 s of a quick comparison's 11 s). Its
+            // block of F and F Fᵀ, once per width.
             let n = train.x.nrows();
-            let kernels: Vec<Option<DMatrix<f64>>> = self
+            let rows_space: Vec<Option<(DMatrix<f64>, DMatrix<f64>)>> = self
                 .hiddens
                 .par_iter()
                 .map(|&h| {
                     (h + 1 > n).then(|| {
                         let fs = f.select_columns(&block(h));
-                        &fs * fs.transpose()
+                        let kernel = &fs * fs.transpose();
+                        (fs, kernel)
                     })
                 })
                 .collect();
             let fits: Vec<Option<(f64, DMatrix<f64>)>> = cands
                 .par_iter()
-                .map(|&(h, r)| {
-                    let idx = block(h);
-                    let kernel = self
-                        .hiddens
-                        .iter()
-                        .position(|&w| w == h)
-                        .and_then(|i| kernels[i].as_ref());
-                    let w = match kernel {
-                        Some(k) => {
-                            let fs = f.select_columns(&idx);
-                            let s = idx.iter().map(|&i| g[(i, i)]).sum::<f64>() / idx.len() as f64;
-                            dual_ridge_solve(&fs, k, train.y, r * s.max(f64::MIN_POSITIVE))?
+                .map(|&(i, r)| {
+                    let idx = block(self.hiddens[i]);
+                    let w = match &rows_space[i] {
+                        Some((fs, kernel)) => {
+                            let s = idx.iter().map(|&j| g[(j, j)]).sum::<f64>() / idx.len() as f64;
+                            dual_ridge_solve(fs, kernel, train.y, r * s.max(f64::MIN_POSITIVE))?
                         }
                         None => {
                             let gs = g.select_rows(&idx).select_columns(&idx);
@@ -281,7 +276,7 @@ impl Learner for Elm {
                 .collect();
             if let Some(i) = argmin(&scores) {
                 if best.as_ref().is_none_or(|b| scores[i] < b.0) {
-                    let (h, r) = cands[i];
+                    let (h, r) = (self.hiddens[cands[i].0], cands[i].1);
                     let w = fits[i].as_ref().map(|f| f.1.clone()).unwrap_or_default();
                     best = Some((scores[i], h, r, scale, layer.narrowed(h), w));
                 }
