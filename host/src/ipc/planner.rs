@@ -301,7 +301,7 @@ pub fn plan(cfg: &PlannerConfig) -> Result<Planned, IpcError> {
             &robot,
             cfg.controller_gains
                 .unwrap_or_else(|| controller_gains(&robot)),
-            super::controller::correction::SETTLE_AFTER_JUMP_S,
+            super::controller::correction::QUIET_AFTER_MOVE_S,
             shaping.map(|s| s.mode_hz),
             cfg.loop_delay_s
                 .unwrap_or_else(|| super::controller::loop_delay_s(false)),

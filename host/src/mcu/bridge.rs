@@ -243,7 +243,7 @@ impl Bridge {
             update_seq: 0,
             last_tangent: None,
             tip_shift: [0.0; 3],
-            quiet: MoveQuiet::new(crate::ipc::controller::correction::SETTLE_AFTER_JUMP_S),
+            quiet: MoveQuiet::new(crate::ipc::controller::correction::QUIET_AFTER_MOVE_S),
             in_flight: Default::default(),
             last_cmd_seq: 0,
             counters: Counters::default(),

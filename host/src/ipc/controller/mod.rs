@@ -57,6 +57,18 @@ pub mod correction {
     /// Tracker frames sampled within this after a jump are not integrated,
     /// s: the motors (20 ms) and the rod's swing settle first.
     pub const SETTLE_AFTER_JUMP_S: f64 = 0.3;
+    /// Tracker frames are held back this long after a shaped move's last
+    /// setpoint, s (`MoveQuiet`, `docs/design.md` §6.4). A shaped move
+    /// leaves the rod still at its end (the shaper cancels the mode) and
+    /// nothing of a jump's transient to wait out: what is left is the
+    /// motors' lag (20 ms; the lead covers the move's velocity) and a
+    /// tracker frame's latency (20 ms on the EM tracker), so five motor
+    /// time constants. Until 2026-12-07 a move waited the jump's 0.3 s,
+    /// and the model error at a new target stood uncorrected for 0.2 s
+    /// longer (default robot 10 % off its file: each target settled
+    /// 0.17–0.21 s later; BENCHMARKS.md, "The approach from rest, the
+    /// first target, and the quiet after a shaped move").
+    pub const QUIET_AFTER_MOVE_S: f64 = 0.1;
     /// No tracker frame for this long freezes the correction, s.
     pub const TRACKER_TIMEOUT_S: f64 = 0.25;
     /// Adaptation gain of the error map, 1/s.

@@ -91,7 +91,7 @@ pub fn with_dynamic_offset(s: &Setpoint) -> (Setpoint, [f32; 3]) {
 
 /// Tracker frames held back while the robot is on a shaped move
 /// (`docs/design.md` §6.4): the planner flags a shaped move's setpoints
-/// `MOVING`, and until the settle time after the last of them every plant
+/// `MOVING`, and until the quiet time after the last of them every plant
 /// state goes to the period with the last frame from before the move, so
 /// the period integrates no frame of the move's transient — what its jump
 /// rule does for a jump, which a shaped move never makes. Done here, beside
@@ -296,7 +296,7 @@ impl Controller {
             update_seq: 0,
             last_state_seq: 0,
             tip_shift: [0.0; 3],
-            quiet: MoveQuiet::new(correction::SETTLE_AFTER_JUMP_S),
+            quiet: MoveQuiet::new(correction::QUIET_AFTER_MOVE_S),
             cmd: TensionCommand::default(),
             row: [0.0; LOG_FIXED + MAX_TENDONS],
         })
