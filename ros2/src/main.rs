@@ -152,6 +152,9 @@ impl DriveArgs {
             learning: LearningChoice::Off,
             // Targets from a topic have no path to fit along.
             adapt_stiffness: self.path.adapt_stiffness == OnOff::On && !self.target_topic,
+            // The net's error along the planned path, as `tendril sim` takes it out.
+            net_error_offset: !self.target_topic,
+            model: Some(controller.model.clone()),
             loop_delay_s: Some(tendril::ipc::controller::loop_delay_s(
                 controller.mcu.is_some(),
             )),

@@ -57,6 +57,12 @@ pub struct SimArgs {
     /// iceoryx2 service-name prefix (default: unique per run).
     #[arg(long)]
     pub prefix: Option<String>,
+    /// The planner takes the net's own quasi-static error along the path
+    /// out before the loop sees it, from the robot's exact statics (an
+    /// offset sent with the dynamic offset; docs/design.md §6.4); off with
+    /// --correction off.
+    #[arg(long, value_enum, default_value_t = super::controller::OnOff::On)]
+    pub net_error_offset: super::controller::OnOff,
     #[command(flatten)]
     pub traj: TrajectoryOpts,
     #[command(flatten)]
@@ -141,6 +147,8 @@ impl SimArgs {
         cfg.planner.learning = self.traj.learning();
         // The net alone is the net without feedback: no adaptation either.
         cfg.planner.adapt_stiffness = self.traj.adapt_stiffness == super::controller::OnOff::On
+            && self.tuning.correction == super::controller::OnOff::On;
+        cfg.planner.net_error_offset = self.net_error_offset == super::controller::OnOff::On
             && self.tuning.correction == super::controller::OnOff::On;
         let rate = match self.controller {
             ControllerKind::Host => self.tuning.rate_hz(),

@@ -333,6 +333,8 @@ mod tests {
             dynamic_offset: true,
             learning: crate::plan::LearningChoice::Off,
             adapt_stiffness: true,
+            net_error_offset: true,
+            model: Some("m.tnet".into()),
             controller_gains: Some(crate::plan::IntegralGains {
                 ki_per_s: 4.0,
                 filter_tau_s: 0.08,

@@ -37,6 +37,10 @@ pub struct Motion {
     trajectory: Trajectory,
     settle_s: f64,
     approach: Option<(StepShaping, [f64; 7])>,
+    /// Where the approach ends, relative to the first pose: the offset the
+    /// hold then sends (`plan::net_error`), so that the net is asked for
+    /// the same pose on either side of the approach's end.
+    approach_end_shift: [f64; 7],
     inverse: Option<ModalInverse>,
 }
 
@@ -55,8 +59,16 @@ impl Motion {
             trajectory,
             settle_s,
             approach,
+            approach_end_shift: [0.0; 7],
             inverse,
         }
+    }
+
+    /// The approach from rest ends at the first pose moved by `shift`
+    /// (position m, quaternion components) instead of at the first pose.
+    pub fn with_approach_end_shift(mut self, shift: [f64; 7]) -> Motion {
+        self.approach_end_shift = shift;
+        self
     }
 
     /// The trajectory followed.
@@ -70,8 +82,15 @@ impl Motion {
             let mut point = self.trajectory.sample(0.0);
             point.velocity = [0.0; 7];
             let moving = match &self.approach {
-                Some((shaping, rest)) => approach(shaping, rest, t.max(0.0), &mut point),
-                None => false,
+                // The approach ends where the hold's offset puts the pose;
+                // the hold itself sends the first pose and the offset.
+                Some((shaping, rest)) if t.max(0.0) < shaping.length_s() => {
+                    for (p, d) in point.pose.iter_mut().zip(&self.approach_end_shift) {
+                        *p += d;
+                    }
+                    approach(shaping, rest, t.max(0.0), &mut point)
+                }
+                _ => false,
             };
             return Desired {
                 point,
@@ -220,6 +239,40 @@ mod tests {
         );
         assert!(!m.at(4.0).moving && !m.at(4.0).holding);
         assert!(m.dynamic_offset(3.0, &m.at(3.0)).is_none());
+    }
+
+    /// With the net's error offset the approach ends at the first pose
+    /// moved by the offset's shift, and the hold then sends the first pose
+    /// itself (the offset goes beside it): the net is asked for the same
+    /// pose on either side of the approach's end. The start is still the
+    /// robot at rest.
+    #[test]
+    fn the_approach_ends_where_the_holds_offset_puts_the_pose() {
+        let shift = [1e-4, -2e-4, 5e-5, 1e-5, 0.0, -1e-5, 0.0];
+        let shifted = circle_motion(None).with_approach_end_shift(shift);
+        let plain = circle_motion(None);
+        let length = StepShaping::for_mode(3.6, 0.05).unwrap().length_s();
+        for (a, b) in shifted
+            .at(0.0)
+            .point
+            .pose
+            .iter()
+            .zip(&plain.at(0.0).point.pose)
+        {
+            assert!((a - b).abs() < 1e-12, "starts at rest");
+        }
+        let (end, hold) = (shifted.at(length - 1e-9), shifted.at(length + 1e-9));
+        assert!(end.moving && hold.holding && !hold.moving);
+        let plain_hold = plain.at(length + 1e-9).point.pose;
+        for (k, d) in shift.iter().enumerate().take(3) {
+            let want = plain_hold[k] + d;
+            assert!(
+                (end.point.pose[k] - want).abs() < 1e-9,
+                "axis {k}: {}",
+                end.point.pose[k]
+            );
+            assert_eq!(hold.point.pose[k], plain_hold[k]);
+        }
     }
 
     /// On the circle at cruise the modal inverse's offset is the closed

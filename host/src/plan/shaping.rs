@@ -62,6 +62,11 @@ pub enum ShapingChoice {
 }
 
 impl ShapingChoice {
+    /// A design given (what a launcher that designed it passes on).
+    pub fn is_designed(&self) -> bool {
+        matches!(self, ShapingChoice::Designed(_))
+    }
+
     /// The shaping a planner following `shape` on `robot` uses: none for a
     /// hold, or when off.
     pub fn resolve(

@@ -287,11 +287,8 @@ pub fn build_report(
             crate::plan::ShapingChoice::Designed(s) => Some(s),
             _ => None,
         },
-        dynamic_offset: cfg.planner.dynamic_offset
-            && matches!(
-                cfg.planner.step_shaping,
-                crate::plan::ShapingChoice::Designed(_)
-            ),
+        dynamic_offset: cfg.planner.dynamic_offset && cfg.planner.step_shaping.is_designed(),
+        net_error_offset: cfg.planner.net_error_offset,
         learning: match cfg.planner.learning {
             crate::plan::LearningChoice::Designed(d) => Some(d),
             _ => None,

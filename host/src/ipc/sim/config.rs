@@ -151,6 +151,7 @@ impl SimConfig {
                 start_from_rest: true,
                 dynamic_offset: true,
                 adapt_stiffness: true,
+                net_error_offset: true,
                 peer_timeout_s: controller.peer_timeout_s,
                 supervised: true,
                 realtime: true,
@@ -177,6 +178,9 @@ impl SimConfig {
         // The net alone is the net without feedback: no stiffness
         // adaptation either (`docs/design.md` §6.5).
         self.planner.adapt_stiffness &= on;
+        // Nor the planner's offset for the net's own error: "alone" is the
+        // net as it was trained.
+        self.planner.net_error_offset &= on;
     }
 
     /// Reject what cannot be a run, before anything starts.

@@ -36,6 +36,10 @@ pub struct SimReport {
     /// with a shaping).
     #[serde(default)]
     pub dynamic_offset: bool,
+    /// Whether the planner sent the offset that takes the net's own
+    /// quasi-static error along the path out (`docs/design.md` §6.4).
+    #[serde(default)]
+    pub net_error_offset: bool,
     /// Learning for repeated paths: the design the planner learned with
     /// (`null`: off).
     #[serde(default)]
@@ -345,7 +349,12 @@ impl SimReport {
             Some(k) => format!("stiffness κ̂ {k:+.3}"),
             None => "stiffness not adapted".into(),
         };
-        format!("{shaping}; {offset}; {learning}; {stiffness}")
+        let net = if self.net_error_offset {
+            "net's error offset"
+        } else {
+            "no net's error offset"
+        };
+        format!("{shaping}; {offset}; {net}; {learning}; {stiffness}")
     }
 
     /// `report.md`: the headline numbers, each with what it covers.
@@ -394,6 +403,10 @@ impl SimReport {
                 if self.dynamic_offset { "yes" } else { "no" }.into(),
             );
         }
+        row(
+            "the net's own error along the path sent as an offset (from the exact statics)",
+            if self.net_error_offset { "yes" } else { "no" }.into(),
+        );
         if let Some(l) = &self.learning {
             row(
                 "learning for repeated paths: harmonics to (Hz); worst contraction a pass",

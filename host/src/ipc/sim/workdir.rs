@@ -273,6 +273,7 @@ impl Configs<'_> {
             Role::Planner => {
                 let mut c = self.cfg.planner.clone();
                 c.robot = self.cfg.robot.clone();
+                c.model = Some(self.model.clone());
                 c.prefix = self.prefix.clone();
                 c.log = log;
                 c.cpu = planner_cpu;

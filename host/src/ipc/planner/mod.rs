@@ -14,13 +14,15 @@ use super::process::{self, Process, Scheduling, Stepped};
 use super::stats::CsvLog;
 use super::transport::{self, Services};
 use super::IpcError;
+
 use crate::plan::learning::PassOutcome;
 use crate::plan::{
-    along_axes, Desired, Learner, LearningChoice, Motion, PathShape, ShapingChoice,
-    StiffnessAdaptation, Trajectory, TENSION_HEADROOM,
+    along_axes, Desired, Learner, LearningChoice, Motion, NetErrorOffset, PathShape, ShapingChoice,
+    StiffnessAdaptation,
 };
-use crate::robot::Robot;
-use crate::statics::{SolverSettings, Statics};
+
+mod planned;
+pub use planned::{net_error_at, plan, setpoint_for, Planned};
 
 /// Bad setpoints to send instead of the trajectory's, each for one message.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -98,6 +100,16 @@ pub struct PlannerConfig {
     /// dynamic offset).
     #[serde(default)]
     pub adapt_stiffness: bool,
+    /// Take the controller's net's own quasi-static error along the path
+    /// out before the loop sees it: the offset that puts the net's tip on
+    /// every pose of the path, from the robot's exact statics
+    /// (`docs/design.md` §6.4; sent with the dynamic offset). Needs
+    /// `model`.
+    #[serde(default)]
+    pub net_error_offset: bool,
+    /// The net the controller runs (`.tnet`), for `net_error_offset`.
+    #[serde(default)]
+    pub model: Option<PathBuf>,
     /// The controller's integral gains (after its scaling to the mode) that
     /// the stiffness adaptation's loop model assumes (None: the
     /// controller's defaults for the robot; a launcher that knows the
@@ -151,6 +163,8 @@ impl PlannerConfig {
             dynamic_offset: false,
             learning: LearningChoice::default(),
             adapt_stiffness: false,
+            net_error_offset: false,
+            model: None,
             controller_gains: None,
             loop_delay_s: None,
             inject: Injections::default(),
@@ -219,159 +233,6 @@ pub fn run(cfg: &PlannerConfig) -> Result<u64, IpcError> {
     )
 }
 
-/// What the planner works out before it joins the loop (the CPU-heavy
-/// part: the path lifted to reachable poses, the shaping, the learning).
-pub struct Planned {
-    /// The path in time: settle, shaped moves, the dynamic offset's inverse.
-    pub motion: Motion,
-    /// Learning for repeated paths, when asked for and accepted.
-    pub learner: Option<Learner>,
-    /// The stiffness adaptation, when asked for.
-    pub stiffness: Option<StiffnessAdaptation>,
-    /// The model's `[base]`: the path is planned in its base frame and
-    /// published in the tracker's (`docs/design.md` §2.4).
-    pub base: crate::robot::BasePose,
-    /// The least tension headroom along the path (warned about below
-    /// [`TENSION_HEADROOM`]); `None` without feed-forward tensions.
-    pub headroom: Option<crate::plan::Headroom>,
-}
-
-/// Work out `cfg`'s path (the planner process's set-up; `tendril-ros2
-/// drive` plans the same way in-process).
-pub fn plan(cfg: &PlannerConfig) -> Result<Planned, IpcError> {
-    if !(cfg.rate_hz > 0.0 && cfg.rate_hz <= 20_000.0 && cfg.settle_s >= 0.0) {
-        return Err(IpcError::Config(format!(
-            "planner rate {} Hz / settle {} s: rate must be in (0, 20000], settle ≥ 0",
-            cfg.rate_hz, cfg.settle_s
-        )));
-    }
-    let robot = Robot::load(&cfg.robot).map_err(|e| IpcError::Other(e.to_string()))?;
-    let statics = Statics::new(&robot, SolverSettings::default());
-    let shaping = cfg
-        .step_shaping
-        .resolve(&robot, &cfg.shape)
-        .map_err(|e| IpcError::Config(e.to_string()))?;
-    if let Some(s) = shaping {
-        log::info!(
-            "planner: steps and the path's start shaped for the first mode at {:.3} Hz (ζ {:.3}): {:.0} ms",
-            s.mode_hz,
-            s.damping_ratio,
-            s.length_s() * 1e3
-        );
-    }
-    let traj = Trajectory::new(&cfg.shape, &statics)?.with_shaping(shaping);
-    let headroom = traj.tension_headroom(&robot);
-    if let Some(h) = headroom.filter(|h| h.fraction < TENSION_HEADROOM) {
-        log::warn!(
-            "planner: the path has tendon {} commanded at {:.3} N, {:.0} % of its range below its \
-             {:.3} N limit (the built-in paths keep {:.0} %): little room there for the correction",
-            h.tendon,
-            h.tension_n,
-            h.fraction * 1e2,
-            robot.max_tensions()[h.tendon],
-            TENSION_HEADROOM * 1e2
-        );
-    }
-    let rest = match shaping {
-        Some(s) if cfg.start_from_rest => {
-            if s.length_s() > cfg.settle_s {
-                log::warn!(
-                    "planner: the approach from rest takes {:.2} s, longer than the {:.2} s settle",
-                    s.length_s(),
-                    cfg.settle_s
-                );
-            }
-            let at_rest = statics
-                .solve(&robot.min_tensions(), None)
-                .map_err(|e| IpcError::Other(format!("planner: the robot at rest: {e}")))?;
-            Some(at_rest.pose())
-        }
-        _ => None,
-    };
-    // Only where the path has an acceleration everywhere: at a corner the
-    // inverse asks for a kick (a helix whose height turned back at a corner
-    // went from 3.4 to 8 mm RMS with it on the three-segment robot; its
-    // height now turns back on a parabola, `plan::path::helix_height`).
-    let inverse = shaping
-        .filter(|_| cfg.dynamic_offset && cfg.shape.is_smooth())
-        .map(|s| s.modal_inverse());
-    let stiffness = match cfg.adapt_stiffness {
-        true => Some(StiffnessAdaptation::new(
-            &traj,
-            &robot,
-            cfg.controller_gains
-                .unwrap_or_else(|| controller_gains(&robot)),
-            super::controller::correction::QUIET_AFTER_MOVE_S,
-            shaping.map(|s| s.mode_hz),
-            cfg.loop_delay_s
-                .unwrap_or_else(|| super::controller::loop_delay_s(false)),
-        )?),
-        false => None,
-    };
-    Ok(Planned {
-        motion: Motion::new(traj, cfg.settle_s, rest, inverse),
-        learner: learner(cfg, &robot, shaping)?,
-        stiffness,
-        base: robot.base,
-        headroom,
-    })
-}
-
-/// The setpoint the planner sends at `t` (s since its start) for `desired`
-/// (`motion.at(t)`), with `learned` (the learning's and the stiffness
-/// adaptation's offsets, m along the tangent axes) if any: pose,
-/// velocity, tangent, flags and dynamic offset in the model's base frame,
-/// the header left empty. The planner process sends it (after any injected
-/// fault, in the tracker's frame); `tendril-ros2 drive` runs it in-process.
-pub fn setpoint_for(
-    motion: &Motion,
-    t: f64,
-    desired: &crate::plan::Desired,
-    learned: Option<[f64; 3]>,
-) -> Setpoint {
-    let point = &desired.point;
-    let mut flags = 0;
-    for (on, bit) in [
-        (desired.holding, setpoint_flags::HOLD),
-        (desired.moving, setpoint_flags::MOVING),
-        (desired.has_velocity, setpoint_flags::HAS_VELOCITY),
-    ] {
-        if on {
-            flags |= bit;
-        }
-    }
-    let dynamic_offset = match (motion.dynamic_offset(t, desired), learned) {
-        (None, None) => [0.0; 3],
-        (inverse, learned) => {
-            flags |= setpoint_flags::HAS_DYNAMIC_OFFSET;
-            let (a, b) = (inverse.unwrap_or_default(), learned.unwrap_or_default());
-            std::array::from_fn(|k| (a[k] + b[k]) as f32)
-        }
-    };
-    let (tangent, tangent_axes, tangent_dim) = match point.tangent {
-        Some(d) => {
-            flags |= setpoint_flags::HAS_TANGENT;
-            (
-                d.columns.map(|column| column.map(|v| v as f32)),
-                d.family.axes_padded().map(|axis| axis.map(|v| v as f32)),
-                d.family.dim() as u32,
-            )
-        }
-        None => ([[0.0; 7]; 3], [[0.0; 3]; 3], 0),
-    };
-    Setpoint {
-        header: Header::default(),
-        pose: point.pose.map(|v| v as f32),
-        velocity: point.velocity.map(|v| v as f32),
-        tangent,
-        tangent_axes,
-        tangent_dim,
-        flags,
-        dynamic_offset,
-        reserved: 0,
-    }
-}
-
 /// The planner as a [`process::Task`]: each step sleeps to its deadline and
 /// sends the setpoint for that time (with the learned offset and any
 /// injected fault), and learns from the tracker's newest frame.
@@ -392,6 +253,8 @@ struct PlannerTask<'a> {
     following: Following,
     /// The stiffness adaptation, when asked for (`docs/design.md` §6.5).
     stiffness: Option<StiffnessAdaptation>,
+    /// The offset that takes the net's own error out, when asked for.
+    net_error: Option<NetErrorOffset>,
     /// The tracker's frames, for the learning and the stiffness adaptation.
     states: Option<transport::Sub<PlantState>>,
     last_frame: u32,
@@ -419,6 +282,7 @@ impl<'a> PlannerTask<'a> {
                 false => None,
             },
             stiffness: planned.stiffness,
+            net_error: planned.net_error,
             motion: planned.motion,
             learner: planned.learner,
             publisher: transport::publisher(&services.setpoint)?,
@@ -527,11 +391,19 @@ impl process::Task for PlannerTask<'_> {
         }
         let following = self.following.follows(tick.deadline_ns);
         let adapted = self.adapt(frame.as_ref(), t, &desired, following);
-        let offset = match (learned, adapted) {
-            (None, None) => None,
-            (a, b) => {
-                let (a, b) = (a.unwrap_or_default(), b.unwrap_or_default());
-                Some(std::array::from_fn(|k| a[k] + b[k]))
+        let net_error = self
+            .net_error
+            .as_ref()
+            .and_then(|n| net_error_at(n, &self.motion, &desired));
+        let offset = match (learned, adapted, net_error) {
+            (None, None, None) => None,
+            (a, b, c) => {
+                let (a, b, c) = (
+                    a.unwrap_or_default(),
+                    b.unwrap_or_default(),
+                    c.unwrap_or_default(),
+                );
+                Some(std::array::from_fn(|k| a[k] + b[k] + c[k]))
             }
         };
         let mut msg = setpoint_for(&self.motion, t, &desired, offset);
@@ -597,51 +469,6 @@ impl process::Task for PlannerTask<'_> {
     fn finish(self, _: &Result<(), IpcError>) -> Result<u64, IpcError> {
         Ok(self.seq)
     }
-}
-
-/// The learning `cfg` asks for, designed and checked (`None`: off). A
-/// learning the convergence check refuses stays off and says why; the run
-/// goes on without it.
-fn learner(
-    cfg: &PlannerConfig,
-    robot: &Robot,
-    shaping: Option<crate::plan::StepShaping>,
-) -> Result<Option<Learner>, IpcError> {
-    match cfg
-        .learning
-        .resolve(shaping, cfg.shape.period_s(), controller_gains(robot))
-    {
-        Ok(Some(design)) => {
-            log::info!(
-                "planner: learning the {:.2} s path's harmonics up to {:.2} Hz (worst contraction {:.2} a pass)",
-                design.period_s,
-                design.harmonics() as f64 / design.period_s,
-                design.contraction
-            );
-            Ok(Some(Learner::new(design)))
-        }
-        Ok(None) => Ok(None),
-        Err(e) if matches!(cfg.learning, LearningChoice::Designed(_)) => {
-            Err(IpcError::Config(e.to_string()))
-        }
-        Err(e) => {
-            log::warn!("planner: learning off: {e}");
-            Ok(None)
-        }
-    }
-}
-
-/// The integral correction's gains of a controller at its defaults for
-/// `robot`: a launcher that knows the controller's own gains designs the
-/// learning with them and passes the design.
-fn controller_gains(robot: &Robot) -> crate::plan::IntegralGains {
-    super::controller::correction::applied(
-        robot,
-        super::controller::correction::KI_PER_S,
-        super::controller::correction::FILTER_TAU_S,
-        super::controller::correction::MAP_GAIN_PER_S,
-        true,
-    )
 }
 
 /// One tracker frame to the learner: the error of the tip against the
