@@ -3,6 +3,7 @@
 //! rest to the first pose), then the trajectory on its eased clock, and the
 //! offset the rod's dynamics need on top of it (the modal inverse).
 
+use super::net_error::NetErrorOffset;
 use super::shaping::{ModalInverse, StepShaping};
 use super::{PosePoint, Trajectory};
 
@@ -42,6 +43,8 @@ pub struct Motion {
     /// the same pose on either side of the approach's end.
     approach_end_shift: [f64; 7],
     inverse: Option<ModalInverse>,
+    /// The offset that takes the net's own error out (`plan::net_error`).
+    net_error: Option<NetErrorOffset>,
 }
 
 impl Motion {
@@ -61,14 +64,35 @@ impl Motion {
             approach,
             approach_end_shift: [0.0; 7],
             inverse,
+            net_error: None,
+        }
+    }
+
+    /// With the offset that takes the net's own error out along the path:
+    /// sent in the hold and on the path; the approach from rest, which
+    /// sends none, ends where it puts the first pose.
+    pub fn with_net_error(self, net_error: NetErrorOffset) -> Motion {
+        let shift = net_error.first_shift(&self.trajectory);
+        Motion {
+            net_error: Some(net_error),
+            ..self.with_approach_end_shift(shift)
         }
     }
 
     /// The approach from rest ends at the first pose moved by `shift`
     /// (position m, quaternion components) instead of at the first pose.
-    pub fn with_approach_end_shift(mut self, shift: [f64; 7]) -> Motion {
+    fn with_approach_end_shift(mut self, shift: [f64; 7]) -> Motion {
         self.approach_end_shift = shift;
         self
+    }
+
+    /// The net's error offset for `now` (none without one, and none on the
+    /// approach from rest: its setpoints have no tangent to carry it, and
+    /// it ends where the offset puts the pose instead), m along the point's
+    /// tangent axes.
+    pub fn net_error_offset(&self, now: &Desired) -> Option<[f64; 3]> {
+        let net_error = self.net_error.as_ref()?;
+        (!(now.holding && now.moving)).then(|| net_error.at(&self.trajectory, now.t_path))
     }
 
     /// The trajectory followed.

@@ -14,7 +14,7 @@
 //! planner's pose, and the chip in the loop runs the same.
 
 use super::{along_axes, PosePoint, Trajectory};
-use crate::statics::{SolveError, Statics};
+use crate::statics::Statics;
 
 /// Refinements of the offset: the first cancels the error where the net
 /// is asked for the pose, the second where it is asked for the pose plus
@@ -34,6 +34,8 @@ pub struct NetErrorOffset {
     rows: Vec<Vec<f64>>,
     /// The largest error found, m (for the planner's report).
     worst_m: f64,
+    /// Rows whose statics did not solve: they send no offset.
+    unsolved: usize,
 }
 
 impl NetErrorOffset {
@@ -45,9 +47,10 @@ impl NetErrorOffset {
         trajectory: &Trajectory,
         statics: &Statics,
         mut tensions_for: impl FnMut(&[f64; 7]) -> Vec<f64>,
-    ) -> Result<NetErrorOffset, SolveError> {
+    ) -> NetErrorOffset {
         let mut rows = Vec::with_capacity(trajectory.poses.len());
         let mut worst_m: f64 = 0.0;
+        let mut unsolved = 0;
         let mut warm = None;
         for (i, pose) in trajectory.poses.iter().enumerate() {
             let point = PosePoint {
@@ -59,7 +62,14 @@ impl NetErrorOffset {
             for pass in 0..PASSES {
                 let asked = shifted(&point, &d);
                 let tensions = tensions_for(&asked);
-                let solution = statics.solve(&tensions, warm.as_ref())?;
+                // A row whose statics fail sends no offset (the offset is a
+                // refinement; the path goes on without it there).
+                let Ok(solution) = statics.solve(&tensions, warm.as_ref()) else {
+                    d = [f64::NAN; 3];
+                    unsolved += 1;
+                    warm = None;
+                    break;
+                };
                 let error: [f64; 3] = std::array::from_fn(|k| solution.position[k] - pose[k]);
                 if pass == 0 {
                     worst_m = worst_m.max(error.iter().map(|e| e * e).sum::<f64>().sqrt());
@@ -75,15 +85,19 @@ impl NetErrorOffset {
                 .all(|v| v.is_finite() && v.abs() <= MAX_NET_ERROR_OFFSET);
             rows.push(if usable { d.to_vec() } else { vec![0.0; 3] });
         }
-        Ok(NetErrorOffset { rows, worst_m })
+        NetErrorOffset {
+            rows,
+            worst_m,
+            unsolved,
+        }
     }
 
     /// The offset at the trajectory's own time `t_path` (s), interpolated
     /// as the poses are (along a shaped step under way too).
     pub fn at(&self, trajectory: &Trajectory, t_path: f64) -> [f64; 3] {
-        let mut out = Vec::with_capacity(3);
-        trajectory.blend(&self.rows, t_path, &mut out);
-        std::array::from_fn(|k| out.get(k).copied().unwrap_or(0.0))
+        let mut out = [0.0; 3];
+        trajectory.blend_into(&self.rows, t_path, &mut out);
+        out
     }
 
     /// The first pose's offset as a shift of the whole pose (m and
@@ -103,6 +117,12 @@ impl NetErrorOffset {
     /// The largest error of the net along the path, m.
     pub fn worst_m(&self) -> f64 {
         self.worst_m
+    }
+
+    /// How many of the path's rows send no offset because their statics
+    /// did not solve.
+    pub fn unsolved(&self) -> usize {
+        self.unsolved
     }
 }
 
@@ -180,7 +200,8 @@ mod tests {
                 .collect(),
             ..traj.clone()
         };
-        let offsets = NetErrorOffset::along(&sub, &statics, &mut erring).unwrap();
+        let offsets = NetErrorOffset::along(&sub, &statics, &mut erring);
+        assert_eq!(offsets.unsolved(), 0);
         assert!(
             offsets.worst_m() > 2e-4,
             "the erring net is {} m off",

@@ -149,11 +149,20 @@ impl Trajectory {
     /// the poses are: linearly between a path's rows, and along each
     /// shaped step under way between a stepwise trajectory's targets.
     pub fn blend(&self, rows: &[Vec<f64>], t: f64, out: &mut Vec<f64>) {
+        out.clear();
+        out.resize(rows.first().map_or(0, Vec::len), 0.0);
+        self.blend_into(rows, t, out);
+    }
+
+    /// [`Trajectory::blend`] into `out`, as many columns as it holds (no
+    /// allocation: the planner's step calls it every period).
+    pub fn blend_into(&self, rows: &[Vec<f64>], t: f64, out: &mut [f64]) {
         let (i, f) = self.segment(t);
         let a = &rows[i];
-        out.clear();
         if f == 0.0 {
-            out.extend_from_slice(a);
+            for (o, a) in out.iter_mut().zip(a) {
+                *o = *a;
+            }
             for (j, left, _) in self.steps_under_way(self.local_time(t)) {
                 let (to, from) = (&rows[j], &rows[j - 1]);
                 for (o, (b, a)) in out.iter_mut().zip(to.iter().zip(from)) {
@@ -163,7 +172,9 @@ impl Trajectory {
             return;
         }
         let b = &rows[i + 1];
-        out.extend(a.iter().zip(b).map(|(a, b)| a + f * (b - a)));
+        for (o, (a, b)) in out.iter_mut().zip(a.iter().zip(b)) {
+            *o = a + f * (b - a);
+        }
     }
 
     /// The feed-forward tensions, one set per pose (N; NaN where the

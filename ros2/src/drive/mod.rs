@@ -21,7 +21,7 @@ use ros2_client::{Publisher, Subscription};
 use tendril::ipc::clock::{now_ns, Ticker};
 use tendril::ipc::controller::{Controller, ControllerConfig, Inbox};
 use tendril::ipc::following::Following;
-use tendril::ipc::planner::{net_error_at, plan, setpoint_for, Planned};
+use tendril::ipc::planner::{plan, setpoint_for, Planned};
 use tendril::ipc::sim::analysis::Sample;
 use tendril::robot::RigidMap;
 use tendril::runlog::{RunLog, RunLogStats, StepRecord};
@@ -379,25 +379,12 @@ impl Drive {
                 // A silent robot, a held controller: nothing to fit.
                 let following = self.silent.is_none() && self.following.follows(t_wake);
                 let Planned {
-                    motion,
-                    stiffness,
-                    net_error,
-                    ..
+                    motion, stiffness, ..
                 } = &mut self.planned;
                 let adapted = stiffness
                     .as_mut()
                     .map(|s| s.step(motion.trajectory(), t, &desired, following));
-                let net = net_error
-                    .as_ref()
-                    .and_then(|n| net_error_at(n, motion, &desired));
-                let offset = match (adapted, net) {
-                    (None, None) => None,
-                    (a, b) => {
-                        let (a, b) = (a.unwrap_or_default(), b.unwrap_or_default());
-                        Some(std::array::from_fn(|k| a[k] + b[k]))
-                    }
-                };
-                setpoint_for(motion, t, &desired, offset)
+                setpoint_for(motion, t, &desired, adapted)
             }
         };
         setpoint.header = MsgHeader {

@@ -17,12 +17,12 @@ use super::IpcError;
 
 use crate::plan::learning::PassOutcome;
 use crate::plan::{
-    along_axes, Desired, Learner, LearningChoice, Motion, NetErrorOffset, PathShape, ShapingChoice,
+    along_axes, Desired, Learner, LearningChoice, Motion, PathShape, ShapingChoice,
     StiffnessAdaptation,
 };
 
 mod planned;
-pub use planned::{net_error_at, plan, setpoint_for, Planned};
+pub use planned::{plan, setpoint_for, Planned};
 
 /// Bad setpoints to send instead of the trajectory's, each for one message.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -253,8 +253,6 @@ struct PlannerTask<'a> {
     following: Following,
     /// The stiffness adaptation, when asked for (`docs/design.md` §6.5).
     stiffness: Option<StiffnessAdaptation>,
-    /// The offset that takes the net's own error out, when asked for.
-    net_error: Option<NetErrorOffset>,
     /// The tracker's frames, for the learning and the stiffness adaptation.
     states: Option<transport::Sub<PlantState>>,
     last_frame: u32,
@@ -282,7 +280,6 @@ impl<'a> PlannerTask<'a> {
                 false => None,
             },
             stiffness: planned.stiffness,
-            net_error: planned.net_error,
             motion: planned.motion,
             learner: planned.learner,
             publisher: transport::publisher(&services.setpoint)?,
@@ -391,19 +388,11 @@ impl process::Task for PlannerTask<'_> {
         }
         let following = self.following.follows(tick.deadline_ns);
         let adapted = self.adapt(frame.as_ref(), t, &desired, following);
-        let net_error = self
-            .net_error
-            .as_ref()
-            .and_then(|n| net_error_at(n, &self.motion, &desired));
-        let offset = match (learned, adapted, net_error) {
-            (None, None, None) => None,
-            (a, b, c) => {
-                let (a, b, c) = (
-                    a.unwrap_or_default(),
-                    b.unwrap_or_default(),
-                    c.unwrap_or_default(),
-                );
-                Some(std::array::from_fn(|k| a[k] + b[k] + c[k]))
+        let offset = match (learned, adapted) {
+            (None, None) => None,
+            (a, b) => {
+                let (a, b) = (a.unwrap_or_default(), b.unwrap_or_default());
+                Some(std::array::from_fn(|k| a[k] + b[k]))
             }
         };
         let mut msg = setpoint_for(&self.motion, t, &desired, offset);

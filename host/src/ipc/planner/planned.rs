@@ -8,7 +8,7 @@ use tendril_shared::messages::{setpoint_flags, Header, Setpoint};
 use super::PlannerConfig;
 use crate::ipc::IpcError;
 use crate::plan::{
-    Desired, Learner, LearningChoice, Motion, NetErrorOffset, StiffnessAdaptation, Trajectory,
+    Learner, LearningChoice, Motion, NetErrorOffset, StiffnessAdaptation, Trajectory,
     TENSION_HEADROOM,
 };
 use crate::robot::Robot;
@@ -29,8 +29,6 @@ pub struct Planned {
     /// The least tension headroom along the path (warned about below
     /// [`TENSION_HEADROOM`]); `None` without feed-forward tensions.
     pub headroom: Option<crate::plan::Headroom>,
-    /// The offset that takes the net's own error out, when asked for.
-    pub net_error: Option<NetErrorOffset>,
 }
 
 /// Work out `cfg`'s path (the planner process's set-up; `tendril-ros2
@@ -115,13 +113,12 @@ pub fn plan(cfg: &PlannerConfig) -> Result<Planned, IpcError> {
         }
         (true, Some(model)) => Some(net_error_offset(model, &statics, &robot, &traj)?),
     };
-    let first_shift = net_error
-        .as_ref()
-        .filter(|_| rest.is_some())
-        .map_or([0.0; 7], |n| n.first_shift(&traj));
+    let motion = Motion::new(traj, cfg.settle_s, rest, inverse);
     Ok(Planned {
-        net_error,
-        motion: Motion::new(traj, cfg.settle_s, rest, inverse).with_approach_end_shift(first_shift),
+        motion: match net_error {
+            Some(n) => motion.with_net_error(n),
+            None => motion,
+        },
         learner: learner(cfg, &robot, shaping)?,
         stiffness,
         base: robot.base,
@@ -150,25 +147,18 @@ fn net_error_offset(
             .map(|&t| f64::from(t))
             .collect();
         crate::command_stage::command_for(&limits, &raw)
-    })
-    .map_err(|e| IpcError::Other(format!("planner: the net's error along the path: {e}")))?;
+    });
+    if offset.unsolved() > 0 {
+        log::warn!(
+            "planner: the statics of the net's command did not solve at {} of the path's poses: no net's error offset there",
+            offset.unsolved()
+        );
+    }
     log::info!(
         "planner: the net is up to {:.3} mm off the path; its error is sent as an offset",
         offset.worst_m() * 1e3
     );
     Ok(offset)
-}
-
-/// The net-error offset for `desired`: the path's, in the hold and on the
-/// path; none on the approach from rest, which ends where the offset puts
-/// the pose instead ([`Motion::with_approach_end_shift`]).
-pub fn net_error_at(
-    net_error: &NetErrorOffset,
-    motion: &Motion,
-    desired: &Desired,
-) -> Option<[f64; 3]> {
-    (!(desired.holding && desired.moving))
-        .then(|| net_error.at(motion.trajectory(), desired.t_path))
 }
 
 /// The setpoint the planner sends at `t` (s since its start) for `desired`
@@ -194,14 +184,18 @@ pub fn setpoint_for(
             flags |= bit;
         }
     }
-    let dynamic_offset = match (motion.dynamic_offset(t, desired), learned) {
-        (None, None) => [0.0; 3],
-        (inverse, learned) => {
-            flags |= setpoint_flags::HAS_DYNAMIC_OFFSET;
-            let (a, b) = (inverse.unwrap_or_default(), learned.unwrap_or_default());
-            std::array::from_fn(|k| (a[k] + b[k]) as f32)
+    let offsets = [
+        motion.dynamic_offset(t, desired),
+        motion.net_error_offset(desired),
+        learned,
+    ];
+    let mut dynamic_offset = [0.0f32; 3];
+    for offset in offsets.iter().flatten() {
+        flags |= setpoint_flags::HAS_DYNAMIC_OFFSET;
+        for (sum, v) in dynamic_offset.iter_mut().zip(offset) {
+            *sum += *v as f32;
         }
-    };
+    }
     let (tangent, tangent_axes, tangent_dim) = match point.tangent {
         Some(d) => {
             flags |= setpoint_flags::HAS_TANGENT;
