@@ -220,8 +220,14 @@ fn two_segment_planner_kill_holds_then_resumes_tracking() {
         .iter()
         .find(|e| e["kind"] == "planner_restarted")
         .expect("restart event");
+    // Tracking resumed: the RMS from 1.5 s after the restart to the end.
+    // Six idle runs gave 0.055–0.092 mm (with and without the net's error
+    // offset), a loaded CI rehearsal 0.101 mm; the correction is still
+    // settling back in that window (the whole circle tracks at ≈ 0.045 mm),
+    // and a loop that had not resumed would be millimetres off the moving
+    // circle. So 0.15 mm, not the 0.1 mm that the load alone crossed.
     let after = f(&restart["rms_after_recovery_mm"]);
-    assert!(after <= 0.1, "RMS after recovery {after} mm");
+    assert!(after <= 0.15, "RMS after recovery {after} mm");
     assert_eq!(f(&r["plant"]["out_of_range_commands"]), 0.0);
 }
 
