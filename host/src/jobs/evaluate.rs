@@ -14,8 +14,8 @@ use crate::evaluate::{ErrorStats, EvalError, SplitMetrics};
 use crate::fsutil::{check_distinct, write_atomic, PathCollision};
 use crate::inverse::{ExactIk, IkSettings, InverseError, Target};
 use crate::net::{
-    check_model_robot, infer, infer_batch, pose_rows, read_model, HostNet, ReadError,
-    RobotMismatch, CLI_OVERRIDE,
+    check_model_robot, infer_batch, pose_rows, read_model, HostNet, ReadError, RobotMismatch,
+    CLI_OVERRIDE,
 };
 use crate::robot::{Robot, RobotError};
 use crate::statics::{SolverSettings, Statics};
@@ -278,10 +278,7 @@ pub fn refine(
     );
     let rows = data.len().min(REFINE_ROWS);
     let pose_of = |r: usize| -> [f64; 7] { std::array::from_fn(|k| data.poses[(r, k)]) };
-    let guess_of = |pose: &[f64; 7]| -> Vec<f64> {
-        let raw: Vec<f64> = infer(net, pose).iter().map(|&t| f64::from(t)).collect();
-        crate::command_stage::command_for(&limits, &raw)
-    };
+    let guess_of = |pose: &[f64; 7]| crate::net::steady_command(net, &limits, pose);
     let started = Instant::now();
     for r in 0..rows {
         std::hint::black_box(guess_of(&pose_of(r)));

@@ -4,7 +4,7 @@
 //! batch runs through [`HostNet`], which computes the same bits faster.
 
 use nalgebra::DMatrix;
-use tendril_shared::{McuNet, POSE_DIM};
+use tendril_shared::{McuNet, TendonLimits, POSE_DIM};
 
 use super::HostNet;
 
@@ -16,6 +16,15 @@ pub fn infer(net: &McuNet, pose: &[f64; POSE_DIM]) -> Vec<f32> {
     }
     let y = tendril_firmware::infer(net, &x);
     y[..net.shape().outputs].to_vec()
+}
+
+/// The tensions the MCU commands for `pose` in a steady state: the net's
+/// output through [`infer`], then the command stage
+/// ([`crate::command_stage::command_for`]: the co-contraction shift, the
+/// clip to `limits`).
+pub fn steady_command(net: &McuNet, limits: &TendonLimits, pose: &[f64; POSE_DIM]) -> Vec<f64> {
+    let raw: Vec<f64> = infer(net, pose).into_iter().map(f64::from).collect();
+    crate::command_stage::command_for(limits, &raw)
 }
 
 /// Batch inference: poses `n × 7` → tensions `n × outputs` (N), through

@@ -35,7 +35,7 @@ mod test_nets;
 
 pub use fast::HostNet;
 pub use guarded::{read_poses, solve_csv, BatchSummary, GuardedNet, IkAnswer, IkError};
-pub use infer::{infer, infer_batch, pose_rows};
+pub use infer::{infer, infer_batch, pose_rows, steady_command};
 pub use read::{decode, read_tnet, read_tnet_bytes, ReadError, MAX_TNET_BYTES};
 pub use robot_check::{
     check_model_robot, decode_with_provenance, load_for_robot, read_model, ModelError, RobotCheck,

@@ -142,11 +142,7 @@ fn net_error_offset(
     let limits = crate::command_stage::limits_for(robot, 1.0)
         .map_err(|e| IpcError::Config(format!("planner: the robot's tension limits: {e:?}")))?;
     let offset = NetErrorOffset::along(traj, statics, |pose| {
-        let raw: Vec<f64> = crate::net::infer(&net, pose)
-            .iter()
-            .map(|&t| f64::from(t))
-            .collect();
-        crate::command_stage::command_for(&limits, &raw)
+        crate::net::steady_command(&net, &limits, pose)
     });
     if offset.unsolved() > 0 {
         log::warn!(
