@@ -63,6 +63,12 @@ pub struct SimArgs {
     /// --correction off.
     #[arg(long, value_enum, default_value_t = super::controller::OnOff::On)]
     pub net_error_offset: super::controller::OnOff,
+    /// Learn the circle's offset on the model before the run: the loop
+    /// rehearsed in process against the robot file's plant (its rod, with
+    /// --plant dynamic), the offset in the circle's turning frame
+    /// (docs/design.md §6.4; a minute or two on a three-segment robot).
+    #[arg(long, value_enum, default_value_t = super::controller::OnOff::Off)]
+    pub model_learning: super::controller::OnOff,
     #[command(flatten)]
     pub traj: TrajectoryOpts,
     #[command(flatten)]
@@ -145,6 +151,7 @@ impl SimArgs {
         cfg.planner.step_shaping = self.traj.step_shaping();
         cfg.planner.dynamic_offset = self.traj.dynamic_offset == super::controller::OnOff::On;
         cfg.planner.learning = self.traj.learning();
+        cfg.model_learning = self.model_learning == super::controller::OnOff::On;
         // The net alone is the net without feedback: no adaptation either.
         cfg.planner.adapt_stiffness = self.traj.adapt_stiffness == super::controller::OnOff::On
             && self.tuning.correction == super::controller::OnOff::On;

@@ -19,6 +19,7 @@ pub mod frame;
 pub mod planner;
 pub mod plant;
 pub mod process;
+pub mod rehearsal;
 pub mod sim;
 pub mod stats;
 pub mod transport;
@@ -335,6 +336,11 @@ mod tests {
             adapt_stiffness: true,
             net_error_offset: true,
             model: Some("m.tnet".into()),
+            turning_offset: Some(crate::plan::TurningOffset {
+                center_m: [0.0, 0.01],
+                period_s: 5.0,
+                harmonics: vec![[[1e-4, 0.0], [-2e-5, 0.0], [0.0, 0.0]], [[3e-5, -1e-5]; 3]],
+            }),
             controller_gains: Some(crate::plan::IntegralGains {
                 ki_per_s: 4.0,
                 filter_tau_s: 0.08,

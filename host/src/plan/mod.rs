@@ -47,6 +47,7 @@ pub mod stand_in;
 pub mod stiffness;
 pub mod table;
 pub mod trajectory;
+pub mod turning_offset;
 
 pub use bend::bend_tensions;
 pub use family::Family;
@@ -62,6 +63,7 @@ pub use shaping::{ModalInverse, ShapingChoice, StepShaping};
 pub use stiffness::{StiffnessAdaptation, StiffnessDirections, StiffnessEstimator};
 pub use table::read_pose_csv;
 pub use trajectory::{PosePoint, Trajectory};
+pub use turning_offset::TurningOffset;
 
 use std::path::PathBuf;
 

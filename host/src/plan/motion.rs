@@ -5,6 +5,7 @@
 
 use super::net_error::NetErrorOffset;
 use super::shaping::{ModalInverse, StepShaping};
+use super::turning_offset::TurningOffset;
 use super::{PosePoint, Trajectory};
 
 /// The desired point at one instant of the planner's clock.
@@ -45,6 +46,8 @@ pub struct Motion {
     inverse: Option<ModalInverse>,
     /// The offset that takes the net's own error out (`plan::net_error`).
     net_error: Option<NetErrorOffset>,
+    /// The offset learned on the model for a circle (`plan::turning_offset`).
+    turning: Option<TurningOffset>,
 }
 
 impl Motion {
@@ -65,7 +68,31 @@ impl Motion {
             approach_end_shift: [0.0; 7],
             inverse,
             net_error: None,
+            turning: None,
         }
+    }
+
+    /// With the offset learned on the model for the path (sent on the path
+    /// only: not in the hold, not on a shaped move).
+    pub fn with_turning_offset(self, turning: TurningOffset) -> Motion {
+        Motion {
+            turning: Some(turning),
+            ..self
+        }
+    }
+
+    /// The learned turning offset for `now`, m along the point's tangent
+    /// axes (none without one, in the hold and on shaped moves).
+    pub fn turning_offset(&self, now: &Desired) -> Option<[f64; 3]> {
+        let turning = self.turning.as_ref()?;
+        if now.holding || now.moving {
+            return None;
+        }
+        let p = &now.point.pose;
+        Some(along_axes(
+            &now.point,
+            turning.at(now.t_path, [p[0], p[1], p[2]]),
+        ))
     }
 
     /// With the offset that takes the net's own error out along the path:

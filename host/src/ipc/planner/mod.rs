@@ -22,7 +22,7 @@ use crate::plan::{
 };
 
 mod planned;
-pub use planned::{plan, setpoint_for, Planned};
+pub use planned::{plan, setpoint_for, Planned, MAX_TURNING_OFFSET_M};
 
 /// Bad setpoints to send instead of the trajectory's, each for one message.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -110,6 +110,11 @@ pub struct PlannerConfig {
     /// The net the controller runs (`.tnet`), for `net_error_offset`.
     #[serde(default)]
     pub model: Option<PathBuf>,
+    /// The offset learned on the model for a circle, sent on the path
+    /// (`docs/design.md` §6.4, "Learning on the model"; `tendril sim
+    /// --model-learning on` works it out before the run).
+    #[serde(default)]
+    pub turning_offset: Option<crate::plan::TurningOffset>,
     /// The controller's integral gains (after its scaling to the mode) that
     /// the stiffness adaptation's loop model assumes (None: the
     /// controller's defaults for the robot; a launcher that knows the
@@ -165,6 +170,7 @@ impl PlannerConfig {
             adapt_stiffness: false,
             net_error_offset: false,
             model: None,
+            turning_offset: None,
             controller_gains: None,
             loop_delay_s: None,
             inject: Injections::default(),

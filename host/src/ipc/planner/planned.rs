@@ -113,17 +113,51 @@ pub fn plan(cfg: &PlannerConfig) -> Result<Planned, IpcError> {
         }
         (true, Some(model)) => Some(net_error_offset(model, &statics, &robot, &traj)?),
     };
-    let motion = Motion::new(traj, cfg.settle_s, rest, inverse);
+    let mut motion = Motion::new(traj, cfg.settle_s, rest, inverse);
+    if let Some(n) = net_error {
+        motion = motion.with_net_error(n);
+    }
+    if let Some(turning) = &cfg.turning_offset {
+        check_turning_offset(turning, &cfg.shape)?;
+        motion = motion.with_turning_offset(turning.clone());
+    }
     Ok(Planned {
-        motion: match net_error {
-            Some(n) => motion.with_net_error(n),
-            None => motion,
-        },
+        motion,
         learner: learner(cfg, &robot, shaping)?,
         stiffness,
         base: robot.base,
         headroom,
     })
+}
+
+/// The largest turning offset a planner sends, per coefficient, m: what
+/// the model's learning may put there (it stops well below: the soft
+/// three-segment robot's circle needed 0.32 mm).
+pub const MAX_TURNING_OFFSET_M: f64 = 2e-3;
+
+/// A turning offset is learned for one circle: its centre and period.
+fn check_turning_offset(
+    turning: &crate::plan::TurningOffset,
+    shape: &crate::plan::PathShape,
+) -> Result<(), IpcError> {
+    let bad = |why: String| IpcError::Config(format!("planner: turning offset: {why}"));
+    turning.check(MAX_TURNING_OFFSET_M).map_err(bad)?;
+    match shape {
+        crate::plan::PathShape::Circle {
+            center_m, freq_hz, ..
+        } if *center_m == turning.center_m
+            && (1.0 / freq_hz - turning.period_s).abs() <= 1e-9 * turning.period_s =>
+        {
+            Ok(())
+        }
+        _ => Err(bad(format!(
+            "learned for a circle about ({:.4}, {:.4}) m with a {:.3} s period, not for this {}",
+            turning.center_m[0],
+            turning.center_m[1],
+            turning.period_s,
+            shape.name()
+        ))),
+    }
 }
 
 /// The offset that cancels the net in `model`'s quasi-static error along
@@ -183,6 +217,7 @@ pub fn setpoint_for(
     let offsets = [
         motion.dynamic_offset(t, desired),
         motion.net_error_offset(desired),
+        motion.turning_offset(desired),
         learned,
     ];
     let mut dynamic_offset = [0.0f32; 3];

@@ -294,6 +294,7 @@ pub fn build_report(
             _ => None,
         },
         learning_stopped_at_s,
+        model_learning: None,
         stiffness_adapted: logs.stiffness_adapted(),
         pass_rms_mm: match (cfg.planner.shape.period_s(), logs.setpoints.first()) {
             // From the end of the first planner's settle hold.

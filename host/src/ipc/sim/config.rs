@@ -70,6 +70,9 @@ pub struct SimConfig {
     /// Seconds of trajectory after the settle hold.
     pub duration_s: f64,
     /// Planner: trajectory, rate, settle, injected bad setpoints.
+    /// Learn the circle's offset on the model before the run
+    /// (`--model-learning on`; `docs/design.md` §6.4).
+    pub model_learning: bool,
     pub planner: PlannerConfig,
     /// Controller: loop and correction tuning.
     pub controller: ControllerConfig,
@@ -146,6 +149,7 @@ impl SimConfig {
             smoke: false,
             prefix: None,
             duration_s: 10.0,
+            model_learning: false,
             planner: PlannerConfig {
                 prefix: String::new(),
                 start_from_rest: true,

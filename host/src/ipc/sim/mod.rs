@@ -17,6 +17,7 @@ pub mod assess;
 pub mod budget;
 mod config;
 pub mod faults;
+pub mod model_learning;
 pub mod oscillation;
 pub mod realtime;
 pub mod report;
@@ -300,6 +301,17 @@ fn model_file(cfg: &SimConfig, dir: &RunDir) -> Result<(PathBuf, Vec<u8>, ModelU
 
 fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
     let (model_path, model_bytes, model_used) = model_file(cfg, dir)?;
+    let learned = model_learning::before_run(cfg, &model_path, &model_bytes)?;
+    let with_offset;
+    let (cfg, model_learning) = match learned {
+        Some((offset, report)) => {
+            let mut c = cfg.clone();
+            c.planner.turning_offset = Some(offset);
+            with_offset = c;
+            (&with_offset, Some(report))
+        }
+        None => (cfg, None),
+    };
     let prefix = cfg.prefix.clone().unwrap_or_else(unique_prefix);
     let cpus = if cfg.pin {
         let cpus = super::clock::allowed_cpus();
@@ -462,7 +474,7 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
         return Err(SimError::Interrupted);
     }
 
-    let report = assess::build_report(
+    let mut report = assess::build_report(
         cfg,
         dir,
         t0,
@@ -476,6 +488,7 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
             shared_stall_periods: None,
         },
     )?;
+    report.model_learning = model_learning;
     write_json(&dir.file("report.json"), &report)?;
     crate::fsutil::write_atomic(&dir.file("report.md"), report.markdown().as_bytes()).map_err(
         |source| SimError::Io {

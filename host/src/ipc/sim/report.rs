@@ -47,6 +47,10 @@ pub struct SimReport {
     /// When learning stopped on a growing error (the fault event), s.
     #[serde(default)]
     pub learning_stopped_at_s: Option<f64>,
+    /// The circle's offset learned on the model before the run (`null`:
+    /// not asked for; `docs/design.md` §6.4).
+    #[serde(default)]
+    pub model_learning: Option<super::model_learning::ModelLearningReport>,
     /// The stiffness adaptation's estimate at the end, κ̂ (the tip's share
     /// of a stiffness error: 0.091 for a backbone 10 % stiffer than its
     /// file; `null`: off; `docs/design.md` §6.5).
@@ -354,7 +358,11 @@ impl SimReport {
         } else {
             "no net's error offset"
         };
-        format!("{shaping}; {offset}; {net}; {learning}; {stiffness}")
+        let model = match &self.model_learning {
+            Some(m) => format!("; learned on the model ({:.3} mm)", m.learned_pass_rms_mm),
+            None => String::new(),
+        };
+        format!("{shaping}; {offset}; {net}; {learning}; {stiffness}{model}")
     }
 
     /// `report.md`: the headline numbers, each with what it covers.
@@ -422,6 +430,21 @@ impl SimReport {
                     format!("{t:.2}"),
                 );
             }
+        }
+        if let Some(m) = &self.model_learning {
+            row(
+                "the circle's offset learned on the model: the rehearsed pass unaided → learned (mm RMS); rehearsals; s",
+                format!(
+                    "{:.3} → {:.3}; {}; {:.0}{}",
+                    m.unaided_pass_rms_mm,
+                    m.learned_pass_rms_mm,
+                    m.rehearsals,
+                    m.seconds,
+                    m.stopped
+                        .as_ref()
+                        .map_or(String::new(), |why| format!(" (stopped early: {why})"))
+                ),
+            );
         }
         if let Some(k) = self.stiffness_adapted {
             row(

@@ -1,0 +1,126 @@
+//! `tendril sim --model-learning on`: the circle's offset learned on the
+//! model before the run (`ipc::rehearsal`, `docs/design.md` §6.4), then
+//! sent by the planner on the path.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::{SimConfig, SimError};
+use crate::ipc::rehearsal::{self, Settings, VirtualLoop};
+use crate::plan::{PathShape, TurningOffset};
+use crate::plant::PlantParams;
+
+/// What the learning on the model did (`report.json`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ModelLearningReport {
+    /// The rehearsed loop's measured pass without the offset, RMS mm.
+    pub unaided_pass_rms_mm: f64,
+    /// The same pass after each iteration, RMS mm.
+    pub iteration_pass_rms_mm: Vec<f64>,
+    /// With the offset sent (the best iteration's), RMS mm.
+    pub learned_pass_rms_mm: f64,
+    /// The offset's largest coefficient, mm.
+    pub largest_offset_mm: f64,
+    /// Why the iterations stopped early, if they did.
+    #[serde(default)]
+    pub stopped: Option<String>,
+    /// Rehearsals of the loop run.
+    pub rehearsals: usize,
+    /// Wall time, s.
+    pub seconds: f64,
+}
+
+/// The offset for `cfg`'s circle, learned on the loop rehearsed against
+/// the robot file's plant model with the controller's net (`model_path`,
+/// `model_bytes`); `None` when not asked for.
+pub fn before_run(
+    cfg: &SimConfig,
+    model_path: &Path,
+    model_bytes: &[u8],
+) -> Result<Option<(TurningOffset, ModelLearningReport)>, SimError> {
+    if !cfg.model_learning {
+        return Ok(None);
+    }
+    let PathShape::Circle { center_m, .. } = cfg.planner.shape else {
+        return Err(SimError::Config(format!(
+            "--model-learning on learns a circle's offset; this path is a {}",
+            cfg.planner.shape.name()
+        )));
+    };
+    let period_s =
+        cfg.planner.shape.period_s().ok_or_else(|| {
+            SimError::Config("--model-learning on: the circle has no period".into())
+        })?;
+    if cfg.controller.ki_per_s == 0.0 {
+        return Err(SimError::Config(
+            "--model-learning on needs the correction (it learns on the loop with it)".into(),
+        ));
+    }
+    let robot =
+        crate::robot::Robot::load(&cfg.robot).map_err(|e| SimError::Config(e.to_string()))?;
+    // The planner as it will run, less what the rehearsal cannot be: the
+    // learning and the stiffness adaptation read the tracker's frames.
+    let mut planner = cfg.planner.clone();
+    planner.model = Some(model_path.to_path_buf());
+    planner.turning_offset = None;
+    planner.learning = crate::plan::LearningChoice::Off;
+    planner.adapt_stiffness = false;
+    let planned = crate::ipc::planner::plan(&planner)?;
+    let mut controller = cfg.controller.clone();
+    controller.model = model_path.to_path_buf();
+    // The model: the robot file's plant (its rod, static or dynamic, with
+    // its own damping), an ideal tracker; never a reality, which the
+    // controller does not know.
+    let plant = PlantParams {
+        model: cfg.plant.params.model_in_effect(),
+        ..PlantParams::default()
+    };
+    let rehearsed = VirtualLoop {
+        robot: &robot,
+        net: model_bytes,
+        controller: &controller,
+        plant: &plant,
+        motion: &planned.motion,
+        period_s,
+        settle_s: planner.settle_s,
+    };
+    let settings = Settings::default();
+    let total = 1 + (settings.lifted * 6 - 3) + 3 + settings.iterations;
+    log::info!(
+        "sim: learning the circle's offset on the model: up to {total} rehearsals of {:.0} s of loop",
+        planner.settle_s + period_s * settings.passes as f64
+    );
+    let bar = crate::progress::bar(
+        total as u64,
+        true,
+        "learning on the model {bar:30} {pos}/{len} rehearsals {elapsed}",
+    );
+    let started = std::time::Instant::now();
+    let learned = rehearsal::learn(&rehearsed, center_m, &settings, &|| bar.inc(1));
+    bar.finish_and_clear();
+    if crate::interrupt::stop_requested() {
+        return Err(SimError::Interrupted);
+    }
+    let learned = learned?;
+    let report = ModelLearningReport {
+        unaided_pass_rms_mm: learned.unaided_rms_m * 1e3,
+        iteration_pass_rms_mm: learned.iteration_rms_m.iter().map(|v| v * 1e3).collect(),
+        learned_pass_rms_mm: learned.learned_rms_m() * 1e3,
+        largest_offset_mm: learned.offset.largest_m() * 1e3,
+        stopped: learned.stopped.clone(),
+        rehearsals: learned.rehearsals,
+        seconds: started.elapsed().as_secs_f64(),
+    };
+    if let Some(why) = &learned.stopped {
+        log::warn!("sim: learning on the model stopped early: {why}");
+    }
+    log::info!(
+        "sim: on the model, the circle's pass {:.3} → {:.3} mm RMS ({} rehearsals, {:.0} s)",
+        report.unaided_pass_rms_mm,
+        report.learned_pass_rms_mm,
+        report.rehearsals,
+        report.seconds
+    );
+    Ok(Some((learned.offset, report)))
+}
