@@ -48,6 +48,9 @@ pub struct Motion {
     net_error: Option<NetErrorOffset>,
     /// The offset learned on the model for a circle (`plan::turning_offset`).
     turning: Option<TurningOffset>,
+    /// Where the approach ends for the turning offset, beside
+    /// `approach_end_shift`: the hold sends the offset at the path's start.
+    turning_shift: [f64; 7],
 }
 
 impl Motion {
@@ -69,23 +72,33 @@ impl Motion {
             inverse,
             net_error: None,
             turning: None,
+            turning_shift: [0.0; 7],
         }
     }
 
-    /// With the offset learned on the model for the path (sent on the path
-    /// only: not in the hold, not on a shaped move).
+    /// With the offset learned on the model for the path: sent in the hold
+    /// (its value at the path's start) and on the path, not on shaped
+    /// moves; the approach from rest ends where it puts the first pose, so
+    /// that it does not step in when the path starts (a step rings the
+    /// rod's mode, which on the three-segment robot decays over seconds).
     pub fn with_turning_offset(self, turning: TurningOffset) -> Motion {
+        let point = self.trajectory.sample(0.0);
+        let p = point.pose;
+        let d = along_axes(&point, turning.at(0.0, [p[0], p[1], p[2]]));
+        let shifted = super::net_error::shifted(&point, &d);
         Motion {
             turning: Some(turning),
+            turning_shift: std::array::from_fn(|k| shifted[k] - p[k]),
             ..self
         }
     }
 
     /// The learned turning offset for `now`, m along the point's tangent
-    /// axes (none without one, in the hold and on shaped moves).
+    /// axes (none without one and on shaped moves; in the hold, its value
+    /// at the path's start).
     pub fn turning_offset(&self, now: &Desired) -> Option<[f64; 3]> {
         let turning = self.turning.as_ref()?;
-        if now.holding || now.moving {
+        if now.moving {
             return None;
         }
         let p = &now.point.pose;
@@ -136,8 +149,11 @@ impl Motion {
                 // The approach ends where the hold's offset puts the pose;
                 // the hold itself sends the first pose and the offset.
                 Some((shaping, rest)) if t.max(0.0) < shaping.length_s() => {
-                    for (p, d) in point.pose.iter_mut().zip(&self.approach_end_shift) {
-                        *p += d;
+                    for ((p, d), e) in (point.pose.iter_mut())
+                        .zip(&self.approach_end_shift)
+                        .zip(&self.turning_shift)
+                    {
+                        *p += d + e;
                     }
                     approach(shaping, rest, t.max(0.0), &mut point)
                 }
@@ -324,6 +340,46 @@ mod tests {
             );
             assert_eq!(hold.point.pose[k], plain_hold[k]);
         }
+    }
+
+    /// A turning offset is sent in the hold at its value for the path's
+    /// start, and the approach ends where that puts the first pose: the
+    /// pose the net is asked for does not step at the approach's end or at
+    /// the path's start. Shaped moves send none.
+    #[test]
+    fn a_turning_offset_is_in_place_before_the_path_starts() {
+        let mut turning = TurningOffset::zero([0.0, 0.0], 5.0, 2);
+        turning.harmonics[0] = [[1e-4, 0.0], [-5e-5, 0.0], [2e-5, 0.0]];
+        turning.harmonics[1] = [[3e-5, 1e-5], [0.0, 4e-5], [0.0, 0.0]];
+        let m = circle_motion(None).with_turning_offset(turning.clone());
+        let length = StepShaping::for_mode(3.6, 0.05).unwrap().length_s();
+        // What the controller asks the net for: the pose moved by the offset.
+        let asked = |t: f64| {
+            let d = m.at(t);
+            let o = m.turning_offset(&d).unwrap_or([0.0; 3]);
+            super::super::net_error::shifted(&d.point, &o)
+        };
+        assert!(
+            m.turning_offset(&m.at(0.1)).is_none(),
+            "none on the approach"
+        );
+        let (end, hold) = (asked(length - 1e-9), asked(length + 1e-9));
+        let start = asked(2.0 + 1e-9);
+        for k in 0..3 {
+            assert!(
+                (end[k] - hold[k]).abs() < 1e-9,
+                "axis {k}: {end:?} {hold:?}"
+            );
+            assert!(
+                (start[k] - hold[k]).abs() < 1e-8,
+                "axis {k}: {start:?} {hold:?}"
+            );
+        }
+        // The first pose at +x: radial is x, tangential y.
+        let p = m.at(1.9).point.pose;
+        let want = turning.at(0.0, [p[0], p[1], p[2]]);
+        assert!((want[0] - 1.3e-4).abs() < 1e-12 && (want[1] - -5e-5).abs() < 1e-12);
+        assert!((hold[0] - p[0] - want[0]).abs() < 1e-9, "{hold:?}");
     }
 
     /// On the circle at cruise the modal inverse's offset is the closed

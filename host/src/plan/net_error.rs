@@ -129,7 +129,7 @@ impl NetErrorOffset {
 /// `point`'s pose moved by the offset `d` as the controller moves it
 /// (`ipc::controller::with_dynamic_offset`): Σ_j d_j T_j along the
 /// tangent, the position by d without one.
-fn shifted(point: &PosePoint, d: &[f64; 3]) -> [f64; 7] {
+pub(crate) fn shifted(point: &PosePoint, d: &[f64; 3]) -> [f64; 7] {
     let mut pose = point.pose;
     match point.tangent {
         Some(t) => {
