@@ -124,3 +124,49 @@ pub fn before_run(
     );
     Ok(Some((learned.offset, report)))
 }
+
+#[cfg(test)]
+mod tests {
+    use std::path::{Path, PathBuf};
+
+    use super::*;
+    use crate::ipc::sim::ModelSource;
+
+    fn config(shape: PathShape) -> SimConfig {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let mut cfg = SimConfig::new(
+            PathBuf::from("tendril"),
+            root.join("robots/seed-4t.toml"),
+            ModelSource::BuiltIn,
+            PathBuf::from("out"),
+        );
+        cfg.planner.shape = shape;
+        cfg.model_learning = true;
+        cfg
+    }
+
+    /// What cannot be learned this way is refused with one line that names
+    /// it, before any rehearsal runs; not asking for it costs nothing.
+    #[test]
+    fn a_path_other_than_a_circle_or_no_correction_is_refused_by_name() {
+        let net = crate::ipc::sim::BUILT_IN_NET;
+        let steps = PathShape::Steps {
+            targets_m: vec![vec![0.01, 0.0], vec![0.0, 0.01]],
+            dwell_s: 2.0,
+            height_m: None,
+        };
+        let err = before_run(&config(steps), Path::new("m.tnet"), net).unwrap_err();
+        assert!(
+            err.to_string().contains("circle") && err.to_string().contains("steps"),
+            "{err}"
+        );
+        let mut cfg = config(PathShape::default_circle());
+        cfg.set_correction(false);
+        let err = before_run(&cfg, Path::new("m.tnet"), net).unwrap_err();
+        assert!(err.to_string().contains("correction"), "{err}");
+        cfg.model_learning = false;
+        assert!(before_run(&cfg, Path::new("m.tnet"), net)
+            .unwrap()
+            .is_none());
+    }
+}
