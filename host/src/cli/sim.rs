@@ -69,6 +69,10 @@ pub struct SimArgs {
     /// (docs/design.md §6.4; a minute or two on a three-segment robot).
     #[arg(long, value_enum, default_value_t = super::controller::OnOff::Off)]
     pub model_learning: super::controller::OnOff,
+    /// Send this circle's offset, learned on the model by an earlier run
+    /// (its `turning-offset.json`), instead of learning it again.
+    #[arg(long, value_name = "FILE", conflicts_with = "model_learning")]
+    pub turning_offset: Option<PathBuf>,
     #[command(flatten)]
     pub traj: TrajectoryOpts,
     #[command(flatten)]
@@ -152,6 +156,10 @@ impl SimArgs {
         cfg.planner.dynamic_offset = self.traj.dynamic_offset == super::controller::OnOff::On;
         cfg.planner.learning = self.traj.learning();
         cfg.model_learning = self.model_learning == super::controller::OnOff::On;
+        if let Some(path) = &self.turning_offset {
+            cfg.planner.turning_offset =
+                Some(crate::plan::TurningOffset::read(path).map_err(anyhow::Error::msg)?);
+        }
         // The net alone is the net without feedback: no adaptation either.
         cfg.planner.adapt_stiffness = self.traj.adapt_stiffness == super::controller::OnOff::On
             && self.tuning.correction == super::controller::OnOff::On;

@@ -340,6 +340,10 @@ mod tests {
                 center_m: [0.0, 0.01],
                 period_s: 5.0,
                 harmonics: vec![[[1e-4, 0.0], [-2e-5, 0.0], [0.0, 0.0]], [[3e-5, -1e-5]; 3]],
+                learned_for: Some(crate::plan::LearnedFor {
+                    robot: [7; 32],
+                    shape: crate::plan::PathShape::default_circle(),
+                }),
             }),
             controller_gains: Some(crate::plan::IntegralGains {
                 ki_per_s: 4.0,

@@ -21,6 +21,20 @@ pub struct TurningOffset {
     /// `harmonics[m][axis] = [re, im]` of U_m, m; axis 0 radial, 1
     /// tangential, 2 height. Harmonic 0's imaginary part is unused.
     pub harmonics: Vec<[[f64; 2]; 3]>,
+    /// What the table was learned for (a planner sends it only there).
+    #[serde(default)]
+    pub learned_for: Option<LearnedFor>,
+}
+
+/// The robot file and the path a table was learned for: the same circle
+/// on another robot, or at another radius or height, needs another.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LearnedFor {
+    /// The robot file's fingerprint (`Robot::fingerprint`).
+    pub robot: [u8; 32],
+    /// The path.
+    pub shape: super::PathShape,
 }
 
 impl TurningOffset {
@@ -30,6 +44,7 @@ impl TurningOffset {
             center_m,
             period_s,
             harmonics: vec![[[0.0; 2]; 3]; n],
+            learned_for: None,
         }
     }
 
@@ -60,6 +75,19 @@ impl TurningOffset {
         let theta = (position[1] - self.center_m[1]).atan2(position[0] - self.center_m[0]);
         let (sin, cos) = theta.sin_cos();
         [e[0] * cos + e[1] * sin, -e[0] * sin + e[1] * cos, e[2]]
+    }
+
+    /// Read a table `tendril sim --model-learning on` wrote
+    /// (`turning-offset.json`): JSON, at most 1 MB, finite, a period > 0.
+    pub fn read(path: &std::path::Path) -> Result<TurningOffset, String> {
+        let bytes = crate::fsutil::read_capped(path, 1 << 20)
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+        let table: TurningOffset = serde_json::from_slice(&bytes)
+            .map_err(|e| format!("{}: not a turning offset: {e}", path.display()))?;
+        table
+            .check(f64::INFINITY)
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+        Ok(table)
     }
 
     /// The largest coefficient, m.
@@ -130,5 +158,32 @@ mod tests {
         assert!(u.check(2e-5).is_err());
         u.harmonics[1][0][0] = f64::NAN;
         assert!(u.check(1e-3).is_err());
+    }
+
+    #[test]
+    fn a_table_reads_back_as_written_and_a_bad_one_is_refused_by_name() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("turning-offset.json");
+        let mut u = TurningOffset::zero([0.001, 0.0], 5.0, 2);
+        u.harmonics[1] = [[1e-5, -2e-5], [3e-5, 0.0], [0.0, 4e-6]];
+        std::fs::write(&path, serde_json::to_vec(&u).unwrap()).unwrap();
+        assert_eq!(TurningOffset::read(&path).unwrap(), u);
+        for (text, why) in [
+            ("{\"center_m\": [0, 0]}", "not a turning offset"),
+            (
+                "{\"center_m\": [0, 0], \"period_s\": -1, \"harmonics\": []}",
+                "period",
+            ),
+            ("[1, 2", "not a turning offset"),
+        ] {
+            std::fs::write(&path, text).unwrap();
+            let err = TurningOffset::read(&path).unwrap_err();
+            assert!(
+                err.contains("turning-offset.json") && err.contains(why),
+                "{text}: {err}"
+            );
+        }
+        let err = TurningOffset::read(&dir.path().join("missing.json")).unwrap_err();
+        assert!(err.contains("missing.json"), "{err}");
     }
 }

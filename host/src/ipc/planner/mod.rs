@@ -22,7 +22,7 @@ use crate::plan::{
 };
 
 mod planned;
-pub use planned::{plan, setpoint_for, Planned, MAX_TURNING_OFFSET_M};
+pub use planned::{check_turning_offset, plan, setpoint_for, Planned, MAX_TURNING_OFFSET_M};
 
 /// Bad setpoints to send instead of the trajectory's, each for one message.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -118,7 +118,7 @@ pub fn plan(cfg: &PlannerConfig) -> Result<Planned, IpcError> {
         motion = motion.with_net_error(n);
     }
     if let Some(turning) = &cfg.turning_offset {
-        check_turning_offset(turning, &cfg.shape)?;
+        check_turning_offset(turning, &cfg.shape, &robot)?;
         motion = motion.with_turning_offset(turning.clone());
     }
     Ok(Planned {
@@ -135,13 +135,31 @@ pub fn plan(cfg: &PlannerConfig) -> Result<Planned, IpcError> {
 /// three-segment robot's circle needed 0.32 mm).
 pub const MAX_TURNING_OFFSET_M: f64 = 2e-3;
 
-/// A turning offset is learned for one circle: its centre and period.
-fn check_turning_offset(
+/// A turning offset is learned for one robot file and one circle.
+pub fn check_turning_offset(
     turning: &crate::plan::TurningOffset,
     shape: &crate::plan::PathShape,
+    robot: &Robot,
 ) -> Result<(), IpcError> {
     let bad = |why: String| IpcError::Config(format!("planner: turning offset: {why}"));
     turning.check(MAX_TURNING_OFFSET_M).map_err(bad)?;
+    match &turning.learned_for {
+        None => return Err(bad("it does not say what it was learned for".into())),
+        Some(f) if f.robot != robot.fingerprint() => {
+            return Err(bad(format!(
+                "learned for another robot file, not {}",
+                robot.name
+            )))
+        }
+        Some(f) if f.shape != *shape => {
+            return Err(bad(format!(
+                "learned for another path ({:?}), not this {}",
+                f.shape,
+                shape.name()
+            )))
+        }
+        Some(_) => {}
+    }
     match shape {
         crate::plan::PathShape::Circle {
             center_m, freq_hz, ..
@@ -294,4 +312,45 @@ fn controller_gains(robot: &Robot) -> crate::plan::IntegralGains {
         crate::ipc::controller::correction::MAP_GAIN_PER_S,
         true,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plan::{LearnedFor, PathShape, TurningOffset};
+
+    /// A table is sent only for the robot file and the circle it was
+    /// learned for; anything else is refused with what differs.
+    #[test]
+    fn a_turning_offset_is_refused_off_its_robot_and_its_circle() {
+        let robot = crate::robot::repo_robot("seed-4t.toml");
+        let circle = PathShape::default_circle();
+        let mut table = TurningOffset::zero([0.0, 0.0], circle.period_s().unwrap(), 2);
+        let refused = |t: &TurningOffset, s: &PathShape, r: &Robot| {
+            check_turning_offset(t, s, r).unwrap_err().to_string()
+        };
+        assert!(refused(&table, &circle, &robot).contains("does not say"));
+        table.learned_for = Some(LearnedFor {
+            robot: robot.fingerprint(),
+            shape: circle.clone(),
+        });
+        check_turning_offset(&table, &circle, &robot).unwrap();
+        let other = crate::robot::repo_robot("tdcr-3seg.toml");
+        assert!(refused(&table, &circle, &other).contains("another robot"));
+        let PathShape::Circle {
+            center_m, freq_hz, ..
+        } = circle.clone()
+        else {
+            unreachable!()
+        };
+        let wider = PathShape::Circle {
+            center_m,
+            radius_m: 0.02,
+            freq_hz,
+            height_m: None,
+        };
+        assert!(refused(&table, &wider, &robot).contains("another path"));
+        table.harmonics[1][0][0] = 1.0;
+        assert!(refused(&table, &circle, &robot).contains("over"));
+    }
 }

@@ -46,6 +46,10 @@ use crate::statics::Statics;
 /// given and none has been trained (the very file the MCU build embeds).
 pub const BUILT_IN_NET: &[u8] = include_bytes!("../../../../firmware/vectors/default.tnet");
 
+/// The circle's offset learned on the model, in the run's directory
+/// (`--model-learning on`; read back with `--turning-offset`).
+pub const TURNING_OFFSET_FILE: &str = "turning-offset.json";
+
 /// Integral gain of the correction when it is on, 1/s.
 pub const DEFAULT_KI_PER_S: f64 = crate::ipc::controller::correction::KI_PER_S;
 
@@ -159,6 +163,10 @@ pub fn run(cfg: &SimConfig) -> Result<SimReport, SimError> {
     let statics = Statics::new(&robot, crate::statics::SolverSettings::default());
     let family = crate::plan::Family::of(&statics).map_err(IpcError::from)?;
     cfg.planner.shape.check(&family).map_err(IpcError::from)?;
+    if let Some(table) = &cfg.planner.turning_offset {
+        crate::ipc::planner::check_turning_offset(table, &cfg.planner.shape, &robot)
+            .map_err(|e| SimError::Config(e.to_string()))?;
+    }
     // The step shaping is designed once, here, so the report can say what
     // the planner used (`docs/design.md` §6.4).
     let shaping = cfg
@@ -305,6 +313,7 @@ fn run_in(cfg: &SimConfig, dir: &RunDir) -> Result<SimReport, SimError> {
     let with_offset;
     let (cfg, model_learning) = match learned {
         Some((offset, report)) => {
+            write_json(&dir.file(TURNING_OFFSET_FILE), &offset)?;
             let mut c = cfg.clone();
             c.planner.turning_offset = Some(offset);
             with_offset = c;

@@ -122,7 +122,12 @@ pub fn before_run(
         report.rehearsals,
         report.seconds
     );
-    Ok(Some((learned.offset, report)))
+    let mut offset = learned.offset;
+    offset.learned_for = Some(crate::plan::LearnedFor {
+        robot: robot.fingerprint(),
+        shape: cfg.planner.shape.clone(),
+    });
+    Ok(Some((offset, report)))
 }
 
 #[cfg(test)]

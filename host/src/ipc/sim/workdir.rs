@@ -129,7 +129,9 @@ impl RunDir {
                 .any(|p| name.starts_with(p))
                 && [".csv", ".json", ".mcap"].iter().any(|e| name.ends_with(e));
             // A run without a log must not leave the previous run's.
-            let process_file = process_file || name == super::RUN_MCAP;
+            // Nor the previous run's table learned on the model.
+            let process_file =
+                process_file || name == super::RUN_MCAP || name == super::TURNING_OFFSET_FILE;
             if process_file && entry.path().is_file() {
                 std::fs::remove_file(entry.path()).map_err(io(entry.path()))?;
             }
