@@ -115,6 +115,36 @@ pub struct PlantStats {
     pub runlog: Option<RunLogStats>,
 }
 
+/// The plant's state message for `model` after a step: its tensions and
+/// its tracker's newest frame (the plant process publishes it; the loop
+/// rehearsed in process, `ipc::rehearsal`, hands it to its controller).
+pub fn state_message(
+    model: &crate::plant::PlantModel,
+    header: Header,
+    command_seq: u64,
+    status: u32,
+) -> PlantState {
+    let frame = model.frame();
+    let mut msg = PlantState {
+        header,
+        command_seq,
+        count: model.n() as u32,
+        status,
+        tip_seq: frame.map_or(0, |f| f.seq),
+        tip_stamp_ns: frame.map_or(0, |f| f.stamp_ns),
+        ..PlantState::default()
+    };
+    for (dst, src) in msg.tensions.iter_mut().zip(model.tensions()) {
+        *dst = *src as f32;
+    }
+    if let Some(f) = frame {
+        for (dst, src) in msg.tip_pose.iter_mut().zip(f.pose) {
+            *dst = src as f32;
+        }
+    }
+    msg
+}
+
 /// Column names of the plant log (for `n` tendons).
 pub fn log_header(n: usize) -> String {
     let mut cols = vec!["t_ns".to_string(), "cmd_seq".into(), "cmd_status".into()];
@@ -335,26 +365,16 @@ impl PlantTask {
         let frame = self.model.frame().copied();
         self.seq += 1;
         let last_cmd = self.last_cmd;
-        let mut msg = PlantState {
-            header: Header {
-                seq: self.seq,
-                stamp_ns: now_ns(),
-            },
-            command_seq: last_cmd.map_or(0, |c| c.header.seq),
-            count: self.n as u32,
-            status,
-            tip_seq: frame.map_or(0, |f| f.seq),
-            tip_stamp_ns: frame.map_or(0, |f| f.stamp_ns),
-            ..PlantState::default()
+        let header = Header {
+            seq: self.seq,
+            stamp_ns: now_ns(),
         };
-        for (dst, src) in msg.tensions.iter_mut().zip(self.model.tensions()) {
-            *dst = *src as f32;
-        }
-        if let Some(f) = &frame {
-            for (dst, src) in msg.tip_pose.iter_mut().zip(f.pose) {
-                *dst = src as f32;
-            }
-        }
+        let msg = state_message(
+            &self.model,
+            header,
+            last_cmd.map_or(0, |c| c.header.seq),
+            status,
+        );
         transport::send(&self.state_pub, msg)?;
         if let Some(r) = self.runlog.as_mut() {
             r.record(&self.model, t1, last_cmd.as_ref(), status, frame.as_ref())?;

@@ -57,6 +57,18 @@ impl Default for Settings {
     }
 }
 
+impl Settings {
+    /// The rehearsals a learning runs at most: the unaided one, the
+    /// identification's (harmonic 0 has no imaginary part; three for the
+    /// rest at once) and one per iteration.
+    pub fn most_rehearsals(&self) -> usize {
+        let lifted = self.lifted.min(self.harmonics);
+        let one_at_a_time = (lifted * 6).saturating_sub(3);
+        let at_once = if lifted < self.harmonics { 3 } else { 0 };
+        1 + one_at_a_time + at_once + self.iterations
+    }
+}
+
 /// What the learning found.
 #[derive(Clone, Debug)]
 pub struct ModelLearning {
@@ -251,7 +263,8 @@ fn identify(
     let phase = |m: usize, axis: usize| {
         ((m * 7 + axis * 13) as f64 * 2.399_963).rem_euclid(std::f64::consts::TAU)
     };
-    let multi: Vec<_> = (0..3)
+    let axes = if lifted < n { 0..3 } else { 0..0 };
+    let multi: Vec<_> = axes
         .into_par_iter()
         .map(|axis| {
             let mut offset = TurningOffset::zero(center_m, period_s, n);

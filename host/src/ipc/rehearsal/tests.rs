@@ -91,6 +91,7 @@ fn the_identified_map_predicts_an_offsets_error_and_the_learning_lowers_the_pass
     let e0 = flatten(&unaided.harmonics[1], s.harmonics);
     let identified = identify(&e0, &s, zero.center_m, PERIOD_S, &rehearse).unwrap();
     assert_eq!(identified.rehearsals, 9 + 3);
+    assert_eq!(s.most_rehearsals(), 1 + 9 + 3 + s.iterations);
 
     // Superposition in the turning frame, the fact the design rests on:
     // an offset the identification never ran (four harmonics on three

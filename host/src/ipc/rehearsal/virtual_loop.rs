@@ -5,11 +5,12 @@
 //! differ only in the offset differ only by what the offset did (the
 //! tracker's noise repeats with its seed).
 
-use tendril_shared::messages::{Header, PlantState, TensionCommand};
+use tendril_shared::messages::{Header, TensionCommand};
 
 use crate::ipc::clock::Tick;
 use crate::ipc::controller::{Controller, ControllerConfig, Inbox};
 use crate::ipc::planner::setpoint_for;
+use crate::ipc::plant::state_message;
 use crate::ipc::IpcError;
 use crate::plan::{Motion, TurningOffset};
 use crate::plant::{PlantModel, PlantParams};
@@ -72,6 +73,8 @@ impl VirtualLoop<'_> {
         let mut counts = vec![0usize; passes];
         let mut command: Option<TensionCommand> = None;
         let mut tau = vec![0.0; n];
+        // e^{−j2πmφ} of the sample, one per harmonic, shared by the axes.
+        let mut rotors = vec![Complex::new(0.0, 0.0); harmonics];
         for k in 0..steps {
             let now_ns = start_ns + k * period_ns;
             let t = k as f64 * dt;
@@ -87,7 +90,12 @@ impl VirtualLoop<'_> {
                 )));
             }
             plant.sense(now_ns);
-            let state = plant_state(&plant, k + 1, now_ns, n);
+            let header = Header {
+                seq: k + 1,
+                stamp_ns: now_ns,
+            };
+            let status = 0;
+            let state = state_message(&plant, header, command.map_or(0, |c| c.header.seq), status);
             let desired = motion.at(t);
             let mut setpoint = setpoint_for(&motion, t, &desired, None);
             setpoint.header = Header {
@@ -122,10 +130,12 @@ impl VirtualLoop<'_> {
             counts[pass] += 1;
             let turned = offset.turned([p[0], p[1], p[2]], e);
             let phase = (desired.t_path / offset.period_s).rem_euclid(1.0);
+            for (m, rotor) in rotors.iter_mut().enumerate() {
+                *rotor = Complex::from_polar(1.0, -std::f64::consts::TAU * m as f64 * phase);
+            }
             for (axis, value) in turned.iter().enumerate() {
-                for (m, sum) in sums[pass][axis].iter_mut().enumerate() {
-                    let angle = -std::f64::consts::TAU * m as f64 * phase;
-                    *sum += Complex::from_polar(*value, angle);
+                for (sum, rotor) in sums[pass][axis].iter_mut().zip(&rotors) {
+                    *sum += rotor * *value;
                 }
             }
         }
@@ -143,28 +153,4 @@ impl VirtualLoop<'_> {
             rms_m: squares,
         })
     }
-}
-
-/// The plant's state message as the plant process would publish it.
-fn plant_state(plant: &PlantModel, seq: u64, now_ns: u64, n: usize) -> PlantState {
-    let frame = plant.frame().copied();
-    let mut state = PlantState {
-        header: Header {
-            seq,
-            stamp_ns: now_ns,
-        },
-        count: n as u32,
-        tip_seq: frame.map_or(0, |f| f.seq),
-        tip_stamp_ns: frame.map_or(0, |f| f.stamp_ns),
-        ..PlantState::default()
-    };
-    for (d, v) in state.tensions.iter_mut().zip(plant.tensions()) {
-        *d = *v as f32;
-    }
-    if let Some(f) = &frame {
-        for (d, v) in state.tip_pose.iter_mut().zip(f.pose) {
-            *d = v as f32;
-        }
-    }
-    state
 }

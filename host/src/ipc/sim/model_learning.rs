@@ -86,7 +86,7 @@ pub fn before_run(
         settle_s: planner.settle_s,
     };
     let settings = Settings::default();
-    let total = 1 + (settings.lifted * 6 - 3) + 3 + settings.iterations;
+    let total = settings.most_rehearsals();
     log::info!(
         "sim: learning the circle's offset on the model: up to {total} rehearsals of {:.0} s of loop",
         planner.settle_s + period_s * settings.passes as f64
