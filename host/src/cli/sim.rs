@@ -65,8 +65,9 @@ pub struct SimArgs {
     pub net_error_offset: super::controller::OnOff,
     /// Learn the circle's offset on the model before the run: the loop
     /// rehearsed in process against the robot file's plant (its rod, with
-    /// --plant dynamic), the offset in the circle's turning frame
-    /// (docs/design.md §6.4; a minute or two on a three-segment robot).
+    /// --plant dynamic), the offset in the circle's turning frame, then the
+    /// path's start (docs/design.md §6.4; four minutes on a three-segment
+    /// robot).
     #[arg(long, value_enum, default_value_t = super::controller::OnOff::Off)]
     pub model_learning: super::controller::OnOff,
     /// Send this circle's offset, learned on the model by an earlier run

@@ -344,6 +344,15 @@ mod tests {
                     robot: [7; 32],
                     shape: crate::plan::PathShape::default_circle(),
                 }),
+                start: Some(crate::plan::StartOffset {
+                    step_s: 0.15,
+                    bumps: vec![[1e-5, -2e-5, 3e-6]; 2],
+                }),
+                expected: Some(crate::plan::ExpectedError {
+                    bin_s: 0.05,
+                    start: vec![[2e-5, 0.0, -1e-6]; 3],
+                    harmonics: vec![[[4e-5, 0.0], [0.0, 1e-6], [0.0; 2]]],
+                }),
             }),
             controller_gains: Some(crate::plan::IntegralGains {
                 ki_per_s: 4.0,

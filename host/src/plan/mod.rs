@@ -63,7 +63,7 @@ pub use shaping::{ModalInverse, ShapingChoice, StepShaping};
 pub use stiffness::{StiffnessAdaptation, StiffnessDirections, StiffnessEstimator};
 pub use table::read_pose_csv;
 pub use trajectory::{PosePoint, Trajectory};
-pub use turning_offset::{LearnedFor, TurningOffset};
+pub use turning_offset::{ExpectedError, LearnedFor, StartOffset, TurningOffset};
 
 use std::path::PathBuf;
 

@@ -108,6 +108,24 @@ impl Motion {
         ))
     }
 
+    /// The error the loop had on the model at `t` with the learned
+    /// turning offset, base frame, m: on the path the table's
+    /// ([`TurningOffset::expected_error`]); in the hold after the approach,
+    /// the offset's value at the path's start, which the hold sends and
+    /// the tip then holds; zero without a table and on a move.
+    pub fn expected_error(&self, t: f64, now: &Desired) -> [f64; 3] {
+        let Some(turning) = &self.turning else {
+            return [0.0; 3];
+        };
+        let p = now.point.pose;
+        let p = [p[0], p[1], p[2]];
+        match (now.holding, now.moving) {
+            (false, _) => turning.expected_error(t - self.settle_s, now.t_path, p),
+            (true, false) => turning.at(0.0, p).map(|v| -v),
+            (true, true) => [0.0; 3],
+        }
+    }
+
     /// With the offset that takes the net's own error out along the path:
     /// sent in the hold and on the path; the approach from rest, which
     /// sends none, ends where it puts the first pose.
@@ -380,6 +398,16 @@ mod tests {
         let want = turning.at(0.0, [p[0], p[1], p[2]]);
         assert!((want[0] - 1.3e-4).abs() < 1e-12 && (want[1] - -5e-5).abs() < 1e-12);
         assert!((hold[0] - p[0] - want[0]).abs() < 1e-9, "{hold:?}");
+        // The error the table expects of the hold is the offset the hold
+        // sends, held by the tip (none on the approach; the path's is the
+        // table's own, here none).
+        let expected = m.expected_error(1.9, &m.at(1.9));
+        assert!(
+            (0..3).all(|k| (expected[k] + want[k]).abs() < 1e-15),
+            "{expected:?}"
+        );
+        assert_eq!(m.expected_error(0.1, &m.at(0.1)), [0.0; 3]);
+        assert_eq!(m.expected_error(2.5, &m.at(2.5)), [0.0; 3]);
     }
 
     /// On the circle at cruise the modal inverse's offset is the closed

@@ -616,11 +616,15 @@ impl StiffnessAdaptation {
     }
 
     /// A tracker frame: the tip at `tip` (m, base frame) measured at `t`
-    /// (s on the planner's clock), against what `motion` asked for then.
+    /// (s on the planner's clock), against what `motion` asked for then
+    /// less the error the loop had there on the model
+    /// ([`Motion::expected_error`]): a robot that is its file shows that
+    /// one, and it tells nothing of the robot's stiffness.
     pub fn frame(&mut self, motion: &Motion, t: f64, tip: [f64; 3]) {
         self.estimator.frame(t, tip, |t| {
-            let p = motion.at(t).point.pose;
-            [p[0], p[1], p[2]]
+            let now = motion.at(t);
+            let (p, e) = (now.point.pose, motion.expected_error(t, &now));
+            [p[0] - e[0], p[1] - e[1], p[2] - e[2]]
         });
     }
 

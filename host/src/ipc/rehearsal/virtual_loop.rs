@@ -28,6 +28,28 @@ pub struct PassErrors {
     pub harmonics: Vec<[Vec<Complex>; 3]>,
     /// Per pass, RMS of the error's length, m.
     pub rms_m: Vec<f64>,
+    /// The error over the path's first seconds, turning frame: the mean of
+    /// each of the window's bins (m).
+    pub start: Vec<[f64; 3]>,
+    /// RMS of the error's length over that window, m.
+    pub start_rms_m: f64,
+}
+
+/// The first seconds of the path a run measures bin by bin (real time
+/// from the path's start): `bins` bins of `bin_s` (none: `bins` 0).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StartWindow {
+    /// Width of a bin, s.
+    pub bin_s: f64,
+    /// Bins.
+    pub bins: usize,
+}
+
+impl StartWindow {
+    /// Its length, s.
+    pub fn length_s(&self) -> f64 {
+        self.bin_s * self.bins as f64
+    }
 }
 
 /// The loop's parts, set up once and run many times.
@@ -49,14 +71,16 @@ pub struct VirtualLoop<'a> {
 }
 
 impl VirtualLoop<'_> {
-    /// Run the settle and `passes` periods of the path with `offset` (in
-    /// the turning frame of `offset`'s circle) on top of the motion's
-    /// own; measure `harmonics` harmonics of each pass.
+    /// Run the settle and `passes` periods of the path (at least the
+    /// `window`) with `offset` (in the turning frame of `offset`'s circle)
+    /// on top of the motion's own; measure `harmonics` harmonics of each
+    /// pass and the window's bins.
     pub fn run(
         &self,
         offset: &TurningOffset,
         passes: usize,
         harmonics: usize,
+        window: StartWindow,
     ) -> Result<PassErrors, IpcError> {
         let period_ns = (1e9 / self.controller.rate_hz).round() as u64;
         let dt = period_ns as f64 * 1e-9;
@@ -67,10 +91,13 @@ impl VirtualLoop<'_> {
         let to_tracker = self.robot.base.to_tracker();
         let motion = self.motion.clone().with_turning_offset(offset.clone());
         let n = self.robot.n_tendons();
-        let steps = ((self.settle_s + self.period_s * passes as f64) / dt).ceil() as u64 + 1;
+        let path_s = (self.period_s * passes as f64).max(window.length_s());
+        let steps = ((self.settle_s + path_s) / dt).ceil() as u64 + 1;
         let mut sums = vec![[(); 3].map(|_| vec![Complex::new(0.0, 0.0); harmonics]); passes];
         let mut squares = vec![0.0; passes];
         let mut counts = vec![0usize; passes];
+        let mut start = vec![([0.0; 3], 0usize); window.bins];
+        let (mut start_squares, mut start_count) = (0.0, 0usize);
         let mut command: Option<TensionCommand> = None;
         let mut tau = vec![0.0; n];
         // e^{−j2πmφ} of the sample, one per harmonic, shared by the axes.
@@ -118,17 +145,29 @@ impl VirtualLoop<'_> {
             };
             command = Some(controller.period(&tick, now_ns, false, &inbox));
             controller.finish(0);
-            let pass = ((t - self.settle_s) / self.period_s).floor();
-            if desired.holding || desired.moving || pass < 0.0 || pass as usize >= passes {
+            let since = t - self.settle_s;
+            let pass = (since / self.period_s).floor();
+            if desired.holding || desired.moving || since < 0.0 {
                 continue;
             }
-            let pass = pass as usize;
             let p = desired.point.pose;
             let tip = plant.pose_in_base();
             let e = [p[0] - tip[0], p[1] - tip[1], p[2] - tip[2]];
+            let turned = offset.turned([p[0], p[1], p[2]], e);
+            if let Some((sum, count)) = start.get_mut((since / window.bin_s.max(1e-9)) as usize) {
+                for (s, v) in sum.iter_mut().zip(turned) {
+                    *s += v;
+                }
+                *count += 1;
+                start_squares += e.iter().map(|v| v * v).sum::<f64>();
+                start_count += 1;
+            }
+            if pass as usize >= passes {
+                continue;
+            }
+            let pass = pass as usize;
             squares[pass] += e.iter().map(|v| v * v).sum::<f64>();
             counts[pass] += 1;
-            let turned = offset.turned([p[0], p[1], p[2]], e);
             let phase = (desired.t_path / offset.period_s).rem_euclid(1.0);
             for (m, rotor) in rotors.iter_mut().enumerate() {
                 *rotor = Complex::from_polar(1.0, -std::f64::consts::TAU * m as f64 * phase);
@@ -151,6 +190,11 @@ impl VirtualLoop<'_> {
         Ok(PassErrors {
             harmonics: sums,
             rms_m: squares,
+            start: start
+                .into_iter()
+                .map(|(sum, count)| sum.map(|v| v / count.max(1) as f64))
+                .collect(),
+            start_rms_m: (start_squares / start_count.max(1) as f64).sqrt(),
         })
     }
 }

@@ -445,6 +445,12 @@ impl SimReport {
                         .map_or(String::new(), |why| format!(" (stopped early: {why})"))
                 ),
             );
+            if let Some([before, after]) = m.start_window_rms_mm {
+                row(
+                    "the path's start learned on the model: its first seconds with the periodic offset alone → with the start's (mm RMS)",
+                    format!("{before:.3} → {after:.3}"),
+                );
+            }
         }
         if let Some(k) = self.stiffness_adapted {
             row(
