@@ -45,8 +45,8 @@ impl StartSettings {
         if !(mode_hz > 0.0 && damping_ratio > 0.0 && ease_s >= 0.0 && mode_hz.is_finite()) {
             return None;
         }
-        let step_s = 1.0 / (6.0 * mode_hz);
-        let bumps = ((ease_s + 2.0 / mode_hz) / step_s).ceil() as usize;
+        let step_s = 1.0 / (4.0 * mode_hz);
+        let bumps = ((ease_s + 4.0 / mode_hz) / step_s).ceil() as usize;
         let decay_s = 1.0 / (std::f64::consts::TAU * mode_hz * damping_ratio);
         let length_s = (bumps + 1) as f64 * step_s + (2.0 * decay_s).min(10.0);
         let bin_s = 0.05;
