@@ -75,7 +75,7 @@ impl Default for PlantConfig {
             prefix: super::DEFAULT_PREFIX.into(),
             params: PlantParams::default(),
             spin: false,
-            idle_period_s: 0.001,
+            idle_period_s: IDLE_PERIOD_S,
             command_timeout_s: 0.05,
             duration_s: None,
             peer_timeout_s: Some(2.0),
@@ -144,6 +144,11 @@ pub fn state_message(
     }
     msg
 }
+
+/// The plant's default idle period, s: it steps its model and publishes at
+/// least this often without commands (the loop rehearsed in process,
+/// `ipc::rehearsal`, steps its plant as often).
+pub const IDLE_PERIOD_S: f64 = 1e-3;
 
 /// Column names of the plant log (for `n` tendons).
 pub fn log_header(n: usize) -> String {

@@ -16,10 +16,6 @@ use crate::plan::{Motion, TurningOffset};
 use crate::plant::{PlantModel, PlantParams};
 use crate::robot::Robot;
 
-/// The plant process's idle period, s (`ipc::plant`): it steps its model
-/// at least this often.
-const PLANT_PERIOD_S: f64 = 1e-3;
-
 /// Complex harmonic coefficient.
 pub type Complex = nalgebra::Complex<f64>;
 
@@ -88,7 +84,7 @@ impl VirtualLoop<'_> {
     ) -> Result<PassErrors, IpcError> {
         let period_ns = (1e9 / self.controller.rate_hz).round() as u64;
         let dt = period_ns as f64 * 1e-9;
-        let substeps = (dt / PLANT_PERIOD_S).round().max(1.0) as usize;
+        let substeps = (dt / crate::ipc::plant::IDLE_PERIOD_S).round().max(1.0) as usize;
         let start_ns: u64 = 1_000_000_000;
         let mut controller = Controller::new(self.controller, self.robot, self.net, start_ns)?;
         let mut plant = PlantModel::new(self.robot, self.plant.clone())
